@@ -1,0 +1,153 @@
+#pragma once
+// The one LCM wrapper every service uses.
+//
+// * The same interface over `udpm://` (live), `memq://` (in-process tests) and
+//   `file://PATH?speed=0` (reading a log, for replay and analysis).
+// * Typed subscriptions decode inside try/catch: LCM 1.3.1's generated decode
+//   throws (std::length_error / bad_alloc) on a negative or huge array length. A
+//   message that fails to decode is counted and dropped; no exception ever passes
+//   through LCM's C frames.
+// * Every message type of the cell begins with `int64_t utime; int64_t seq;
+//   int32_t sender;`, so the wrapper reads the header from the raw bytes and counts
+//   sequence gaps per channel and sender, for typed and raw subscribers alike.
+#include <lcm/lcm.h>
+
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "common/util/clock.h"
+
+namespace cnc::bus {
+
+struct WireHeader {
+  int64_t utime = 0;
+  int64_t seq = 0;
+  int32_t sender = 0;
+};
+
+// Reads the common header that follows the 8-byte fingerprint; nullopt when the
+// buffer is too short to hold it.
+std::optional<WireHeader> peek_header(const void* data, size_t size);
+
+struct ChannelStats {
+  int64_t received = 0;         // messages that reached this process
+  int64_t decode_failures = 0;  // dropped: did not decode as the subscribed type
+  int64_t handler_errors = 0;   // a handler threw; the message is lost to it
+  int64_t seq_gaps = 0;         // messages missing between two received from one sender
+  int64_t seq_restarts = 0;     // a sender's seq went backwards (it restarted)
+  int64_t published = 0;
+};
+
+class BusError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// Escapes a channel name for LCM's anchored-regex subscriptions.
+std::string exact_channel(const std::string& channel);
+
+class Bus {
+ public:
+  using RawHandler =
+      std::function<void(const std::string& channel, const void* data, size_t size, int64_t recv_utime)>;
+
+  // url: an LCM provider URL; "" uses LCM_DEFAULT_URL or LCM's default.
+  // sender: identifies this process in the `sender` field (0 picks one from pid and time).
+  explicit Bus(const std::string& url, int32_t sender = 0);
+  ~Bus();
+  Bus(const Bus&) = delete;
+  Bus& operator=(const Bus&) = delete;
+
+  // Typed subscription to one channel (exact name).
+  template <class Msg>
+  void subscribe(const std::string& channel, std::function<void(const Msg&)> handler);
+
+  // Raw subscription; `channel_regex` is an LCM regex (e.g. "MILL1\\..*").
+  void subscribe_raw(const std::string& channel_regex, RawHandler handler);
+
+  // Stamps utime (wall clock), seq (per channel, from 0) and sender, then publishes.
+  template <class Msg>
+  void publish(const std::string& channel, Msg& msg);
+  // Publishes already encoded bytes unchanged (a log player, a fault injector).
+  void publish_raw(const std::string& channel, const void* data, size_t size);
+
+  // Waits up to timeout_ms for one message and dispatches it. Returns 1 when a
+  // message was handled, 0 on timeout, -1 on error or at the end of a log.
+  int handle(int timeout_ms);
+  // Handles everything already pending without waiting; returns the count.
+  int drain(int max_messages = 10000);
+
+  int fileno() const;
+  int32_t sender() const { return sender_; }
+  const std::string& url() const { return url_; }
+  // Counters per channel name, for heartbeats and tests.
+  const std::map<std::string, ChannelStats>& stats() const { return stats_; }
+  ChannelStats stats(const std::string& channel) const;
+
+ private:
+  struct Subscription {
+    Bus* bus;
+    std::function<void(const std::string&, const void*, size_t, int64_t)> dispatch;
+    lcm_subscription_t* handle = nullptr;
+  };
+  static void on_message(const lcm_recv_buf_t* rbuf, const char* channel, void* user);
+  void add_subscription(const std::string& regex,
+                        std::function<void(const std::string&, const void*, size_t, int64_t)> dispatch);
+  void account(const std::string& channel, const void* data, size_t size);
+  int64_t next_seq(const std::string& channel);
+  void publish_encoded(const std::string& channel, const void* data, size_t size);
+
+  std::string url_;
+  int32_t sender_;
+  lcm_t* lcm_ = nullptr;
+  std::vector<std::unique_ptr<Subscription>> subs_;
+  std::map<std::string, ChannelStats> stats_;
+  std::map<std::pair<std::string, int32_t>, int64_t> last_seq_;
+  // Several subscriptions may match one channel: count each message once.
+  const lcm_recv_buf_t* last_accounted_ = nullptr;
+  std::map<std::string, int64_t> out_seq_;
+  std::vector<uint8_t> encode_buf_;
+};
+
+template <class Msg>
+void Bus::subscribe(const std::string& channel, std::function<void(const Msg&)> handler) {
+  add_subscription(exact_channel(channel),
+                   [this, handler = std::move(handler)](const std::string& ch, const void* data, size_t size,
+                                                        int64_t) {
+                     Msg msg;
+                     bool ok = false;
+                     try {
+                       ok = msg.decode(data, 0, static_cast<int>(size)) == static_cast<int>(size);
+                     } catch (...) {
+                       ok = false;
+                     }
+                     if (!ok) {
+                       ++stats_[ch].decode_failures;
+                       return;
+                     }
+                     try {
+                       handler(msg);
+                     } catch (...) {
+                       ++stats_[ch].handler_errors;
+                     }
+                   });
+}
+
+template <class Msg>
+void Bus::publish(const std::string& channel, Msg& msg) {
+  msg.utime = util::wall_utime();
+  msg.seq = next_seq(channel);
+  msg.sender = sender_;
+  const int size = msg.getEncodedSize();
+  encode_buf_.resize(static_cast<size_t>(size));
+  if (msg.encode(encode_buf_.data(), 0, size) != size) throw BusError("encode failed on " + channel);
+  publish_encoded(channel, encode_buf_.data(), encode_buf_.size());
+}
+
+}  // namespace cnc::bus

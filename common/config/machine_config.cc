@@ -1,0 +1,148 @@
+#include "common/config/machine_config.h"
+
+#include <cmath>
+#include <map>
+#include <set>
+
+#include "common/config/yaml_reader.h"
+
+namespace cnc::config {
+namespace {
+constexpr double kInf = std::numeric_limits<double>::max();
+
+DriveConfig read_drive(MapReader r) {
+  DriveConfig d;
+  d.transport = r.get_choice("transport", d.transport, {"modbus_tcp", "modbus_rtu", "loopback"});
+  d.host = r.get_string("host", d.host);
+  d.port = static_cast<int>(r.get_int("port", d.port, 1, 65535));
+  d.device = r.get_string("device", d.device);
+  d.baud = static_cast<int>(r.get_int("baud", d.baud, 1200, 4'000'000));
+  d.unit_id = static_cast<int>(r.get_int("unit_id", d.unit_id, 1, 247));
+  d.profile = r.get_string("profile", d.profile);
+  d.response_timeout_s = r.get_double("response_timeout_s", d.response_timeout_s, 0.001, 5.0);
+  if (d.transport == "modbus_rtu" && d.device.empty()) r.fail("device", "is required for transport modbus_rtu");
+  r.finish();
+  return d;
+}
+
+AxisConfig read_axis(MapReader r) {
+  AxisConfig a;
+  a.name = r.require_string("name");
+  if (a.name.empty()) r.fail("name", "must not be empty");
+  a.min_mm = r.require_double("min_mm", -1e5, 1e5);
+  a.max_mm = r.require_double("max_mm", -1e5, 1e5);
+  if (a.max_mm <= a.min_mm) r.fail("max_mm", "must be greater than min_mm");
+  a.max_velocity_mm_s = r.require_double("max_velocity_mm_s", 1e-3, 1e4);
+  a.max_accel_mm_s2 = r.require_double("max_accel_mm_s2", 1e-3, 1e6);
+  a.max_jerk_mm_s3 = r.require_double("max_jerk_mm_s3", 1e-3, 1e9);
+  a.max_following_error_mm = r.get_double("max_following_error_mm", a.max_following_error_mm, 1e-4, 1e3);
+  a.home_mm = r.get_double("home_mm", 0.0, a.min_mm, a.max_mm);
+  a.drive = read_drive(r.map("drive"));
+  MapReader s = r.map("sim");
+  a.sim.bandwidth_hz = s.get_double("bandwidth_hz", a.sim.bandwidth_hz, 0.1, 1000);
+  a.sim.damping = s.get_double("damping", a.sim.damping, 0.05, 10);
+  a.sim.max_velocity_mm_s = s.get_double("max_velocity_mm_s", 0.0, 0.0, 1e4);
+  s.finish();
+  r.finish();
+  return a;
+}
+
+MachineConfig read_machine(MapReader top) {
+  MachineConfig c;
+  {
+    MapReader r = top.map("cell");
+    c.name = r.require_string("name");
+    c.channel_prefix = r.get_string("channel_prefix", c.name.empty() ? "" : c.name + ".");
+    c.lcm_url = r.get_string("lcm_url", "");
+    r.finish();
+  }
+  {
+    MapReader r = top.map("timing");
+    c.ipo_period_s = r.get_double("ipo_period_s", c.ipo_period_s, 1e-4, 0.1);
+    c.servo_period_s = r.get_double("servo_period_s", c.servo_period_s, 1e-4, 0.1);
+    if (c.servo_period_s > c.ipo_period_s) r.fail("servo_period_s", "must not exceed timing.ipo_period_s");
+    const double ratio = c.ipo_period_s / c.servo_period_s;
+    if (std::fabs(ratio - std::round(ratio)) > 1e-9)
+      r.fail("servo_period_s", "timing.ipo_period_s must be a whole multiple of it");
+    c.setpoint_timeout_s = r.get_double("setpoint_timeout_s", c.setpoint_timeout_s, 2 * c.ipo_period_s, 10.0);
+    c.stop_decel_mm_s2 = r.get_double("stop_decel_mm_s2", c.stop_decel_mm_s2, 1.0, 1e6);
+    c.heartbeat_period_s = r.get_double("heartbeat_period_s", c.heartbeat_period_s, 0.05, 60.0);
+    r.finish();
+  }
+  {
+    MapReader r = top.map("motion");
+    c.default_feed_mm_per_min = r.get_double("default_feed_mm_per_min", c.default_feed_mm_per_min, 1e-3, 1e6);
+    c.chord_tolerance_mm = r.get_double("chord_tolerance_mm", c.chord_tolerance_mm, 1e-8, 1.0);
+    c.path_accel_mm_s2 = r.get_double("path_accel_mm_s2", c.path_accel_mm_s2, 1e-3, 1e6);
+    c.path_jerk_mm_s3 = r.get_double("path_jerk_mm_s3", c.path_jerk_mm_s3, 1e-3, 1e9);
+    c.block_window = static_cast<int>(r.get_int("block_window", c.block_window, 1, 4096));
+    r.finish();
+  }
+  {
+    MapReader r = top.map("process");
+    c.process.ball_radius_mm = r.get_double("ball_radius_mm", 0.0, 0.0, 100.0);
+    c.process.flutes = static_cast<int>(r.get_int("flutes", 0, 0, 64));
+    c.process.pick_feed_mm = r.get_double("pick_feed_mm", 0.0, 0.0, 100.0);
+    c.process.target_rmax_um = r.get_double("target_rmax_um", 0.0, 0.0, 1000.0);
+    c.process.spindle_rpm = r.get_double("spindle_rpm", 0.0, 0.0, 200000.0);
+    r.finish();
+  }
+  {
+    YAML::Node axes = top.sequence("axes");
+    if (axes.size() == 0) top.fail("axes", "at least one axis is required");
+    if (axes.size() > 9) top.fail("axes", "at most 9 axes are supported");
+    std::set<std::string> names;
+    std::set<std::tuple<std::string, std::string, int, std::string, int>> addresses;
+    for (size_t i = 0; i < axes.size(); ++i) {
+      const std::string path = top.item_path("axes", i);
+      AxisConfig a = read_axis(MapReader(axes[i], path, top.file()));
+      if (!names.insert(a.name).second) throw ConfigError(top.file(), path + ".name", "duplicate axis '" + a.name + "'");
+      const auto addr = std::make_tuple(a.drive.transport, a.drive.host, a.drive.port, a.drive.device, a.drive.unit_id);
+      if (!addresses.insert(addr).second)
+        throw ConfigError(top.file(), path + ".drive.unit_id", "another axis already uses this drive address");
+      c.axes.push_back(std::move(a));
+    }
+  }
+  {
+    MapReader r = top.map("logger");
+    c.log_directory = r.get_string("directory", c.log_directory);
+    c.log_rotate_mb = r.get_double("rotate_mb", c.log_rotate_mb, 1.0, 1e6);
+    c.log_flush_period_s = r.get_double("flush_period_s", c.log_flush_period_s, 0.01, 60.0);
+    r.finish();
+  }
+  {
+    MapReader r = top.map("monitor");
+    c.monitor_rmax_margin = r.get_double("rmax_margin", c.monitor_rmax_margin, 0.0, 10.0);
+    r.finish();
+  }
+  top.finish();
+  return c;
+}
+}  // namespace
+
+int MachineConfig::axis_index(const std::string& axis_name) const {
+  for (size_t i = 0; i < axes.size(); ++i)
+    if (axes[i].name == axis_name) return static_cast<int>(i);
+  return -1;
+}
+
+MachineConfig load_machine_config(const std::string& file) {
+  MachineConfig c = read_machine(MapReader(load_yaml_file(file), "", file));
+  c.source_file = file;
+  return c;
+}
+
+MachineConfig parse_machine_config(const std::string& yaml_text, const std::string& file_label) {
+  YAML::Node root;
+  try {
+    root = YAML::Load(yaml_text);
+  } catch (const YAML::ParserException& e) {
+    throw ConfigError(file_label, "", "YAML syntax error at line " + std::to_string(e.mark.line + 1) + ", column " +
+                                          std::to_string(e.mark.column + 1) + ": " + e.msg);
+  }
+  MachineConfig c = read_machine(MapReader(root, "", file_label));
+  c.source_file = file_label;
+  return c;
+}
+
+}  // namespace cnc::config

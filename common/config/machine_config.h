@@ -1,0 +1,107 @@
+#pragma once
+// The configuration of one cell: plain structs with defaults, loaded strictly from
+// `config/machines/NAME.yaml`.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace cnc::config {
+
+struct DriveConfig {
+  std::string transport = "modbus_tcp";  // modbus_tcp | modbus_rtu | loopback
+  std::string host = "127.0.0.1";        // modbus_tcp
+  int port = 1502;                       // modbus_tcp
+  std::string device;                    // modbus_rtu: serial device
+  int baud = 115200;                     // modbus_rtu
+  int unit_id = 1;                       // Modbus slave / unit id
+  std::string profile = "sim";           // config/drives/<profile>.yaml
+  double response_timeout_s = 0.05;
+};
+
+struct ServoSimAxisConfig {
+  double bandwidth_hz = 40.0;  // closed position loop bandwidth
+  double damping = 1.0;
+  double max_velocity_mm_s = 0;  // 0: the axis's max_velocity_mm_s
+};
+
+struct AxisConfig {
+  std::string name;  // X, Y, Z, ...
+  double min_mm = 0;
+  double max_mm = 0;
+  double max_velocity_mm_s = 0;
+  double max_accel_mm_s2 = 0;
+  double max_jerk_mm_s3 = 0;
+  double max_following_error_mm = 1.0;
+  double home_mm = 0;  // where the simulated drive starts
+  DriveConfig drive;
+  ServoSimAxisConfig sim;  // used by cnc-servo-sim only
+};
+
+struct ProcessConfig {
+  // Seed 000's roughness feed law; all zero = not set.
+  double ball_radius_mm = 0;
+  int flutes = 0;
+  double pick_feed_mm = 0;
+  double target_rmax_um = 0;
+  double spindle_rpm = 0;
+};
+
+struct MachineConfig {
+  std::string source_file;
+
+  // cell
+  std::string name;
+  std::string channel_prefix;  // e.g. "SIM3." — prepended to every channel
+  std::string lcm_url;         // "" = LCM default
+
+  // timing
+  double ipo_period_s = 0.004;
+  double servo_period_s = 0.001;
+  double setpoint_timeout_s = 0.05;
+  double stop_decel_mm_s2 = 1000.0;
+  double heartbeat_period_s = 1.0;
+
+  std::vector<AxisConfig> axes;
+
+  // motion
+  double default_feed_mm_per_min = 1000.0;
+  double chord_tolerance_mm = 0.001;
+  double path_accel_mm_s2 = 1000.0;
+  double path_jerk_mm_s3 = 20000.0;
+  int block_window = 32;  // blocks the interpolator keeps requested ahead
+
+  ProcessConfig process;
+
+  // logger
+  std::string log_directory = "runs";
+  double log_rotate_mb = 512.0;
+  double log_flush_period_s = 0.5;
+
+  // monitor
+  double monitor_rmax_margin = 0.1;  // alarm when R_max > target·(1 + margin)
+
+  // Channel names with the prefix applied.
+  std::string channel(const std::string& base) const { return channel_prefix + base; }
+  int axis_index(const std::string& name) const;  // -1 when absent
+};
+
+// Loads and validates; throws ConfigError naming the key path.
+MachineConfig load_machine_config(const std::string& file);
+MachineConfig parse_machine_config(const std::string& yaml_text, const std::string& file_label);
+
+// Channel base names of the cell.
+namespace channels {
+inline constexpr const char* kProgramCmd = "PROGRAM_CMD";
+inline constexpr const char* kProgramState = "PROGRAM_STATE";
+inline constexpr const char* kProgramBlocks = "PROGRAM_BLOCKS";
+inline constexpr const char* kBlockRequest = "BLOCK_REQUEST";
+inline constexpr const char* kSetpoints = "SETPOINTS";
+inline constexpr const char* kInterpState = "INTERP_STATE";
+inline constexpr const char* kInterpInput = "INTERP_INPUT";
+inline constexpr const char* kAxisStatus = "AXIS_STATUS";
+inline constexpr const char* kMonitor = "MONITOR";
+inline constexpr const char* kAlarm = "ALARM";
+inline constexpr const char* kHeartbeat = "HEARTBEAT";
+}  // namespace channels
+
+}  // namespace cnc::config

@@ -1,0 +1,24 @@
+#pragma once
+// Publishes a service's heartbeat with the bus's per-channel counters.
+#include <string>
+
+#include "common/bus/bus.h"
+#include "common/config/machine_config.h"
+
+namespace cnc::service {
+
+class Heartbeat {
+ public:
+  Heartbeat(bus::Bus& bus, const config::MachineConfig& cfg, std::string service_name);
+  // Publishes when a heartbeat period has passed since the last one (or `force`).
+  void tick(int8_t state, int64_t loop_overruns, const std::string& detail = "", bool force = false);
+
+ private:
+  bus::Bus& bus_;
+  std::string channel_;
+  std::string name_;
+  double period_s_;
+  double last_s_ = -1e9;
+};
+
+}  // namespace cnc::service

@@ -1,0 +1,40 @@
+#pragma once
+// What every service's main shares: flags, config loading with exit code 2 on a
+// bad config, logging set-up, stop signals.
+#include <functional>
+#include <map>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "common/config/machine_config.h"
+
+namespace cnc::service {
+
+struct Args {
+  std::string machine_file;
+  std::map<std::string, std::string> options;  // --key value
+  std::set<std::string> flags;                 // --flag
+  std::string option(const std::string& key, const std::string& fallback = "") const;
+};
+
+struct Spec {
+  std::string name;                    // e.g. "cnc-interpolator"
+  std::string summary;                 // one line for --help
+  std::set<std::string> options;       // accepted --key value options besides --machine
+  std::set<std::string> flags;         // accepted --flag switches
+  bool needs_machine = true;
+};
+
+// Exit codes shared by all services.
+inline constexpr int kExitOk = 0;
+inline constexpr int kExitFailure = 1;
+inline constexpr int kExitBadInput = 2;  // bad flags or config
+
+// Parses flags, loads the machine config, installs the stop handlers and runs
+// `body`. A ConfigError or a bad flag exits 2 with the message on stderr; any other
+// exception exits 1.
+int run(const Spec& spec, int argc, char** argv,
+        const std::function<int(const config::MachineConfig&, const Args&)>& body);
+
+}  // namespace cnc::service

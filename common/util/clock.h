@@ -1,0 +1,36 @@
+#pragma once
+// Clocks and the periodic loop of the services. Cores never include this file:
+// they are driven by cycle indices, not by time.
+#include <cstdint>
+#include <ctime>
+
+namespace cnc::util {
+
+// Wall-clock time in µs since the epoch: the `utime` of every message.
+int64_t wall_utime();
+// Monotonic time in s, for measuring durations.
+double monotonic_s();
+
+// Waits on absolute deadlines (clock_nanosleep TIMER_ABSTIME) so the period does
+// not drift with the work done in each cycle. A cycle that starts after its
+// deadline has passed by a whole period counts as an overrun and the schedule is
+// moved on instead of bursting to catch up.
+class PeriodicTimer {
+ public:
+  explicit PeriodicTimer(double period_s);
+  // Sleeps until the next deadline. Returns false when the sleep was interrupted
+  // by a signal (the caller then checks its stop flag).
+  bool wait();
+  int64_t overruns() const { return overruns_; }
+  int64_t cycles() const { return cycles_; }
+  double period_s() const { return period_s_; }
+
+ private:
+  double period_s_;
+  int64_t period_ns_;
+  timespec next_{};
+  int64_t overruns_ = 0;
+  int64_t cycles_ = 0;
+};
+
+}  // namespace cnc::util

@@ -1,0 +1,13 @@
+#pragma once
+// SIGTERM / SIGINT handling shared by every service: the handler only sets a flag;
+// the service's loop sees it, shuts down cleanly and exits 0.
+#include <atomic>
+
+namespace cnc::util {
+
+void install_stop_handlers();
+bool stop_requested();
+int stop_signal();  // the signal that asked for the stop, 0 if none
+void request_stop();  // for tests and for a service that decides to end itself
+
+}  // namespace cnc::util

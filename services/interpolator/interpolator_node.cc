@@ -1,0 +1,186 @@
+#include "services/interpolator/interpolator_node.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "cnc/lcmt_block_request.hpp"
+#include "cnc/lcmt_interp_input.hpp"
+#include "cnc/lcmt_interp_state.hpp"
+#include "cnc/lcmt_setpoint.hpp"
+#include "common/program/block_msg.h"
+
+namespace cnc::interp {
+
+namespace ch = config::channels;
+
+InterpolatorNode::InterpolatorNode(const config::MachineConfig& cfg, bus::Bus& bus)
+    : cfg_(cfg), bus_(bus), core_(cfg),
+      ch_setpoints_(cfg.channel(ch::kSetpoints)), ch_request_(cfg.channel(ch::kBlockRequest)),
+      ch_state_(cfg.channel(ch::kInterpState)), ch_input_(cfg.channel(ch::kInterpInput)),
+      // Re-request after ~100 ms without the block (a lost request or block).
+      resend_cycles_(std::max<int64_t>(2, std::llround(0.1 / cfg.ipo_period_s))) {
+  bus_.subscribe<cnc::lcmt_program_command>(cfg.channel(ch::kProgramCmd),
+                                            [this](const auto& m) { on_command(m); });
+  bus_.subscribe<cnc::lcmt_program_state>(cfg.channel(ch::kProgramState),
+                                          [this](const auto& m) { on_program_state(m); });
+  bus_.subscribe<cnc::lcmt_program_block>(cfg.channel(ch::kProgramBlocks), [this](const auto& m) { on_block(m); });
+}
+
+void InterpolatorNode::on_command(const cnc::lcmt_program_command& m) { pending_commands_.push_back(m); }
+
+void InterpolatorNode::on_program_state(const cnc::lcmt_program_state& m) {
+  const bool loaded = m.state == cnc::lcmt_program_state::LOADED || m.state == cnc::lcmt_program_state::RUNNING;
+  if (!loaded || m.program_token == token_) return;
+  const RunState s = core_.state();
+  if (s == RunState::kRunning || s == RunState::kHeld || s == RunState::kStarved) {
+    spdlog::warn("program {} loaded while a program runs: ignored until it ends", m.program_path);
+    return;
+  }
+  token_ = m.program_token;
+  num_blocks_ = m.num_blocks;
+  program_path_ = m.program_path;
+  reorder_.clear();
+  load_pending_ = true;
+}
+
+void InterpolatorNode::on_block(const cnc::lcmt_program_block& m) {
+  if (m.program_token != token_ || token_ == 0) return;
+  if (m.block_index < core_.next_block_index()) return;  // a duplicate of what the core has
+  if (m.block_index >= core_.next_block_index() + cfg_.block_window) return;  // outside the window
+  reorder_.emplace(m.block_index, m);
+}
+
+void InterpolatorNode::apply_command(const Command& c, const cnc::lcmt_program_command& m) {
+  core_.apply_command(c);
+  cnc::lcmt_interp_input in{};
+  in.cycle = core_.cycle();
+  in.kind = cnc::lcmt_interp_input::COMMAND;
+  in.command = m;
+  in.block.num_axes = 0;
+  bus_.publish(ch_input_, in);
+}
+
+void InterpolatorNode::request_blocks() {
+  const RunState s = core_.state();
+  if (token_ == 0 || !(s == RunState::kRunning || s == RunState::kStarved || s == RunState::kHeld)) return;
+  const int64_t first = core_.next_block_index();
+  const int64_t capacity = cfg_.block_window - static_cast<int64_t>(core_.queued_blocks());
+  const int64_t end = std::min(first + capacity, num_blocks_);
+  int64_t missing = first;
+  while (missing < end && reorder_.count(missing)) ++missing;
+  if (missing >= end) return;
+  const int64_t now = core_.cycle();
+  // Ask in batches of half a window (or for the tail of the program), and again
+  // when nothing came for a while: a lost request or block only delays.
+  const bool batch_ready = end - missing >= std::max<int64_t>(1, cfg_.block_window / 2) || end == num_blocks_;
+  const bool fresh = missing != last_request_first_;
+  const bool timed_out = now - last_request_cycle_ >= resend_cycles_;
+  if (!((fresh && batch_ready) || timed_out)) return;
+  cnc::lcmt_block_request r{};
+  r.program_token = token_;
+  r.first_block = missing;
+  r.count = static_cast<int32_t>(end - missing);
+  bus_.publish(ch_request_, r);
+  last_request_first_ = missing;
+  last_request_cycle_ = now;
+}
+
+void InterpolatorNode::cycle() {
+  bus_.drain();
+  const int64_t cyc = core_.cycle();
+  if (load_pending_) {
+    load_pending_ = false;
+    cnc::lcmt_program_command m{};
+    m.command = cnc::lcmt_program_command::LOAD;
+    m.program_path = program_path_;
+    apply_command(Command{Command::Kind::kLoad, 1.0}, m);
+    last_request_first_ = -1;
+  }
+  for (const auto& m : pending_commands_) {
+    Command c;
+    switch (m.command) {
+      case cnc::lcmt_program_command::START:
+        if (token_ == 0) {
+          spdlog::warn("START without a loaded program: ignored");
+          continue;
+        }
+        c.kind = Command::Kind::kStart;
+        last_request_first_ = -1;
+        break;
+      case cnc::lcmt_program_command::HOLD: c.kind = Command::Kind::kHold; break;
+      case cnc::lcmt_program_command::RESUME: c.kind = Command::Kind::kResume; break;
+      case cnc::lcmt_program_command::STOP: c.kind = Command::Kind::kStop; break;
+      case cnc::lcmt_program_command::OVERRIDE:
+        if (!std::isfinite(m.feed_override) || m.feed_override < 0 || m.feed_override > 1.5) {
+          spdlog::warn("feed override {} outside 0..1.5: ignored (seq {})", m.feed_override, m.seq);
+          continue;
+        }
+        c.kind = Command::Kind::kOverride;
+        c.feed_override = m.feed_override;
+        break;
+      default: continue;  // LOAD is the server's; the core sees it through PROGRAM_STATE
+    }
+    apply_command(c, m);
+  }
+  pending_commands_.clear();
+
+  // Hand the core every block that is next in order.
+  for (auto it = reorder_.find(core_.next_block_index()); it != reorder_.end();
+       it = reorder_.find(core_.next_block_index())) {
+    program::Block b;
+    const std::string why = program::from_msg(it->second, static_cast<int>(cfg_.axes.size()), &b);
+    if (!why.empty() || !core_.apply_block(b)) {
+      ++rejected_blocks_;
+      spdlog::error("block {} of program {} refused: {}", it->first, token_, why.empty() ? "out of order" : why);
+      reorder_.erase(it);
+      break;
+    }
+    cnc::lcmt_interp_input in{};
+    in.cycle = cyc;
+    in.kind = cnc::lcmt_interp_input::BLOCK;
+    in.block = it->second;
+    bus_.publish(ch_input_, in);
+    reorder_.erase(it);
+  }
+  request_blocks();
+
+  const Setpoint& sp = core_.step();
+  cnc::lcmt_setpoint out{};
+  out.cycle = sp.cycle;
+  out.period_s = cfg_.ipo_period_s;
+  out.num_axes = sp.num_axes;
+  out.position_mm.assign(sp.position_mm.begin(), sp.position_mm.begin() + sp.num_axes);
+  out.feed_mm_per_min = sp.feed_mm_per_min;
+  out.program_token = token_;
+  out.block_index = sp.block_index;
+  out.source_line = sp.source_line;
+  out.u = sp.u;
+  out.limit = static_cast<int8_t>(sp.limit);
+  out.state = static_cast<int8_t>(sp.state);
+  bus_.publish(ch_setpoints_, out);
+  ++setpoints_published_;
+  publish_state(false);
+}
+
+void InterpolatorNode::publish_state(bool force) {
+  const RunState s = core_.state();
+  const int64_t now = core_.cycle();
+  if (!force && s == last_state_ && now - last_state_cycle_ < resend_cycles_) return;
+  last_state_ = s;
+  last_state_cycle_ = now;
+  cnc::lcmt_interp_state m{};
+  m.cycle = now;
+  m.state = static_cast<int8_t>(s);
+  m.program_token = token_;
+  m.blocks_done = core_.blocks_done();
+  m.blocks_buffered = static_cast<int64_t>(core_.queued_blocks() + reorder_.size());
+  m.setpoints_published = setpoints_published_;
+  m.starved_cycles = core_.starved_cycles();
+  m.feed_override = core_.feed_override();
+  m.program_time_s = core_.program_time_s();
+  bus_.publish(ch_state_, m);
+}
+
+}  // namespace cnc::interp

@@ -1,0 +1,27 @@
+// cnc-interpolator: turns program blocks into coarse axis setpoints every T_ipo.
+#include "cnc/lcmt_heartbeat.hpp"
+#include "common/bus/bus.h"
+#include "common/service/heartbeat.h"
+#include "common/service/service.h"
+#include "common/util/clock.h"
+#include "common/util/signals.h"
+#include "services/interpolator/interpolator_node.h"
+
+int main(int argc, char** argv) {
+  cnc::service::Spec spec{"cnc-interpolator", "coarse interpolation of program blocks into axis setpoints", {}, {}};
+  return cnc::service::run(spec, argc, argv, [](const cnc::config::MachineConfig& cfg, const cnc::service::Args&) {
+    cnc::bus::Bus bus(cfg.lcm_url);
+    cnc::interp::InterpolatorNode node(cfg, bus);
+    cnc::service::Heartbeat hb(bus, cfg, "cnc-interpolator");
+    cnc::util::PeriodicTimer timer(cfg.ipo_period_s);
+    while (!cnc::util::stop_requested()) {
+      timer.wait();
+      if (cnc::util::stop_requested()) break;
+      node.cycle();
+      hb.tick(cnc::lcmt_heartbeat::RUNNING, timer.overruns());
+    }
+    node.publish_state(true);
+    hb.tick(cnc::lcmt_heartbeat::STOPPING, timer.overruns(), "", true);
+    return cnc::service::kExitOk;
+  });
+}
