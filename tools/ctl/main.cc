@@ -1,0 +1,213 @@
+// cnc-ctl: operator commands to a running cell, and `--do run`, which loads a
+// program, starts it, waits for its end and for the axes to settle.
+//
+//   cnc-ctl --machine M --do run --program P [--timeout S]
+//   cnc-ctl --machine M --do load --program P | start | hold | resume | stop | override --value 0.8
+//
+// Exit codes: 0 done; 2 bad flags or config; 3 program refused; 4 timeout; 5 fault.
+#include <spdlog/spdlog.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+#include <set>
+
+#include "cnc/lcmt_alarm.hpp"
+#include "cnc/lcmt_axis_status.hpp"
+#include "cnc/lcmt_heartbeat.hpp"
+#include "cnc/lcmt_interp_state.hpp"
+#include "cnc/lcmt_program_command.hpp"
+#include "cnc/lcmt_program_state.hpp"
+#include "cnc/lcmt_setpoint.hpp"
+#include "common/bus/bus.h"
+#include "common/service/service.h"
+#include "common/util/clock.h"
+#include "common/util/signals.h"
+
+namespace ch = cnc::config::channels;
+using cnc::lcmt_program_command;
+
+namespace {
+
+constexpr int kExitRefused = 3;
+constexpr int kExitTimeout = 4;
+constexpr int kExitFault = 5;
+
+struct CellView {
+  std::map<std::string, cnc::lcmt_heartbeat> heartbeats;
+  cnc::lcmt_program_state program{};
+  bool have_program = false;
+  cnc::lcmt_interp_state interp{};
+  bool have_interp = false;
+  cnc::lcmt_axis_status axes{};
+  bool have_axes = false;
+  std::vector<cnc::lcmt_alarm> alarms;
+};
+
+// Runs the bus until `done()` or the deadline; false on timeout or stop signal.
+template <class Pred>
+bool wait_for(cnc::bus::Bus& bus, double timeout_s, Pred done) {
+  const double end = cnc::util::monotonic_s() + timeout_s;
+  while (!done()) {
+    if (cnc::util::stop_requested() || cnc::util::monotonic_s() > end) return false;
+    bus.handle(10);
+  }
+  return true;
+}
+
+int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& args) {
+  const std::string what = args.option("do", "run");
+  const double timeout_s = std::stod(args.option("timeout", "600"));
+  cnc::bus::Bus bus(cfg.lcm_url);
+  CellView view;
+  bus.subscribe<cnc::lcmt_heartbeat>(cfg.channel(ch::kHeartbeat),
+                                     [&](const auto& m) { view.heartbeats[m.service] = m; });
+  bus.subscribe<cnc::lcmt_program_state>(cfg.channel(ch::kProgramState), [&](const auto& m) {
+    view.program = m;
+    view.have_program = true;
+  });
+  bus.subscribe<cnc::lcmt_interp_state>(cfg.channel(ch::kInterpState), [&](const auto& m) {
+    view.interp = m;
+    view.have_interp = true;
+  });
+  double largest_fe = 0;
+  std::string largest_fe_axis;
+  bus.subscribe<cnc::lcmt_axis_status>(cfg.channel(ch::kAxisStatus), [&](const auto& m) {
+    view.axes = m;
+    view.have_axes = true;
+    for (int i = 0; i < m.num_axes; ++i) {
+      if (std::fabs(m.following_error_mm[i]) > largest_fe) {
+        largest_fe = std::fabs(m.following_error_mm[i]);
+        largest_fe_axis = m.axis_name[i];
+      }
+    }
+  });
+  bus.subscribe<cnc::lcmt_alarm>(cfg.channel(ch::kAlarm), [&](const auto& m) {
+    view.alarms.push_back(m);
+    std::fprintf(stderr, "ALARM %s [%s] %s\n", m.source.c_str(), m.code.c_str(), m.text.c_str());
+  });
+
+  auto send = [&](int8_t command, const std::string& path = "", double value = 1.0) {
+    lcmt_program_command c{};
+    c.command = command;
+    c.program_path = path;
+    c.feed_override = value;
+    bus.publish(cfg.channel(ch::kProgramCmd), c);
+  };
+
+  if (what == "start") return send(lcmt_program_command::START), 0;
+  if (what == "hold") return send(lcmt_program_command::HOLD), 0;
+  if (what == "resume") return send(lcmt_program_command::RESUME), 0;
+  if (what == "stop") return send(lcmt_program_command::STOP), 0;
+  if (what == "override") return send(lcmt_program_command::OVERRIDE, "", std::stod(args.option("value", "1.0"))), 0;
+  if (what != "run" && what != "load") {
+    std::fprintf(stderr, "cnc-ctl: --do must be one of run load start hold resume stop override\n");
+    return cnc::service::kExitBadInput;
+  }
+  const std::string program_arg = args.option("program");
+  if (program_arg.empty()) {
+    std::fprintf(stderr, "cnc-ctl: --program FILE is required\n");
+    return cnc::service::kExitBadInput;
+  }
+  // The server may run elsewhere: send the path as given when it is not a local file.
+  const std::string program = std::filesystem::exists(program_arg)
+                                  ? std::filesystem::absolute(program_arg).lexically_normal().string()
+                                  : program_arg;
+
+  // The services must be up first.
+  const std::set<std::string> needed = {"cnc-program-server", "cnc-interpolator", "cnc-drive-bridge"};
+  auto all_up = [&] {
+    for (const auto& s : needed) {
+      auto it = view.heartbeats.find(s);
+      if (it == view.heartbeats.end() || it->second.state != cnc::lcmt_heartbeat::RUNNING) return false;
+    }
+    return true;
+  };
+  if (!wait_for(bus, 30, all_up)) {
+    std::fprintf(stderr, "cnc-ctl: services not running after 30 s:");
+    for (const auto& s : needed)
+      if (!view.heartbeats.count(s)) std::fprintf(stderr, " %s", s.c_str());
+    std::fprintf(stderr, "\n");
+    return kExitTimeout;
+  }
+
+  // LOAD; repeated if no answer (a lost datagram), the answer names the path.
+  const int64_t old_token = view.have_program ? view.program.program_token : 0;
+  auto answered = [&] {
+    return view.have_program && view.program.program_path == program &&
+           (view.program.state == cnc::lcmt_program_state::REFUSED ||
+            (view.program.state == cnc::lcmt_program_state::LOADED && view.program.program_token != old_token));
+  };
+  bool got = false;
+  for (int attempt = 0; attempt < 5 && !got; ++attempt) {
+    send(lcmt_program_command::LOAD, program);
+    got = wait_for(bus, 2.0, answered);
+  }
+  if (!got) {
+    std::fprintf(stderr, "cnc-ctl: the program server did not answer the load of %s\n", program.c_str());
+    return kExitTimeout;
+  }
+  if (view.program.state == cnc::lcmt_program_state::REFUSED) {
+    std::fprintf(stderr, "cnc-ctl: program refused: %s\n", view.program.error.c_str());
+    return kExitRefused;
+  }
+  const int64_t token = view.program.program_token;
+  std::printf("loaded %s: %lld blocks\n", program.c_str(), static_cast<long long>(view.program.num_blocks));
+  if (what == "load") return 0;
+
+  if (!wait_for(bus, 5.0, [&] { return view.have_interp && view.interp.program_token == token; })) {
+    std::fprintf(stderr, "cnc-ctl: the interpolator did not take the program\n");
+    return kExitTimeout;
+  }
+  auto started = [&] {
+    return view.interp.program_token == token && view.interp.state != 0 /* idle */;
+  };
+  got = false;
+  for (int attempt = 0; attempt < 5 && !got; ++attempt) {
+    send(lcmt_program_command::START);
+    got = wait_for(bus, 1.0, started);
+  }
+  if (!got) {
+    std::fprintf(stderr, "cnc-ctl: the interpolator did not start\n");
+    return kExitTimeout;
+  }
+  const double t0 = cnc::util::monotonic_s();
+  auto bridge_fault = [&] {
+    if (!view.have_axes) return false;
+    for (int8_t s : view.axes.drive_state)
+      if (s == cnc::lcmt_axis_status::FAULT) return true;
+    return false;
+  };
+  const bool done = wait_for(bus, timeout_s, [&] {
+    return bridge_fault() || (view.interp.program_token == token && view.interp.state == 3 /* done */);
+  });
+  if (bridge_fault()) {
+    std::fprintf(stderr, "cnc-ctl: drive fault: %s\n", view.axes.fault.empty() ? "" : view.axes.fault[0].c_str());
+    return kExitFault;
+  }
+  if (!done) {
+    std::fprintf(stderr, "cnc-ctl: program did not finish within %.0f s\n", timeout_s);
+    return kExitTimeout;
+  }
+  // Let the servo loops settle on the end point (1 µm), for at most 3 s.
+  auto settled = [&] {
+    if (!view.have_axes) return false;
+    for (double fe : view.axes.following_error_mm)
+      if (std::fabs(fe) > 1e-4) return false;
+    return true;
+  };
+  const bool is_settled = wait_for(bus, 3.0, settled);
+  std::printf("program done: %.3f s program time (%.1f s wall), %lld blocks, largest following error %.4f mm (%s)%s\n",
+              view.interp.program_time_s, cnc::util::monotonic_s() - t0, static_cast<long long>(view.interp.blocks_done),
+              largest_fe, largest_fe_axis.c_str(), is_settled ? "" : ", axes not settled within 3 s");
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  cnc::service::Spec spec{"cnc-ctl", "operator commands to a running cell", {"do", "program", "value", "timeout"}, {}};
+  return cnc::service::run(spec, argc, argv, run_ctl);
+}

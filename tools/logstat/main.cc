@@ -1,0 +1,136 @@
+// cnc-logstat: reads a cell's LCM log through the bus's file back end and prints,
+// per channel, the events, senders and sequence gaps; with --summary, the run's
+// summary (program time, blocks, setpoints published/received, gaps per channel
+// and receiver, largest following error).
+//
+//   cnc-logstat --log FILE [--summary] [--require-no-gaps CHANNEL]
+//
+// Exit codes: 0 fine; 1 a required channel is empty or has gaps; 2 bad flags.
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <set>
+
+#include "cnc/lcmt_axis_status.hpp"
+#include "cnc/lcmt_heartbeat.hpp"
+#include "cnc/lcmt_interp_state.hpp"
+#include "cnc/lcmt_program_state.hpp"
+#include "common/bus/bus.h"
+#include "common/service/service.h"
+
+namespace {
+
+struct Senders {
+  std::set<int32_t> ids;
+};
+
+int run_logstat(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
+  const std::string log = args.option("log");
+  if (log.empty()) {
+    std::fprintf(stderr, "cnc-logstat: --log FILE is required\n");
+    return cnc::service::kExitBadInput;
+  }
+  cnc::bus::Bus bus("file://" + log + "?speed=0");
+  std::map<std::string, Senders> senders;
+  bus.subscribe_raw(".*", [&](const std::string& ch, const void* data, size_t size, int64_t) {
+    if (auto h = cnc::bus::peek_header(data, size)) senders[ch].ids.insert(h->sender);
+  });
+  // The last heartbeat of each service (its final one when it stopped cleanly).
+  std::map<std::string, cnc::lcmt_heartbeat> last_hb;
+  cnc::lcmt_interp_state interp{};
+  cnc::lcmt_program_state program{};
+  double largest_fe = 0;
+  std::string largest_fe_axis;
+  int64_t axis_faults = 0;
+  std::string prefix;
+  bus.subscribe_raw(".*HEARTBEAT", [&](const std::string& ch, const void* data, size_t size, int64_t) {
+    cnc::lcmt_heartbeat hb;
+    if (hb.decode(data, 0, static_cast<int>(size)) == static_cast<int>(size)) {
+      last_hb[hb.service] = hb;
+      prefix = ch.substr(0, ch.size() - std::string("HEARTBEAT").size());
+    }
+  });
+  bus.subscribe_raw(".*INTERP_STATE", [&](const std::string&, const void* data, size_t size, int64_t) {
+    cnc::lcmt_interp_state m;
+    if (m.decode(data, 0, static_cast<int>(size)) == static_cast<int>(size)) interp = m;
+  });
+  bus.subscribe_raw(".*PROGRAM_STATE", [&](const std::string&, const void* data, size_t size, int64_t) {
+    cnc::lcmt_program_state m;
+    if (m.decode(data, 0, static_cast<int>(size)) == static_cast<int>(size)) program = m;
+  });
+  bus.subscribe_raw(".*AXIS_STATUS", [&](const std::string&, const void* data, size_t size, int64_t) {
+    cnc::lcmt_axis_status m;
+    if (m.decode(data, 0, static_cast<int>(size)) != static_cast<int>(size)) return;
+    for (int i = 0; i < m.num_axes; ++i) {
+      if (std::fabs(m.following_error_mm[i]) > largest_fe) {
+        largest_fe = std::fabs(m.following_error_mm[i]);
+        largest_fe_axis = m.axis_name[i];
+      }
+      if (m.drive_state[i] == cnc::lcmt_axis_status::FAULT) ++axis_faults;
+    }
+  });
+  int64_t events = 0;
+  while (bus.handle(1000) > 0) ++events;
+
+  std::printf("%-28s %10s %8s %10s %10s\n", "channel", "events", "senders", "seq_gaps", "restarts");
+  for (const auto& [ch, st] : bus.stats()) {
+    std::printf("%-28s %10lld %8zu %10lld %10lld\n", ch.c_str(), static_cast<long long>(st.received),
+                senders[ch].ids.size(), static_cast<long long>(st.seq_gaps), static_cast<long long>(st.seq_restarts));
+  }
+  std::printf("%lld events in %s\n", static_cast<long long>(events), log.c_str());
+
+  if (args.flags.count("summary")) {
+    auto hb_count = [&](const std::string& service, const std::string& channel, const char* what) -> long long {
+      auto it = last_hb.find(service);
+      if (it == last_hb.end()) return -1;
+      const auto& hb = it->second;
+      for (int i = 0; i < hb.num_channels; ++i) {
+        if (hb.channel[i] != channel) continue;
+        if (std::string(what) == "published") return hb.published[i];
+        if (std::string(what) == "received") return hb.received[i];
+        return hb.seq_gaps[i];
+      }
+      return 0;
+    };
+    const std::string sp = prefix + "SETPOINTS";
+    std::printf("\nrun summary\n");
+    std::printf("  program             %s\n", program.program_path.c_str());
+    std::printf("  program time        %.3f s\n", interp.program_time_s);
+    std::printf("  blocks              %lld of %lld done (sent %lld, re-sent %lld)\n",
+                static_cast<long long>(interp.blocks_done), static_cast<long long>(program.num_blocks),
+                static_cast<long long>(program.blocks_sent), static_cast<long long>(program.blocks_resent));
+    std::printf("  setpoints           published %lld (interpolator), received %lld (drive bridge), %lld (monitor), "
+                "%lld (logger)\n",
+                hb_count("cnc-interpolator", sp, "published"), hb_count("cnc-drive-bridge", sp, "received"),
+                hb_count("cnc-monitor", sp, "received"), static_cast<long long>(bus.stats(sp).received));
+    std::printf("  sequence gaps       per channel, as each receiver counted them:\n");
+    for (const auto& [service, hb] : last_hb) {
+      for (int i = 0; i < hb.num_channels; ++i) {
+        if (hb.received[i] == 0) continue;
+        std::printf("      %-26s %-20s %lld\n", hb.channel[i].c_str(), service.c_str(),
+                    static_cast<long long>(hb.seq_gaps[i]));
+      }
+    }
+    std::printf("  largest foll. error %.4f mm (axis %s)%s\n", largest_fe, largest_fe_axis.c_str(),
+                axis_faults ? "  -- drive FAULT reported" : "");
+  }
+
+  const std::string required = args.option("require-no-gaps");
+  if (!required.empty()) {
+    const auto st = bus.stats(required);
+    if (st.received == 0 || st.seq_gaps != 0) {
+      std::fprintf(stderr, "cnc-logstat: %s has %lld events and %lld sequence gaps\n", required.c_str(),
+                   static_cast<long long>(st.received), static_cast<long long>(st.seq_gaps));
+      return 1;
+    }
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  cnc::service::Spec spec{"cnc-logstat", "per-channel statistics and run summary of a cell log",
+                          {"log", "require-no-gaps"}, {"summary"}, false};
+  return cnc::service::run(spec, argc, argv, run_logstat);
+}
