@@ -144,6 +144,15 @@ Program GcodeParser::parse(std::istream& in, const std::string& file) const {
     bool any_axis = false;
     std::optional<int> m_end;
 
+    // G20/G21 hold for the whole block, whatever the order of its words (RS274):
+    // set them before any F or axis word of the block is scaled.
+    for (const Word& w : words) {
+      if (w.letter != 'G') continue;
+      const auto code = code_tenths(w.value);
+      if (code == 200) unit_mm = 25.4;
+      if (code == 210) unit_mm = 1.0;
+    }
+
     for (const Word& w : words) {
       if (w.letter != 'G' && w.letter != 'M') {
         if (seen.count(w.letter)) throw ProgramError(at(w), std::string("word '") + w.letter + "' appears twice in one block");
@@ -179,8 +188,7 @@ Program GcodeParser::parse(std::istream& in, const std::string& file) const {
               dwell_src = &w;
               break;
             case 170: case 180: case 190: break;  // plane: only matters for arcs
-            case 200: unit_mm = 25.4; break;
-            case 210: unit_mm = 1.0; break;
+            case 200: case 210: break;  // units: set before this loop
             case 900: absolute = true; break;
             case 910: absolute = false; break;
             default:

@@ -15,6 +15,7 @@ void BridgeCore::reset(const AxisArray& actual_mm) {
   active_ = false;
   have_seg_ = false;
   cmd_ = actual_mm;
+  prev_cmd_ = actual_mm;
   last_sp_ = actual_mm;
   vel_.fill(0.0);
   last_cycle_ = -1;
@@ -80,6 +81,7 @@ bool BridgeCore::on_setpoint(int64_t cycle, const AxisArray& p) {
 
 const AxisArray& BridgeCore::tick() {
   ++ticks_since_setpoint_;
+  prev_cmd_ = cmd_;
   if (faulted_) return cmd_;
   if (static_cast<double>(ticks_since_setpoint_) * servo_s_ > cfg_.setpoint_timeout_s && active_) {
     std::ostringstream why;
@@ -110,6 +112,7 @@ const AxisArray& BridgeCore::tick() {
     return cmd_;
   }
   // No segment: brake along the last velocity at the stop deceleration.
+  if (active_) ++starved_ticks_;
   double speed = 0;
   for (int a = 0; a < naxes_; ++a) speed += vel_[a] * vel_[a];
   speed = std::sqrt(speed);
@@ -132,7 +135,7 @@ const AxisArray& BridgeCore::tick() {
 bool BridgeCore::check_following(const AxisArray& actual) {
   if (faulted_) return false;
   for (int a = 0; a < naxes_; ++a) {
-    const double fe = cmd_[a] - actual[a];
+    const double fe = following_error(a, actual[a]);
     if (std::fabs(fe) > cfg_.axes[a].max_following_error_mm) {
       std::ostringstream why;
       why << "axis " << cfg_.axes[a].name << " following error " << fe << " mm over its limit "

@@ -30,8 +30,10 @@ class BridgeCore {
   bool on_setpoint(int64_t cycle, const AxisArray& position_mm);
   // One servo tick: advances the fine interpolation. Returns the commanded positions.
   const AxisArray& tick();
-  // Following error check against the drives' actual positions; faults when over.
+  // Following error check against the drives' actual positions, read in the same
+  // transaction that sent this tick's command: they answer the previous command.
   bool check_following(const AxisArray& actual_mm);
+  double following_error(int axis, double actual_mm) const { return prev_cmd_[axis] - actual_mm; }
   void fault(const std::string& why);
 
   bool faulted() const { return faulted_; }
@@ -42,6 +44,8 @@ class BridgeCore {
   int64_t setpoint_gaps() const { return gaps_; }
   int64_t ticks_since_setpoint() const { return ticks_since_setpoint_; }
   bool active() const { return active_; }
+  // Servo ticks on which the fine interpolation had no coarse setpoint to follow.
+  int64_t starved_ticks() const { return starved_ticks_; }
 
  private:
   struct Coarse {
@@ -60,10 +64,12 @@ class BridgeCore {
   int seg_tick_ = 0;
   bool have_seg_ = false;
   AxisArray cmd_{};
+  AxisArray prev_cmd_{};
   AxisArray vel_{};      // commanded velocity of the last tick, mm/s
   AxisArray last_sp_{};
   int64_t last_cycle_ = -1;
   int64_t gaps_ = 0;
+  int64_t starved_ticks_ = 0;
   int64_t ticks_since_setpoint_ = 0;
   bool stopping_ = false;
   bool faulted_ = false;

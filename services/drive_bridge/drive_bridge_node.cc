@@ -145,7 +145,7 @@ void DriveBridgeNode::publish_status(int64_t overruns) {
     s.axis_name.push_back(cfg_.axes[i].name);
     s.commanded_mm.push_back(core_.commanded()[i]);
     s.actual_mm.push_back(ax.actual_mm);
-    s.following_error_mm.push_back(core_.commanded()[i] - ax.actual_mm);
+    s.following_error_mm.push_back(core_.following_error(static_cast<int>(i), ax.actual_mm));
     int8_t st = ax.state;
     if (!up_) st = cnc::lcmt_axis_status::DISABLED;
     else if (core_.stopping()) st = cnc::lcmt_axis_status::STOPPING;
@@ -163,6 +163,8 @@ void DriveBridgeNode::publish_status(int64_t overruns) {
 }
 
 void DriveBridgeNode::shut_down() {
+  spdlog::info("setpoint gaps {}, servo ticks without a setpoint to follow {}", core_.setpoint_gaps(),
+               core_.starved_ticks());
   for (auto& ax : axes_) {
     if (ax.link->connected()) ax.link->write_register(ax.unit, sim::kControlword, 0, ax.counters);
   }

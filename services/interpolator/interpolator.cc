@@ -80,7 +80,7 @@ void Interpolator::apply_command(const Command& cmd) {
   }
 }
 
-void Interpolator::begin_next_segment() {
+void Interpolator::begin_next_segment(double entry_fraction) {
   have_segment_ = false;
   if (queue_.empty()) return;
   seg_ = Segment{};
@@ -109,8 +109,11 @@ void Interpolator::begin_next_segment() {
     const double v_prog = b.kind == program::BlockKind::kRapid ? std::numeric_limits<double>::infinity()
                                                                : b.feed_mm_per_min / 60.0;
     seg_.v_max_mm_s = std::min(v_prog, v_axis);
+    seg_.v_axis_mm_s = v_axis;
     seg_.v_limit = v_prog <= v_axis ? Limit::kProgram : Limit::kAxisVelocity;
     seg_.accel_mm_s2 = accel;
+    // Negative: the first cycle brakes the previous segment's last velocity first.
+    v_mm_s_ = -entry_fraction * accel * period_s_;
   }
   have_segment_ = true;
 }
@@ -118,7 +121,9 @@ void Interpolator::begin_next_segment() {
 void Interpolator::advance_motion() {
   out_.limit = Limit::kNone;
   out_.feed_mm_per_min = 0;
-  if (!have_segment_) begin_next_segment();
+  const double entry_fraction = exit_fraction_;
+  exit_fraction_ = 0;
+  if (!have_segment_) begin_next_segment(entry_fraction);
   if (!have_segment_) {
     if (stopping_) {
       stopping_ = false;
@@ -173,11 +178,19 @@ void Interpolator::advance_motion() {
   Limit limit = seg_.v_limit;
   if (L > 0) {
     const double ovr = b.kind == program::BlockKind::kRapid ? std::min(override_, 1.0) : override_;
-    const double v_target = pausing ? 0.0 : seg_.v_max_mm_s * ovr;
+    const double v_target = pausing ? 0.0 : std::min(seg_.v_max_mm_s * ovr, seg_.v_axis_mm_s);
+    if (!pausing && seg_.v_max_mm_s * ovr > seg_.v_axis_mm_s) limit = Limit::kAxisVelocity;
     const double rem = L - s_mm_;
-    // Largest speed from which braking at `a` in whole cycles stops within `rem`:
-    // T·(v + (v − aT) + (v − 2aT) + ...) ≤ rem  ⇔  v ≤ −aT/2 + sqrt((aT/2)² + 2·a·rem).
-    const double v_brake = -0.5 * a * T + std::sqrt(0.25 * a * a * T * T + 2.0 * a * rem);
+    // Largest speed from which braking at `a` in whole cycles stops within `rem`.
+    // Moving at v this cycle and braking by aT per cycle covers
+    //   d(v) = T·(v + (v − aT) + ... + (v − n·aT)) = T·(n+1)·(v − n·aT/2),  n = floor(v/aT),
+    // after which the speed is below aT and the next cycle is at rest. d is continuous
+    // and increasing, so v_brake = d⁻¹(rem): with n the largest integer such that
+    // aT²·n(n+1)/2 ≤ rem, v_brake = rem/((n+1)·T) + n·aT/2. (The continuous law
+    // v(v + aT)/2a ≤ rem underestimates d between multiples of aT, which let the last
+    // cycle of a block brake at up to 1.125·a.)
+    const double n_brake = std::floor((std::sqrt(8.0 * rem / (a * T * T) + 1.0) - 1.0) / 2.0);
+    const double v_brake = rem / ((n_brake + 1.0) * T) + 0.5 * n_brake * a * T;
     v_next = std::min({std::max(v_target, v_mm_s_ - a * T), v_mm_s_ + a * T, v_brake});
     v_next = std::max(v_next, 0.0);
     if (v_brake <= std::max(v_target, v_mm_s_ - a * T) && v_brake <= v_mm_s_ + a * T) limit = Limit::kLookahead;
@@ -199,6 +212,7 @@ void Interpolator::advance_motion() {
   out_.limit = v_next > 0 ? limit : Limit::kNone;
   state_ = (hold_ && v_next == 0) ? RunState::kHeld : RunState::kRunning;
   if (finished) {
+    exit_fraction_ = std::min(1.0, v_next / (a * T));
     v_mm_s_ = 0;
     ++blocks_done_;
     have_segment_ = false;

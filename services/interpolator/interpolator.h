@@ -70,11 +70,12 @@ class Interpolator {
     program::Block block;
     double length_mm = 0;
     double v_max_mm_s = 0;  // from the program feed and the axis velocity limits (before override)
+    double v_axis_mm_s = 0;  // from the axis velocity limits alone: override never goes past it
     Limit v_limit = Limit::kProgram;
     double accel_mm_s2 = 0;
     int64_t dwell_cycles_left = 0;
   };
-  void begin_next_segment();
+  void begin_next_segment(double entry_fraction);
   void advance_motion();
 
   config::MachineConfig cfg_;
@@ -92,6 +93,10 @@ class Interpolator {
   Segment seg_;
   double s_mm_ = 0;      // distance along the current segment
   double v_mm_s_ = 0;    // path speed of the last cycle
+  // When the last cycle ended a segment: its speed as a fraction of that segment's
+  // a·T. The next segment's first cycle may only add what is left of a·T, so the
+  // change of velocity across the (exact-stop) corner stays within the limits.
+  double exit_fraction_ = 0;
 
   std::array<double, program::kMaxAxes> pos_{};
   int64_t cycle_ = 0;

@@ -104,13 +104,16 @@ int run_logstat(const cnc::config::MachineConfig&, const cnc::service::Args& arg
                 hb_count("cnc-interpolator", sp, "published"), hb_count("cnc-drive-bridge", sp, "received"),
                 hb_count("cnc-monitor", sp, "received"), static_cast<long long>(bus.stats(sp).received));
     std::printf("  sequence gaps       per channel, as each receiver counted them:\n");
+    std::map<std::string, std::string> per_channel;
     for (const auto& [service, hb] : last_hb) {
       for (int i = 0; i < hb.num_channels; ++i) {
         if (hb.received[i] == 0) continue;
-        std::printf("      %-26s %-20s %lld\n", hb.channel[i].c_str(), service.c_str(),
-                    static_cast<long long>(hb.seq_gaps[i]));
+        std::string& line = per_channel[hb.channel[i]];
+        line += (line.empty() ? "" : ", ") + service.substr(service.rfind("cnc-", 0) == 0 ? 4 : 0) + " " +
+                std::to_string(hb.seq_gaps[i]);
       }
     }
+    for (const auto& [channel, line] : per_channel) std::printf("      %-26s %s\n", channel.c_str(), line.c_str());
     std::printf("  largest foll. error %.4f mm (axis %s)%s\n", largest_fe, largest_fe_axis.c_str(),
                 axis_faults ? "  -- drive FAULT reported" : "");
   }

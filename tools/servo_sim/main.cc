@@ -31,7 +31,21 @@ struct SimAxis {
   int unit;
   modbus_mapping_t* map;
   cnc::servo_sim::ServoModel model;
+  // Velocity feed-forward, estimated from the last two target writes.
+  int32_t last_target_counts = 0;
+  double last_write_s = -1;
+  double feedforward_mm_s = 0;
 };
+
+void note_target_write(SimAxis& a, double now_s) {
+  const int32_t t = sim::get_i32_low_first(&a.map->tab_registers[sim::kTargetPosition]);
+  const double dt = now_s - a.last_write_s;
+  a.feedforward_mm_s = (a.last_write_s > 0 && dt > 1e-4 && dt < 0.02)
+                           ? sim::counts_to_mm(t - a.last_target_counts) / dt
+                           : 0.0;
+  a.last_target_counts = t;
+  a.last_write_s = now_s;
+}
 
 void publish_state(SimAxis& a) {
   uint16_t* r = a.map->tab_registers;
@@ -53,7 +67,9 @@ int run_sim(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
     }
     modbus_mapping_t* map = modbus_mapping_new(0, 0, sim::kNumRegisters, 0);
     if (map == nullptr) throw std::runtime_error("modbus_mapping_new failed");
-    axes.push_back(SimAxis{a.name, a.drive.unit_id, map, cnc::servo_sim::ServoModel(a.sim, a.max_velocity_mm_s, a.home_mm)});
+    axes.push_back(SimAxis{a.name, a.drive.unit_id, map,
+                           cnc::servo_sim::ServoModel(a.sim, a.max_velocity_mm_s, a.home_mm),
+                           sim::mm_to_counts(a.home_mm), -1.0, 0.0});
     sim::put_i32_low_first(&map->tab_registers[sim::kTargetPosition], sim::mm_to_counts(a.home_mm));
     publish_state(axes.back());
   }
@@ -80,7 +96,9 @@ int run_sim(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
       for (auto& a : axes) {
         const uint16_t* r = a.map->tab_registers;
         const double target = sim::counts_to_mm(sim::get_i32_low_first(&r[sim::kTargetPosition]));
-        a.model.step(dt, target, (r[sim::kControlword] & sim::kCwEnable) != 0);
+        // No write for two periods: the target stands still.
+        if (now - a.last_write_s > 2 * dt) a.feedforward_mm_s = 0;
+        a.model.step(dt, target, a.feedforward_mm_s, (r[sim::kControlword] & sim::kCwEnable) != 0);
         publish_state(a);
       }
       next_step += dt;
@@ -122,7 +140,10 @@ int run_sim(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
         modbus_reply_exception(ctx, query, MODBUS_EXCEPTION_GATEWAY_TARGET);
         continue;
       }
+      const int function = query[header];
       modbus_reply(ctx, query, len, target->map);
+      if (function == MODBUS_FC_WRITE_AND_READ_REGISTERS || function == MODBUS_FC_WRITE_MULTIPLE_REGISTERS)
+        note_target_write(*target, cnc::util::monotonic_s());
       publish_state(*target);
     }
     for (int fd : closed) {

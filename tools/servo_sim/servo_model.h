@@ -1,7 +1,8 @@
 #pragma once
 // Servo dynamics of one simulated drive: a second-order position loop (bandwidth,
-// damping) with velocity feed-forward from the target's rate of change, as real
-// drives in position mode have, and a velocity limit; integrated semi-implicitly.
+// damping) with velocity feed-forward (as real drives in position mode have; the
+// caller estimates it from the target updates) and a velocity limit; integrated
+// semi-implicitly.
 // Disabled, the axis brakes to a stop and holds.
 #include "common/config/machine_config.h"
 
@@ -10,7 +11,7 @@ namespace cnc::servo_sim {
 class ServoModel {
  public:
   ServoModel(const config::ServoSimAxisConfig& sim, double max_velocity_mm_s, double start_mm);
-  void step(double dt_s, double target_mm, bool enabled);
+  void step(double dt_s, double target_mm, double feedforward_mm_s, bool enabled);
   double position_mm() const { return pos_; }
   double velocity_mm_s() const { return vel_; }
 
@@ -20,7 +21,6 @@ class ServoModel {
   double vmax_;
   double pos_;
   double vel_ = 0;
-  double last_target_;
 };
 
 }  // namespace cnc::servo_sim

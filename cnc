@@ -1,0 +1,179 @@
+#!/usr/bin/env bash
+# Entry point of the project. On a fresh Debian 12 machine, as root:
+#   ./cnc demo     install what is missing, build, run the whole cell on this PC once
+#   ./cnc test     install what is missing, build, run the test suite (ctest)
+# and, once built:
+#   ./cnc up --machine FILE [--only SERVICE,...]   start a cell's services in the foreground
+#   ./cnc ctl --machine FILE --do run --program P  operator commands (see cnc-ctl --help)
+#   ./cnc logstat --log FILE [--summary]           statistics of a recorded run
+#   ./cnc build                                    set up and build only
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+BUILD="${CNC_BUILD_DIR:-$ROOT/build}"
+DEFAULT_MACHINE="$ROOT/config/machines/sim3.yaml"
+DEFAULT_PROGRAM="$ROOT/config/programs/demo.ngc"
+
+# Debian packages the project needs to build, test and run.
+PACKAGES=(
+  g++ make cmake pkg-config
+  liblcm-dev liblcm-bin libglib2.0-dev   # LCM 1.3.1; its lcm.pc needs glib
+  libyaml-cpp-dev libmodbus-dev libspdlog-dev libeigen3-dev libgtest-dev
+  python3 iproute2 util-linux procps            # ip, unshare, pkill: private network namespaces in tests
+)
+
+# Service name -> executable, in start order. The logger starts first and stops
+# last so that it records everything the others publish, their final heartbeats too.
+SERVICES=(logger servo-sim drive-bridge monitor program-server interpolator)
+declare -A EXE=(
+  [logger]=services/cnc-logger
+  [servo-sim]=tools/cnc-servo-sim
+  [drive-bridge]=services/cnc-drive-bridge
+  [monitor]=services/cnc-monitor
+  [program-server]=services/cnc-program-server
+  [interpolator]=services/cnc-interpolator
+)
+
+say() { printf '%s\n' "cnc: $*" >&2; }
+die() { say "$*"; exit 2; }
+
+install_missing() {
+  local missing=()
+  for p in "${PACKAGES[@]}"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed' || missing+=("$p")
+  done
+  [ ${#missing[@]} -eq 0 ] && return 0
+  if [ "$(id -u)" -ne 0 ]; then
+    die "missing Debian packages: ${missing[*]} (run as root, or: sudo apt-get install ${missing[*]})"
+  fi
+  say "installing ${missing[*]}"
+  export DEBIAN_FRONTEND=noninteractive
+  apt-get update -qq
+  apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+}
+
+build() {
+  install_missing
+  if [ ! -f "$BUILD/CMakeCache.txt" ]; then
+    cmake -S "$ROOT" -B "$BUILD" -DCMAKE_BUILD_TYPE=Release >/dev/null
+  fi
+  mkdir -p "$BUILD"
+  if ! cmake --build "$BUILD" -j "$(nproc)" >"$BUILD/last-build.log" 2>&1; then
+    grep -E 'error|Error' -A5 "$BUILD/last-build.log" | head -60 >&2
+    die "build failed (whole output in $BUILD/last-build.log)"
+  fi
+}
+
+# up --machine FILE [--only a,b] [--log-out BASE] [--sim-final-state FILE]
+# Runs in the foreground; SIGINT/SIGTERM stop every service in reverse start order.
+# Exit status: 0 when every service exited 0.
+cmd_up() {
+  local machine="" only="" log_out="" final_state=""
+  while [ $# -gt 0 ]; do
+    case "$1" in
+      --machine) machine="$2"; shift 2 ;;
+      --only) only="$2"; shift 2 ;;
+      --log-out) log_out="$2"; shift 2 ;;
+      --sim-final-state) final_state="$2"; shift 2 ;;
+      *) die "up: unknown argument '$1' (expected --machine FILE [--only SERVICE,...])" ;;
+    esac
+  done
+  [ -n "$machine" ] || die "up: --machine FILE is required"
+  [ -f "$machine" ] || die "up: no machine config at '$machine'"
+  local chosen=()
+  if [ -n "$only" ]; then
+    IFS=',' read -r -a wanted <<<"$only"
+    for w in "${wanted[@]}"; do
+      [ -n "${EXE[$w]:-}" ] || die "up: unknown service '$w' (one of: ${SERVICES[*]})"
+    done
+    for s in "${SERVICES[@]}"; do
+      for w in "${wanted[@]}"; do [ "$s" = "$w" ] && chosen+=("$s"); done
+    done
+  else
+    chosen=("${SERVICES[@]}")
+  fi
+  declare -A pids=()
+  local rc=0
+  stop_all() {
+    trap '' INT TERM
+    for ((i = ${#chosen[@]} - 1; i >= 0; i--)); do
+      local s="${chosen[$i]}" pid="${pids[${chosen[$i]}]:-}"
+      [ -n "$pid" ] || continue
+      kill -TERM "$pid" 2>/dev/null || true
+      local code=0
+      wait "$pid" || code=$?
+      if [ "$code" -ne 0 ]; then say "$s exited with status $code"; rc=1; else say "$s stopped"; fi
+    done
+  }
+  trap 'stop_all; exit $rc' INT TERM
+  for s in "${chosen[@]}"; do
+    local args=(--machine "$machine")
+    [ "$s" = logger ] && [ -n "$log_out" ] && args+=(--out "$log_out")
+    [ "$s" = servo-sim ] && [ -n "$final_state" ] && args+=(--final-state "$final_state")
+    "$BUILD/${EXE[$s]}" "${args[@]}" &
+    pids[$s]=$!
+    say "started $s (pid ${pids[$s]})"
+    sleep 0.1
+  done
+  # A service that ends on its own ends the cell.
+  local code=0
+  wait -n "${pids[@]}" || code=$?
+  say "a service ended by itself (status $code): stopping the cell"
+  stop_all
+  exit 1
+}
+
+cmd_demo() {
+  local machine="$DEFAULT_MACHINE" program="$DEFAULT_PROGRAM"
+  while [ $# -gt 0 ]; do
+    case "$1" in
+      --machine) machine="$2"; shift 2 ;;
+      --program) program="$2"; shift 2 ;;
+      *) die "demo: unknown argument '$1'" ;;
+    esac
+  done
+  build
+  local run_dir="$ROOT/runs/demo-$(date -u +%Y%m%d-%H%M%S)"
+  mkdir -p "$run_dir"
+  say "starting the cell ($machine), output in $run_dir"
+  "$ROOT/cnc" up --machine "$machine" --log-out "$run_dir/cell" --sim-final-state "$run_dir/final-positions.json" \
+    >"$run_dir/services.log" 2>&1 &
+  local up_pid=$!
+  local ctl_rc=0
+  "$BUILD/tools/cnc-ctl" --machine "$machine" --do run --program "$program" --timeout 300 || ctl_rc=$?
+  kill -TERM "$up_pid"
+  local up_rc=0
+  wait "$up_pid" || up_rc=$?
+  echo
+  echo "== summary =="
+  "$BUILD/tools/cnc-logstat" --log "$run_dir/cell.lcmlog" --summary | sed -n '/^run summary/,$p'
+  echo "  final positions     $(cat "$run_dir/final-positions.json" 2>/dev/null || echo '(simulator did not report)')"
+  echo "  services            $( [ $up_rc -eq 0 ] && echo 'all exited 0 on SIGTERM' || echo "a service failed, see $run_dir/services.log")"
+  echo "  log                 $run_dir/cell.lcmlog"
+  echo "  play it back with   lcm-logplayer $run_dir/cell.lcmlog"
+  [ $ctl_rc -eq 0 ] && [ $up_rc -eq 0 ]
+}
+
+cmd_test() {
+  build
+  cd "$BUILD"
+  local start=$SECONDS
+  ctest --output-on-failure -j "$(nproc)" --timeout 900 "$@"
+  say "test suite passed in $((SECONDS - start)) s"
+}
+
+main() {
+  local cmd="${1:-}"
+  [ $# -gt 0 ] && shift
+  case "$cmd" in
+    demo) cmd_demo "$@" ;;
+    test) cmd_test "$@" ;;
+    build) build ;;
+    up) [ -x "$BUILD/services/cnc-logger" ] || build; cmd_up "$@" ;;
+    ctl) exec "$BUILD/tools/cnc-ctl" "$@" ;;
+    logstat) exec "$BUILD/tools/cnc-logstat" "$@" ;;
+    *) sed -n '2,12p' "$0" | sed 's/^# \{0,1\}//'; [ -z "$cmd" ] || exit 2 ;;
+  esac
+}
+
+main "$@"

@@ -1,0 +1,58 @@
+# Shared by the integration tests: a private network namespace when the machine
+# allows it (and private ports in any case), a private copy of the machine config,
+# and helpers to start and stop the real executables.
+set -euo pipefail
+
+fail() { echo "FAIL: $*" >&2; exit 1; }
+note() { echo "# $*" >&2; }
+
+# Re-executes the calling script inside a new network namespace with multicast on
+# loopback, unless already inside one or unshare is not permitted here.
+enter_private_netns() {
+  if [ -z "${CNC_IN_NETNS:-}" ] && unshare -n true 2>/dev/null; then
+    export CNC_IN_NETNS=1
+    exec unshare -n bash -c 'ip link set lo up && ip route add 224.0.0.0/4 dev lo && exec "$0" "$@"' "$0" "$@"
+  fi
+  if [ -n "${CNC_IN_NETNS:-}" ]; then note "private network namespace"; else note "no namespace: private ports only"; fi
+}
+
+# make_machine SRC DST: a copy of SRC with private LCM and Modbus ports and a
+# private channel prefix, so parallel tests never see each other.
+make_machine() {
+  local src="$1" dst="$2"
+  local base=$(( (RANDOM % 2000) * 10 + 20000 ))
+  export TEST_LCM_PORT=$base TEST_MODBUS_PORT=$((base + 1))
+  sed -e "s#udpm://239.255.76.67:7667#udpm://239.255.76.67:${TEST_LCM_PORT}#" \
+      -e "s#port: 1502#port: ${TEST_MODBUS_PORT}#g" \
+      -e "s#channel_prefix: \"SIM3.\"#channel_prefix: \"T${base}.\"#" "$src" >"$dst"
+  export TEST_PREFIX="T${base}."
+}
+
+declare -A TEST_PIDS=()
+# start NAME EXECUTABLE ARGS...: starts a process with its output in $WORK/NAME.log
+start() {
+  local name="$1"; shift
+  "$@" >"$WORK/$name.log" 2>&1 &
+  TEST_PIDS[$name]=$!
+}
+
+# stop NAME SIGNAL: signals the process and checks that it exits 0 within 10 s.
+stop() {
+  local name="$1" sig="${2:-TERM}" pid="${TEST_PIDS[$1]}"
+  kill -"$sig" "$pid" 2>/dev/null || fail "$name (pid $pid) was not running at stop"
+  local i
+  for ((i = 0; i < 100; i++)); do
+    kill -0 "$pid" 2>/dev/null || break
+    sleep 0.1
+  done
+  kill -0 "$pid" 2>/dev/null && { kill -KILL "$pid"; fail "$name did not exit within 10 s of SIG$sig"; }
+  local rc=0
+  wait "$pid" || rc=$?
+  unset "TEST_PIDS[$name]"
+  [ "$rc" -eq 0 ] || { cat "$WORK/$name.log" >&2; fail "$name exited with status $rc on SIG$sig"; }
+  note "$name exited 0 on SIG$sig"
+}
+
+cleanup() {
+  for name in "${!TEST_PIDS[@]}"; do kill -KILL "${TEST_PIDS[$name]}" 2>/dev/null || true; done
+}

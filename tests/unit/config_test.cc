@@ -1,0 +1,190 @@
+// Strict loading of the cell configuration: sim3.yaml loads, and every kind of
+// fault is refused with the exact key path and the file label in the message.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "common/config/machine_config.h"
+#include "common/config/yaml_reader.h"
+
+namespace cnc::config {
+namespace {
+
+const std::string kSim3Path = std::string(CNC_SOURCE_DIR) + "/config/machines/sim3.yaml";
+const std::string kLabel = "test.yaml";
+
+std::string sim3_text() {
+  std::ifstream in(kSim3Path);
+  EXPECT_TRUE(in.good()) << "cannot open " << kSim3Path;
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+// Replaces the `nth` (0-based) occurrence of `from`; fails the test when there is none,
+// so a change to sim3.yaml cannot silently turn a variant into the original text.
+std::string replace_nth(std::string text, const std::string& from, const std::string& to, int nth = 0) {
+  size_t at = text.find(from);
+  for (int i = 0; i < nth && at != std::string::npos; ++i) at = text.find(from, at + 1);
+  EXPECT_NE(at, std::string::npos) << "'" << from << "' (occurrence " << nth << ") not in the sim3 text";
+  if (at == std::string::npos) return text;
+  return text.replace(at, from.size(), to);
+}
+
+// Parses `yaml` and returns the ConfigError it must raise.
+ConfigError expect_error(const std::string& yaml) {
+  try {
+    parse_machine_config(yaml, kLabel);
+  } catch (const ConfigError& e) {
+    return e;
+  }
+  ADD_FAILURE() << "parse_machine_config accepted the text";
+  return ConfigError("", "", "");
+}
+
+void expect_error_at(const std::string& yaml, const std::string& key_path, const std::string& detail) {
+  const ConfigError e = expect_error(yaml);
+  EXPECT_EQ(e.key_path(), key_path) << e.what();
+  const std::string what = e.what();
+  EXPECT_EQ(what.rfind(kLabel + ": " + key_path + ": ", 0), 0u) << what;
+  EXPECT_NE(what.find(detail), std::string::npos) << "'" << detail << "' not in: " << what;
+}
+
+TEST(MachineConfig, LoadsSim3) {
+  const MachineConfig c = load_machine_config(kSim3Path);
+  EXPECT_EQ(c.source_file, kSim3Path);
+  EXPECT_EQ(c.name, "sim3");
+  EXPECT_EQ(c.channel_prefix, "SIM3.");
+  EXPECT_EQ(c.channel(channels::kSetpoints), "SIM3.SETPOINTS");
+  EXPECT_DOUBLE_EQ(c.ipo_period_s, 0.004);
+  EXPECT_DOUBLE_EQ(c.servo_period_s, 0.001);
+  EXPECT_DOUBLE_EQ(c.path_accel_mm_s2, 1500.0);
+  ASSERT_EQ(c.axes.size(), 3u);
+  EXPECT_EQ(c.axes[0].name, "X");
+  EXPECT_EQ(c.axes[1].name, "Y");
+  EXPECT_EQ(c.axes[2].name, "Z");
+  EXPECT_DOUBLE_EQ(c.axes[2].max_velocity_mm_s, 150.0);
+  EXPECT_DOUBLE_EQ(c.axes[2].max_accel_mm_s2, 2000.0);
+  EXPECT_DOUBLE_EQ(c.axes[2].min_mm, -150.0);
+  EXPECT_EQ(c.axes[1].drive.unit_id, 2);
+  EXPECT_EQ(c.axes[2].drive.transport, "modbus_tcp");
+  EXPECT_DOUBLE_EQ(c.axes[2].sim.bandwidth_hz, 30.0);
+  EXPECT_EQ(c.axis_index("Z"), 2);
+  EXPECT_EQ(c.axis_index("A"), -1);
+  EXPECT_EQ(c.process.flutes, 2);
+}
+
+TEST(MachineConfig, ParseOfTheSameTextMatchesLoad) {
+  const MachineConfig c = parse_machine_config(sim3_text(), kLabel);
+  EXPECT_EQ(c.source_file, kLabel);
+  ASSERT_EQ(c.axes.size(), 3u);
+  EXPECT_EQ(c.channel_prefix, "SIM3.");
+  EXPECT_DOUBLE_EQ(c.ipo_period_s, 0.004);
+}
+
+TEST(MachineConfig, DefaultsApplyToOmittedSections) {
+  const std::string yaml =
+      "cell: {name: mini}\n"
+      "axes:\n"
+      "  - {name: X, min_mm: 0, max_mm: 10, max_velocity_mm_s: 5, max_accel_mm_s2: 50, max_jerk_mm_s3: 500}\n";
+  const MachineConfig c = parse_machine_config(yaml, kLabel);
+  EXPECT_EQ(c.channel_prefix, "mini.");
+  EXPECT_DOUBLE_EQ(c.ipo_period_s, MachineConfig{}.ipo_period_s);
+  EXPECT_EQ(c.block_window, MachineConfig{}.block_window);
+  ASSERT_EQ(c.axes.size(), 1u);
+  EXPECT_EQ(c.axes[0].drive.port, DriveConfig{}.port);
+}
+
+TEST(MachineConfig, UnknownKeyAtTopLevel) {
+  expect_error_at(sim3_text() + "bogus: 1\n", "bogus", "unknown key");
+}
+
+TEST(MachineConfig, UnknownKeyInTiming) {
+  expect_error_at(replace_nth(sim3_text(), "timing:\n", "timing:\n  ipo_period: 0.004\n"), "timing.ipo_period",
+                  "unknown key");
+}
+
+TEST(MachineConfig, UnknownKeyInAxisDrive) {
+  expect_error_at(replace_nth(sim3_text(), "unit_id: 2, profile: sim}", "unit_id: 2, profile: sim, bogus: 1}"),
+                  "axes[1].drive.bogus", "unknown key");
+}
+
+TEST(MachineConfig, WrongType) {
+  expect_error_at(replace_nth(sim3_text(), "ipo_period_s: 0.004", "ipo_period_s: fast"), "timing.ipo_period_s",
+                  "expected a number, got 'fast'");
+}
+
+TEST(MachineConfig, OutOfRange) {
+  expect_error_at(replace_nth(sim3_text(), "max_velocity_mm_s: 250", "max_velocity_mm_s: -3"),
+                  "axes[0].max_velocity_mm_s", "out of range");
+}
+
+TEST(MachineConfig, MissingRequiredKey) {
+  expect_error_at(replace_nth(sim3_text(), "    max_accel_mm_s2: 2000\n", ""), "axes[2].max_accel_mm_s2",
+                  "is required");
+}
+
+TEST(MachineConfig, DuplicateAxisName) {
+  expect_error_at(replace_nth(sim3_text(), "- name: Y", "- name: X"), "axes[1].name", "duplicate axis 'X'");
+}
+
+TEST(MachineConfig, DuplicateDriveAddress) {
+  expect_error_at(replace_nth(sim3_text(), "unit_id: 3", "unit_id: 1"), "axes[2].drive.unit_id",
+                  "another axis already uses this drive address");
+}
+
+TEST(MachineConfig, DuplicateKey) {
+  expect_error_at(replace_nth(sim3_text(), "timing:\n", "timing:\n  stop_decel_mm_s2: 100\n"),
+                  "timing.stop_decel_mm_s2", "duplicate key");
+}
+
+TEST(MachineConfig, ServoPeriodMustDivideIpoPeriod) {
+  expect_error_at(replace_nth(sim3_text(), "servo_period_s: 0.001", "servo_period_s: 0.0015"),
+                  "timing.servo_period_s", "whole multiple");
+}
+
+TEST(MachineConfig, ServoPeriodMustNotExceedIpoPeriod) {
+  expect_error_at(replace_nth(sim3_text(), "servo_period_s: 0.001", "servo_period_s: 0.008"),
+                  "timing.servo_period_s", "must not exceed");
+}
+
+TEST(MachineConfig, SectionThatIsNotAMapping) {
+  expect_error_at(replace_nth(sim3_text(), "monitor:\n  rmax_margin: 0.1\n", "monitor: 5\n"), "monitor",
+                  "expected a mapping");
+}
+
+TEST(MachineConfig, ChoiceListsTheAlternatives) {
+  expect_error_at(replace_nth(sim3_text(), "transport: modbus_tcp", "transport: canopen"), "axes[0].drive.transport",
+                  "'canopen' is not one of: loopback, modbus_rtu, modbus_tcp");
+}
+
+TEST(MachineConfig, YamlSyntaxErrorNamesLineAndColumn) {
+  // Line 3 opens a flow sequence that line 4 does not close.
+  const std::string yaml =
+      "cell:\n"
+      "  name: sim3\n"
+      "  lcm_url: [a, b\n"
+      "timing: {}\n";
+  const ConfigError e = expect_error(yaml);
+  EXPECT_EQ(e.key_path(), "");
+  const std::string what = e.what();
+  EXPECT_EQ(what.rfind(kLabel + ": (top level): YAML syntax error at line ", 0), 0u) << what;
+  EXPECT_NE(what.find("at line 4, column 7"), std::string::npos) << what;
+}
+
+TEST(MachineConfig, EmptyFileNeedsCellName) { expect_error_at("", "cell.name", "is required"); }
+
+TEST(MachineConfig, MissingFileIsReported) {
+  try {
+    load_machine_config(kSim3Path + ".missing");
+    FAIL() << "a missing file loaded";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("cannot open the file"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(".missing"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace cnc::config
