@@ -36,6 +36,8 @@ AxisConfig read_axis(MapReader r) {
   a.max_accel_mm_s2 = r.require_double("max_accel_mm_s2", 1e-3, 1e6);
   a.max_jerk_mm_s3 = r.require_double("max_jerk_mm_s3", 1e-3, 1e9);
   a.max_following_error_mm = r.get_double("max_following_error_mm", a.max_following_error_mm, 1e-4, 1e3);
+  if (!r.has("home_mm") && (a.min_mm > 0 || a.max_mm < 0))
+    r.fail("home_mm", "is required when 0 is outside [min_mm, max_mm]");
   a.home_mm = r.get_double("home_mm", 0.0, a.min_mm, a.max_mm);
   a.drive = read_drive(r.map("drive"));
   MapReader s = r.map("sim");

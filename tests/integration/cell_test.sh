@@ -83,5 +83,19 @@ sp=$(awk -v c="${TEST_PREFIX}SETPOINTS" '/ events in /{exit} $1 == c {print $2}'
 grep -qE "blocks +8 of 8 done \(sent 8," "$WORK/logstat.out" || fail "blocks sent differ from the good program's 8"
 blocks=$(awk -v c="${TEST_PREFIX}PROGRAM_BLOCKS" '/ events in /{exit} $1 == c {print $2}' "$WORK/logstat.out")
 [ "${blocks:-0}" -ge 8 ] || fail "log holds ${blocks:-0} program blocks, expected at least 8"
+
+# lcm-logplayer (Debian's liblcm-bin) plays the log back onto the bus; a fresh
+# logger records it again: the same setpoint stream, still without a gap.
+start logger2 "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/replayed"
+sleep 0.3
+timeout 60 lcm-logplayer --speed 4 --lcm-url "udpm://239.255.76.67:${TEST_LCM_PORT}?ttl=0" "$WORK/run.lcmlog" \
+  || fail "lcm-logplayer could not play the log"
+sleep 0.3
+stop logger2 TERM
+"$BUILD/tools/cnc-logstat" --log "$WORK/replayed.lcmlog" --require-no-gaps "${TEST_PREFIX}SETPOINTS" >"$WORK/replayed.out" \
+  || { cat "$WORK/replayed.out" >&2; fail "the played-back setpoint stream has gaps"; }
+sp2=$(awk -v c="${TEST_PREFIX}SETPOINTS" '/ events in /{exit} $1 == c {print $2}' "$WORK/replayed.out")
+[ "${sp2:-0}" -eq "$sp" ] || fail "lcm-logplayer delivered ${sp2:-0} of $sp setpoints"
+note "lcm-logplayer played back all $sp setpoints"
 rm -rf "$WORK"
 echo "PASS"
