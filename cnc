@@ -6,6 +6,7 @@
 #   ./cnc up --machine FILE [--only SERVICE,...]   start a cell's services in the foreground
 #   ./cnc ctl --machine FILE --do run --program P  operator commands (see cnc-ctl --help)
 #   ./cnc logstat --log FILE [--summary]           statistics of a recorded run
+#   ./cnc plan PROGRAM [--machine FILE] --csv OUT  dry run: setpoints to CSV, program time
 #   ./cnc build                                    set up and build only
 set -euo pipefail
 
@@ -154,6 +155,20 @@ cmd_demo() {
   [ $ctl_rc -eq 0 ] && [ $up_rc -eq 0 ]
 }
 
+# plan PROGRAM [--machine FILE] [--csv OUT] [other cnc-plan options]
+cmd_plan() {
+  [ $# -gt 0 ] || die "plan: PROGRAM is required"
+  local program="$1"; shift
+  local machine="$DEFAULT_MACHINE" rest=()
+  while [ $# -gt 0 ]; do
+    case "$1" in
+      --machine) machine="$2"; shift 2 ;;
+      *) rest+=("$1"); shift ;;
+    esac
+  done
+  exec "$BUILD/tools/cnc-plan" --machine "$machine" --program "$program" "${rest[@]}"
+}
+
 cmd_test() {
   build
   cd "$BUILD"
@@ -172,7 +187,8 @@ main() {
     up) [ -x "$BUILD/services/cnc-logger" ] || build; cmd_up "$@" ;;
     ctl) exec "$BUILD/tools/cnc-ctl" "$@" ;;
     logstat) exec "$BUILD/tools/cnc-logstat" "$@" ;;
-    *) sed -n '2,12p' "$0" | sed 's/^# \{0,1\}//'; [ -z "$cmd" ] || exit 2 ;;
+    plan) [ -x "$BUILD/tools/cnc-plan" ] || build; cmd_plan "$@" ;;
+    *) sed -n '2,13p' "$0" | sed 's/^# \{0,1\}//'; [ -z "$cmd" ] || exit 2 ;;
   esac
 }
 

@@ -69,6 +69,9 @@ struct MachineConfig {
   double path_accel_mm_s2 = 1000.0;
   double path_jerk_mm_s3 = 20000.0;
   int block_window = 32;  // blocks the interpolator keeps requested ahead
+  // Curve-parameter update per cycle: first_order (u += Δs/|P'|), taylor2 (seed 000
+  // eq. 7), corrected (eq. 7, then Newton so the step's chord has the commanded length).
+  std::string param_update = "corrected";
 
   ProcessConfig process;
 

@@ -2,7 +2,23 @@
 
 #include <cmath>
 
+#include "common/program/block_check.h"
+
 namespace cnc::program {
+
+namespace {
+
+// Anything beyond these is not a program block but garbage or an attack.
+constexpr int32_t kMaxMsgAxes = kMaxAxes;
+constexpr int32_t kMaxMsgControlPoints = 1 << 20;
+
+bool finite(const std::vector<double>& v) {
+  for (double x : v)
+    if (!std::isfinite(x)) return false;
+  return true;
+}
+
+}  // namespace
 
 cnc::lcmt_program_block to_msg(const Block& b, int64_t program_token) {
   cnc::lcmt_program_block m{};
@@ -13,12 +29,27 @@ cnc::lcmt_program_block to_msg(const Block& b, int64_t program_token) {
   m.num_axes = static_cast<int32_t>(b.end.size());
   m.start = b.start;
   m.end = b.end;
-  m.center.assign(b.end.size(), 0.0);
-  m.plane = 17;
-  m.turns = 0;
-  m.order = 0;
-  m.num_knots = 0;
-  m.num_control_points = 0;
+  const bool arc = b.kind == BlockKind::kArcCw || b.kind == BlockKind::kArcCcw;
+  if (arc && b.arc.center.size() == b.end.size()) {
+    m.center = b.arc.center;
+  } else {
+    m.center.assign(b.end.size(), 0.0);
+  }
+  m.plane = static_cast<int8_t>(arc ? b.arc.plane : 17);
+  m.turns = arc ? b.arc.turns : 0;
+  if (b.kind == BlockKind::kNurbs) {
+    m.order = b.nurbs.order;
+    m.num_knots = static_cast<int32_t>(b.nurbs.knots.size());
+    m.knots = b.nurbs.knots;
+    m.num_control_points = static_cast<int32_t>(b.nurbs.control_points.size());
+    m.control_points.reserve(b.nurbs.control_points.size());
+    for (const auto& p : b.nurbs.control_points) m.control_points.push_back({p[0], p[1], p[2]});
+    m.weights = b.nurbs.weights;
+  } else {
+    m.order = 0;
+    m.num_knots = 0;
+    m.num_control_points = 0;
+  }
   m.feed_mm_per_min = b.feed_mm_per_min;
   m.dwell_s = b.dwell_s;
   m.spindle_rpm = b.spindle_rpm;
@@ -31,11 +62,19 @@ cnc::lcmt_program_block to_msg(const Block& b, int64_t program_token) {
 
 std::string from_msg(const cnc::lcmt_program_block& m, int num_axes, Block* out) {
   if (m.num_axes != num_axes) return "block has " + std::to_string(m.num_axes) + " axes, machine has " + std::to_string(num_axes);
+  if (m.num_axes < 1 || m.num_axes > kMaxMsgAxes) return "bad axis count " + std::to_string(m.num_axes);
+  // A message built in memory (not decoded) may disagree with its own counts.
+  const auto n = static_cast<size_t>(m.num_axes);
+  if (m.start.size() != n || m.end.size() != n || m.center.size() != n) return "axis arrays disagree with num_axes";
   if (m.kind < 0 || m.kind > static_cast<int8_t>(BlockKind::kEnd)) return "unknown block kind " + std::to_string(m.kind);
-  for (int a = 0; a < num_axes; ++a)
-    if (!std::isfinite(m.start[a]) || !std::isfinite(m.end[a])) return "non-finite coordinate";
+  if (m.block_index < 0) return "negative block index";
+  if (!finite(m.start) || !finite(m.end)) return "non-finite coordinate";
   if (!std::isfinite(m.feed_mm_per_min) || m.feed_mm_per_min < 0) return "bad feed";
   if (!std::isfinite(m.dwell_s) || m.dwell_s < 0) return "bad dwell time";
+  if (!std::isfinite(m.spindle_rpm) || m.spindle_rpm < 0) return "bad spindle speed";
+  if (!std::isfinite(m.ball_radius_mm) || m.ball_radius_mm < 0 || m.flutes < 0 || !std::isfinite(m.pick_feed_mm) ||
+      m.pick_feed_mm < 0 || !std::isfinite(m.target_rmax_um) || m.target_rmax_um < 0)
+    return "bad process parameters";
   Block b;
   b.index = m.block_index;
   b.source_line = m.source_line;
@@ -46,6 +85,35 @@ std::string from_msg(const cnc::lcmt_program_block& m, int num_axes, Block* out)
   b.dwell_s = m.dwell_s;
   b.spindle_rpm = m.spindle_rpm;
   b.process = ProcessParams{m.ball_radius_mm, m.flutes, m.pick_feed_mm, m.target_rmax_um};
+  const bool feed_move = b.kind == BlockKind::kLine || b.kind == BlockKind::kArcCw || b.kind == BlockKind::kArcCcw ||
+                         b.kind == BlockKind::kNurbs;
+  if (feed_move && !(b.feed_mm_per_min > 0)) return std::string(to_string(b.kind)) + " without a feed";
+  if (b.kind == BlockKind::kArcCw || b.kind == BlockKind::kArcCcw) {
+    b.arc.center = m.center;
+    b.arc.plane = m.plane;
+    b.arc.turns = m.turns;
+    const std::string why = check_arc_block(b);
+    if (!why.empty()) return why;
+  }
+  if (b.kind == BlockKind::kNurbs) {
+    if (m.num_control_points < 0 || m.num_control_points > kMaxMsgControlPoints || m.num_knots < 0 ||
+        m.num_knots > kMaxMsgControlPoints + kMaxNurbsOrder)
+      return "NURBS counts out of range";
+    if (m.knots.size() != static_cast<size_t>(m.num_knots) ||
+        m.control_points.size() != static_cast<size_t>(m.num_control_points) ||
+        m.weights.size() != static_cast<size_t>(m.num_control_points))
+      return "NURBS arrays disagree with their counts";
+    b.nurbs.order = m.order;
+    b.nurbs.knots = m.knots;
+    b.nurbs.weights = m.weights;
+    b.nurbs.control_points.reserve(m.control_points.size());
+    for (const auto& p : m.control_points) {
+      if (p.size() != 3) return "NURBS control point without exactly 3 coordinates";
+      b.nurbs.control_points.push_back({p[0], p[1], p[2]});
+    }
+    const std::string why = check_nurbs_block(b);
+    if (!why.empty()) return "NURBS: " + why;
+  }
   *out = std::move(b);
   return {};
 }

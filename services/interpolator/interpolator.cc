@@ -3,8 +3,62 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
+#include <stdexcept>
+
+#include "common/geometry/chord.h"
+#include "common/process/roughness.h"
 
 namespace cnc::interp {
+
+namespace {
+constexpr double kInf = std::numeric_limits<double>::infinity();
+// Share of each axis's acceleration and jerk left to the centripetal terms on
+// curved blocks; the tangential planning gets the rest.
+constexpr double kCentripetalShare = 0.5;
+// Samples per knot span of a NURBS and per radian of an arc.
+constexpr int kSamplesPerSpan = 24;
+constexpr double kArcSamplesPerRad = 24.0;
+
+using motion::AxisVec;
+
+// One phase of constant jerk j for time t applied to (s, v, a).
+void integrate(double j, double t, double* s, double* v, double* a) {
+  *s += *v * t + 0.5 * *a * t * t + j * t * t * t / 6.0;
+  *v += *a * t + 0.5 * j * t * t;
+  *a += j * t;
+}
+
+// Shortest distance in which a jerk-limited (J) and acceleration-limited (A) brake
+// brings the speed from v (acceleration a) to vt; 0 when the speed never exceeds vt.
+double brake_distance(double v, double a, double vt, double A, double J) {
+  if (a >= 0 ? v + a * a / (2 * J) <= vt : v <= vt) return 0.0;
+  const double ap2 = J * (v - vt) + 0.5 * a * a;
+  double s = 0, vv = v, aa = a;
+  if (a < 0 && ap2 < a * a) {
+    // Already braking harder than needed: releasing the brake reaches vt.
+    const double disc = std::max(0.0, a * a - 2 * J * (v - vt));
+    integrate(J, (-a - std::sqrt(disc)) / J, &s, &vv, &aa);
+    return s;
+  }
+  double ap = std::sqrt(ap2), t2 = 0;
+  if (ap > A) {
+    ap = A;
+    t2 = std::max(0.0, (v - vt + a * a / (2 * J) - A * A / J) / A);
+  }
+  integrate(-J, (a + ap) / J, &s, &vv, &aa);
+  integrate(0.0, t2, &s, &vv, &aa);
+  integrate(J, ap / J, &s, &vv, &aa);
+  return s;
+}
+
+double norm(const AxisVec& v, int n) {
+  double s = 0;
+  for (int i = 0; i < n; ++i) s += v[i] * v[i];
+  return std::sqrt(s);
+}
+
+}  // namespace
 
 const char* to_string(Limit limit) {
   switch (limit) {
@@ -30,32 +84,259 @@ const char* to_string(RunState state) {
   return "?";
 }
 
+ParamUpdate param_update_from_string(const std::string& s) {
+  if (s == "first_order") return ParamUpdate::kFirstOrder;
+  if (s == "taylor2") return ParamUpdate::kTaylor2;
+  if (s == "corrected") return ParamUpdate::kCorrected;
+  throw std::invalid_argument("parameter update '" + s + "' is not one of first_order, taylor2, corrected");
+}
+
+bool Interpolator::Planned::stop_block() const {
+  return block.kind == program::BlockKind::kDwell || block.kind == program::BlockKind::kEnd;
+}
+
+bool Interpolator::Planned::stop_at_start() const { return stop_block() || v_entry == 0; }
+
 Interpolator::Interpolator(const config::MachineConfig& cfg)
-    : cfg_(cfg), period_s_(cfg.ipo_period_s), naxes_(static_cast<int>(cfg.axes.size())) {
+    : cfg_(cfg), period_s_(cfg.ipo_period_s), naxes_(static_cast<int>(cfg.axes.size())),
+      param_update_(param_update_from_string(cfg.param_update)) {
   for (int a = 0; a < naxes_; ++a) pos_[a] = cfg_.axes[a].home_mm;
 }
 
+Interpolator::~Interpolator() = default;
+
+// ---- planning ------------------------------------------------------------------
+
+void Interpolator::plan_block(Planned& p) const {
+  const program::Block& b = p.block;
+  p.v_prog = b.kind == program::BlockKind::kRapid ? kInf : b.feed_mm_per_min / 60.0;
+  p.accel = cfg_.path_accel_mm_s2;
+  p.jerk = cfg_.path_jerk_mm_s3;
+  if (p.stop_block()) return;
+
+  const bool curved = p.path.curved();
+  const double share = curved ? 1.0 - kCentripetalShare : 1.0;
+  const double eps = cfg_.chord_tolerance_mm;
+  const bool rough = b.process.active() && b.spindle_rpm > 0;
+  const process::RoughnessLaw law{b.process.ball_radius_mm, b.process.flutes, b.process.pick_feed_mm,
+                                  b.process.target_rmax_um * 1e-3};
+  if (rough) {
+    const std::string why = law.validate();
+    if (!why.empty()) throw std::invalid_argument("process parameters: " + why);
+  }
+
+  // Parameter values to sample.
+  std::vector<double> us;
+  const double u0 = p.path.u_begin(), u1 = p.path.u_end();
+  if (!curved) {
+    us = {u0, u1};
+  } else if (b.kind == program::BlockKind::kNurbs) {
+    std::vector<double> bp = p.path.nurbs_breakpoints();
+    for (size_t k = 0; k + 1 < bp.size(); ++k)
+      for (int i = 0; i < kSamplesPerSpan; ++i) us.push_back(bp[k] + (bp[k + 1] - bp[k]) * i / kSamplesPerSpan);
+    us.push_back(u1);
+  } else {
+    const int n = std::max(2, static_cast<int>(std::ceil(p.path.arc_sweep_rad() * kArcSamplesPerRad)));
+    for (int i = 0; i <= n; ++i) us.push_back(u0 + (u1 - u0) * i / n);
+  }
+
+  // Per sample: speed limits from the local geometry.
+  const size_t n = us.size();
+  p.samples.assign(n, Sample{0, 0, kInf, Limit::kNone});
+  std::vector<AxisVec> kvec(n);  // curvature vector d²P/ds²
+  std::vector<double> speed(n);  // |dP/du|
+  std::vector<double> v_chord(n, kInf);
+  for (size_t i = 0; i < n; ++i) {
+    AxisVec P{}, d1{}, d2{};
+    p.path.eval(us[i], &P, &d1, &d2);
+    const double sp = norm(d1, naxes_);
+    speed[i] = sp;
+    Sample& smp = p.samples[i];
+    smp.u = us[i];
+    if (sp <= 0) continue;
+    AxisVec t{};
+    double d2t = 0;
+    for (int a = 0; a < naxes_; ++a) {
+      t[a] = d1[a] / sp;
+      d2t += d2[a] * t[a];
+    }
+    double kappa = 0;
+    for (int a = 0; a < naxes_; ++a) {
+      kvec[i][a] = (d2[a] - d2t * t[a]) / (sp * sp);
+      kappa += kvec[i][a] * kvec[i][a];
+    }
+    kappa = std::sqrt(kappa);
+    auto take = [&smp](double v, Limit why) {
+      if (v < smp.v_geo) {
+        smp.v_geo = v;
+        smp.limit = why;
+      }
+    };
+    for (int a = 0; a < naxes_; ++a) {
+      const double ta = std::fabs(t[a]);
+      if (ta > 0) {
+        take(cfg_.axes[a].max_velocity_mm_s / ta, Limit::kAxisVelocity);
+        p.accel = std::min(p.accel, share * cfg_.axes[a].max_accel_mm_s2 / ta);
+        p.jerk = std::min(p.jerk, share * cfg_.axes[a].max_jerk_mm_s3 / ta);
+      }
+      if (std::fabs(kvec[i][a]) > 0)
+        take(std::sqrt(kCentripetalShare * cfg_.axes[a].max_accel_mm_s2 / std::fabs(kvec[i][a])),
+             Limit::kCurvatureAccel);
+    }
+    if (kappa > 1e-12) v_chord[i] = geometry::chord_step_length(1.0 / kappa, eps) / period_s_;
+    if (rough && naxes_ >= 3) {
+      const double alpha = process::feed_inclination_angle(Eigen::Vector3d(t[0], t[1], t[2]));
+      take(law.feed_mm_per_min(b.spindle_rpm, alpha) / 60.0, Limit::kRoughness);
+    }
+  }
+  // The chord limit holds over a whole step, and the curvature may peak between
+  // samples: each sample takes the least of its neighbours' chord limits.
+  for (size_t i = 0; i < n; ++i) {
+    double v = v_chord[i];
+    if (i > 0) v = std::min(v, v_chord[i - 1]);
+    if (i + 1 < n) v = std::min(v, v_chord[i + 1]);
+    if (v < p.samples[i].v_geo) {
+      p.samples[i].v_geo = v;
+      p.samples[i].limit = Limit::kChord;
+    }
+  }
+  // Arc length by 3-point Gauss–Legendre per sample interval (on top of dense samples).
+  double s = 0;
+  for (size_t i = 0; i + 1 < n; ++i) {
+    const double a = us[i], c = us[i + 1], h = 0.5 * (c - a), m = 0.5 * (a + c);
+    static constexpr double kX = 0.7745966692414834, kW0 = 8.0 / 9.0, kW1 = 5.0 / 9.0;
+    auto spd = [&](double u) {
+      AxisVec P{}, d1{}, d2{};
+      p.path.eval(u, &P, &d1, &d2);
+      return norm(d1, naxes_);
+    };
+    s += h * (kW0 * spd(m) + kW1 * (spd(m - h * kX) + spd(m + h * kX)));
+    p.samples[i + 1].s = s;
+  }
+  p.length = s;
+  // Jerk from the curvature changing along the path: v³·|dk/ds| per axis.
+  for (size_t i = 0; i + 1 < n && curved; ++i) {
+    const double ds = p.samples[i + 1].s - p.samples[i].s;
+    if (ds <= 0) continue;
+    for (int a = 0; a < naxes_; ++a) {
+      const double dk = std::fabs(kvec[i + 1][a] - kvec[i][a]) / ds;
+      if (dk <= 0) continue;
+      const double v = std::cbrt(kCentripetalShare * cfg_.axes[a].max_jerk_mm_s3 / dk);
+      for (size_t k : {i, i + 1}) {
+        if (v < p.samples[k].v_geo) {
+          p.samples[k].v_geo = v;
+          p.samples[k].limit = Limit::kCurvatureAccel;
+        }
+      }
+    }
+  }
+}
+
+void Interpolator::plan_junction(Planned& prev, Planned& next) const {
+  if (prev.stop_block() || next.stop_block() || prev.path.degenerate() || next.path.degenerate()) {
+    next.v_entry = 0;
+    return;
+  }
+  AxisVec P{}, t0{}, t1{}, d2{};
+  prev.path.eval(prev.path.u_end(), &P, &t0, &d2);
+  next.path.eval(next.path.u_begin(), &P, &t1, &d2);
+  const double n0 = norm(t0, naxes_), n1 = norm(t1, naxes_);
+  const double T = period_s_;
+  const double a_path = std::min(prev.accel, next.accel);
+  double v = kInf;
+  double dt2 = 0;
+  for (int a = 0; a < naxes_; ++a) {
+    const double dt = std::fabs(t1[a] / n1 - t0[a] / n0);
+    dt2 += dt * dt;
+    if (dt < 1e-12) continue;
+    const auto& ax = cfg_.axes[a];
+    // The direction change happens within one cycle. It turns the path
+    // acceleration by the same angle: where that alone would step the axis's
+    // acceleration by more than half its jerk budget, the corner is a stop.
+    if (a_path * dt > 0.5 * ax.max_jerk_mm_s3 * T) {
+      next.v_entry = 0;
+      return;
+    }
+    // Otherwise its velocity step must stay within one cycle's acceleration and
+    // half a cycle's jerk (the tangential acceleration changes across it too).
+    v = std::min(v, std::min(ax.max_accel_mm_s2 * T, 0.5 * ax.max_jerk_mm_s3 * T * T) / dt);
+  }
+  if (dt2 > 0) v = std::min(v, std::min(cfg_.path_accel_mm_s2 * T, 0.5 * cfg_.path_jerk_mm_s3 * T * T) / std::sqrt(dt2));
+  next.v_entry = v;
+}
+
+void Interpolator::backward_pass() {
+  double carry = 0;  // the buffer ends in a stop unless more blocks come
+  for (auto it = blocks_.rbegin(); it != blocks_.rend(); ++it) {
+    Planned& p = *it;
+    if (p.stop_block()) {
+      carry = 0;
+      continue;
+    }
+    const size_t n = p.samples.size();
+    p.v_bw.resize(n);
+    const double vp = p.v_prog * override_;
+    for (size_t i = n; i-- > 0;) {
+      double cap = std::min(p.samples[i].v_geo, vp);
+      if (i == 0) cap = std::min(cap, p.v_entry);
+      const double ds = i + 1 < n ? p.samples[i + 1].s - p.samples[i].s : 0.0;
+      const double reach = std::sqrt(carry * carry + 2.0 * p.accel * ds);
+      p.v_bw[i] = std::min(cap, reach);
+      carry = p.v_bw[i];
+    }
+  }
+}
+
+// ---- inputs ----------------------------------------------------------------------
+
 bool Interpolator::apply_block(const program::Block& block) {
-  if (block.index != next_index_) return false;
-  if (static_cast<int>(block.end.size()) != naxes_ || static_cast<int>(block.start.size()) != naxes_) return false;
-  for (int a = 0; a < naxes_; ++a)
-    if (!std::isfinite(block.end[a])) return false;
-  queue_.push_back(block);
+  refusal_.clear();
+  if (block.index != next_index_) {
+    refusal_ = "block " + std::to_string(block.index) + " out of order (expected " + std::to_string(next_index_) + ")";
+    return false;
+  }
+  if (static_cast<int>(block.end.size()) != naxes_ || static_cast<int>(block.start.size()) != naxes_) {
+    refusal_ = "block has the wrong number of axes";
+    return false;
+  }
+  for (int a = 0; a < naxes_; ++a) {
+    if (!std::isfinite(block.start[a]) || !std::isfinite(block.end[a])) {
+      refusal_ = "block " + std::to_string(block.index) + ": coordinate is not finite";
+      return false;
+    }
+  }
+  if (!(block.feed_mm_per_min >= 0) || !std::isfinite(block.feed_mm_per_min) ||
+      (block.kind == program::BlockKind::kLine && block.feed_mm_per_min <= 0) ||
+      (block.kind == program::BlockKind::kDwell && !(block.dwell_s >= 0 && std::isfinite(block.dwell_s)))) {
+    refusal_ = "block " + std::to_string(block.index) + ": feed or dwell time out of range";
+    return false;
+  }
+  try {
+    Planned p(block, motion::PathSegment(block, naxes_));
+    plan_block(p);
+    if (!blocks_.empty()) plan_junction(blocks_.back(), p);
+    else p.v_entry = v_;  // the path starts from the current speed (0 when at rest)
+    blocks_.push_back(std::move(p));
+  } catch (const std::exception& e) {
+    refusal_ = std::string("block ") + std::to_string(block.index) + ": " + e.what();
+    return false;
+  }
   ++next_index_;
+  backward_pass();
   return true;
 }
 
 void Interpolator::apply_command(const Command& cmd) {
   switch (cmd.kind) {
     case Command::Kind::kLoad:
-      // A new program: only when nothing moves.
       if (state_ == RunState::kRunning || state_ == RunState::kHeld || state_ == RunState::kStarved) return;
-      queue_.clear();
-      have_segment_ = false;
+      blocks_.clear();
       next_index_ = 0;
       blocks_done_ = 0;
       program_cycles_ = 0;
       starved_cycles_ = 0;
+      u_ = s_ = v_ = a_ = 0;
+      dwell_left_ = -1;
       state_ = RunState::kIdle;
       break;
     case Command::Kind::kStart:
@@ -65,169 +346,269 @@ void Interpolator::apply_command(const Command& cmd) {
         stopping_ = false;
       }
       break;
-    case Command::Kind::kHold:
-      hold_ = true;
-      break;
-    case Command::Kind::kResume:
-      hold_ = false;
-      break;
+    case Command::Kind::kHold: hold_ = true; break;
+    case Command::Kind::kResume: hold_ = false; break;
     case Command::Kind::kStop:
       if (state_ != RunState::kIdle && state_ != RunState::kDone) stopping_ = true;
       break;
     case Command::Kind::kOverride:
-      if (std::isfinite(cmd.feed_override)) override_ = std::clamp(cmd.feed_override, 0.0, 1.5);
+      if (std::isfinite(cmd.feed_override)) {
+        override_ = std::clamp(cmd.feed_override, 0.0, 1.5);
+        backward_pass();
+      }
       break;
   }
 }
 
-void Interpolator::begin_next_segment(double entry_fraction) {
-  have_segment_ = false;
-  if (queue_.empty()) return;
-  seg_ = Segment{};
-  seg_.block = std::move(queue_.front());
-  queue_.pop_front();
-  s_mm_ = 0;
-  v_mm_s_ = 0;
-  const program::Block& b = seg_.block;
-  if (b.kind == program::BlockKind::kDwell) {
-    seg_.dwell_cycles_left = static_cast<int64_t>(std::ceil(b.dwell_s / period_s_ - 1e-9));
-  } else if (b.kind == program::BlockKind::kRapid || b.kind == program::BlockKind::kLine) {
-    double len2 = 0;
-    for (int a = 0; a < naxes_; ++a) len2 += (b.end[a] - b.start[a]) * (b.end[a] - b.start[a]);
-    seg_.length_mm = std::sqrt(len2);
-    double v_axis = std::numeric_limits<double>::infinity();
-    double accel = cfg_.path_accel_mm_s2;
-    if (seg_.length_mm > 0) {
-      for (int a = 0; a < naxes_; ++a) {
-        const double dir = std::fabs(b.end[a] - b.start[a]) / seg_.length_mm;
-        if (dir > 0) {
-          v_axis = std::min(v_axis, cfg_.axes[a].max_velocity_mm_s / dir);
-          accel = std::min(accel, cfg_.axes[a].max_accel_mm_s2 / dir);
-        }
-      }
-    }
-    const double v_prog = b.kind == program::BlockKind::kRapid ? std::numeric_limits<double>::infinity()
-                                                               : b.feed_mm_per_min / 60.0;
-    seg_.v_max_mm_s = std::min(v_prog, v_axis);
-    seg_.v_axis_mm_s = v_axis;
-    seg_.v_limit = v_prog <= v_axis ? Limit::kProgram : Limit::kAxisVelocity;
-    seg_.accel_mm_s2 = accel;
-    // Negative: the first cycle brakes the previous segment's last velocity first.
-    v_mm_s_ = -entry_fraction * accel * period_s_;
+// ---- motion ----------------------------------------------------------------------
+
+double Interpolator::cap_at(const Planned& p, double s, Limit* why, double* v_geo) const {
+  const auto& sm = p.samples;
+  size_t i = 0;
+  if (sm.size() > 2) {
+    auto it = std::upper_bound(sm.begin(), sm.end(), s, [](double x, const Sample& q) { return x < q.s; });
+    i = it == sm.begin() ? 0 : static_cast<size_t>(it - sm.begin()) - 1;
+    i = std::min(i, sm.size() - 2);
   }
-  have_segment_ = true;
+  const double span = sm[i + 1].s - sm[i].s;
+  const double f = span > 0 ? std::clamp((s - sm[i].s) / span, 0.0, 1.0) : 0.0;
+  double v = sm[i].v_geo + (sm[i + 1].v_geo - sm[i].v_geo) * f;
+  if (!std::isfinite(v)) v = std::min(sm[i].v_geo, sm[i + 1].v_geo);
+  *why = f < 0.5 ? sm[i].limit : sm[i + 1].limit;
+  if (v_geo != nullptr) *v_geo = v;
+  const double vp = p.v_prog * (p.block.kind == program::BlockKind::kRapid ? std::min(override_, 1.0) : override_);
+  if (vp <= v) {
+    *why = Limit::kProgram;
+    return vp;
+  }
+  return v;
 }
 
-void Interpolator::advance_motion() {
-  out_.limit = Limit::kNone;
-  out_.feed_mm_per_min = 0;
-  const double entry_fraction = exit_fraction_;
-  exit_fraction_ = 0;
-  if (!have_segment_) begin_next_segment(entry_fraction);
-  if (!have_segment_) {
-    if (stopping_) {
-      stopping_ = false;
-      state_ = RunState::kIdle;
-      return;
+bool Interpolator::safe(double v_n, double a_n, double s_n) const {
+  double A = kInf, J = kInf;
+  // The brake is continuous-time; executed in whole cycles it needs about half a
+  // step more room.
+  const double margin = 0.5 * v_n * period_s_;
+  double offset = 0;  // arc length of the front block's start relative to its start
+  double horizon = -1;
+  for (const Planned& p : blocks_) {
+    A = std::min(A, p.accel);
+    J = std::min(J, p.jerk);
+    if (horizon < 0) horizon = brake_distance(v_n, a_n, 0.0, A, J) + v_n * period_s_ + 1e-9;
+    if (p.stop_block() || (p.v_entry == 0 && offset > 0))
+      return brake_distance(v_n, a_n, 0.0, A, J) + margin <= offset - s_n + 1e-9;
+    const size_t n = p.samples.size();
+    for (size_t i = 0; i < n; ++i) {
+      const double d = offset + p.samples[i].s - s_n;
+      if (d < 0) continue;
+      if (d > horizon) return true;
+      if (brake_distance(v_n, a_n, p.v_bw[i], A, J) + margin > d + 1e-9) return false;
     }
-    state_ = RunState::kStarved;
-    ++starved_cycles_;
-    return;
+    offset += p.length;
   }
-  const program::Block& b = seg_.block;
-  out_.block_index = b.index;
-  out_.source_line = b.source_line;
+  return true;
+}
 
-  if (b.kind == program::BlockKind::kEnd) {
-    have_segment_ = false;
-    ++blocks_done_;
-    state_ = RunState::kDone;
-    out_.u = 1.0;
-    return;
-  }
-  if (stopping_ && v_mm_s_ == 0) {
-    // Controlled stop complete: the rest of the program is dropped.
-    queue_.clear();
-    have_segment_ = false;
-    stopping_ = false;
-    state_ = RunState::kIdle;
-    return;
-  }
-  const bool pausing = hold_ || stopping_;
-  if (b.kind == program::BlockKind::kDwell) {
-    state_ = hold_ ? RunState::kHeld : RunState::kRunning;
-    if (!pausing && seg_.dwell_cycles_left > 0) --seg_.dwell_cycles_left;
-    out_.u = 0;
-    if (seg_.dwell_cycles_left == 0 && !pausing) {
+double Interpolator::advance(double ds, bool* reached_stop) {
+  *reached_stop = false;
+  double moved = 0;
+  while (!blocks_.empty()) {
+    Planned& p = blocks_.front();
+    if (p.stop_block()) {
+      *reached_stop = true;
+      return moved;
+    }
+    const double left = p.length - s_;
+    if (left <= ds - moved + 1e-12) {
+      moved += std::max(0.0, left);
+      for (int a = 0; a < naxes_; ++a) pos_[a] = p.path.end()[a];
+      out_.block_index = p.block.index;
+      out_.source_line = p.block.source_line;
+      out_.u = p.path.u_end();
+      blocks_.pop_front();
       ++blocks_done_;
-      have_segment_ = false;
+      s_ = 0;
+      u_ = blocks_.empty() ? 0 : blocks_.front().path.u_begin();
+      if (!blocks_.empty() && blocks_.front().stop_at_start()) {
+        // A corner that is a stop: the step ends on it.
+        *reached_stop = true;
+        return moved;
+      }
+      continue;
     }
-    return;
+    const double step = ds - moved;
+    // Seed 000 eq. 7: u += Δs/|P'| − Δs²·(P'·P'')/(2|P'|⁴).
+    AxisVec P{}, d1{}, d2{};
+    p.path.eval(u_, &P, &d1, &d2);
+    double sp2 = 0, dd = 0;
+    for (int a = 0; a < naxes_; ++a) {
+      sp2 += d1[a] * d1[a];
+      dd += d1[a] * d2[a];
+    }
+    const double sp = std::sqrt(sp2);
+    double u = u_ + step / sp;
+    if (param_update_ != ParamUpdate::kFirstOrder) u -= step * step * dd / (2 * sp2 * sp2);
+    u = std::min(u, p.path.u_end());
+    if (param_update_ == ParamUpdate::kCorrected) {
+      // Newton on |P(u) − P(u_k)| = Δs: the chord of the step has the commanded length.
+      for (int it = 0; it < 4; ++it) {
+        AxisVec Q{}, q1{}, q2{};
+        p.path.eval(u, &Q, &q1, &q2);
+        double L = 0, dLdu = 0;
+        for (int a = 0; a < naxes_; ++a) L += (Q[a] - P[a]) * (Q[a] - P[a]);
+        L = std::sqrt(L);
+        if (L <= 0) break;
+        for (int a = 0; a < naxes_; ++a) dLdu += (Q[a] - P[a]) * q1[a];
+        dLdu /= L;
+        const double err = step - L;
+        if (std::fabs(err) <= 1e-12 * std::max(1.0, step) || dLdu <= 0) break;
+        u = std::clamp(u + err / dLdu, u_, p.path.u_end());
+      }
+    }
+    u_ = u;
+    s_ += step;
+    pos_ = p.path.point(u_);
+    out_.block_index = p.block.index;
+    out_.source_line = p.block.source_line;
+    out_.u = u_;
+    return ds;
   }
-  if (b.kind != program::BlockKind::kRapid && b.kind != program::BlockKind::kLine) {
-    // The parser does not produce other kinds yet; a broken invariant stops here.
-    have_segment_ = false;
-    ++blocks_done_;
-    return;
-  }
+  return moved;
+}
 
-  const double L = seg_.length_mm;
-  const double a = seg_.accel_mm_s2;
+bool Interpolator::creep_to_stop() {
+  // Within half a cycle's jerk-limited travel (J·T³/2) of the next stop point.
+  double d = -s_;
+  double J = kInf;
+  bool first = true;
+  for (const Planned& p : blocks_) {
+    if (p.stop_block() || (!first && p.v_entry == 0)) break;
+    first = false;
+    J = std::min(J, p.jerk);
+    d += p.length;
+  }
   const double T = period_s_;
-  double v_next = 0;
-  Limit limit = seg_.v_limit;
-  if (L > 0) {
-    const double ovr = b.kind == program::BlockKind::kRapid ? std::min(override_, 1.0) : override_;
-    const double v_target = pausing ? 0.0 : std::min(seg_.v_max_mm_s * ovr, seg_.v_axis_mm_s);
-    if (!pausing && seg_.v_max_mm_s * ovr > seg_.v_axis_mm_s) limit = Limit::kAxisVelocity;
-    const double rem = L - s_mm_;
-    // Largest speed from which braking at `a` in whole cycles stops within `rem`.
-    // Moving at v this cycle and braking by aT per cycle covers
-    //   d(v) = T·(v + (v − aT) + ... + (v − n·aT)) = T·(n+1)·(v − n·aT/2),  n = floor(v/aT),
-    // after which the speed is below aT and the next cycle is at rest. d is continuous
-    // and increasing, so v_brake = d⁻¹(rem): with n the largest integer such that
-    // aT²·n(n+1)/2 ≤ rem, v_brake = rem/((n+1)·T) + n·aT/2. (The continuous law
-    // v(v + aT)/2a ≤ rem underestimates d between multiples of aT, which let the last
-    // cycle of a block brake at up to 1.125·a.)
-    const double n_brake = std::floor((std::sqrt(8.0 * rem / (a * T * T) + 1.0) - 1.0) / 2.0);
-    const double v_brake = rem / ((n_brake + 1.0) * T) + 0.5 * n_brake * a * T;
-    v_next = std::min({std::max(v_target, v_mm_s_ - a * T), v_mm_s_ + a * T, v_brake});
-    v_next = std::max(v_next, 0.0);
-    if (v_brake <= std::max(v_target, v_mm_s_ - a * T) && v_brake <= v_mm_s_ + a * T) limit = Limit::kLookahead;
-    if (s_mm_ + v_next * T >= L - 1e-9) {
-      v_next = (L - s_mm_) / T;
-      s_mm_ = L;
-    } else {
-      s_mm_ += v_next * T;
-    }
-  } else {
-    s_mm_ = L;
-  }
-  v_mm_s_ = v_next;
-  const bool finished = s_mm_ >= L;
-  for (int ax = 0; ax < naxes_; ++ax)
-    pos_[ax] = finished ? b.end[ax] : b.start[ax] + (b.end[ax] - b.start[ax]) * (s_mm_ / L);
-  out_.u = L > 0 ? s_mm_ / L : 1.0;
-  out_.feed_mm_per_min = v_next * 60.0;
-  out_.limit = v_next > 0 ? limit : Limit::kNone;
-  state_ = (hold_ && v_next == 0) ? RunState::kHeld : RunState::kRunning;
-  if (finished) {
-    exit_fraction_ = std::min(1.0, v_next / (a * T));
-    v_mm_s_ = 0;
-    ++blocks_done_;
-    have_segment_ = false;
-  }
+  // Slow enough that stopping within this cycle stays within the jerk limit.
+  if (v_ > 0.5 * J * T * T || std::fabs(a_) > J * T) return false;
+  if (!(d > 0) || d > 0.5 * J * T * T * T) return false;
+  bool at_stop = false;
+  const double moved = advance(d, &at_stop);
+  out_.feed_mm_per_min = moved / T * 60.0;
+  v_ = a_ = 0;
+  return true;
 }
 
 const Setpoint& Interpolator::step() {
   out_.cycle = cycle_;
   out_.num_axes = naxes_;
-  if (state_ == RunState::kRunning || state_ == RunState::kHeld || state_ == RunState::kStarved) {
-    advance_motion();
+  out_.feed_mm_per_min = 0;
+  out_.path_accel_mm_s2 = 0;
+  out_.limit = Limit::kNone;
+  const bool active = state_ == RunState::kRunning || state_ == RunState::kHeld || state_ == RunState::kStarved;
+  if (active) {
     ++program_cycles_;
-  } else {
-    out_.feed_mm_per_min = 0;
-    out_.limit = Limit::kNone;
+    const double T = period_s_;
+    const bool pausing = hold_ || stopping_;
+    // Arrived at a stop block: dwell, end, or wait.
+    if (!blocks_.empty() && blocks_.front().stop_block() && v_ == 0) {
+      Planned& p = blocks_.front();
+      out_.block_index = p.block.index;
+      out_.source_line = p.block.source_line;
+      if (p.block.kind == program::BlockKind::kEnd) {
+        blocks_.pop_front();
+        ++blocks_done_;
+        state_ = RunState::kDone;
+      } else if (!pausing) {
+        if (dwell_left_ < 0) dwell_left_ = static_cast<int64_t>(std::ceil(p.block.dwell_s / T - 1e-9));
+        if (dwell_left_ > 0) --dwell_left_;
+        state_ = RunState::kRunning;
+        if (dwell_left_ == 0) {
+          blocks_.pop_front();
+          ++blocks_done_;
+          dwell_left_ = -1;
+          if (!blocks_.empty()) u_ = blocks_.front().path.u_begin();
+        }
+      }
+    } else if (blocks_.empty() || (stopping_ && v_ == 0 && a_ == 0)) {
+      if (stopping_) {
+        blocks_.clear();
+        stopping_ = false;
+        state_ = RunState::kIdle;
+        v_ = a_ = 0;
+      } else {
+        state_ = RunState::kStarved;
+        ++starved_cycles_;
+      }
+    } else if (!pausing && creep_to_stop()) {
+      // A discrete brake ended a hair short of a stop point: step onto it.
+      out_.limit = Limit::kLookahead;
+    } else {
+      Planned& p = blocks_.front();
+      Limit why = Limit::kNone;
+      double geo_here = kInf;
+      const double cap = pausing ? 0.0 : cap_at(p, s_, &why, &geo_here);
+      const double A = p.accel, J = p.jerk;
+      const double a_lo = std::max(-A, a_ - J * T), a_hi = std::min(A, a_ + J * T);
+      // Acceleration that approaches the cap with a jerk-limited ramp (discrete form).
+      const double gap = cap - v_;
+      const double ramp = -0.5 * J * T + std::sqrt(0.25 * J * J * T * T + 2.0 * J * std::fabs(gap));
+      double a_des = gap >= 0 ? std::min(A, ramp) : -std::min(A, ramp);
+      // Close enough to land on the cap in this cycle within the jerk limit.
+      if (std::fabs(gap / T - a_) <= J * T && std::fabs(gap) <= J * T * T) a_des = gap / T;
+      double a_n = std::clamp(a_des, a_lo, a_hi);
+      auto next_v = [&](double a) { return std::max(0.0, v_ + a * T); };
+      auto ok = [&](double a) {
+        const double vn = next_v(a);
+        return safe(vn, a, s_ + 0.5 * (v_ + vn) * T);
+      };
+      bool limited = false;
+      if (!ok(a_n)) {
+        limited = true;
+        if (!ok(a_lo)) {
+          a_n = a_lo;
+        } else {
+          double lo = a_lo, hi = a_n;
+          for (int i = 0; i < 14; ++i) {
+            const double mid = 0.5 * (lo + hi);
+            (ok(mid) ? lo : hi) = mid;
+          }
+          a_n = lo;
+        }
+      }
+      double v_n = next_v(a_n);
+      // Approaching the cap from below, the discrete ramp must not overshoot it by
+      // its rounding. (A cap that dropped under a running ramp, by an override,
+      // is overshot and returned to within the jerk limit instead.)
+      if (v_ <= cap && v_n > cap && v_n - cap <= J * T * T) v_n = cap;
+      // Hard geometric caps over the step (chord error, axis velocity) bound its
+      // mean speed; the programmed feed and override are followed jerk-limited.
+      const double v_avg = 0.5 * (v_ + v_n);
+      Limit w2;
+      double geo_end = kInf;
+      cap_at(p, std::min(p.length, s_ + v_avg * T), &w2, &geo_end);
+      const double hard = std::min(geo_here, geo_end);
+      if (v_avg > hard) {
+        v_n = std::max(0.0, 2.0 * hard - v_);
+        if (geo_end < geo_here) why = w2;
+      }
+      a_n = (v_n - v_) / T;
+      // Creep onto a stop point that a discrete brake ended just short of.
+      double ds = 0.5 * (v_ + v_n) * T;
+      bool at_stop = false;
+      const double moved = advance(ds, &at_stop);
+      if (at_stop) {
+        v_n = 0;
+        a_n = 0;
+      }
+      out_.feed_mm_per_min = moved / T * 60.0;
+      out_.path_accel_mm_s2 = a_n;
+      if (moved <= 0) out_.limit = Limit::kNone;
+      else out_.limit = (limited || v_n < cap * (1 - 1e-6)) ? Limit::kLookahead : why;
+      v_ = v_n;
+      a_ = a_n;  // the realised acceleration, also on the cycle that comes to rest
+      state_ = (hold_ && v_ == 0) ? RunState::kHeld : RunState::kRunning;
+      if (blocks_.empty() && v_ > 0) v_ = a_ = 0;
+    }
   }
   out_.position_mm = pos_;
   out_.state = state_;

@@ -3,15 +3,30 @@
 // to it, cycle by cycle. It reads no clock, starts no thread, draws no random
 // number; the node (interpolator_node.h) feeds it and publishes what it returns.
 //
-// This version moves along straight lines (G0/G1) with a trapezoidal speed
-// profile per block and an exact stop at each block end. The speed is planned
-// online each cycle: the discrete braking law below makes the block end exact
-// without overshoot, and feed hold / override act at the path acceleration limit.
+// Planning, per block on arrival: the block's curve is sampled along its arc
+// length and each sample gets the geometric feed limit, the least of
+//   * the chord-error limit of seed 001: step L = 2·sqrt(2ρε − ε²) per period,
+//   * the roughness limit of seed 000 (eqs. 4–6) when process parameters are set,
+//   * each axis's velocity limit v_i / |t_i|,
+//   * the centripetal limit sqrt(a_i / (κ·|n_i|)) on half of each axis's acceleration;
+// junctions between blocks get the speed at which the direction change stays
+// within one cycle's acceleration and jerk of every axis (a sharp corner is a stop).
+//
+// Motion, per cycle: the path speed follows min(programmed feed × override, the
+// limit here) with a jerk-limited acceleration. Before each cycle commits to an
+// acceleration, it checks that from the resulting state a jerk-limited brake still
+// meets every limit ahead (look-ahead over the buffered blocks, which end in a stop
+// unless more blocks follow). The step along the curve uses seed 000's eq. 7
+// parameter update, then a Newton correction so the chord length of the step
+// equals the commanded step length.
 #include <array>
 #include <cstdint>
 #include <deque>
+#include <memory>
+#include <vector>
 
 #include "common/config/machine_config.h"
+#include "common/motion/path_segment.h"
 #include "common/program/block.h"
 
 namespace cnc::interp {
@@ -21,9 +36,12 @@ enum class RunState : int8_t { kIdle = 0, kRunning = 1, kHeld = 2, kDone = 3, kS
 enum class Limit : int8_t {
   kNone = 0, kProgram = 1, kChord = 2, kRoughness = 3, kAxisVelocity = 4, kCurvatureAccel = 5, kLookahead = 6
 };
+// How the curve parameter advances each cycle (for the feed-fluctuation comparison).
+enum class ParamUpdate : int8_t { kFirstOrder = 0, kTaylor2 = 1, kCorrected = 2 };
 
 const char* to_string(Limit limit);
 const char* to_string(RunState state);
+ParamUpdate param_update_from_string(const std::string& s);
 
 struct Command {
   enum class Kind : int8_t { kLoad = 1, kStart = 2, kHold = 3, kResume = 4, kStop = 5, kOverride = 6 };
@@ -35,7 +53,8 @@ struct Setpoint {
   int64_t cycle = 0;
   int num_axes = 0;
   std::array<double, program::kMaxAxes> position_mm{};
-  double feed_mm_per_min = 0;
+  double feed_mm_per_min = 0;      // commanded path speed (the step length of this cycle / T)
+  double path_accel_mm_s2 = 0;     // planned tangential acceleration
   int64_t block_index = -1;
   int32_t source_line = 0;
   double u = 0;
@@ -46,6 +65,7 @@ struct Setpoint {
 class Interpolator {
  public:
   explicit Interpolator(const config::MachineConfig& cfg);
+  ~Interpolator();
 
   // Inputs, applied before the next step(). Blocks must come in index order
   // (0, 1, 2, ... of the current program); anything else is refused (false).
@@ -58,45 +78,64 @@ class Interpolator {
   int64_t cycle() const { return cycle_; }
   RunState state() const { return state_; }
   int64_t next_block_index() const { return next_index_; }
-  size_t queued_blocks() const { return queue_.size(); }
+  size_t queued_blocks() const { return blocks_.size(); }
   int64_t blocks_done() const { return blocks_done_; }
   int64_t starved_cycles() const { return starved_cycles_; }
   double feed_override() const { return override_; }
   double program_time_s() const { return static_cast<double>(program_cycles_) * period_s_; }
   const Setpoint& last() const { return out_; }
+  void set_param_update(ParamUpdate mode) { param_update_ = mode; }
+  // Why the last refused block was refused.
+  const std::string& last_refusal() const { return refusal_; }
+
+  struct Sample {
+    double u;
+    double s;      // arc length from the block start, mm
+    double v_geo;  // geometric speed limit, mm/s
+    Limit limit;
+  };
+  struct Planned {
+    program::Block block;
+    motion::PathSegment path;
+    std::vector<Sample> samples;  // at least two for a moving block
+    double length = 0;
+    double v_prog = 0;            // programmed feed in mm/s (infinite for rapids)
+    double accel = 0, jerk = 0;   // tangential limits over the block
+    double v_entry = 0;           // junction limit with the previous block
+    std::vector<double> v_bw;     // backward-pass limits per sample (acceleration-limited)
+    bool stop_block() const;      // dwell / end: the path stops here
+    bool stop_at_start() const;   // a stop block, or a corner the path must stop at
+    Planned(program::Block b, motion::PathSegment p) : block(std::move(b)), path(std::move(p)) {}
+  };
 
  private:
-  struct Segment {
-    program::Block block;
-    double length_mm = 0;
-    double v_max_mm_s = 0;  // from the program feed and the axis velocity limits (before override)
-    double v_axis_mm_s = 0;  // from the axis velocity limits alone: override never goes past it
-    Limit v_limit = Limit::kProgram;
-    double accel_mm_s2 = 0;
-    int64_t dwell_cycles_left = 0;
-  };
-  void begin_next_segment(double entry_fraction);
-  void advance_motion();
+  void plan_block(Planned& p) const;
+  void plan_junction(Planned& prev, Planned& next) const;
+  void backward_pass();
+  // Speed limit at arc length s of block p: programmed feed × override and the
+  // geometric limit (also returned alone in *v_geo when not null).
+  double cap_at(const Planned& p, double s, Limit* why, double* v_geo = nullptr) const;
+  bool safe(double v_next, double a_next, double s_next) const;
+  double advance(double ds, bool* reached_stop);
+  bool creep_to_stop();
 
   config::MachineConfig cfg_;
   double period_s_;
   int naxes_;
+  ParamUpdate param_update_ = ParamUpdate::kCorrected;
 
   RunState state_ = RunState::kIdle;
   bool hold_ = false;
   bool stopping_ = false;
   double override_ = 1.0;
 
-  std::deque<program::Block> queue_;
+  std::deque<Planned> blocks_;  // front: the block being executed
   int64_t next_index_ = 0;
-  bool have_segment_ = false;
-  Segment seg_;
-  double s_mm_ = 0;      // distance along the current segment
-  double v_mm_s_ = 0;    // path speed of the last cycle
-  // When the last cycle ended a segment: its speed as a fraction of that segment's
-  // a·T. The next segment's first cycle may only add what is left of a·T, so the
-  // change of velocity across the (exact-stop) corner stays within the limits.
-  double exit_fraction_ = 0;
+  double u_ = 0;     // parameter in the front block
+  double s_ = 0;     // arc length in the front block
+  double v_ = 0;     // path speed, mm/s
+  double a_ = 0;     // path acceleration, mm/s²
+  int64_t dwell_left_ = -1;
 
   std::array<double, program::kMaxAxes> pos_{};
   int64_t cycle_ = 0;
@@ -104,6 +143,7 @@ class Interpolator {
   int64_t starved_cycles_ = 0;
   int64_t program_cycles_ = 0;
   Setpoint out_;
+  std::string refusal_;
 };
 
 }  // namespace cnc::interp

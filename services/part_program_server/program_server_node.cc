@@ -2,6 +2,9 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
+#include <iterator>
+
 #include "cnc/lcmt_program_state.hpp"
 #include "common/program/block_msg.h"
 #include "common/util/clock.h"
@@ -29,7 +32,7 @@ void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {
         spdlog::info("loaded {}: {} blocks (token {})", m.program_path, core_.num_blocks(), token);
         state_ = S::LOADED;
         last_refusal_ = LoadResult{};
-        sent_.assign(static_cast<size_t>(core_.num_blocks()), false);
+        sent_.clear();
         blocks_sent_ = blocks_resent_ = 0;
       } else {
         spdlog::error("program refused: {}", r.error);
@@ -58,19 +61,53 @@ void ProgramServerNode::on_request(const cnc::lcmt_block_request& m) {
     spdlog::warn("block request seq {} asks for {} blocks: ignored", m.seq, m.count);
     return;
   }
-  for (int64_t i = m.first_block; i < m.first_block + m.count; ++i) {
+  const int64_t token = core_.token();
+  const std::string path = core_.path();
+  if (m.first_block < 0 || m.first_block >= core_.num_blocks()) return;
+  const int64_t end = m.first_block + std::min<int64_t>(m.count, core_.num_blocks() - m.first_block);
+  for (int64_t i = m.first_block; i < end; ++i) {
     const program::Block* b = core_.block(i);
-    if (b == nullptr) break;
-    cnc::lcmt_program_block msg = program::to_msg(*b, core_.token());
+    if (b == nullptr) {
+      // The file no longer reads as validated: serve nothing more of it.
+      spdlog::error("program {} withdrawn: {}", token, core_.serving_error());
+      last_refusal_ = LoadResult{false, core_.serving_error(), 0, 0};
+      refused_path_ = path;
+      state_ = cnc::lcmt_program_state::REFUSED;
+      publish_state(true);
+      return;
+    }
+    cnc::lcmt_program_block msg = program::to_msg(*b, token);
     bus_.publish(ch_blocks_, msg);
-    auto sent = sent_[static_cast<size_t>(i)];
-    if (sent) {
+    if (mark_sent(i)) {
       ++blocks_resent_;
     } else {
-      sent_[static_cast<size_t>(i)] = true;
       ++blocks_sent_;
     }
   }
+}
+
+bool ProgramServerNode::mark_sent(int64_t i) {
+  auto next = sent_.upper_bound(i);
+  if (next != sent_.begin()) {
+    auto prev = std::prev(next);
+    if (i < prev->second) return true;
+    if (i == prev->second) {
+      prev->second = i + 1;
+      if (next != sent_.end() && next->first == i + 1) {
+        prev->second = next->second;
+        sent_.erase(next);
+      }
+      return false;
+    }
+  }
+  if (next != sent_.end() && next->first == i + 1) {
+    const int64_t e = next->second;
+    sent_.erase(next);
+    sent_.emplace(i, e);
+  } else {
+    sent_.emplace(i, i + 1);
+  }
+  return false;
 }
 
 void ProgramServerNode::publish_state(bool force) {

@@ -1,5 +1,5 @@
 #pragma once
-#include <set>
+#include <map>
 
 #include "cnc/lcmt_block_request.hpp"
 #include "cnc/lcmt_program_command.hpp"
@@ -8,7 +8,10 @@
 
 namespace cnc::pps {
 
-// LCM side: LOAD/START commands, block requests, program state.
+// LCM side: LOAD/START/STOP commands, block requests, program state. Blocks go out
+// only on request (the interpolator asks for a bounded window and asks again after
+// a silence), each stamped with the bus's per-channel sequence number, so a lost
+// datagram delays a block but never loses it.
 class ProgramServerNode {
  public:
   ProgramServerNode(const config::MachineConfig& cfg, bus::Bus& bus);
@@ -19,6 +22,8 @@ class ProgramServerNode {
  private:
   void on_command(const cnc::lcmt_program_command& m);
   void on_request(const cnc::lcmt_block_request& m);
+  // Counts block `i` as sent; returns whether it was sent before.
+  bool mark_sent(int64_t i);
 
   config::MachineConfig cfg_;
   bus::Bus& bus_;
@@ -29,7 +34,9 @@ class ProgramServerNode {
   std::string refused_path_;
   int64_t blocks_sent_ = 0;
   int64_t blocks_resent_ = 0;
-  std::vector<bool> sent_;
+  // Blocks sent at least once, as disjoint ranges [first, end) keyed by first:
+  // requests come in order, so this stays a handful of ranges for any program size.
+  std::map<int64_t, int64_t> sent_;
   double last_state_s_ = -1e9;
 };
 

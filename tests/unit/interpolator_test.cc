@@ -118,8 +118,11 @@ void expect_limits_held(const std::vector<Setpoint>& sps, const std::vector<Bloc
       ASSERT_GE(bi, 0);
       ASSERT_LT(bi, static_cast<int64_t>(blocks.size()));
       const Block& b = blocks[static_cast<size_t>(bi)];
+      // A step that crosses a block boundary may carry the previous block's feed.
+      const int64_t prev_bi = sps[k - 1].block_index;
+      const double prev_feed = prev_bi >= 0 && prev_bi < bi ? blocks[static_cast<size_t>(prev_bi)].feed_mm_per_min : 0;
       if (b.kind == BlockKind::kLine) {
-        const double v_max = b.feed_mm_per_min / 60.0 * feed_override;
+        const double v_max = std::max(b.feed_mm_per_min, prev_feed) / 60.0 * feed_override;
         if (speed > v_max * (1 + 1e-9) && ++speed_faults <= 5)
           ADD_FAILURE() << "cycle " << sps[k].cycle << " block " << bi << ": path speed " << speed << " > " << v_max;
       } else if (b.kind != BlockKind::kRapid && ++speed_faults <= 5) {
@@ -133,6 +136,16 @@ void expect_limits_held(const std::vector<Setpoint>& sps, const std::vector<Bloc
     }
   }
   // vel[sps.size()] stays zero: at rest after the last setpoint.
+  int jerk_faults = 0;
+  for (size_t k = 2; k <= sps.size(); ++k) {
+    for (int a = 0; a < n; ++a) {
+      const double jerk = std::fabs(vel[k][a] - 2 * vel[k - 1][a] + vel[k - 2][a]) / (T * T);
+      if (jerk > cfg.axes[a].max_jerk_mm_s3 * 1.01 && ++jerk_faults <= 5)
+        ADD_FAILURE() << "cycle " << k << " axis " << cfg.axes[a].name << ": jerk " << jerk << " > "
+                      << cfg.axes[a].max_jerk_mm_s3;
+    }
+  }
+  EXPECT_EQ(jerk_faults, 0);
   for (size_t k = 1; k <= sps.size(); ++k) {
     double dv2 = 0;
     for (int a = 0; a < n; ++a) {
@@ -293,12 +306,13 @@ TEST(Interpolator, RapidIsLimitedByTheAxes) {
 }
 
 TEST(Interpolator, LongLineTakesTheTrapezoidTime) {
-  const double L = 300, v = 6000.0 / 60.0, a = 1500;
+  // Jerk-limited: the S-curve time L/v + v/a + a/j.
+  const double L = 300, v = 6000.0 / 60.0, a = 1500, j = sim3().path_jerk_mm_s3;
   const auto blocks = polyline({{0, 0, 0}, {L, 0, 0}}, BlockKind::kLine, 6000);
   const auto sps = run_program(blocks);
   const double T = sim3().ipo_period_s;
-  const double expected_cycles = (L / v + v / a) / T;
-  EXPECT_NEAR(static_cast<double>(cycles_in_block(sps, 0)), expected_cycles, 2.0);
+  const double expected_cycles = (L / v + v / a + a / j) / T;
+  EXPECT_NEAR(static_cast<double>(cycles_in_block(sps, 0)), expected_cycles, 4.0);  // discrete ramps and the creep onto the end
   EXPECT_NEAR(peak_speed(sps, 0), v, v * 1e-9);
   expect_limits_held(sps, blocks);
 }
@@ -316,7 +330,8 @@ TEST(Interpolator, FeedHoldStopsMidBlockAndResumeFinishes) {
   ASSERT_NEAR(distance(sps[sps.size() - 2], sps.back(), 3) / T, v, 1e-9);  // cruising
 
   ip.apply_command(cmd(Command::Kind::kHold));
-  const int max_decel_cycles = static_cast<int>(std::ceil(v / (sim3().path_accel_mm_s2 * T))) + 2;
+  const double a = sim3().path_accel_mm_s2, j = sim3().path_jerk_mm_s3;
+  const int max_decel_cycles = static_cast<int>(std::ceil((v / a + a / j) / T)) + 2;
   int decel_cycles = 0;
   while (decel_cycles <= max_decel_cycles) {
     sps.push_back(ip.step());
@@ -409,7 +424,8 @@ TEST(Interpolator, StopDeceleratesToIdleAndDropsTheProgram) {
   for (int i = 0; i < 300; ++i) sps.push_back(ip.step());
   ip.apply_command(cmd(Command::Kind::kStop));
   const double T = sim3().ipo_period_s;
-  const int max_cycles = static_cast<int>(std::ceil(100.0 / (sim3().path_accel_mm_s2 * T))) + 3;
+  const double a = sim3().path_accel_mm_s2, j = sim3().path_jerk_mm_s3;
+  const int max_cycles = static_cast<int>(std::ceil((100.0 / a + a / j) / T)) + 3;
   int cycles = 0;
   while (ip.state() != RunState::kIdle && cycles < max_cycles) {
     sps.push_back(ip.step());
