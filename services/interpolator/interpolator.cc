@@ -17,7 +17,7 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 // curved blocks; the tangential planning gets the rest.
 constexpr double kCentripetalShare = 0.5;
 // Samples per knot span of a NURBS and per radian of an arc.
-constexpr int kSamplesPerSpan = 24;
+constexpr int kSamplesPerSpan = 16;
 constexpr double kArcSamplesPerRad = 24.0;
 
 using motion::AxisVec;
@@ -50,6 +50,33 @@ double brake_distance(double v, double a, double vt, double A, double J) {
   integrate(0.0, t2, &s, &vv, &aa);
   integrate(J, ap / J, &s, &vv, &aa);
   return s;
+}
+
+// Appends u0 and the refinement points of (u0, u1) where the curvature changes by
+// more than 1 % of the larger value, bisecting up to 8 levels deep.
+// Curvatures below k_floor cannot make the chord limit bind and are not refined.
+template <class Kappa>
+void refine(double u0, double k0, double u1, double k1, const Kappa& kappa, double k_floor, int depth,
+            std::vector<double>* out) {
+  const double um = 0.5 * (u0 + u1);
+  if (depth >= 8 || std::max(k0, k1) < k_floor) {
+    out->push_back(u0);
+    return;
+  }
+  if (std::fabs(k1 - k0) <= 0.01 * std::max(k0, k1)) {
+    // Also catch a peak between two equal ends.
+    const double km = kappa(um);
+    if (km <= 1.01 * std::max(k0, k1)) {
+      out->push_back(u0);
+      return;
+    }
+    refine(u0, k0, um, km, kappa, k_floor, depth + 1, out);
+    refine(um, km, u1, k1, kappa, k_floor, depth + 1, out);
+    return;
+  }
+  const double km = kappa(um);
+  refine(u0, k0, um, km, kappa, k_floor, depth + 1, out);
+  refine(um, km, u1, k1, kappa, k_floor, depth + 1, out);
 }
 
 double norm(const AxisVec& v, int n) {
@@ -116,7 +143,9 @@ void Interpolator::plan_block(Planned& p) const {
 
   const bool curved = p.path.curved();
   const double share = curved ? 1.0 - kCentripetalShare : 1.0;
-  const double eps = cfg_.chord_tolerance_mm;
+  // 1 % below the tolerance: the circle formula is exact for constant curvature;
+  // where the curvature changes within a step the error runs up to ~0.5 % over it.
+  const double eps = 0.99 * cfg_.chord_tolerance_mm;
   const bool rough = b.process.active() && b.spindle_rpm > 0;
   const process::RoughnessLaw law{b.process.ball_radius_mm, b.process.flutes, b.process.pick_feed_mm,
                                   b.process.target_rmax_um * 1e-3};
@@ -131,9 +160,37 @@ void Interpolator::plan_block(Planned& p) const {
   if (!curved) {
     us = {u0, u1};
   } else if (b.kind == program::BlockKind::kNurbs) {
+    // Uniform samples per knot span, refined where the curvature changes by more
+    // than 1 % between neighbours: a sharp curvature peak between samples would
+    // let the chord error exceed ε.
+    auto kappa = [&](double u) {
+      AxisVec P{}, d1{}, d2{};
+      p.path.eval(u, &P, &d1, &d2);
+      const double sp = norm(d1, naxes_);
+      double d2t = 0, k2 = 0;
+      for (int a = 0; a < naxes_; ++a) d2t += d2[a] * d1[a] / sp;
+      for (int a = 0; a < naxes_; ++a) {
+        const double k = (d2[a] - d2t * d1[a] / sp) / (sp * sp);
+        k2 += k * k;
+      }
+      return std::sqrt(k2);
+    };
+    // The chord limit binds only where it is below the fastest the block can go.
+    double v_top = p.v_prog;
+    for (int a = 0; a < naxes_; ++a) v_top = std::min(v_top, std::sqrt(3.0) * cfg_.axes[a].max_velocity_mm_s);
+    const double step_top = v_top * period_s_;
+    const double k_floor = 0.5 * 8.0 * eps / (step_top * step_top);
     std::vector<double> bp = p.path.nurbs_breakpoints();
-    for (size_t k = 0; k + 1 < bp.size(); ++k)
-      for (int i = 0; i < kSamplesPerSpan; ++i) us.push_back(bp[k] + (bp[k + 1] - bp[k]) * i / kSamplesPerSpan);
+    for (size_t k = 0; k + 1 < bp.size(); ++k) {
+      double ua = bp[k], ka = kappa(ua);
+      for (int i = 1; i <= kSamplesPerSpan; ++i) {
+        const double ub = bp[k] + (bp[k + 1] - bp[k]) * i / kSamplesPerSpan;
+        const double kb = kappa(ub);
+        refine(ua, ka, ub, kb, kappa, k_floor, 0, &us);
+        ua = ub;
+        ka = kb;
+      }
+    }
     us.push_back(u1);
   } else {
     const int n = std::max(2, static_cast<int>(std::ceil(p.path.arc_sweep_rad() * kArcSamplesPerRad)));
@@ -387,8 +444,8 @@ double Interpolator::cap_at(const Planned& p, double s, Limit* why, double* v_ge
 bool Interpolator::safe(double v_n, double a_n, double s_n) const {
   double A = kInf, J = kInf;
   // The brake is continuous-time; executed in whole cycles it needs about half a
-  // step more room.
-  const double margin = 0.5 * v_n * period_s_;
+  // cycle's travel at the speed it sheds more room.
+  const double T = period_s_;
   double offset = 0;  // arc length of the front block's start relative to its start
   double horizon = -1;
   for (const Planned& p : blocks_) {
@@ -396,13 +453,16 @@ bool Interpolator::safe(double v_n, double a_n, double s_n) const {
     J = std::min(J, p.jerk);
     if (horizon < 0) horizon = brake_distance(v_n, a_n, 0.0, A, J) + v_n * period_s_ + 1e-9;
     if (p.stop_block() || (p.v_entry == 0 && offset > 0))
-      return brake_distance(v_n, a_n, 0.0, A, J) + margin <= offset - s_n + 1e-9;
+      return brake_distance(v_n, a_n, 0.0, A, J) + 0.5 * v_n * T <= offset - s_n + 1e-9;
     const size_t n = p.samples.size();
     for (size_t i = 0; i < n; ++i) {
       const double d = offset + p.samples[i].s - s_n;
       if (d < 0) continue;
       if (d > horizon) return true;
-      if (brake_distance(v_n, a_n, p.v_bw[i], A, J) + margin > d + 1e-9) return false;
+      const double vt = p.v_bw[i];
+      if (vt < v_n + a_n * a_n / (2 * J) &&
+          brake_distance(v_n, a_n, vt, A, J) + 0.5 * std::max(0.0, v_n - vt) * T > d + 1e-9)
+        return false;
     }
     offset += p.length;
   }
