@@ -1,6 +1,5 @@
 #include "common/geometry/nurbs.h"
 
-#include <Eigen/Geometry>
 #include <algorithm>
 #include <charconv>
 #include <cmath>

@@ -3,7 +3,8 @@
 // Piegl & Tiller, The NURBS Book: span search (A2.1), basis functions and their
 // derivatives (A2.3) and rational derivatives (A4.2). The evaluation functions run
 // in the interpolator's cycle, so they use fixed-size arrays and never allocate.
-#include <Eigen/Core>
+// Geometry, not just Core: with Core alone Vec3::cross compiles but does not link.
+#include <Eigen/Geometry>
 #include <string>
 #include <vector>
 

@@ -23,6 +23,9 @@ inline double arc_radius_tolerance_mm(double radius_mm) { return std::max(0.002,
 // its last control point, to this distance per axis.
 constexpr double kNurbsContinuityMm = 1e-6;
 constexpr int kMaxArcTurns = 1000;
+// One curve is one block and one message: CAM curves hold tens to hundreds of
+// control points; ten thousand is ~400 kB on the wire.
+constexpr int kMaxNurbsControlPoints = 10000;
 
 // Machine axis indices of an arc plane's first and second axis: G17 X→Y, G18 Z→X,
 // G19 Y→Z (counter-clockwise seen from the positive normal axis); {-1, -1} if the
@@ -67,6 +70,9 @@ inline GeometryFault check_nurbs(const NurbsGeometry& g) {
   if (static_cast<int>(g.weights.size()) != n_ctrl)
     return {P::kCount, -1, std::to_string(g.weights.size()) + " weights for " + std::to_string(n_ctrl) +
                                " control points: expected one weight per control point"};
+  if (n_ctrl > kMaxNurbsControlPoints)
+    return {P::kCount, kMaxNurbsControlPoints, std::to_string(n_ctrl) + " control points: at most " +
+                                                   std::to_string(kMaxNurbsControlPoints) + " in one curve"};
   if (n_ctrl < order)
     return {P::kCount, -1, "a NURBS of order " + ord + " needs at least " + ord + " control points, found " +
                                std::to_string(n_ctrl)};

@@ -10,7 +10,6 @@ namespace {
 
 // Anything beyond these is not a program block but garbage or an attack.
 constexpr int32_t kMaxMsgAxes = kMaxAxes;
-constexpr int32_t kMaxMsgControlPoints = 1 << 20;
 
 bool finite(const std::vector<double>& v) {
   for (double x : v)
@@ -96,8 +95,8 @@ std::string from_msg(const cnc::lcmt_program_block& m, int num_axes, Block* out)
     if (!why.empty()) return why;
   }
   if (b.kind == BlockKind::kNurbs) {
-    if (m.num_control_points < 0 || m.num_control_points > kMaxMsgControlPoints || m.num_knots < 0 ||
-        m.num_knots > kMaxMsgControlPoints + kMaxNurbsOrder)
+    if (m.num_control_points < 0 || m.num_control_points > kMaxNurbsControlPoints || m.num_knots < 0 ||
+        m.num_knots > kMaxNurbsControlPoints + kMaxNurbsOrder)
       return "NURBS counts out of range";
     if (m.knots.size() != static_cast<size_t>(m.num_knots) ||
         m.control_points.size() != static_cast<size_t>(m.num_control_points) ||

@@ -315,7 +315,7 @@ class Engine {
     const Word* motion_src = nullptr;
     const Word* dwell_src = nullptr;
     bool any_axis = false;
-    bool end_program = false;
+    const Word* end_program = nullptr;
 
     for (const Word& w : lx_.words) {
       if (w.letter != 'G' && w.letter != 'M') {
@@ -362,7 +362,7 @@ class Engine {
           switch (*code) {
             case 30: st_.spindle_on = true; break;   // M3
             case 50: st_.spindle_on = false; break;  // M5
-            case 20: case 300: end_program = true; break;  // M2, M30
+            case 20: case 300: end_program = &w; break;  // M2, M30
             default: fail(w, "unsupported M code '" + w.text + "': expected one of M2 M3 M5 M30");
           }
           continue;
@@ -434,6 +434,7 @@ class Engine {
         default: fail(*w, "L word without G5.2 (order)");
       }
     }
+    if (end_program && curve_) fail(*end_program, "the program cannot end on the line that opens a NURBS curve");
     if (end_program && !stop_) end_block();
   }
 
@@ -677,6 +678,8 @@ class Engine {
       if (!(r->value > 0)) fail(*r, "weight " + r->text + ": expected a positive weight");
       weight = r->value;
     }
+    if (static_cast<int>(c.g.control_points.size()) == kMaxNurbsControlPoints)
+      fail(anchor, "more than " + std::to_string(kMaxNurbsControlPoints) + " control points in one NURBS curve: split it");
     c.programmed = p;
     c.g.control_points.push_back(p);
     c.g.weights.push_back(weight);
@@ -775,6 +778,8 @@ class Engine {
     const Word* p = seen['P'];
     if (!p) fail(*x, "expected a weight P with every G5.2 control point (LinuxCNC requires one)");
     if (!(p->value > 0)) fail(*p, "weight " + p->text + ": expected a positive weight");
+    if (static_cast<int>(c.g.control_points.size()) == kMaxNurbsControlPoints)
+      fail(*x, "more than " + std::to_string(kMaxNurbsControlPoints) + " control points in one NURBS curve: split it");
     const auto coord = [&](const Word& w, int a) {
       const double v = w.value * st_.unit_mm;
       return st_.absolute ? v : st_.position_mm[a] + v;

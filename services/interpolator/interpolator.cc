@@ -322,25 +322,33 @@ void Interpolator::plan_junction(Planned& prev, Planned& next) const {
   next.v_entry = v;
 }
 
-void Interpolator::backward_pass() {
-  double carry = 0;  // the buffer ends in a stop unless more blocks come
+void Interpolator::backward_pass(bool full) {
+  // From the end of the buffer (a stop unless more blocks come) backwards. After a
+  // block was appended only the tail changes: once a recomputed limit equals the
+  // stored one, everything before it is unchanged too.
+  double carry = 0;
+  bool last = true;
   for (auto it = blocks_.rbegin(); it != blocks_.rend(); ++it) {
     Planned& p = *it;
     if (p.stop_block()) {
       carry = 0;
+      last = false;
       continue;
     }
     const size_t n = p.samples.size();
-    p.v_bw.resize(n);
+    const bool fresh = p.v_bw.size() != n;
+    if (fresh) p.v_bw.assign(n, -1.0);
     const double vp = p.v_prog * override_;
     for (size_t i = n; i-- > 0;) {
       double cap = std::min(p.samples[i].v_geo, vp);
       if (i == 0) cap = std::min(cap, p.v_entry);
       const double ds = i + 1 < n ? p.samples[i + 1].s - p.samples[i].s : 0.0;
-      const double reach = std::sqrt(carry * carry + 2.0 * p.accel * ds);
-      p.v_bw[i] = std::min(cap, reach);
-      carry = p.v_bw[i];
+      const double v = std::min(cap, std::sqrt(carry * carry + 2.0 * p.accel * ds));
+      if (!full && !fresh && !last && v == p.v_bw[i]) return;
+      p.v_bw[i] = v;
+      carry = v;
     }
+    last = false;
   }
 }
 
@@ -379,7 +387,7 @@ bool Interpolator::apply_block(const program::Block& block) {
     return false;
   }
   ++next_index_;
-  backward_pass();
+  backward_pass(false);
   return true;
 }
 
@@ -411,7 +419,7 @@ void Interpolator::apply_command(const Command& cmd) {
     case Command::Kind::kOverride:
       if (std::isfinite(cmd.feed_override)) {
         override_ = std::clamp(cmd.feed_override, 0.0, 1.5);
-        backward_pass();
+        backward_pass(true);
       }
       break;
   }

@@ -111,7 +111,7 @@ class Interpolator {
  private:
   void plan_block(Planned& p) const;
   void plan_junction(Planned& prev, Planned& next) const;
-  void backward_pass();
+  void backward_pass(bool full);
   // Speed limit at arc length s of block p: programmed feed × override and the
   // geometric limit (also returned alone in *v_geo when not null).
   double cap_at(const Planned& p, double s, Limit* why, double* v_geo = nullptr) const;

@@ -576,6 +576,21 @@ TEST(GcodeParserNurbsError, LinuxCncCloseLineTakesNoPoint) {
   expect_error_at("F100\nG5.2 P1\nX1 Y0 P1\nG5.3 X2 Y1\n", 4, 6, "G5.3 takes no control point");
 }
 
+TEST(GcodeParserNurbsError, NoEndOnTheOpeningLine) {
+  expect_error_at("G06.2 P2 K0 X0 Y0 Z0 F100 M30\nK0 X1\nK1\nK1\n", 1, 27, "cannot end on the line that opens");
+  expect_error_at("F100\nG5.2 P1 M2\nX1 Y0 P1\nX2 Y0 P1\nG5.3\n", 2, 9, "cannot end on the line that opens");
+}
+
+TEST(GcodeParserNurbsError, LinuxCncOrderBelowThreeIsRefusedNotChanged) {
+  expect_error_at("F100\nG5.2 P1 L2\n", 2, 9, "LinuxCNC uses 3 for any L below 4");
+}
+
+TEST(GcodeParserNurbsError, AtMostTenThousandControlPoints) {
+  std::string prog = "G06.2 P2 K0 X0 Y0 Z0 F100\n";
+  for (int i = 1; i <= 10000; ++i) prog += "K0 X" + std::to_string(i) + "\n";
+  expect_error_at(prog, 10001, 1, "more than 10000 control points in one NURBS curve");
+}
+
 // ---- process directive -------------------------------------------------------------
 
 TEST(GcodeParserProcess, DirectiveAppliesFromItsLineOn) {

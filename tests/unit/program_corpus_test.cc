@@ -2,17 +2,22 @@
 // line is `( expect: LINE:COLUMN fragment )`, and the parser must refuse the file at
 // exactly that place with a message containing the fragment — both through
 // GcodeParser::parse and through the part-program server, which must then serve
-// nothing of it. The valid programs (tests/golden/programs/valid) parse, and the
-// server streams the same blocks as the whole-file parse.
+// nothing of it. The valid programs (tests/golden/programs/valid) parse, the server
+// streams the same blocks as the whole-file parse, and random edits of them are
+// either refused with a place or give only blocks that pass from_msg.
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <random>
 #include <regex>
+#include <sstream>
 #include <string>
 #include <vector>
 
+#include "common/program/block_msg.h"
 #include "common/program/gcode_parser.h"
 #include "services/part_program_server/program_server.h"
 
@@ -112,6 +117,48 @@ TEST_P(Valid, ParsesAndStreamsTheSameBlocks) {
     EXPECT_EQ(b->nurbs.control_points, w.nurbs.control_points);
     EXPECT_EQ(b->nurbs.weights, w.nurbs.weights);
   }
+}
+
+// Random edits of the valid programs (fixed seed): each result is either refused
+// with a place in the file, or every block it gives passes from_msg's checks — the
+// parser never hands the interpolator a block the network side would refuse.
+TEST(MutatedCorpus, RefusedWithAPlaceOrEveryBlockIsValid) {
+  std::vector<std::string> seeds;
+  for (const auto& name : programs("valid")) {
+    std::ifstream in(kCorpus / "valid" / (name + ".ngc"));
+    seeds.emplace_back(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  ASSERT_FALSE(seeds.empty());
+  const std::string alphabet = "0123456789GXYZIJKRPLFSMN .-\n()";
+  std::mt19937 rng(5);
+  const GcodeParser parser(settings());
+  int accepted = 0;
+  for (int it = 0; it < 4000; ++it) {
+    std::string text = seeds[rng() % seeds.size()];
+    for (int m = 0, n = 1 + static_cast<int>(rng() % 3); m < n && !text.empty(); ++m) {
+      const size_t at = rng() % text.size();
+      const char c = alphabet[rng() % alphabet.size()];
+      switch (rng() % 3) {
+        case 0: text[at] = c; break;
+        case 1: text.insert(at, 1, c); break;
+        default: text.erase(at, 1); break;
+      }
+    }
+    std::istringstream in(text);
+    try {
+      const Program p = parser.parse(in, "m.ngc");
+      ++accepted;
+      for (const Block& b : p.blocks) {
+        Block back;
+        ASSERT_EQ(from_msg(to_msg(b, 1), 3, &back), "") << "block " << b.index << " of:\n" << text;
+      }
+    } catch (const ProgramError& e) {
+      ASSERT_EQ(e.where().file, "m.ngc");
+      ASSERT_GT(e.where().line, 0) << e.what();
+      ASSERT_GT(e.where().column, 0) << e.what();
+    }
+  }
+  EXPECT_GT(accepted, 400);  // the edits must leave enough programs valid to mean something
 }
 
 INSTANTIATE_TEST_SUITE_P(Corpus, Valid, ::testing::ValuesIn(programs("valid")),
