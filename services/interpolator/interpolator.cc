@@ -52,31 +52,26 @@ double brake_distance(double v, double a, double vt, double A, double J) {
   return s;
 }
 
-// Appends u0 and the refinement points of (u0, u1) where the curvature changes by
-// more than 1 % of the larger value, bisecting up to 8 levels deep.
-// Curvatures below k_floor cannot make the chord limit bind and are not refined.
-template <class Kappa>
-void refine(double u0, double k0, double u1, double k1, const Kappa& kappa, double k_floor, int depth,
+// Appends u0 and the points that refine (u0, u1) until the local speed limit v(u)
+// (chord error, roughness) changes by at most 0.5 % between neighbours, so that
+// interpolating it linearly between samples never overestimates it by more than
+// that. Limits above v_top cannot bind and are not refined. At most 8 levels.
+template <class Limit>
+void refine(double u0, double v0, double u1, double v1, const Limit& vlim, double v_top, int depth,
             std::vector<double>* out) {
-  const double um = 0.5 * (u0 + u1);
-  if (depth >= 8 || std::max(k0, k1) < k_floor) {
+  const double lo = std::min(v0, v1);
+  if (depth >= 8 || lo >= v_top) {
     out->push_back(u0);
     return;
   }
-  if (std::fabs(k1 - k0) <= 0.01 * std::max(k0, k1)) {
-    // Also catch a peak between two equal ends.
-    const double km = kappa(um);
-    if (km <= 1.01 * std::max(k0, k1)) {
-      out->push_back(u0);
-      return;
-    }
-    refine(u0, k0, um, km, kappa, k_floor, depth + 1, out);
-    refine(um, km, u1, k1, kappa, k_floor, depth + 1, out);
+  const double um = 0.5 * (u0 + u1);
+  const double vm = vlim(um);
+  if (std::fabs(v1 - v0) <= 0.005 * lo && vm >= 0.995 * lo) {
+    out->push_back(u0);
     return;
   }
-  const double km = kappa(um);
-  refine(u0, k0, um, km, kappa, k_floor, depth + 1, out);
-  refine(um, km, u1, k1, kappa, k_floor, depth + 1, out);
+  refine(u0, v0, um, vm, vlim, v_top, depth + 1, out);
+  refine(um, vm, u1, v1, vlim, v_top, depth + 1, out);
 }
 
 double norm(const AxisVec& v, int n) {
@@ -146,7 +141,8 @@ void Interpolator::plan_block(Planned& p) const {
   // 1 % below the tolerance: the circle formula is exact for constant curvature;
   // where the curvature changes within a step the error runs up to ~0.5 % over it.
   const double eps = 0.99 * cfg_.chord_tolerance_mm;
-  const bool rough = b.process.active() && b.spindle_rpm > 0;
+  // The roughness law is for cutting moves; a rapid does not cut.
+  const bool rough = b.process.active() && b.spindle_rpm > 0 && b.kind != program::BlockKind::kRapid;
   const process::RoughnessLaw law{b.process.ball_radius_mm, b.process.flutes, b.process.pick_feed_mm,
                                   b.process.target_rmax_um * 1e-3};
   if (rough) {
@@ -154,47 +150,50 @@ void Interpolator::plan_block(Planned& p) const {
     if (!why.empty()) throw std::invalid_argument("process parameters: " + why);
   }
 
-  // Parameter values to sample.
+  // Parameter values to sample: uniform per knot span (NURBS) or per angle (arcs),
+  // then refined where the chord or roughness limit changes quickly.
   std::vector<double> us;
   const double u0 = p.path.u_begin(), u1 = p.path.u_end();
   if (!curved) {
     us = {u0, u1};
-  } else if (b.kind == program::BlockKind::kNurbs) {
-    // Uniform samples per knot span, refined where the curvature changes by more
-    // than 1 % between neighbours: a sharp curvature peak between samples would
-    // let the chord error exceed ε.
-    auto kappa = [&](double u) {
+  } else {
+    std::vector<double> grid;
+    if (b.kind == program::BlockKind::kNurbs) {
+      const std::vector<double> bp = p.path.nurbs_breakpoints();
+      for (size_t k = 0; k + 1 < bp.size(); ++k)
+        for (int i = 0; i < kSamplesPerSpan; ++i) grid.push_back(bp[k] + (bp[k + 1] - bp[k]) * i / kSamplesPerSpan);
+    } else {
+      const int n = std::max(2, static_cast<int>(std::ceil(p.path.arc_sweep_rad() * kArcSamplesPerRad)));
+      for (int i = 0; i < n; ++i) grid.push_back(u0 + (u1 - u0) * i / n);
+    }
+    grid.push_back(u1);
+    auto vlim = [&](double u) {
       AxisVec P{}, d1{}, d2{};
       p.path.eval(u, &P, &d1, &d2);
       const double sp = norm(d1, naxes_);
+      if (sp <= 0) return kInf;
       double d2t = 0, k2 = 0;
       for (int a = 0; a < naxes_; ++a) d2t += d2[a] * d1[a] / sp;
       for (int a = 0; a < naxes_; ++a) {
         const double k = (d2[a] - d2t * d1[a] / sp) / (sp * sp);
         k2 += k * k;
       }
-      return std::sqrt(k2);
+      double v = k2 > 0 ? geometry::chord_step_length(1.0 / std::sqrt(k2), eps) / period_s_ : kInf;
+      if (rough && naxes_ >= 3)
+        v = std::min(v, law.feed_mm_per_min(b.spindle_rpm, process::feed_inclination_angle(
+                                                                  Eigen::Vector3d(d1[0], d1[1], d1[2]))) / 60.0);
+      return v;
     };
-    // The chord limit binds only where it is below the fastest the block can go.
-    double v_top = p.v_prog;
+    // Nothing above the fastest the block can go (1.5 × override) needs refining.
+    double v_top = 1.5 * p.v_prog;
     for (int a = 0; a < naxes_; ++a) v_top = std::min(v_top, std::sqrt(3.0) * cfg_.axes[a].max_velocity_mm_s);
-    const double step_top = v_top * period_s_;
-    const double k_floor = 0.5 * 8.0 * eps / (step_top * step_top);
-    std::vector<double> bp = p.path.nurbs_breakpoints();
-    for (size_t k = 0; k + 1 < bp.size(); ++k) {
-      double ua = bp[k], ka = kappa(ua);
-      for (int i = 1; i <= kSamplesPerSpan; ++i) {
-        const double ub = bp[k] + (bp[k + 1] - bp[k]) * i / kSamplesPerSpan;
-        const double kb = kappa(ub);
-        refine(ua, ka, ub, kb, kappa, k_floor, 0, &us);
-        ua = ub;
-        ka = kb;
-      }
+    double va = vlim(grid[0]);
+    for (size_t k = 0; k + 1 < grid.size(); ++k) {
+      const double vb = vlim(grid[k + 1]);
+      refine(grid[k], va, grid[k + 1], vb, vlim, v_top, 0, &us);
+      va = vb;
     }
     us.push_back(u1);
-  } else {
-    const int n = std::max(2, static_cast<int>(std::ceil(p.path.arc_sweep_rad() * kArcSamplesPerRad)));
-    for (int i = 0; i <= n; ++i) us.push_back(u0 + (u1 - u0) * i / n);
   }
 
   // Per sample: speed limits from the local geometry.
