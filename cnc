@@ -6,7 +6,7 @@
 #   ./cnc up --machine FILE [--only SERVICE,...]   start a cell's services in the foreground
 #   ./cnc ctl --machine FILE --do run --program P  operator commands (see cnc-ctl --help)
 #   ./cnc logstat --log FILE [--summary]           statistics of a recorded run
-#   ./cnc plan PROGRAM [--machine FILE] --csv OUT  dry run: setpoints to CSV, program time
+#   ./cnc plan PROGRAM [--machine FILE] --csv OUT [--plot PNG]  dry run: setpoints, time, feed plot
 #   ./cnc build                                    set up and build only
 set -euo pipefail
 
@@ -20,7 +20,8 @@ PACKAGES=(
   g++ make cmake pkg-config
   liblcm-dev liblcm-bin libglib2.0-dev   # LCM 1.3.1; its lcm.pc needs glib
   libyaml-cpp-dev libmodbus-dev libspdlog-dev libeigen3-dev libgtest-dev
-  python3 iproute2 util-linux procps            # ip, unshare, pkill: private network namespaces in tests
+  python3 python3-matplotlib             # plots of feed profiles and run reports
+  iproute2 util-linux procps             # ip, unshare: private network namespaces in tests
 )
 
 # Service name -> executable, in start order. The logger starts first and stops
@@ -155,18 +156,24 @@ cmd_demo() {
   [ $ctl_rc -eq 0 ] && [ $up_rc -eq 0 ]
 }
 
-# plan PROGRAM [--machine FILE] [--csv OUT] [other cnc-plan options]
+# plan PROGRAM [--machine FILE] [--csv OUT] [--plot PNG] [other cnc-plan options]
 cmd_plan() {
   [ $# -gt 0 ] || die "plan: PROGRAM is required"
   local program="$1"; shift
-  local machine="$DEFAULT_MACHINE" rest=()
+  local machine="$DEFAULT_MACHINE" csv="" plot="" rest=()
   while [ $# -gt 0 ]; do
     case "$1" in
       --machine) machine="$2"; shift 2 ;;
+      --csv) csv="$2"; shift 2 ;;
+      --plot) plot="$2"; shift 2 ;;
       *) rest+=("$1"); shift ;;
     esac
   done
-  exec "$BUILD/tools/cnc-plan" --machine "$machine" --program "$program" "${rest[@]}"
+  [ -n "$csv" ] || { [ -z "$plot" ] || csv="${plot%.png}.csv"; }
+  "$BUILD/tools/cnc-plan" --machine "$machine" --program "$program" ${csv:+--csv "$csv"} "${rest[@]}"
+  if [ -n "$plot" ]; then
+    /usr/bin/python3 "$ROOT/tools/report/plot_plan.py" "$csv" --out "$plot" --title "$(basename "$program")"
+  fi
 }
 
 cmd_test() {

@@ -3,6 +3,7 @@
 // of the same program and config give identical files, byte for byte.
 //
 //   cnc-plan --machine M --program P --csv OUT [--override 1.0] [--param-update corrected]
+#include <array>
 #include <chrono>
 #include <cinttypes>
 #include <cmath>
@@ -55,6 +56,25 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
   double max_feed = 0;
   const auto t0 = std::chrono::steady_clock::now();
   int64_t cycles = 0;
+  // Finite differences of the setpoints against each axis's limits (at rest before
+  // the first and after the last setpoint).
+  const int naxes = static_cast<int>(cfg.axes.size());
+  const double T = cfg.ipo_period_s;
+  std::array<double, cnc::program::kMaxAxes> p_prev = core.last().position_mm, v1{}, v2{};
+  std::array<double, cnc::program::kMaxAxes> use_v{}, use_a{}, use_j{};
+  auto account = [&](const std::array<double, cnc::program::kMaxAxes>& p) {
+    for (int a = 0; a < naxes; ++a) {
+      const double v = (p[a] - p_prev[a]) / T;
+      const double acc = (v - v1[a]) / T;
+      const double jerk = (v - 2 * v1[a] + v2[a]) / (T * T);
+      use_v[a] = std::max(use_v[a], std::fabs(v) / cfg.axes[a].max_velocity_mm_s);
+      use_a[a] = std::max(use_a[a], std::fabs(acc) / cfg.axes[a].max_accel_mm_s2);
+      use_j[a] = std::max(use_j[a], std::fabs(jerk) / cfg.axes[a].max_jerk_mm_s3);
+      v2[a] = v1[a];
+      v1[a] = v;
+    }
+    p_prev = p;
+  };
   while (core.state() != cnc::interp::RunState::kDone && cycles < max_cycles) {
     // Keep the look-ahead window full, as the live node does by requesting blocks.
     while (next < num_blocks && core.queued_blocks() < window) {
@@ -69,6 +89,7 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
     const cnc::interp::Setpoint& sp = core.step();
     ++cycles;
     max_feed = std::max(max_feed, sp.feed_mm_per_min);
+    account(sp.position_mm);
     if (csv) {
       std::fprintf(csv.get(), "%" PRId64 ",%.6f,%.9f,%.9f,%.9f,%d,%.9f,%.6f,%s\n", sp.cycle,
                    static_cast<double>(sp.cycle) * cfg.ipo_period_s, sp.position_mm[0],
@@ -77,6 +98,8 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
     }
   }
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  account(p_prev);
+  account(p_prev);
   if (core.state() != cnc::interp::RunState::kDone) {
     std::fprintf(stderr, "cnc-plan: program did not finish within %" PRId64 " cycles\n", max_cycles);
     return 1;
@@ -85,6 +108,10 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
               "%.0f setpoints/s computed\n",
               core.program_time_s(), cycles, cfg.ipo_period_s * 1e3, core.blocks_done(), max_feed,
               static_cast<double>(cycles) / std::max(wall, 1e-9));
+  std::printf("peak use of the axis limits (finite differences of the setpoints):");
+  for (int a = 0; a < naxes; ++a)
+    std::printf(" %s v %.3f a %.3f j %.3f;", cfg.axes[a].name.c_str(), use_v[a], use_a[a], use_j[a]);
+  std::printf("\n");
   return 0;
 }
 

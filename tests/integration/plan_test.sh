@@ -1,0 +1,35 @@
+#!/usr/bin/env bash
+# The dry run: two runs of the same program give identical files, byte for byte;
+# a malformed program is refused with file:line:column and writes no setpoint.
+#   plan_test.sh BUILD_DIR SOURCE_DIR
+source "$(dirname "$0")/lib.sh"
+BUILD="$1"; SRC="$2"
+WORK="$(mktemp -d /tmp/cnc-plan-test.XXXXXX)"
+trap 'rm -rf "$WORK"' EXIT
+M="$SRC/config/machines/sim3.yaml"
+for prog in "$SRC/config/programs/fig11_valley.ngc" "$SRC/config/programs/demo.ngc" \
+            "$SRC/tests/golden/programs/valid/arcs_planes_helix.ngc" \
+            "$SRC/tests/golden/programs/valid/linuxcnc_doc_example.ngc"; do
+  name=$(basename "$prog" .ngc)
+  "$BUILD/tools/cnc-plan" --machine "$M" --program "$prog" --csv "$WORK/$name.1.csv" >"$WORK/out1" \
+    || fail "$name: dry run failed"
+  "$BUILD/tools/cnc-plan" --machine "$M" --program "$prog" --csv "$WORK/$name.2.csv" >"$WORK/out2" \
+    || fail "$name: second dry run failed"
+  cmp "$WORK/$name.1.csv" "$WORK/$name.2.csv" || fail "$name: the two dry runs differ"
+  head -1 "$WORK/$name.1.csv" | grep -qx "cycle,t_s,x_mm,y_mm,z_mm,line,u,feed_mm_min,limit" || fail "$name: CSV header"
+  rows=$(($(wc -l <"$WORK/$name.1.csv") - 1))
+  [ "$rows" -gt 100 ] || fail "$name: only $rows setpoints"
+  grep -q "program time" "$WORK/out1" || fail "$name: no program time printed"
+  # No axis's velocity, acceleration or jerk over its limit by more than 1 %.
+  worst=$(grep "peak use of the axis limits" "$WORK/out1" | grep -oE ' [vaj] [0-9.]+' | awk '{if ($2 > m) m = $2} END {print m + 0}')
+  awk -v w="$worst" 'BEGIN {exit !(w > 0 && w <= 1.01)}' || fail "$name: peak use of an axis limit $worst"
+  note "$name: $rows setpoints, identical twice ($(sha256sum <"$WORK/$name.1.csv" | cut -c1-16)); $(cat "$WORK/out1")"
+done
+rc=0
+"$BUILD/tools/cnc-plan" --machine "$M" --program "$SRC/tests/golden/programs/malformed/$(ls "$SRC/tests/golden/programs/malformed" | head -1)" \
+  --csv "$WORK/bad.csv" 2>"$WORK/bad.err" || rc=$?
+[ "$rc" -eq 3 ] || fail "malformed program: exit $rc, expected 3"
+grep -qE '\.ngc:[0-9]+:[0-9]+: ' "$WORK/bad.err" || { cat "$WORK/bad.err" >&2; fail "refusal without file:line:column"; }
+[ ! -s "$WORK/bad.csv" ] || fail "a refused program wrote setpoints"
+note "malformed program refused: $(cat "$WORK/bad.err")"
+echo PASS
