@@ -69,6 +69,7 @@ MachineConfig read_machine(MapReader top) {
     c.setpoint_timeout_s = r.get_double("setpoint_timeout_s", c.setpoint_timeout_s, 2 * c.ipo_period_s, 10.0);
     c.stop_decel_mm_s2 = r.get_double("stop_decel_mm_s2", c.stop_decel_mm_s2, 1.0, 1e6);
     c.heartbeat_period_s = r.get_double("heartbeat_period_s", c.heartbeat_period_s, 0.05, 60.0);
+    c.realtime_priority = static_cast<int>(r.get_int("realtime_priority", 0, 0, 98));
     r.finish();
   }
   {

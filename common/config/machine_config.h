@@ -60,6 +60,7 @@ struct MachineConfig {
   double setpoint_timeout_s = 0.05;
   double stop_decel_mm_s2 = 1000.0;
   double heartbeat_period_s = 1.0;
+  int realtime_priority = 0;  // SCHED_FIFO priority of the cyclic services; 0 = normal scheduling
 
   std::vector<AxisConfig> axes;
 

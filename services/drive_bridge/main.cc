@@ -2,7 +2,10 @@
 #include "cnc/lcmt_heartbeat.hpp"
 #include "common/service/heartbeat.h"
 #include "common/service/service.h"
+#include <spdlog/spdlog.h>
+
 #include "common/util/clock.h"
+#include "common/util/realtime.h"
 #include "common/util/signals.h"
 #include "services/drive_bridge/drive_bridge_node.h"
 
@@ -12,6 +15,8 @@ int main(int argc, char** argv) {
     cnc::bus::Bus bus(cfg.lcm_url);
     cnc::bridge::DriveBridgeNode node(cfg, bus);
     cnc::service::Heartbeat hb(bus, cfg, "cnc-drive-bridge");
+    if (const std::string why = cnc::util::make_realtime(cfg.realtime_priority); !why.empty())
+      spdlog::warn("real-time scheduling not available ({}): running with normal scheduling", why);
     cnc::util::PeriodicTimer timer(cfg.servo_period_s);
     while (!cnc::util::stop_requested()) {
       timer.wait();

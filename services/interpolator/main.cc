@@ -3,7 +3,10 @@
 #include "common/bus/bus.h"
 #include "common/service/heartbeat.h"
 #include "common/service/service.h"
+#include <spdlog/spdlog.h>
+
 #include "common/util/clock.h"
+#include "common/util/realtime.h"
 #include "common/util/signals.h"
 #include "services/interpolator/interpolator_node.h"
 
@@ -13,6 +16,8 @@ int main(int argc, char** argv) {
     cnc::bus::Bus bus(cfg.lcm_url);
     cnc::interp::InterpolatorNode node(cfg, bus);
     cnc::service::Heartbeat hb(bus, cfg, "cnc-interpolator");
+    if (const std::string why = cnc::util::make_realtime(cfg.realtime_priority); !why.empty())
+      spdlog::warn("real-time scheduling not available ({}): running with normal scheduling", why);
     cnc::util::PeriodicTimer timer(cfg.ipo_period_s);
     while (!cnc::util::stop_requested()) {
       timer.wait();

@@ -19,6 +19,7 @@
 #include "common/drive/sim_profile.h"
 #include "common/service/service.h"
 #include "common/util/clock.h"
+#include "common/util/realtime.h"
 #include "common/util/signals.h"
 #include "tools/servo_sim/servo_model.h"
 
@@ -83,6 +84,8 @@ int run_sim(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
                                               modbus_strerror(errno));
   spdlog::info("cnc-servo-sim: {} drives on {}:{}", axes.size(), bind, port);
 
+  if (const std::string why = cnc::util::make_realtime(cfg.realtime_priority); !why.empty())
+    spdlog::warn("real-time scheduling not available ({}): running with normal scheduling", why);
   std::map<int, bool> clients;
   const double dt = cfg.servo_period_s;
   double next_step = cnc::util::monotonic_s();
