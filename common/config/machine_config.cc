@@ -1,6 +1,8 @@
 #include "common/config/machine_config.h"
 
 #include <cmath>
+#include <fstream>
+#include <sstream>
 #include <map>
 #include <set>
 
@@ -131,9 +133,12 @@ int MachineConfig::axis_index(const std::string& axis_name) const {
 }
 
 MachineConfig load_machine_config(const std::string& file) {
-  MachineConfig c = read_machine(MapReader(load_yaml_file(file), "", file));
-  c.source_file = file;
-  return c;
+  // Read once and parse that text, so source_text is exactly what was loaded.
+  std::ifstream in(file, std::ios::binary);
+  if (!in) throw ConfigError(file, "", "cannot open the file");
+  std::ostringstream text;
+  text << in.rdbuf();
+  return parse_machine_config(text.str(), file);
 }
 
 MachineConfig parse_machine_config(const std::string& yaml_text, const std::string& file_label) {
@@ -146,6 +151,7 @@ MachineConfig parse_machine_config(const std::string& yaml_text, const std::stri
   }
   MachineConfig c = read_machine(MapReader(root, "", file_label));
   c.source_file = file_label;
+  c.source_text = yaml_text;
   return c;
 }
 

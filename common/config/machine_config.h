@@ -48,6 +48,7 @@ struct ProcessConfig {
 
 struct MachineConfig {
   std::string source_file;
+  std::string source_text;  // the YAML as loaded: the interpolator records it in the log for replay
 
   // cell
   std::string name;
@@ -102,6 +103,7 @@ inline constexpr const char* kBlockRequest = "BLOCK_REQUEST";
 inline constexpr const char* kSetpoints = "SETPOINTS";
 inline constexpr const char* kInterpState = "INTERP_STATE";
 inline constexpr const char* kInterpInput = "INTERP_INPUT";
+inline constexpr const char* kInterpConfig = "INTERP_CONFIG";
 inline constexpr const char* kAxisStatus = "AXIS_STATUS";
 inline constexpr const char* kMonitor = "MONITOR";
 inline constexpr const char* kAlarm = "ALARM";

@@ -9,7 +9,9 @@
 #include "cnc/lcmt_interp_input.hpp"
 #include "cnc/lcmt_interp_state.hpp"
 #include "cnc/lcmt_setpoint.hpp"
+#include "cnc/lcmt_config.hpp"
 #include "common/program/block_msg.h"
+#include "services/interpolator/inputs.h"
 
 namespace cnc::interp {
 
@@ -19,6 +21,8 @@ InterpolatorNode::InterpolatorNode(const config::MachineConfig& cfg, bus::Bus& b
     : cfg_(cfg), bus_(bus), core_(cfg),
       ch_setpoints_(cfg.channel(ch::kSetpoints)), ch_request_(cfg.channel(ch::kBlockRequest)),
       ch_state_(cfg.channel(ch::kInterpState)), ch_input_(cfg.channel(ch::kInterpInput)),
+      ch_config_(cfg.channel(ch::kInterpConfig)),
+      config_period_cycles_(std::max<int64_t>(1, std::llround(1.0 / cfg.ipo_period_s))),
       // Re-request after ~100 ms without the block (a lost request or block).
       resend_cycles_(std::max<int64_t>(2, std::llround(0.1 / cfg.ipo_period_s))) {
   bus_.subscribe<cnc::lcmt_program_command>(cfg.channel(ch::kProgramCmd),
@@ -90,6 +94,15 @@ void InterpolatorNode::request_blocks() {
 void InterpolatorNode::cycle() {
   bus_.drain();
   const int64_t cyc = core_.cycle();
+  // The config as loaded, at start and about once a second: a log alone replays.
+  if (cyc % config_period_cycles_ == 0) {
+    cnc::lcmt_config c{};
+    c.service = "cnc-interpolator";
+    c.source_file = cfg_.source_file;
+    c.yaml = cfg_.source_text;
+    c.cycle = cyc;
+    bus_.publish(ch_config_, c);
+  }
   if (load_pending_) {
     load_pending_ = false;
     cnc::lcmt_program_command m{};
@@ -100,27 +113,18 @@ void InterpolatorNode::cycle() {
   }
   for (const auto& m : pending_commands_) {
     Command c;
-    switch (m.command) {
-      case cnc::lcmt_program_command::START:
-        if (token_ == 0) {
-          spdlog::warn("START without a loaded program: ignored");
-          continue;
-        }
-        c.kind = Command::Kind::kStart;
-        last_request_first_ = -1;
-        break;
-      case cnc::lcmt_program_command::HOLD: c.kind = Command::Kind::kHold; break;
-      case cnc::lcmt_program_command::RESUME: c.kind = Command::Kind::kResume; break;
-      case cnc::lcmt_program_command::STOP: c.kind = Command::Kind::kStop; break;
-      case cnc::lcmt_program_command::OVERRIDE:
-        if (!std::isfinite(m.feed_override) || m.feed_override < 0 || m.feed_override > 1.5) {
-          spdlog::warn("feed override {} outside 0..1.5: ignored (seq {})", m.feed_override, m.seq);
-          continue;
-        }
-        c.kind = Command::Kind::kOverride;
-        c.feed_override = m.feed_override;
-        break;
-      default: continue;  // LOAD is the server's; the core sees it through PROGRAM_STATE
+    if (m.command == cnc::lcmt_program_command::LOAD || !to_core_command(m, &c)) continue;  // LOAD: via PROGRAM_STATE
+    if (c.kind == Command::Kind::kStart) {
+      if (token_ == 0) {
+        spdlog::warn("START without a loaded program: ignored");
+        continue;
+      }
+      last_request_first_ = -1;
+    }
+    if (c.kind == Command::Kind::kOverride &&
+        (!std::isfinite(m.feed_override) || m.feed_override < 0 || m.feed_override > 1.5)) {
+      spdlog::warn("feed override {} outside 0..1.5: ignored (seq {})", m.feed_override, m.seq);
+      continue;
     }
     apply_command(c, m);
   }
@@ -133,7 +137,7 @@ void InterpolatorNode::cycle() {
     const std::string why = program::from_msg(it->second, static_cast<int>(cfg_.axes.size()), &b);
     if (!why.empty() || !core_.apply_block(b)) {
       ++rejected_blocks_;
-      spdlog::error("block {} of program {} refused: {}", it->first, token_, why.empty() ? "out of order" : why);
+      spdlog::error("block {} of program {} refused: {}", it->first, token_, why.empty() ? core_.last_refusal() : why);
       reorder_.erase(it);
       break;
     }

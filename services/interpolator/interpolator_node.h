@@ -34,7 +34,8 @@ class InterpolatorNode {
   config::MachineConfig cfg_;
   bus::Bus& bus_;
   Interpolator core_;
-  std::string ch_setpoints_, ch_request_, ch_state_, ch_input_;
+  std::string ch_setpoints_, ch_request_, ch_state_, ch_input_, ch_config_;
+  int64_t config_period_cycles_;
 
   // Inputs that arrived since the last cycle, applied in arrival order.
   std::vector<cnc::lcmt_program_command> pending_commands_;

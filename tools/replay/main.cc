@@ -1,0 +1,234 @@
+// cnc-replay: re-runs the interpolator core from the inputs recorded in a log, at
+// their stamped cycles, with no socket and no clock, and compares every setpoint
+// with the logged one bit for bit. Exit 0 when identical; 1 at the first
+// divergence, which it names (cycle, time, block, line, field, both values); 2 when
+// the log cannot be replayed (no config, inputs lost).
+//
+//   cnc-replay --log LOG [--machine FILE] [--program FILE]
+//
+// --machine replays with another config, --program with another version of a
+// program: its blocks replace the recorded blocks of every recorded program with
+// the same file name. Both show where a change would alter the run.
+#include <chrono>
+#include <cinttypes>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <map>
+#include <optional>
+#include <vector>
+
+#include "cnc/lcmt_config.hpp"
+#include "cnc/lcmt_interp_input.hpp"
+#include "cnc/lcmt_setpoint.hpp"
+#include "common/bus/bus.h"
+#include "common/program/block_msg.h"
+#include "common/service/service.h"
+#include "services/interpolator/inputs.h"
+#include "services/part_program_server/program_server.h"
+
+namespace {
+
+constexpr int kExitDiverged = 1;
+constexpr int kExitUnreplayable = 2;
+
+template <class Msg>
+bool decode(const void* data, size_t size, Msg* m) {
+  try {
+    return m->decode(data, 0, static_cast<int>(size)) == static_cast<int>(size);
+  } catch (...) {
+    return false;
+  }
+}
+
+std::string bits(double v) {
+  uint64_t u;
+  std::memcpy(&u, &v, sizeof u);
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.17g (0x%016" PRIx64 ")", v, u);
+  return buf;
+}
+
+bool same(double a, double b) { return std::memcmp(&a, &b, sizeof a) == 0; }
+
+// First field where the replayed setpoint differs from the logged one; "" if none.
+std::string compare(const cnc::lcmt_setpoint& logged, const cnc::interp::Setpoint& sp, double period_s) {
+  if (logged.num_axes != sp.num_axes) return "num_axes: logged " + std::to_string(logged.num_axes) + ", replayed " +
+                                              std::to_string(sp.num_axes);
+  for (int a = 0; a < sp.num_axes; ++a)
+    if (!same(logged.position_mm[a], sp.position_mm[a]))
+      return "position_mm[" + std::to_string(a) + "]: logged " + bits(logged.position_mm[a]) + ", replayed " +
+             bits(sp.position_mm[a]);
+  if (!same(logged.feed_mm_per_min, sp.feed_mm_per_min))
+    return "feed_mm_per_min: logged " + bits(logged.feed_mm_per_min) + ", replayed " + bits(sp.feed_mm_per_min);
+  if (!same(logged.u, sp.u)) return "u: logged " + bits(logged.u) + ", replayed " + bits(sp.u);
+  if (logged.block_index != sp.block_index)
+    return "block_index: logged " + std::to_string(logged.block_index) + ", replayed " + std::to_string(sp.block_index);
+  if (logged.source_line != sp.source_line)
+    return "source_line: logged " + std::to_string(logged.source_line) + ", replayed " + std::to_string(sp.source_line);
+  if (logged.limit != static_cast<int8_t>(sp.limit))
+    return std::string("limit: logged ") + cnc::interp::to_string(static_cast<cnc::interp::Limit>(logged.limit)) +
+           ", replayed " + cnc::interp::to_string(sp.limit);
+  if (logged.state != static_cast<int8_t>(sp.state))
+    return std::string("state: logged ") + cnc::interp::to_string(static_cast<cnc::interp::RunState>(logged.state)) +
+           ", replayed " + cnc::interp::to_string(sp.state);
+  if (!same(logged.period_s, period_s)) return "period_s: logged " + bits(logged.period_s) + ", replayed " + bits(period_s);
+  return "";
+}
+
+int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
+  const std::string log = args.option("log");
+  if (log.empty()) {
+    std::fprintf(stderr, "cnc-replay: --log FILE is required\n");
+    return cnc::service::kExitBadInput;
+  }
+  // Everything the interpolator recorded, from the first interpolator in the log.
+  std::optional<cnc::lcmt_config> config;
+  std::vector<cnc::lcmt_interp_input> inputs;
+  std::map<int64_t, cnc::lcmt_setpoint> setpoints;
+  int32_t sender = 0;
+  int64_t foreign = 0;
+  {
+    cnc::bus::Bus bus("file://" + log + "?speed=0");
+    bus.subscribe_raw(".*INTERP_CONFIG", [&](const std::string&, const void* d, size_t n, int64_t) {
+      cnc::lcmt_config c;
+      if (!config && decode(d, n, &c) && c.service == "cnc-interpolator") {
+        config = c;
+        sender = c.sender;
+      }
+    });
+    bus.subscribe_raw(".*INTERP_INPUT", [&](const std::string&, const void* d, size_t n, int64_t) {
+      cnc::lcmt_interp_input in;
+      if (!decode(d, n, &in)) return;
+      if (sender != 0 && in.sender != sender) return ++foreign, void();
+      inputs.push_back(std::move(in));
+    });
+    bus.subscribe_raw(".*SETPOINTS", [&](const std::string&, const void* d, size_t n, int64_t) {
+      cnc::lcmt_setpoint sp;
+      if (!decode(d, n, &sp)) return;
+      if (sender != 0 && sp.sender != sender) return ++foreign, void();
+      setpoints.emplace(sp.cycle, std::move(sp));
+    });
+    while (bus.handle(1000) > 0) {
+    }
+    for (const auto& [ch, st] : bus.stats()) {
+      if (ch.size() >= 12 && ch.compare(ch.size() - 12, 12, "INTERP_INPUT") == 0 && st.decode_failures > 0) {
+        std::fprintf(stderr, "cnc-replay: %lld undecodable inputs on %s\n", static_cast<long long>(st.decode_failures),
+                     ch.c_str());
+        return kExitUnreplayable;
+      }
+    }
+  }
+  if (!config) {
+    std::fprintf(stderr, "cnc-replay: %s holds no interpolator config (INTERP_CONFIG): not a cell log?\n", log.c_str());
+    return kExitUnreplayable;
+  }
+  // Inputs from the interpolator that sent the config, and none may be missing.
+  std::vector<cnc::lcmt_interp_input> mine;
+  for (auto& in : inputs)
+    if (in.sender == sender) mine.push_back(std::move(in));
+  for (size_t i = 1; i < mine.size(); ++i) {
+    if (mine[i].seq != mine[i - 1].seq + 1) {
+      std::fprintf(stderr, "cnc-replay: inputs lost: INTERP_INPUT seq %lld..%lld missing; the run cannot be reproduced\n",
+                   static_cast<long long>(mine[i - 1].seq + 1), static_cast<long long>(mine[i].seq - 1));
+      return kExitUnreplayable;
+    }
+  }
+  if (!mine.empty() && mine.front().seq != 0) {
+    std::fprintf(stderr, "cnc-replay: the log starts after the interpolator's first input (seq %lld)\n",
+                 static_cast<long long>(mine.front().seq));
+    return kExitUnreplayable;
+  }
+  if (setpoints.empty()) {
+    std::fprintf(stderr, "cnc-replay: no setpoints of that interpolator in %s\n", log.c_str());
+    return kExitUnreplayable;
+  }
+
+  const cnc::config::MachineConfig cfg =
+      args.machine_file.empty() ? cnc::config::parse_machine_config(config->yaml, "log:" + config->source_file)
+                                     : cnc::config::load_machine_config(args.machine_file);
+  const int naxes = static_cast<int>(cfg.axes.size());
+
+  // --program: the blocks of another program in place of the recorded ones.
+  std::optional<cnc::pps::ProgramServer> other;
+  if (!args.option("program").empty()) {
+    other.emplace(cfg);
+    const auto r = other->load(args.option("program"), 1);
+    if (!r.ok) {
+      std::fprintf(stderr, "cnc-replay: program refused: %s\n", r.error.c_str());
+      return kExitUnreplayable;
+    }
+  }
+
+  const auto t0 = std::chrono::steady_clock::now();
+  cnc::interp::Interpolator core(cfg);
+  const int64_t last_cycle = setpoints.rbegin()->first;
+  const auto base_name = [](const std::string& path) { return path.substr(path.find_last_of('/') + 1); };
+  const std::string other_name = other ? base_name(args.option("program")) : "";
+  bool substituting = false;  // the recorded program now running has other_name
+  int64_t substituted = 0;
+  size_t next_input = 0;
+  int64_t compared = 0;
+  for (int64_t cycle = 0; cycle <= last_cycle; ++cycle) {
+    while (next_input < mine.size() && mine[next_input].cycle == cycle) {
+      cnc::lcmt_interp_input in = mine[next_input++];
+      if (in.kind == cnc::lcmt_interp_input::COMMAND && in.command.command == cnc::lcmt_program_command::LOAD)
+        substituting = other && base_name(in.command.program_path) == other_name;
+      if (substituting && in.kind == cnc::lcmt_interp_input::BLOCK) {
+        ++substituted;
+        const cnc::program::Block* b = other->block(in.block.block_index);
+        if (b == nullptr) {
+          std::printf("diverges at cycle %lld: the recorded block %lld is not in %s\n", static_cast<long long>(cycle),
+                      static_cast<long long>(in.block.block_index), args.option("program").c_str());
+          return kExitDiverged;
+        }
+        in.block = cnc::program::to_msg(*b, in.block.program_token);
+      }
+      const std::string why = cnc::interp::apply_recorded_input(core, in, naxes);
+      if (!why.empty()) {
+        std::printf("diverges at cycle %lld: input seq %lld was applied live but is refused now: %s\n",
+                    static_cast<long long>(cycle), static_cast<long long>(in.seq), why.c_str());
+        return kExitDiverged;
+      }
+    }
+    if (next_input < mine.size() && mine[next_input].cycle < cycle) {
+      std::fprintf(stderr, "cnc-replay: inputs out of cycle order at seq %lld\n",
+                   static_cast<long long>(mine[next_input].seq));
+      return kExitUnreplayable;
+    }
+    const cnc::interp::Setpoint& sp = core.step();
+    auto it = setpoints.find(cycle);
+    if (it == setpoints.end()) continue;
+    const std::string diff = compare(it->second, sp, cfg.ipo_period_s);
+    if (!diff.empty()) {
+      std::printf("diverges at cycle %lld (t = %.3f s, block %lld, line %d): %s\n", static_cast<long long>(cycle),
+                  static_cast<double>(cycle) * cfg.ipo_period_s, static_cast<long long>(it->second.block_index),
+                  it->second.source_line, diff.c_str());
+      std::printf("%lld setpoints identical before it\n", static_cast<long long>(compared));
+      return kExitDiverged;
+    }
+    ++compared;
+  }
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (other && substituted == 0)
+    std::printf("note: no recorded program is named %s; nothing was substituted\n", other_name.c_str());
+  const double run_s = static_cast<double>(last_cycle + 1) * cfg.ipo_period_s;
+  const int64_t missing = last_cycle + 1 - compared;
+  std::printf("identical: %lld setpoints compared bit for bit (cycles %lld..%lld%s), %zu inputs applied; "
+              "%.1f s of run replayed in %.3f s (%.0fx real time)\n",
+              static_cast<long long>(compared), static_cast<long long>(setpoints.begin()->first),
+              static_cast<long long>(last_cycle),
+              missing > 0 ? (", " + std::to_string(missing) + " cycles not in the log").c_str() : "", mine.size(), run_s,
+              wall, run_s / std::max(wall, 1e-9));
+  if (foreign > 0) std::printf("(%lld messages of other interpolator runs in the log were not replayed)\n",
+                               static_cast<long long>(foreign));
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  cnc::service::Spec spec{"cnc-replay", "deterministic re-run of the interpolator from a log, compared bit for bit",
+                          {"log", "program"}, {}, false};
+  return cnc::service::run(spec, argc, argv, replay);
+}
