@@ -6,6 +6,7 @@
 #   ./cnc up --machine FILE [--only SERVICE,...]   start a cell's services in the foreground
 #   ./cnc ctl --machine FILE --do run --program P  operator commands (see cnc-ctl --help)
 #   ./cnc logstat --log FILE [--summary]           statistics of a recorded run
+#   ./cnc replay LOG [--machine F] [--program P]   re-run the interpolator from a log, bit for bit
 #   ./cnc plan PROGRAM [--machine FILE] --csv OUT [--plot PNG]  dry run: setpoints, time, feed plot
 #   ./cnc build                                    set up and build only
 set -euo pipefail
@@ -194,8 +195,9 @@ main() {
     up) [ -x "$BUILD/services/cnc-logger" ] || build; cmd_up "$@" ;;
     ctl) exec "$BUILD/tools/cnc-ctl" "$@" ;;
     logstat) exec "$BUILD/tools/cnc-logstat" "$@" ;;
+    replay) [ $# -gt 0 ] || die "replay: LOG is required"; log="$1"; shift; exec "$BUILD/tools/cnc-replay" --log "$log" "$@" ;;
     plan) [ -x "$BUILD/tools/cnc-plan" ] || build; cmd_plan "$@" ;;
-    *) sed -n '2,13p' "$0" | sed 's/^# \{0,1\}//'; [ -z "$cmd" ] || exit 2 ;;
+    *) sed -n '2,14p' "$0" | sed 's/^# \{0,1\}//'; [ -z "$cmd" ] || exit 2 ;;
   esac
 }
 
