@@ -197,7 +197,7 @@ main() {
     logstat) exec "$BUILD/tools/cnc-logstat" "$@" ;;
     replay) [ $# -gt 0 ] || die "replay: LOG is required"; log="$1"; shift; exec "$BUILD/tools/cnc-replay" --log "$log" "$@" ;;
     plan) [ -x "$BUILD/tools/cnc-plan" ] || build; cmd_plan "$@" ;;
-    *) sed -n '2,14p' "$0" | sed 's/^# \{0,1\}//'; [ -z "$cmd" ] || exit 2 ;;
+    *) awk 'NR > 1 && /^#/ {sub(/^# ?/, ""); print; next} NR > 1 {exit}' "$0"; [ -z "$cmd" ] || exit 2 ;;
   esac
 }
 
