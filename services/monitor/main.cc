@@ -1,14 +1,19 @@
-// cnc-monitor: live feed and following error; alarms on stream gaps.
+// cnc-monitor: live feed, chord error against the exact block geometry, predicted
+// R_max (seed 000) and following error; alarms on R_max over target, chord error
+// over ε, and sequence gaps in any stream it reads.
 #include <spdlog/spdlog.h>
 
 #include <cmath>
 #include <limits>
+#include <map>
 
 #include "cnc/lcmt_alarm.hpp"
 #include "cnc/lcmt_axis_status.hpp"
 #include "cnc/lcmt_heartbeat.hpp"
+#include "cnc/lcmt_interp_input.hpp"
 #include "cnc/lcmt_monitor_report.hpp"
 #include "cnc/lcmt_setpoint.hpp"
+#include "common/program/block_msg.h"
 #include "common/service/heartbeat.h"
 #include "common/service/service.h"
 #include "common/util/signals.h"
@@ -17,28 +22,58 @@
 namespace ch = cnc::config::channels;
 
 int main(int argc, char** argv) {
-  cnc::service::Spec spec{"cnc-monitor", "live feed and following-error monitor with alarms", {}, {}};
+  cnc::service::Spec spec{"cnc-monitor", "feed, chord error, predicted roughness and following error, with alarms", {},
+                          {}};
   return cnc::service::run(spec, argc, argv, [](const cnc::config::MachineConfig& cfg, const cnc::service::Args&) {
     cnc::bus::Bus bus(cfg.lcm_url);
-    cnc::monitor::FeedMonitor core(cfg.ipo_period_s);
+    cnc::monitor::Monitor core(cfg);
     const std::string ch_report = cfg.channel(ch::kMonitor), ch_alarm = cfg.channel(ch::kAlarm);
-    double spindle = cfg.process.spindle_rpm;
-    bus.subscribe<cnc::lcmt_setpoint>(cfg.channel(ch::kSetpoints),
-                                      [&](const cnc::lcmt_setpoint& m) { core.on_commanded_feed(m.feed_mm_per_min); });
+    const int naxes = static_cast<int>(cfg.axes.size());
+    auto raise = [&](const std::string& code, const std::string& text, int8_t severity) {
+      cnc::lcmt_alarm al{};
+      al.source = "cnc-monitor";
+      al.severity = severity;
+      al.code = code;
+      al.text = text;
+      spdlog::warn("{}: {}", code, text);
+      bus.publish(ch_alarm, al);
+    };
+    bus.subscribe<cnc::lcmt_interp_input>(cfg.channel(ch::kInterpInput), [&](const cnc::lcmt_interp_input& m) {
+      if (m.kind != cnc::lcmt_interp_input::BLOCK) return;
+      cnc::program::Block b;
+      if (cnc::program::from_msg(m.block, naxes, &b).empty()) core.on_block(b, m.block.program_token);
+    });
+    bus.subscribe<cnc::lcmt_setpoint>(cfg.channel(ch::kSetpoints), [&](const cnc::lcmt_setpoint& m) {
+      if (m.num_axes != naxes) return;
+      cnc::monitor::SetpointIn sp;
+      sp.cycle = m.cycle;
+      sp.program_token = m.program_token;
+      sp.block_index = m.block_index;
+      sp.source_line = m.source_line;
+      sp.u = m.u;
+      sp.feed_mm_per_min = m.feed_mm_per_min;
+      for (int a = 0; a < naxes; ++a) sp.position_mm[a] = m.position_mm[a];
+      core.on_setpoint(sp);
+    });
     bus.subscribe<cnc::lcmt_axis_status>(cfg.channel(ch::kAxisStatus), [&](const cnc::lcmt_axis_status& m) {
-      const auto s = core.on_status(m.setpoint_cycle, m.actual_mm, m.following_error_mm);
+      std::vector<cnc::monitor::Alarm> alarms;
+      const auto s = core.on_status(m.setpoint_cycle, m.actual_mm, m.following_error_mm, &alarms);
       cnc::lcmt_monitor_report r{};
-      r.setpoint_cycle = m.setpoint_cycle;
+      r.setpoint_cycle = s.setpoint_cycle;
       r.commanded_feed_mm_per_min = s.commanded_feed_mm_per_min;
       r.actual_feed_mm_per_min = s.actual_feed_mm_per_min;
-      // Chord error and R_max need the block geometry and the roughness model: not known here yet.
-      r.chord_error_mm = std::numeric_limits<double>::quiet_NaN();
-      r.predicted_rmax_um = std::numeric_limits<double>::quiet_NaN();
-      r.spindle_rpm = spindle;
+      r.chord_error_mm = s.chord_error_mm;
+      r.predicted_rmax_um = s.predicted_rmax_um;
+      r.spindle_rpm = s.spindle_rpm;
       r.num_axes = m.num_axes;
-      r.following_error_mm = m.following_error_mm;
+      r.following_error_mm = s.following_error_mm;
       r.max_following_error_mm = s.max_following_error_mm;
+      r.target_rmax_um = s.target_rmax_um;
+      r.chord_tolerance_mm = cfg.chord_tolerance_mm;
+      r.block_index = s.block_index;
+      r.source_line = s.source_line;
       bus.publish(ch_report, r);
+      for (const auto& a : alarms) raise(a.code, a.text, cnc::lcmt_alarm::WARNING);
     });
     cnc::service::Heartbeat hb(bus, cfg, "cnc-monitor");
     std::map<std::string, int64_t> gaps_reported;
@@ -47,19 +82,17 @@ int main(int argc, char** argv) {
       for (const auto& [channel, st] : bus.stats()) {
         int64_t& seen = gaps_reported[channel];
         if (st.seq_gaps > seen) {
-          cnc::lcmt_alarm al{};
-          al.source = "cnc-monitor";
-          al.severity = cnc::lcmt_alarm::WARNING;
-          al.code = "seq_gap";
-          al.text = channel + ": " + std::to_string(st.seq_gaps - seen) + " message(s) lost (total " +
-                    std::to_string(st.seq_gaps) + ")";
-          spdlog::warn("{}", al.text);
+          raise("seq_gap",
+                channel + ": " + std::to_string(st.seq_gaps - seen) + " message(s) lost (total " +
+                    std::to_string(st.seq_gaps) + ")",
+                cnc::lcmt_alarm::WARNING);
           seen = st.seq_gaps;
-          bus.publish(ch_alarm, al);
         }
       }
       hb.tick(cnc::lcmt_heartbeat::RUNNING, 0);
     }
+    spdlog::info("cnc-monitor: largest chord error {:.4f} um, largest following error {:.4f} mm",
+                 core.largest_chord_error_mm() * 1e3, core.largest_following_error_mm());
     hb.tick(cnc::lcmt_heartbeat::STOPPING, 0, "", true);
     return cnc::service::kExitOk;
   });

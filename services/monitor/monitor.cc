@@ -1,27 +1,140 @@
 #include "services/monitor/monitor.h"
 
 #include <cmath>
+#include <limits>
+#include <sstream>
+
+#include "common/motion/chord_error.h"
+#include "common/process/roughness.h"
 
 namespace cnc::monitor {
+namespace {
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr size_t kMaxBlocks = 512;
+constexpr size_t kMaxSetpoints = 2048;
+}  // namespace
 
-FeedSample FeedMonitor::on_status(int64_t cycle, const std::vector<double>& actual,
-                                  const std::vector<double>& following) {
-  FeedSample s;
-  s.commanded_feed_mm_per_min = commanded_;
-  if (last_cycle_ >= 0 && cycle > last_cycle_ && last_actual_.size() == actual.size()) {
+Monitor::Monitor(const config::MachineConfig& cfg) : cfg_(cfg), naxes_(static_cast<int>(cfg.axes.size())) {}
+
+void Monitor::on_block(const program::Block& b, int64_t token) {
+  if (b.kind == program::BlockKind::kDwell || b.kind == program::BlockKind::kEnd) return;
+  Known k;
+  k.block = b;
+  try {
+    k.path = std::make_unique<motion::PathSegment>(b, naxes_);
+  } catch (const std::exception&) {
+    return;  // the interpolator refused it too
+  }
+  blocks_[{token, b.index}] = std::move(k);
+  while (blocks_.size() > kMaxBlocks) blocks_.erase(blocks_.begin());
+}
+
+const Monitor::Known* Monitor::find(int64_t token, int64_t index) const {
+  auto it = blocks_.find({token, index});
+  return it == blocks_.end() ? nullptr : &it->second;
+}
+
+double Monitor::step_chord_error(const SetpointIn& a, const SetpointIn& b) const {
+  if (a.program_token != b.program_token || b.block_index < 0) return kNaN;
+  if (a.block_index == b.block_index) {
+    const Known* k = find(b.program_token, b.block_index);
+    return k ? motion::chord_error(*k->path, a.u, b.u, a.position_mm, b.position_mm) : kNaN;
+  }
+  // Across block boundaries: every block part against the step's segment.
+  double worst = 0;
+  for (int64_t i = std::max<int64_t>(a.block_index, 0); i <= b.block_index; ++i) {
+    const Known* k = find(b.program_token, i);
+    if (k == nullptr) {
+      // Dwell and end blocks have no geometry; anything else unknown makes it unknown.
+      continue;
+    }
+    const double u0 = i == a.block_index ? a.u : k->path->u_begin();
+    const double u1 = i == b.block_index ? b.u : k->path->u_end();
+    worst = std::max(worst, motion::chord_error(*k->path, u0, u1, a.position_mm, b.position_mm));
+  }
+  return worst;
+}
+
+void Monitor::on_setpoint(const SetpointIn& sp) {
+  if (last_sp_ && sp.cycle > last_sp_->cycle) {
+    // Only steps between consecutive cycles are steps of the machine.
+    if (sp.cycle == last_sp_->cycle + 1) {
+      const double e = step_chord_error(*last_sp_, sp);
+      chord_by_cycle_[sp.cycle] = e;
+      if (std::isfinite(e)) largest_chord_ = std::max(largest_chord_, e);
+    }
+  }
+  last_sp_ = sp;
+  setpoints_[sp.cycle] = sp;
+  while (setpoints_.size() > kMaxSetpoints) setpoints_.erase(setpoints_.begin());
+  while (chord_by_cycle_.size() > kMaxSetpoints) chord_by_cycle_.erase(chord_by_cycle_.begin());
+}
+
+Report Monitor::on_status(int64_t cycle, const std::vector<double>& actual, const std::vector<double>& fe,
+                          std::vector<Alarm>* alarms) {
+  Report r;
+  r.setpoint_cycle = cycle;
+  r.chord_error_mm = kNaN;
+  r.predicted_rmax_um = kNaN;
+  r.target_rmax_um = kNaN;
+  // Actual feed from the positions of consecutive statuses of different cycles.
+  if (last_status_cycle_ >= 0 && cycle > last_status_cycle_ && last_actual_.size() == actual.size()) {
     double d2 = 0;
     for (size_t i = 0; i < actual.size(); ++i) d2 += (actual[i] - last_actual_[i]) * (actual[i] - last_actual_[i]);
-    last_feed_ = std::sqrt(d2) / (static_cast<double>(cycle - last_cycle_) * period_s_) * 60.0;
+    actual_feed_ = std::sqrt(d2) / (static_cast<double>(cycle - last_status_cycle_) * cfg_.ipo_period_s) * 60.0;
   }
-  // Statuses of the same setpoint cycle (the bridge idles between setpoints) keep the last feed.
-  if (cycle != last_cycle_) {
+  if (cycle != last_status_cycle_) {
     last_actual_ = actual;
-    last_cycle_ = cycle;
+    last_status_cycle_ = cycle;
   }
-  s.actual_feed_mm_per_min = last_feed_;
-  for (double fe : following) s.max_following_error_mm = std::max(s.max_following_error_mm, std::fabs(fe));
-  largest_fe_ = std::max(largest_fe_, s.max_following_error_mm);
-  return s;
+  r.actual_feed_mm_per_min = actual_feed_;
+  r.following_error_mm = fe;
+  for (double e : fe) r.max_following_error_mm = std::max(r.max_following_error_mm, std::fabs(e));
+  largest_fe_ = std::max(largest_fe_, r.max_following_error_mm);
+
+  auto sp_it = setpoints_.find(cycle);
+  if (sp_it == setpoints_.end()) return r;
+  const SetpointIn& sp = sp_it->second;
+  r.commanded_feed_mm_per_min = sp.feed_mm_per_min;
+  r.block_index = sp.block_index;
+  r.source_line = sp.source_line;
+  if (auto c = chord_by_cycle_.find(cycle); c != chord_by_cycle_.end()) r.chord_error_mm = c->second;
+
+  const Known* k = find(sp.program_token, sp.block_index);
+  if (k != nullptr) {
+    const program::Block& b = k->block;
+    r.spindle_rpm = b.spindle_rpm;
+    const bool cutting = b.kind != program::BlockKind::kRapid;
+    if (b.process.active() && b.spindle_rpm > 0 && cutting && naxes_ >= 3) {
+      motion::AxisVec p{}, d1{}, d2{};
+      k->path->eval(sp.u, &p, &d1, &d2);
+      const double alpha = process::feed_inclination_angle(Eigen::Vector3d(d1[0], d1[1], d1[2]));
+      const double f_t = r.actual_feed_mm_per_min / (b.process.flutes * b.spindle_rpm);
+      r.target_rmax_um = b.process.target_rmax_um;
+      if (f_t > 0)
+        r.predicted_rmax_um = process::rmax_extended(b.process.ball_radius_mm, f_t, b.process.pick_feed_mm, alpha) * 1e3;
+    }
+  }
+
+  // Alarms on entering the condition (not on every report while it lasts).
+  const bool rmax_bad = std::isfinite(r.predicted_rmax_um) &&
+                        r.predicted_rmax_um > r.target_rmax_um * (1.0 + cfg_.monitor_rmax_margin);
+  if (rmax_bad && !rmax_alarm_) {
+    std::ostringstream os;
+    os << "cycle " << cycle << " line " << r.source_line << ": predicted R_max " << r.predicted_rmax_um
+       << " um over the target " << r.target_rmax_um << " um + " << cfg_.monitor_rmax_margin * 100 << " %";
+    alarms->push_back({"rmax", os.str()});
+  }
+  rmax_alarm_ = rmax_bad;
+  const bool chord_bad = std::isfinite(r.chord_error_mm) && r.chord_error_mm > cfg_.chord_tolerance_mm * (1 + 1e-6);
+  if (chord_bad && !chord_alarm_) {
+    std::ostringstream os;
+    os << "cycle " << cycle << " line " << r.source_line << ": chord error " << r.chord_error_mm * 1e3
+       << " um over the tolerance " << cfg_.chord_tolerance_mm * 1e3 << " um";
+    alarms->push_back({"chord_error", os.str()});
+  }
+  chord_alarm_ = chord_bad;
+  return r;
 }
 
 }  // namespace cnc::monitor

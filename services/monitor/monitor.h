@@ -1,32 +1,92 @@
 #pragma once
-// Monitor core: actual feed from consecutive axis statuses, commanded feed from
-// the setpoints, following error. Pure: fed with plain values.
+// Monitor core: from the blocks the interpolator applied, its setpoints and the
+// drive bridge's axis status, per status:
+//   * commanded feed (the setpoint of that cycle) and actual feed (from the actual
+//     positions of consecutive statuses),
+//   * the chord error of the commanded step against the exact block geometry,
+//   * the R_max that seed 000's extended model predicts from the actual feed, the
+//     feed inclination angle and the block's process parameters,
+//   * the following error per axis,
+// and alarm conditions. Pure: no LCM, no clock. A report depends only on the
+// messages and their order, so a log played back gives the same reports.
 #include <cstdint>
+#include <deque>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
 #include <vector>
+
+#include "common/config/machine_config.h"
+#include "common/motion/path_segment.h"
+#include "common/program/block.h"
 
 namespace cnc::monitor {
 
-struct FeedSample {
-  double commanded_feed_mm_per_min = 0;
-  double actual_feed_mm_per_min = 0;
-  double max_following_error_mm = 0;
+struct SetpointIn {
+  int64_t cycle = 0;
+  int64_t program_token = 0;
+  int64_t block_index = -1;
+  int32_t source_line = 0;
+  double u = 0;
+  double feed_mm_per_min = 0;
+  motion::AxisVec position_mm{};
 };
 
-class FeedMonitor {
+struct Report {
+  int64_t setpoint_cycle = 0;
+  double commanded_feed_mm_per_min = 0;
+  double actual_feed_mm_per_min = 0;
+  double chord_error_mm = 0;      // NaN when unknown
+  double predicted_rmax_um = 0;   // NaN without process parameters
+  double target_rmax_um = 0;      // NaN without process parameters
+  double spindle_rpm = 0;
+  std::vector<double> following_error_mm;
+  double max_following_error_mm = 0;
+  int64_t block_index = -1;
+  int32_t source_line = 0;
+};
+
+struct Alarm {
+  std::string code;  // "rmax", "chord_error"
+  std::string text;
+};
+
+class Monitor {
  public:
-  explicit FeedMonitor(double ipo_period_s) : period_s_(ipo_period_s) {}
-  void on_commanded_feed(double feed_mm_per_min) { commanded_ = feed_mm_per_min; }
-  // One axis status: its setpoint cycle and actual positions.
-  FeedSample on_status(int64_t cycle, const std::vector<double>& actual_mm, const std::vector<double>& following_mm);
+  explicit Monitor(const config::MachineConfig& cfg);
+
+  // A block the interpolator applied (INTERP_INPUT), of program `token`.
+  void on_block(const program::Block& b, int64_t token);
+  void on_setpoint(const SetpointIn& sp);
+  // An axis status; returns the report and appends raised alarms to *alarms.
+  Report on_status(int64_t setpoint_cycle, const std::vector<double>& actual_mm,
+                   const std::vector<double>& following_error_mm, std::vector<Alarm>* alarms);
+
   double largest_following_error_mm() const { return largest_fe_; }
+  double largest_chord_error_mm() const { return largest_chord_; }
 
  private:
-  double period_s_;
-  double commanded_ = 0;
+  struct Known {
+    program::Block block;
+    std::unique_ptr<motion::PathSegment> path;
+  };
+  const Known* find(int64_t token, int64_t index) const;
+  double step_chord_error(const SetpointIn& prev, const SetpointIn& cur) const;
+
+  config::MachineConfig cfg_;
+  int naxes_;
+  std::map<std::pair<int64_t, int64_t>, Known> blocks_;  // (token, index), bounded
+  std::map<int64_t, SetpointIn> setpoints_;             // by cycle, bounded
+  std::map<int64_t, double> chord_by_cycle_;            // chord error of the step ending at a cycle
+  std::optional<SetpointIn> last_sp_;
   std::vector<double> last_actual_;
-  int64_t last_cycle_ = -1;
-  double last_feed_ = 0;
+  int64_t last_status_cycle_ = -1;
+  double actual_feed_ = 0;
   double largest_fe_ = 0;
+  double largest_chord_ = 0;
+  bool rmax_alarm_ = false;
+  bool chord_alarm_ = false;
 };
 
 }  // namespace cnc::monitor

@@ -1,0 +1,121 @@
+// The monitor core against the interpolator core: chord error of the commanded
+// steps, predicted R_max from the feed (seed 000's model, which the feed law
+// inverts), alarms, and reports that depend only on the messages.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "common/config/machine_config.h"
+#include "services/interpolator/interpolator.h"
+#include "services/monitor/monitor.h"
+#include "services/part_program_server/program_server.h"
+
+namespace cnc::monitor {
+namespace {
+
+struct Outcome {
+  std::vector<Report> reports;
+  std::vector<Alarm> alarms;
+  double max_chord = 0;
+  double max_rmax_ratio = 0;  // predicted / target where both are known
+  int rmax_points = 0;
+};
+
+// Runs a program through the interpolator core and feeds the monitor what the live
+// services would: the applied blocks, the setpoints, and an axis status per cycle
+// whose actual position is the setpoint (an ideal drive).
+// law_in_interpolator = false: the interpolator gets the blocks without their process
+// parameters (so nothing holds the roughness), the monitor with them.
+Outcome run(const config::MachineConfig& cfg, const std::string& program, bool law_in_interpolator = true) {
+  pps::ProgramServer server(cfg);
+  const auto loaded = server.load(program, 7);
+  EXPECT_TRUE(loaded.ok) << loaded.error;
+  interp::Interpolator ip(cfg);
+  Monitor mon(cfg);
+  ip.apply_command({interp::Command::Kind::kStart, 1.0});
+  for (int64_t i = 0; i < server.num_blocks(); ++i) {
+    program::Block b = *server.block(i);
+    if (!law_in_interpolator) b.process = program::ProcessParams{};
+    EXPECT_TRUE(ip.apply_block(b));
+    mon.on_block(*server.block(i), 7);
+  }
+  Outcome r;
+  const int n = static_cast<int>(cfg.axes.size());
+  for (int k = 0; k < 200000 && ip.state() != interp::RunState::kDone; ++k) {
+    const interp::Setpoint& sp = ip.step();
+    SetpointIn in;
+    in.cycle = sp.cycle;
+    in.program_token = 7;
+    in.block_index = sp.block_index;
+    in.source_line = sp.source_line;
+    in.u = sp.u;
+    in.feed_mm_per_min = sp.feed_mm_per_min;
+    in.position_mm = sp.position_mm;
+    mon.on_setpoint(in);
+    std::vector<double> actual(sp.position_mm.begin(), sp.position_mm.begin() + n), fe(n, 0.0);
+    r.reports.push_back(mon.on_status(sp.cycle, actual, fe, &r.alarms));
+    const Report& rep = r.reports.back();
+    if (std::isfinite(rep.chord_error_mm)) r.max_chord = std::max(r.max_chord, rep.chord_error_mm);
+    if (std::isfinite(rep.predicted_rmax_um) && rep.actual_feed_mm_per_min > 100) {
+      r.max_rmax_ratio = std::max(r.max_rmax_ratio, rep.predicted_rmax_um / rep.target_rmax_um);
+      ++r.rmax_points;
+    }
+  }
+  return r;
+}
+
+config::MachineConfig sim3() {
+  return config::load_machine_config(std::string(CNC_SOURCE_DIR) + "/config/machines/sim3.yaml");
+}
+
+TEST(Monitor, ChordErrorOfTheCommandedStepsStaysWithinTolerance) {
+  const auto cfg = sim3();
+  const Outcome r = run(cfg, std::string(CNC_SOURCE_DIR) + "/config/programs/demo.ngc");
+  EXPECT_GT(r.max_chord, 0.1 * cfg.chord_tolerance_mm);  // arcs and the NURBS do bend
+  EXPECT_LE(r.max_chord, cfg.chord_tolerance_mm * (1 + 1e-6));
+  for (const auto& a : r.alarms) EXPECT_NE(a.code, "chord_error") << a.text;
+}
+
+TEST(Monitor, PredictedRoughnessHoldsTheTargetUnderTheFeedLaw) {
+  // The feed law inverts the model: at the commanded feed the predicted R_max stays
+  // at or below the target (0.5 % for the sampled limit), and reaches it where the
+  // law governs.
+  const auto cfg = sim3();
+  const Outcome r = run(cfg, std::string(CNC_SOURCE_DIR) + "/config/programs/fig11_valley.ngc");
+  EXPECT_GT(r.rmax_points, 300);
+  EXPECT_LE(r.max_rmax_ratio, 1.005);
+  EXPECT_GE(r.max_rmax_ratio, 0.98);
+  for (const auto& a : r.alarms) EXPECT_NE(a.code, "rmax") << a.text;
+}
+
+TEST(Monitor, RoughnessAlarmWhenNothingHoldsTheTarget) {
+  // The same valley at F2000 without the law: at the bottom (|α| < α_c) the feed per
+  // tooth f_p leaves 25 µm (seed 000: 24.9 µm by Z-map), over 10.67 µm + 10 %.
+  const auto cfg = sim3();
+  const Outcome r = run(cfg, std::string(CNC_SOURCE_DIR) + "/config/programs/fig11_valley.ngc", false);
+  int rmax_alarms = 0;
+  for (const auto& a : r.alarms) rmax_alarms += a.code == "rmax";
+  EXPECT_GE(rmax_alarms, 1);
+  EXPECT_GT(r.max_rmax_ratio, 2.0);
+  EXPECT_LT(r.max_rmax_ratio, 25.06 / 10.67 * 1.01);
+}
+
+TEST(Monitor, ReportsDependOnlyOnTheMessages) {
+  const auto cfg = sim3();
+  const Outcome a = run(cfg, std::string(CNC_SOURCE_DIR) + "/config/programs/demo.ngc");
+  const Outcome b = run(cfg, std::string(CNC_SOURCE_DIR) + "/config/programs/demo.ngc");
+  ASSERT_EQ(a.reports.size(), b.reports.size());
+  for (size_t i = 0; i < a.reports.size(); ++i) {
+    const Report& x = a.reports[i];
+    const Report& y = b.reports[i];
+    ASSERT_EQ(x.setpoint_cycle, y.setpoint_cycle);
+    ASSERT_EQ(std::isnan(x.chord_error_mm), std::isnan(y.chord_error_mm));
+    if (!std::isnan(x.chord_error_mm)) {
+      ASSERT_EQ(x.chord_error_mm, y.chord_error_mm);
+    }
+    ASSERT_EQ(x.actual_feed_mm_per_min, y.actual_feed_mm_per_min);
+  }
+}
+
+}  // namespace
+}  // namespace cnc::monitor
