@@ -4,16 +4,25 @@
 // and receiver, largest following error).
 //
 //   cnc-logstat --log FILE [--summary] [--require-no-gaps CHANNEL]
+//   cnc-logstat --log FILE --compare-monitor OTHER_LOG
 //
-// Exit codes: 0 fine; 1 a required channel is empty or has gaps; 2 bad flags.
+// --compare-monitor checks that the monitor reports of OTHER_LOG (e.g. a monitor
+// driven by lcm-logplayer playing FILE) equal FILE's, field by field and in order,
+// from the first report of FILE's setpoint cycle on (the first report of each is
+// skipped: its actual feed depends on statuses before the monitor started).
+//
+// Exit codes: 0 fine; 1 a required channel is empty or has gaps, or the monitor
+// reports differ; 2 bad flags.
 #include <cmath>
 #include <cstdio>
 #include <map>
 #include <set>
+#include <vector>
 
 #include "cnc/lcmt_axis_status.hpp"
 #include "cnc/lcmt_heartbeat.hpp"
 #include "cnc/lcmt_interp_state.hpp"
+#include "cnc/lcmt_monitor_report.hpp"
 #include "cnc/lcmt_program_state.hpp"
 #include "common/bus/bus.h"
 #include "common/service/service.h"
@@ -24,12 +33,74 @@ struct Senders {
   std::set<int32_t> ids;
 };
 
+std::vector<cnc::lcmt_monitor_report> monitor_reports(const std::string& log) {
+  std::vector<cnc::lcmt_monitor_report> out;
+  cnc::bus::Bus bus("file://" + log + "?speed=0");
+  bus.subscribe_raw(".*MONITOR", [&](const std::string&, const void* data, size_t size, int64_t) {
+    cnc::lcmt_monitor_report m;
+    if (m.decode(data, 0, static_cast<int>(size)) == static_cast<int>(size)) out.push_back(std::move(m));
+  });
+  while (bus.handle(1000) > 0) {
+  }
+  return out;
+}
+
+bool same_double(double a, double b) { return (std::isnan(a) && std::isnan(b)) || a == b; }
+
+// "" when equal, else the first differing field.
+std::string report_diff(const cnc::lcmt_monitor_report& a, const cnc::lcmt_monitor_report& b) {
+  auto d = [](const char* name, double x, double y) {
+    return same_double(x, y) ? std::string() : std::string(name) + ": " + std::to_string(x) + " vs " + std::to_string(y);
+  };
+  if (a.setpoint_cycle != b.setpoint_cycle) return "setpoint_cycle";
+  for (const std::string& s : {d("commanded_feed", a.commanded_feed_mm_per_min, b.commanded_feed_mm_per_min),
+                               d("actual_feed", a.actual_feed_mm_per_min, b.actual_feed_mm_per_min),
+                               d("chord_error", a.chord_error_mm, b.chord_error_mm),
+                               d("predicted_rmax", a.predicted_rmax_um, b.predicted_rmax_um),
+                               d("target_rmax", a.target_rmax_um, b.target_rmax_um),
+                               d("max_following_error", a.max_following_error_mm, b.max_following_error_mm)})
+    if (!s.empty()) return s;
+  if (a.block_index != b.block_index) return "block_index";
+  return "";
+}
+
+int compare_monitor(const std::string& log, const std::string& other) {
+  const auto a = monitor_reports(log);
+  const auto b = monitor_reports(other);
+  if (a.size() < 2) {
+    std::fprintf(stderr, "cnc-logstat: %s holds %zu monitor reports\n", log.c_str(), a.size());
+    return 1;
+  }
+  // Align on the second report of the original (the first depends on what came before).
+  const auto& start = a[1];
+  size_t j = 0;
+  while (j < b.size() && !(b[j].setpoint_cycle == start.setpoint_cycle && report_diff(start, b[j]).empty())) ++j;
+  if (j == b.size()) {
+    std::fprintf(stderr, "cnc-logstat: no report in %s matches the report of cycle %lld in %s\n", other.c_str(),
+                 static_cast<long long>(start.setpoint_cycle), log.c_str());
+    return 1;
+  }
+  size_t compared = 0;
+  for (size_t i = 1; i < a.size() && j < b.size(); ++i, ++j, ++compared) {
+    const std::string diff = report_diff(a[i], b[j]);
+    if (!diff.empty()) {
+      std::fprintf(stderr, "cnc-logstat: monitor report %zu (cycle %lld) differs: %s\n", i,
+                   static_cast<long long>(a[i].setpoint_cycle), diff.c_str());
+      return 1;
+    }
+  }
+  std::printf("monitor reports identical: %zu compared (of %zu in %s, %zu in %s)\n", compared, a.size(), log.c_str(),
+              b.size(), other.c_str());
+  return compared + 1 >= a.size() ? 0 : 1;
+}
+
 int run_logstat(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
   const std::string log = args.option("log");
   if (log.empty()) {
     std::fprintf(stderr, "cnc-logstat: --log FILE is required\n");
     return cnc::service::kExitBadInput;
   }
+  if (!args.option("compare-monitor").empty()) return compare_monitor(log, args.option("compare-monitor"));
   cnc::bus::Bus bus("file://" + log + "?speed=0");
   std::map<std::string, Senders> senders;
   bus.subscribe_raw(".*", [&](const std::string& ch, const void* data, size_t size, int64_t) {
@@ -134,6 +205,6 @@ int run_logstat(const cnc::config::MachineConfig&, const cnc::service::Args& arg
 
 int main(int argc, char** argv) {
   cnc::service::Spec spec{"cnc-logstat", "per-channel statistics and run summary of a cell log",
-                          {"log", "require-no-gaps"}, {"summary"}, false};
+                          {"log", "require-no-gaps", "compare-monitor"}, {"summary"}, false};
   return cnc::service::run(spec, argc, argv, run_logstat);
 }
