@@ -12,11 +12,12 @@
 int main(int argc, char** argv) {
   cnc::service::Spec spec{"cnc-drive-bridge", "fine interpolation and Modbus I/O to the servo drives", {}, {}};
   return cnc::service::run(spec, argc, argv, [](const cnc::config::MachineConfig& cfg, const cnc::service::Args&) {
+    // First, so the threads LCM starts (its receive thread) inherit the scheduling.
+    if (const std::string why = cnc::util::make_realtime(cfg.realtime_priority); !why.empty())
+      spdlog::warn("real-time scheduling not available ({}): running with normal scheduling", why);
     cnc::bus::Bus bus(cfg.lcm_url);
     cnc::bridge::DriveBridgeNode node(cfg, bus);
     cnc::service::Heartbeat hb(bus, cfg, "cnc-drive-bridge");
-    if (const std::string why = cnc::util::make_realtime(cfg.realtime_priority); !why.empty())
-      spdlog::warn("real-time scheduling not available ({}): running with normal scheduling", why);
     cnc::util::PeriodicTimer timer(cfg.servo_period_s);
     while (!cnc::util::stop_requested()) {
       timer.wait();

@@ -13,11 +13,12 @@
 int main(int argc, char** argv) {
   cnc::service::Spec spec{"cnc-interpolator", "coarse interpolation of program blocks into axis setpoints", {}, {}};
   return cnc::service::run(spec, argc, argv, [](const cnc::config::MachineConfig& cfg, const cnc::service::Args&) {
+    // First, so the threads LCM starts (its receive thread) inherit the scheduling.
+    if (const std::string why = cnc::util::make_realtime(cfg.realtime_priority); !why.empty())
+      spdlog::warn("real-time scheduling not available ({}): running with normal scheduling", why);
     cnc::bus::Bus bus(cfg.lcm_url);
     cnc::interp::InterpolatorNode node(cfg, bus);
     cnc::service::Heartbeat hb(bus, cfg, "cnc-interpolator");
-    if (const std::string why = cnc::util::make_realtime(cfg.realtime_priority); !why.empty())
-      spdlog::warn("real-time scheduling not available ({}): running with normal scheduling", why);
     cnc::util::PeriodicTimer timer(cfg.ipo_period_s);
     while (!cnc::util::stop_requested()) {
       timer.wait();
