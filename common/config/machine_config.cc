@@ -81,6 +81,7 @@ MachineConfig read_machine(MapReader top) {
     c.path_accel_mm_s2 = r.get_double("path_accel_mm_s2", c.path_accel_mm_s2, 1e-3, 1e6);
     c.path_jerk_mm_s3 = r.get_double("path_jerk_mm_s3", c.path_jerk_mm_s3, 1e-3, 1e9);
     c.block_window = static_cast<int>(r.get_int("block_window", c.block_window, 1, 4096));
+    c.plan_budget_samples = static_cast<int>(r.get_int("plan_budget_samples", c.plan_budget_samples, 2, 10'000'000));
     c.param_update = r.get_choice("param_update", c.param_update, {"first_order", "taylor2", "corrected"});
     r.finish();
   }

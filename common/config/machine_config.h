@@ -71,6 +71,11 @@ struct MachineConfig {
   double path_accel_mm_s2 = 1000.0;
   double path_jerk_mm_s3 = 20000.0;
   int block_window = 32;  // blocks the interpolator keeps requested ahead
+  // Planning work per interpolation cycle: blocks are applied to the core until
+  // this many curve samples were planned in the cycle (at least one block). Keeps a
+  // cycle's compute time bounded when many or large NURBS blocks arrive at once;
+  // counted in samples, not time, so the cycle a block is applied at is deterministic.
+  int plan_budget_samples = 1500;
   // Curve-parameter update per cycle: first_order (u += Δs/|P'|), taylor2 (seed 000
   // eq. 7), corrected (eq. 7, then Newton so the step's chord has the commanded length).
   std::string param_update = "corrected";

@@ -129,7 +129,7 @@ Interpolator::~Interpolator() = default;
 
 // ---- planning ------------------------------------------------------------------
 
-void Interpolator::plan_block(Planned& p) const {
+void Interpolator::plan_block(Planned& p) {
   const program::Block& b = p.block;
   p.v_prog = b.kind == program::BlockKind::kRapid ? kInf : b.feed_mm_per_min / 60.0;
   p.accel = cfg_.path_accel_mm_s2;
@@ -199,6 +199,7 @@ void Interpolator::plan_block(Planned& p) const {
   // Per sample: speed limits from the local geometry.
   const size_t n = us.size();
   p.samples.assign(n, Sample{0, 0, kInf, Limit::kNone});
+  planned_samples_ += static_cast<int64_t>(n);
   std::vector<AxisVec> kvec(n);  // curvature vector d²P/ds²
   std::vector<double> speed(n);  // |dP/du|
   std::vector<double> v_chord(n, kInf);

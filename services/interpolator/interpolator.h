@@ -81,6 +81,9 @@ class Interpolator {
   size_t queued_blocks() const { return blocks_.size(); }
   int64_t blocks_done() const { return blocks_done_; }
   int64_t starved_cycles() const { return starved_cycles_; }
+  // Curve samples planned so far (all blocks): the measure of planning work by which
+  // the node bounds what it applies per cycle (see motion.plan_budget_samples).
+  int64_t planned_samples() const { return planned_samples_; }
   double feed_override() const { return override_; }
   double program_time_s() const { return static_cast<double>(program_cycles_) * period_s_; }
   const Setpoint& last() const { return out_; }
@@ -109,7 +112,7 @@ class Interpolator {
   };
 
  private:
-  void plan_block(Planned& p) const;
+  void plan_block(Planned& p);
   void plan_junction(Planned& prev, Planned& next) const;
   void backward_pass(bool full);
   // Speed limit at arc length s of block p: programmed feed × override and the
@@ -142,6 +145,7 @@ class Interpolator {
   int64_t blocks_done_ = 0;
   int64_t starved_cycles_ = 0;
   int64_t program_cycles_ = 0;
+  int64_t planned_samples_ = 0;
   Setpoint out_;
   std::string refusal_;
 };

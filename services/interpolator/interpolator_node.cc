@@ -130,8 +130,10 @@ void InterpolatorNode::cycle() {
   }
   pending_commands_.clear();
 
-  // Hand the core every block that is next in order.
-  for (auto it = reorder_.find(core_.next_block_index()); it != reorder_.end();
+  // Hand the core the blocks that are next in order, within the cycle's planning budget.
+  const int64_t planned_before = core_.planned_samples();
+  for (auto it = reorder_.find(core_.next_block_index());
+       it != reorder_.end() && core_.planned_samples() - planned_before < cfg_.plan_budget_samples;
        it = reorder_.find(core_.next_block_index())) {
     program::Block b;
     const std::string why = program::from_msg(it->second, static_cast<int>(cfg_.axes.size()), &b);

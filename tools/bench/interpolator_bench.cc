@@ -95,7 +95,9 @@ Result run(const cnc::config::MachineConfig& cfg, const std::vector<Block>& bloc
   while (ip.state() != cnc::interp::RunState::kDone && r.cycles < 50'000'000) {
     const auto t0 = std::chrono::steady_clock::now();
     // The window refill is part of the cycle that applies the blocks, as in the node.
-    while (next < blocks.size() && ip.queued_blocks() < static_cast<size_t>(cfg.block_window))
+    const int64_t planned_before = ip.planned_samples();
+    while (next < blocks.size() && ip.queued_blocks() < static_cast<size_t>(cfg.block_window) &&
+           ip.planned_samples() - planned_before < cfg.plan_budget_samples)
       ip.apply_block(blocks[next++]);
     const cnc::interp::Setpoint& sp = ip.step();
     const auto t1 = std::chrono::steady_clock::now();

@@ -76,8 +76,11 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
     p_prev = p;
   };
   while (core.state() != cnc::interp::RunState::kDone && cycles < max_cycles) {
-    // Keep the look-ahead window full, as the live node does by requesting blocks.
-    while (next < num_blocks && core.queued_blocks() < window) {
+    // Keep the look-ahead window full, as the live node does by requesting blocks,
+    // within the same planning budget per cycle.
+    const int64_t planned_before = core.planned_samples();
+    while (next < num_blocks && core.queued_blocks() < window &&
+           core.planned_samples() - planned_before < cfg.plan_budget_samples) {
       const cnc::program::Block* b = server.block(next);
       if (b == nullptr || !core.apply_block(*b)) {
         std::fprintf(stderr, "cnc-plan: block %" PRId64 " refused by the interpolator: %s\n", next,
