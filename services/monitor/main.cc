@@ -57,7 +57,7 @@ int main(int argc, char** argv) {
     });
     bus.subscribe<cnc::lcmt_axis_status>(cfg.channel(ch::kAxisStatus), [&](const cnc::lcmt_axis_status& m) {
       std::vector<cnc::monitor::Alarm> alarms;
-      const auto s = core.on_status(m.setpoint_cycle, m.actual_mm, m.following_error_mm, &alarms);
+      const auto s = core.on_status(m.utime, m.setpoint_cycle, m.actual_mm, m.following_error_mm, &alarms);
       cnc::lcmt_monitor_report r{};
       r.setpoint_cycle = s.setpoint_cycle;
       r.commanded_feed_mm_per_min = s.commanded_feed_mm_per_min;

@@ -70,22 +70,22 @@ void Monitor::on_setpoint(const SetpointIn& sp) {
   while (chord_by_cycle_.size() > kMaxSetpoints) chord_by_cycle_.erase(chord_by_cycle_.begin());
 }
 
-Report Monitor::on_status(int64_t cycle, const std::vector<double>& actual, const std::vector<double>& fe,
-                          std::vector<Alarm>* alarms) {
+Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double>& actual,
+                          const std::vector<double>& fe, std::vector<Alarm>* alarms) {
   Report r;
   r.setpoint_cycle = cycle;
   r.chord_error_mm = kNaN;
   r.predicted_rmax_um = kNaN;
   r.target_rmax_um = kNaN;
-  // Actual feed from the positions of consecutive statuses of different cycles.
-  if (last_status_cycle_ >= 0 && cycle > last_status_cycle_ && last_actual_.size() == actual.size()) {
+  constexpr size_t kFeedWindow = 2;
+  if (!recent_.empty() && (utime <= recent_.back().utime || recent_.back().pos.size() != actual.size())) recent_.clear();
+  recent_.push_back(Sample{utime, actual});
+  if (recent_.size() > kFeedWindow + 1) recent_.pop_front();
+  if (recent_.size() >= 2) {
+    const Sample& a = recent_.front();
     double d2 = 0;
-    for (size_t i = 0; i < actual.size(); ++i) d2 += (actual[i] - last_actual_[i]) * (actual[i] - last_actual_[i]);
-    actual_feed_ = std::sqrt(d2) / (static_cast<double>(cycle - last_status_cycle_) * cfg_.ipo_period_s) * 60.0;
-  }
-  if (cycle != last_status_cycle_) {
-    last_actual_ = actual;
-    last_status_cycle_ = cycle;
+    for (size_t i = 0; i < actual.size(); ++i) d2 += (actual[i] - a.pos[i]) * (actual[i] - a.pos[i]);
+    actual_feed_ = std::sqrt(d2) / (static_cast<double>(utime - a.utime) * 1e-6) * 60.0;
   }
   r.actual_feed_mm_per_min = actual_feed_;
   r.following_error_mm = fe;
@@ -100,14 +100,18 @@ Report Monitor::on_status(int64_t cycle, const std::vector<double>& actual, cons
   r.source_line = sp.source_line;
   if (auto c = chord_by_cycle_.find(cycle); c != chord_by_cycle_.end()) r.chord_error_mm = c->second;
 
-  const Known* k = find(sp.program_token, sp.block_index);
+  // The feed is measured over the last kFeedWindow statuses: the model takes the
+  // inclination where the tool was in the middle of that window.
+  auto mid_it = setpoints_.find(cycle - static_cast<int64_t>(kFeedWindow / 2));
+  const SetpointIn& mid = mid_it != setpoints_.end() ? mid_it->second : sp;
+  const Known* k = find(mid.program_token, mid.block_index);
   if (k != nullptr) {
     const program::Block& b = k->block;
     r.spindle_rpm = b.spindle_rpm;
     const bool cutting = b.kind != program::BlockKind::kRapid;
     if (b.process.active() && b.spindle_rpm > 0 && cutting && naxes_ >= 3) {
       motion::AxisVec p{}, d1{}, d2{};
-      k->path->eval(sp.u, &p, &d1, &d2);
+      k->path->eval(mid.u, &p, &d1, &d2);
       const double alpha = process::feed_inclination_angle(Eigen::Vector3d(d1[0], d1[1], d1[2]));
       const double f_t = r.actual_feed_mm_per_min / (b.process.flutes * b.spindle_rpm);
       r.target_rmax_um = b.process.target_rmax_um;

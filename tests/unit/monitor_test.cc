@@ -53,7 +53,8 @@ Outcome run(const config::MachineConfig& cfg, const std::string& program, bool l
     in.position_mm = sp.position_mm;
     mon.on_setpoint(in);
     std::vector<double> actual(sp.position_mm.begin(), sp.position_mm.begin() + n), fe(n, 0.0);
-    r.reports.push_back(mon.on_status(sp.cycle, actual, fe, &r.alarms));
+    r.reports.push_back(mon.on_status(static_cast<int64_t>(std::llround(static_cast<double>(sp.cycle) * cfg.ipo_period_s * 1e6)), sp.cycle,
+                                   actual, fe, &r.alarms));
     const Report& rep = r.reports.back();
     if (std::isfinite(rep.chord_error_mm)) r.max_chord = std::max(r.max_chord, rep.chord_error_mm);
     if (std::isfinite(rep.predicted_rmax_um) && rep.actual_feed_mm_per_min > 100) {
