@@ -3,6 +3,7 @@
 // over ε, and sequence gaps in any stream it reads.
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <map>
@@ -16,6 +17,7 @@
 #include "common/program/block_msg.h"
 #include "common/service/heartbeat.h"
 #include "common/service/service.h"
+#include "common/util/realtime.h"
 #include "common/util/signals.h"
 #include "services/monitor/monitor.h"
 
@@ -25,6 +27,9 @@ int main(int argc, char** argv) {
   cnc::service::Spec spec{"cnc-monitor", "feed, chord error, predicted roughness and following error, with alarms", {},
                           {}};
   return cnc::service::run(spec, argc, argv, [](const cnc::config::MachineConfig& cfg, const cnc::service::Args&) {
+    // Below the cyclic services, above ordinary load: a starved monitor loses messages.
+    if (const std::string why = cnc::util::make_realtime(std::max(0, cfg.realtime_priority - 10)); !why.empty())
+      spdlog::warn("real-time scheduling not available ({}): running with normal scheduling", why);
     cnc::bus::Bus bus(cfg.lcm_url);
     cnc::monitor::Monitor core(cfg);
     const std::string ch_report = cfg.channel(ch::kMonitor), ch_alarm = cfg.channel(ch::kAlarm);
