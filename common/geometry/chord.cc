@@ -1,5 +1,7 @@
 #include "common/geometry/chord.h"
 
+#include "common/geometry/maximize.h"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -37,48 +39,7 @@ double chord_error_of_step(const NurbsCurve& curve, double u0, double u1) {
   if (u1 == u0) return 0.0;
   const Vec3 a = curve.point(u0);
   const Vec3 b = curve.point(u1);
-  auto dist = [&](double u) { return distance_to_segment(curve.point(u), a, b); };
-
-  constexpr int kSamples = 16;
-  double u[kSamples + 1];
-  double f[kSamples + 1];
-  for (int i = 0; i <= kSamples; ++i) {
-    u[i] = i == kSamples ? u1 : u0 + (u1 - u0) * i / kSamples;
-    f[i] = dist(u[i]);
-  }
-  double best = std::max(f[0], f[kSamples]);
-  // Golden section on [u[i-1], u[i+1]] around each sampled local maximum. Near a
-  // maximum the error in the value is quadratic in the error in u, so a bracket of
-  // 1e-9 of the step leaves far less than 1e-9 of the result.
-  const double invphi = (std::sqrt(5.0) - 1.0) / 2.0;
-  const double stop = 1e-9 * (u1 - u0);
-  for (int i = 1; i < kSamples; ++i) {
-    best = std::max(best, f[i]);
-    if (f[i] < f[i - 1] || f[i] < f[i + 1]) continue;
-    double lo = u[i - 1];
-    double hi = u[i + 1];
-    double x1 = hi - invphi * (hi - lo);
-    double x2 = lo + invphi * (hi - lo);
-    double f1 = dist(x1);
-    double f2 = dist(x2);
-    while (hi - lo > stop) {
-      if (f1 < f2) {
-        lo = x1;
-        x1 = x2;
-        f1 = f2;
-        x2 = lo + invphi * (hi - lo);
-        f2 = dist(x2);
-      } else {
-        hi = x2;
-        x2 = x1;
-        f2 = f1;
-        x1 = hi - invphi * (hi - lo);
-        f1 = dist(x1);
-      }
-    }
-    best = std::max({best, f1, f2});
-  }
-  return best;
+  return maximize_on_interval([&](double u) { return distance_to_segment(curve.point(u), a, b); }, u0, u1);
 }
 
 }  // namespace cnc::geometry
