@@ -8,6 +8,7 @@
 #   ./cnc logstat --log FILE [--summary]           statistics of a recorded run
 #   ./cnc replay LOG [--machine F] [--program P]   re-run the interpolator from a log, bit for bit
 #   ./cnc plan PROGRAM [--machine FILE] --csv OUT [--plot PNG]  dry run: setpoints, time, feed plot
+#   ./cnc report LOG --out DIR [--tolerance-um U] [--target-rmax-um U]  run report to open in a browser
 #   ./cnc build                                    set up and build only
 set -euo pipefail
 
@@ -22,7 +23,11 @@ PACKAGES=(
   liblcm-dev liblcm-bin libglib2.0-dev   # LCM 1.3.1; its lcm.pc needs glib
   libyaml-cpp-dev libmodbus-dev libspdlog-dev libeigen3-dev libgtest-dev
   python3 python3-matplotlib             # plots of feed profiles and run reports
+  chromium                               # renders the run report headless in its test
   iproute2 util-linux procps             # ip, unshare: private network namespaces in tests
+  socat                                  # pseudo-terminal pairs standing in for RS-485 (Modbus RTU tests)
+  python3-pymodbus python3-serial python3-serial-asyncio python3-yaml  # drive emulated with pymodbus (interop test)
+  mbpoll                                 # reads the simulator's registers (interop test)
 )
 
 # Service name -> executable, in start order. The logger starts first and stops
@@ -177,6 +182,24 @@ cmd_plan() {
   fi
 }
 
+# report LOG --out DIR [--tolerance-um U] [--target-rmax-um U] [--title T]
+# cnc-logexport writes the run's tables into DIR, make_report.py plots them into DIR/index.html.
+cmd_report() {
+  [ $# -gt 0 ] || die "report: LOG is required (report LOG --out DIR)"
+  local log="$1"; shift
+  local out="" rest=()
+  while [ $# -gt 0 ]; do
+    case "$1" in
+      --out) out="$2"; shift 2 ;;
+      *) rest+=("$1"); shift ;;
+    esac
+  done
+  [ -n "$out" ] || die "report: --out DIR is required"
+  "$BUILD/tools/cnc-logexport" --log "$log" --out "$out"
+  /usr/bin/python3 "$ROOT/tools/report/make_report.py" "$out" "${rest[@]}"
+  say "open $out/index.html in a browser"
+}
+
 cmd_test() {
   build
   cd "$BUILD"
@@ -197,6 +220,7 @@ main() {
     logstat) exec "$BUILD/tools/cnc-logstat" "$@" ;;
     replay) [ $# -gt 0 ] || die "replay: LOG is required"; log="$1"; shift; exec "$BUILD/tools/cnc-replay" --log "$log" "$@" ;;
     plan) [ -x "$BUILD/tools/cnc-plan" ] || build; cmd_plan "$@" ;;
+    report) [ -x "$BUILD/tools/cnc-logexport" ] || build; cmd_report "$@" ;;
     *) awk 'NR > 1 && /^#/ {sub(/^# ?/, ""); print; next} NR > 1 {exit}' "$0"; [ -z "$cmd" ] || exit 2 ;;
   esac
 }

@@ -34,7 +34,7 @@ std::string exact_channel(const std::string& channel) {
   return out;
 }
 
-Bus::Bus(const std::string& url, int32_t sender) : url_(url) {
+Bus::Bus(const std::string& url, int32_t sender, int queue_capacity) : url_(url), queue_capacity_(queue_capacity) {
   lcm_ = lcm_create(url.empty() ? nullptr : url.c_str());
   if (lcm_ == nullptr) throw BusError("cannot open LCM at '" + url + "'");
   if (sender == 0) {
@@ -61,8 +61,8 @@ void Bus::add_subscription(const std::string& regex,
   sub->dispatch = std::move(dispatch);
   sub->handle = lcm_subscribe(lcm_, regex.c_str(), &Bus::on_message, sub.get());
   if (sub->handle == nullptr) throw BusError("cannot subscribe to '" + regex + "'");
-  // Unbounded LCM queues would hide loss; the default (30) drops under bursts.
-  lcm_subscription_set_queue_capacity(sub->handle, 1000);
+  // LCM's default (30) drops under bursts; the capacity is the caller's choice.
+  lcm_subscription_set_queue_capacity(sub->handle, queue_capacity_);
   subs_.push_back(std::move(sub));
 }
 

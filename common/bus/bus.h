@@ -59,7 +59,9 @@ class Bus {
 
   // url: an LCM provider URL; "" uses LCM_DEFAULT_URL or LCM's default.
   // sender: identifies this process in the `sender` field (0 picks one from pid and time).
-  explicit Bus(const std::string& url, int32_t sender = 0);
+  // queue_capacity: messages LCM holds per subscription until handled; beyond it
+  // LCM drops them silently (they then show as sequence gaps).
+  explicit Bus(const std::string& url, int32_t sender = 0, int queue_capacity = 1000);
   ~Bus();
   Bus(const Bus&) = delete;
   Bus& operator=(const Bus&) = delete;
@@ -105,6 +107,7 @@ class Bus {
 
   std::string url_;
   int32_t sender_;
+  int queue_capacity_;
   lcm_t* lcm_ = nullptr;
   std::vector<std::unique_ptr<Subscription>> subs_;
   std::map<std::string, ChannelStats> stats_;

@@ -19,9 +19,12 @@ DriveConfig read_drive(MapReader r) {
   d.port = static_cast<int>(r.get_int("port", d.port, 1, 65535));
   d.device = r.get_string("device", d.device);
   d.baud = static_cast<int>(r.get_int("baud", d.baud, 1200, 4'000'000));
+  d.parity = r.get_choice("parity", d.parity, {"none", "even", "odd"});
+  d.stop_bits = static_cast<int>(r.get_int("stop_bits", d.stop_bits, 1, 2));
   d.unit_id = static_cast<int>(r.get_int("unit_id", d.unit_id, 1, 247));
   d.profile = r.get_string("profile", d.profile);
   d.response_timeout_s = r.get_double("response_timeout_s", d.response_timeout_s, 0.001, 5.0);
+  if (d.profile.empty()) r.fail("profile", "must not be empty");
   if (d.transport == "modbus_rtu" && d.device.empty()) r.fail("device", "is required for transport modbus_rtu");
   r.finish();
   return d;
@@ -107,8 +110,30 @@ MachineConfig read_machine(MapReader top) {
       const auto addr = std::make_tuple(a.drive.transport, a.drive.host, a.drive.port, a.drive.device, a.drive.unit_id);
       if (!addresses.insert(addr).second)
         throw ConfigError(top.file(), path + ".drive.unit_id", "another axis already uses this drive address");
+      for (const auto& other : c.axes) {
+        if (other.drive.link_key() != a.drive.link_key()) continue;
+        if (other.drive.baud != a.drive.baud || other.drive.parity != a.drive.parity ||
+            other.drive.stop_bits != a.drive.stop_bits)
+          throw ConfigError(top.file(), path + ".drive.baud",
+                            "axis " + other.name + " is on the same serial line with other line settings");
+      }
       c.axes.push_back(std::move(a));
     }
+  }
+  {
+    MapReader r = top.map("drive_bridge");
+    DriveBridgeConfig& b = c.drive_bridge;
+    b.enable_on_start = r.get_bool("enable_on_start", b.enable_on_start);
+    c.drive_profile_dir = r.get_string("profile_dir", c.drive_profile_dir);
+    b.enable_timeout_s = r.get_double("enable_timeout_s", b.enable_timeout_s, 0.01, 60.0);
+    b.link_loss_timeout_s = r.get_double("link_loss_timeout_s", b.link_loss_timeout_s, 0.001, 60.0);
+    b.reconnect_min_s = r.get_double("reconnect_min_s", b.reconnect_min_s, 0.001, 60.0);
+    b.reconnect_max_s = r.get_double("reconnect_max_s", b.reconnect_max_s, b.reconnect_min_s, 600.0);
+    for (const auto& a : c.axes) {
+      if (b.link_loss_timeout_s < a.drive.response_timeout_s)
+        r.fail("link_loss_timeout_s", "must not be shorter than axis " + a.name + "'s drive.response_timeout_s");
+    }
+    r.finish();
   }
   {
     MapReader r = top.map("logger");
@@ -126,6 +151,12 @@ MachineConfig read_machine(MapReader top) {
   return c;
 }
 }  // namespace
+
+std::string DriveConfig::link_key() const {
+  if (transport == "modbus_tcp") return "tcp://" + host + ":" + std::to_string(port);
+  if (transport == "modbus_rtu") return "rtu://" + device;
+  return "loopback";
+}
 
 int MachineConfig::axis_index(const std::string& axis_name) const {
   for (size_t i = 0; i < axes.size(); ++i)

@@ -13,9 +13,23 @@ struct DriveConfig {
   int port = 1502;                       // modbus_tcp
   std::string device;                    // modbus_rtu: serial device
   int baud = 115200;                     // modbus_rtu
+  std::string parity = "none";           // modbus_rtu: none | even | odd
+  int stop_bits = 1;                     // modbus_rtu: 1 | 2
   int unit_id = 1;                       // Modbus slave / unit id
-  std::string profile = "sim";           // config/drives/<profile>.yaml
+  std::string profile = "sim";           // config/drives/<profile>.yaml (or a path to a profile file)
   double response_timeout_s = 0.05;
+
+  // The link this drive is on: drives with the same key share one connection.
+  std::string link_key() const;
+};
+
+// The drive bridge (section `drive_bridge:`).
+struct DriveBridgeConfig {
+  bool enable_on_start = false;       // enable the drives when the bridge starts; else wait for ENABLE
+  double enable_timeout_s = 2.0;      // the drives must reach "enabled" within this after ENABLE
+  double link_loss_timeout_s = 0.25;  // a drive that answers nothing for this long has lost its link
+  double reconnect_min_s = 0.1;       // back-off between attempts to reopen a lost link, doubling up to max
+  double reconnect_max_s = 2.0;
 };
 
 struct ServoSimAxisConfig {
@@ -82,6 +96,10 @@ struct MachineConfig {
 
   ProcessConfig process;
 
+  DriveBridgeConfig drive_bridge;
+  // drive_bridge.profile_dir: where drive profiles are; "" = config/drives beside the machine's folder.
+  std::string drive_profile_dir;
+
   // logger
   std::string log_directory = "runs";
   double log_rotate_mb = 512.0;
@@ -113,6 +131,7 @@ inline constexpr const char* kAxisStatus = "AXIS_STATUS";
 inline constexpr const char* kMonitor = "MONITOR";
 inline constexpr const char* kAlarm = "ALARM";
 inline constexpr const char* kHeartbeat = "HEARTBEAT";
+inline constexpr const char* kDriveCmd = "DRIVE_CMD";
 }  // namespace channels
 
 }  // namespace cnc::config

@@ -3,90 +3,98 @@
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
+#include <ctime>
 #include <stdexcept>
 
 namespace cnc::drive {
+namespace {
+int rc_to_err(int rc) { return rc >= 0 ? 0 : (errno != 0 ? errno : EIO); }
+}  // namespace
 
-ModbusLink::ModbusLink(std::string host, int port, double response_timeout_s)
-    : name_("tcp://" + host + ":" + std::to_string(port)) {
-  ctx_ = modbus_new_tcp(host.c_str(), port);
-  if (ctx_ == nullptr) throw std::runtime_error("cannot create Modbus TCP context for " + name_);
-  const double t = std::max(response_timeout_s, 0.001);
+std::unique_ptr<ModbusLink> ModbusLink::tcp(const std::string& host, int port, double response_timeout_s) {
+  modbus_t* ctx = modbus_new_tcp(host.c_str(), port);
+  if (ctx == nullptr) throw std::runtime_error("cannot create a Modbus TCP context for " + host);
+  return std::unique_ptr<ModbusLink>(
+      new ModbusLink("tcp://" + host + ":" + std::to_string(port), ctx, response_timeout_s, false));
+}
+
+std::unique_ptr<ModbusLink> ModbusLink::rtu(const std::string& device, int baud, char parity, int stop_bits,
+                                            double response_timeout_s) {
+  modbus_t* ctx = modbus_new_rtu(device.c_str(), baud, parity, 8, stop_bits);
+  if (ctx == nullptr) throw std::runtime_error("cannot create a Modbus RTU context for " + device);
+  return std::unique_ptr<ModbusLink>(new ModbusLink(
+      "rtu://" + device + "@" + std::to_string(baud) + "-8" + parity + std::to_string(stop_bits), ctx,
+      response_timeout_s, true));
+}
+
+ModbusLink::ModbusLink(std::string name, modbus_t* ctx, double response_timeout_s, bool serial)
+    : Link(std::move(name)), ctx_(ctx), serial_(serial), timeout_s_(std::max(response_timeout_s, 0.001)) {
+  const double t = timeout_s_;
   const auto sec = static_cast<uint32_t>(t);
   const auto usec = static_cast<uint32_t>(std::lround((t - sec) * 1e6));
   modbus_set_response_timeout(ctx_, sec, usec);
+  // Recovery is ours (discard_input, close and back-off), never libmodbus's sleeps.
+  modbus_set_error_recovery(ctx_, MODBUS_ERROR_RECOVERY_NONE);
 }
 
 ModbusLink::~ModbusLink() {
-  if (ctx_ != nullptr) {
-    modbus_close(ctx_);
-    modbus_free(ctx_);
-  }
+  modbus_close(ctx_);
+  modbus_free(ctx_);
 }
 
-bool ModbusLink::ensure_connected(double now_s) {
-  if (connected_) return true;
-  if (now_s < next_attempt_s_) return false;
+int ModbusLink::do_open(std::string& error) {
+  errno = 0;
   if (modbus_connect(ctx_) == 0) {
-    connected_ = true;
-    backoff_s_ = 0.1;
-    last_error_.clear();
-    return true;
+    if (serial_) modbus_flush(ctx_);
+    return 0;
   }
-  last_error_ = std::string("connect to ") + name_ + ": " + modbus_strerror(errno);
-  next_attempt_s_ = now_s + backoff_s_;
-  backoff_s_ = std::min(backoff_s_ * 2.0, 2.0);
-  return false;
+  const int err = errno != 0 ? errno : EIO;
+  error = modbus_strerror(err);
+  modbus_close(ctx_);
+  return err;
 }
 
-void ModbusLink::disconnect() {
-  if (connected_) modbus_close(ctx_);
-  connected_ = false;
+void ModbusLink::do_close() { modbus_close(ctx_); }
+
+void ModbusLink::discard_input() {
+  if (serial_) {
+    // A late reply may still be on its way: let the line fall quiet (one response
+    // timeout), then drop what came, so it is not taken for the next answer.
+    timespec quiet{static_cast<time_t>(timeout_s_), static_cast<long>((timeout_s_ - std::floor(timeout_s_)) * 1e9)};
+    nanosleep(&quiet, nullptr);
+    modbus_flush(ctx_);
+    return;
+  }
+  // A reply that comes after its timeout would be read as the answer to the next
+  // request (a transaction-id mismatch, and the next, and the next): Modbus TCP
+  // connections "break" that way. A fresh connection has no stale replies. If it
+  // cannot be made, the next transaction fails and the link counts as lost.
+  modbus_close(ctx_);
+  modbus_connect(ctx_);
 }
 
-TxResult ModbusLink::classify(int rc, LinkCounters& c) {
-  ++c.transactions;
-  if (rc >= 0) return TxResult::kOk;
-  const int err = errno;
-  last_error_ = modbus_strerror(err);
-  if (err == ETIMEDOUT) {
-    ++c.timeouts;
-    return TxResult::kTimeout;
-  }
-  if (err == EMBBADCRC) {
-    ++c.crc_errors;
-    return TxResult::kCrc;
-  }
-  if (err >= MODBUS_ENOBASE && err <= EMBXGTAR) {
-    ++c.exceptions;
-    return TxResult::kException;
-  }
-  if (err == ECONNRESET || err == EPIPE || err == ECONNREFUSED || err == ENOTCONN || err == EBADF) {
-    ++c.other_errors;
-    disconnect();
-    return TxResult::kLinkLost;
-  }
-  ++c.other_errors;
-  return TxResult::kOther;
-}
-
-TxResult ModbusLink::write_register(int unit, int addr, uint16_t value, LinkCounters& c) {
-  if (!connected_) return TxResult::kLinkLost;
+int ModbusLink::do_read(int unit, int addr, int n, uint16_t* dest) {
   modbus_set_slave(ctx_, unit);
-  return classify(modbus_write_register(ctx_, addr, value), c);
+  errno = 0;
+  return rc_to_err(modbus_read_registers(ctx_, addr, n, dest));
 }
 
-TxResult ModbusLink::write_and_read(int unit, int write_addr, int write_n, const uint16_t* src, int read_addr,
-                                    int read_n, uint16_t* dest, LinkCounters& c) {
-  if (!connected_) return TxResult::kLinkLost;
+int ModbusLink::do_write1(int unit, int addr, uint16_t value) {
   modbus_set_slave(ctx_, unit);
-  return classify(modbus_write_and_read_registers(ctx_, write_addr, write_n, src, read_addr, read_n, dest), c);
+  errno = 0;
+  return rc_to_err(modbus_write_register(ctx_, addr, value));
 }
 
-TxResult ModbusLink::read_registers(int unit, int addr, int n, uint16_t* dest, LinkCounters& c) {
-  if (!connected_) return TxResult::kLinkLost;
+int ModbusLink::do_write(int unit, int addr, int n, const uint16_t* src) {
   modbus_set_slave(ctx_, unit);
-  return classify(modbus_read_registers(ctx_, addr, n, dest), c);
+  errno = 0;
+  return rc_to_err(modbus_write_registers(ctx_, addr, n, src));
+}
+
+int ModbusLink::do_write_read(int unit, int waddr, int wn, const uint16_t* src, int raddr, int rn, uint16_t* dest) {
+  modbus_set_slave(ctx_, unit);
+  errno = 0;
+  return rc_to_err(modbus_write_and_read_registers(ctx_, waddr, wn, src, raddr, rn, dest));
 }
 
 }  // namespace cnc::drive

@@ -1,56 +1,36 @@
 #pragma once
-// One Modbus connection (a TCP endpoint or a serial line) shared by the drives
-// behind it, which are told apart by unit id. The link is kept apart from the
-// register transactions (as LinuxCNC's mb2hal does): a failed transaction is
-// counted and classified, never fatal; a broken connection is closed and retried
-// with exponential back-off by the caller's schedule.
+// The libmodbus links: Modbus TCP (one socket to an endpoint) and Modbus RTU (one
+// serial line, e.g. RS-485, with the drives as unit ids on it).
 #include <modbus.h>
 
-#include <cstdint>
+#include <memory>
 #include <string>
+
+#include "common/drive/link.h"
 
 namespace cnc::drive {
 
-struct LinkCounters {
-  int64_t transactions = 0;
-  int64_t timeouts = 0;
-  int64_t exceptions = 0;  // the drive answered with a Modbus exception
-  int64_t crc_errors = 0;
-  int64_t other_errors = 0;
-  int64_t reconnects = 0;
-};
-
-enum class TxResult : int8_t { kOk, kTimeout, kException, kCrc, kLinkLost, kOther };
-
-class ModbusLink {
+class ModbusLink final : public Link {
  public:
-  // TCP link.
-  ModbusLink(std::string host, int port, double response_timeout_s);
-  ~ModbusLink();
-  ModbusLink(const ModbusLink&) = delete;
-  ModbusLink& operator=(const ModbusLink&) = delete;
-
-  // Connects if not connected and the back-off allows; returns whether connected.
-  bool ensure_connected(double now_s);
-  bool connected() const { return connected_; }
-  void disconnect();
-  const std::string& name() const { return name_; }
-
-  TxResult write_register(int unit, int addr, uint16_t value, LinkCounters& c);
-  TxResult write_and_read(int unit, int write_addr, int write_n, const uint16_t* src, int read_addr, int read_n,
-                          uint16_t* dest, LinkCounters& c);
-  TxResult read_registers(int unit, int addr, int n, uint16_t* dest, LinkCounters& c);
-  std::string last_error() const { return last_error_; }
+  static std::unique_ptr<ModbusLink> tcp(const std::string& host, int port, double response_timeout_s);
+  // parity 'N', 'E' or 'O'.
+  static std::unique_ptr<ModbusLink> rtu(const std::string& device, int baud, char parity, int stop_bits,
+                                         double response_timeout_s);
+  ~ModbusLink() override;
 
  private:
-  TxResult classify(int rc, LinkCounters& c);
-  modbus_t* ctx_ = nullptr;
-  std::string name_;
-  bool connected_ = false;
-  double next_attempt_s_ = 0;
-  double backoff_s_ = 0.1;
-  bool ever_connected_ = false;
-  std::string last_error_;
+  ModbusLink(std::string name, modbus_t* ctx, double response_timeout_s, bool serial);
+  int do_open(std::string& error) override;
+  void do_close() override;
+  int do_read(int unit, int addr, int n, uint16_t* dest) override;
+  int do_write1(int unit, int addr, uint16_t value) override;
+  int do_write(int unit, int addr, int n, const uint16_t* src) override;
+  int do_write_read(int unit, int waddr, int wn, const uint16_t* src, int raddr, int rn, uint16_t* dest) override;
+  void discard_input() override;
+
+  modbus_t* ctx_;
+  bool serial_;
+  double timeout_s_;
 };
 
 }  // namespace cnc::drive

@@ -1,16 +1,25 @@
 #pragma once
 // Drive bridge core: fine interpolation of coarse setpoints (seed 001's two-step
-// scheme) and the safety checks the architecture asks of the bridge. Pure: no
-// Modbus, no LCM, no clock; driven by servo ticks.
+// scheme) and the safety rules the architecture asks of the bridge. Pure: no
+// Modbus, no LCM, no clock, no allocation per tick; driven by servo ticks.
 //
-// Coarse setpoints are queued and each becomes a linear segment of N = T_ipo/T_servo
-// servo ticks, starting one coarse period late so the next setpoint has arrived.
-// A missed setpoint (cycle gap) stretches the next segment over the missed time, so
-// a single loss is bridged. If the queue runs dry the axes brake at the configured
-// deceleration; a silence longer than the timeout faults the bridge.
+// The fine interpolation plays the coarse stream back on a clock of its own,
+// τ (in coarse cycles), 1.5 to 2.5 periods behind the newest setpoint: the
+// command at τ is the straight line between the received setpoints around it, so
+// a missed setpoint (a gap in the cycle index) is bridged by the line between its
+// neighbours. The playback rate follows the buffer (0.90..1.05, slewed gently and
+// never above an axis's velocity limit): a late setpoint that used up the buffer
+// is made up again, and the clocks of two PCs may drift apart. Past the newest
+// setpoint the command goes on at the last velocity for one period; beyond that
+// it brakes at the stop deceleration; a stream back before the timeout is
+// rejoined (the command blends onto it over a period), one silent for longer than
+// the timeout makes the brake a controlled stop and a fault.
+//
+// A setpoint outside an axis's travel, or implying more than its velocity or
+// acceleration limit, is never followed: the bridge faults and stops. A stream
+// is joined only where the axes stand (engage), and only after ENABLE.
 #include <array>
 #include <cstdint>
-#include <deque>
 #include <string>
 
 #include "common/config/machine_config.h"
@@ -22,58 +31,94 @@ using AxisArray = std::array<double, program::kMaxAxes>;
 
 class BridgeCore {
  public:
+  enum class Mode : int8_t {
+    kIdle,       // not engaged: commands hold, setpoints are ignored
+    kFollowing,  // engaged: follows the stream (or waits for one that starts where the axes stand)
+    kStopping,   // a fault: controlled stop at the stop deceleration
+    kStopped,    // a fault, standing still: nothing moves until engaged again
+  };
+  enum class Verdict : int8_t { kAccepted, kIgnored, kWaiting, kFault };
+
   explicit BridgeCore(const config::MachineConfig& cfg);
 
-  // Starts from the drives' actual positions (after enabling them).
-  void reset(const AxisArray& actual_mm);
-  // A coarse setpoint; checks travel and velocity. Returns false and faults on violation.
-  bool on_setpoint(int64_t cycle, const AxisArray& position_mm);
-  // One servo tick: advances the fine interpolation. Returns the commanded positions.
+  // Follow setpoints from here on, starting where the axes stand.
+  void engage(const AxisArray& hold_mm);
+  // Stop following (drives disabled): commands hold at `at_mm`.
+  void disengage(const AxisArray& at_mm);
+  Verdict on_setpoint(int64_t cycle, const AxisArray& position_mm);
+  // One servo tick: the commanded positions for this tick.
   const AxisArray& tick();
-  // Following error check against the drives' actual positions, read in the same
-  // transaction that sent this tick's command: they answer the previous command.
-  bool check_following(const AxisArray& actual_mm);
-  double following_error(int axis, double actual_mm) const { return prev_cmd_[axis] - actual_mm; }
+  // Faults: a controlled stop from the current motion, then kStopped. The first reason stays.
   void fault(const std::string& why);
 
-  bool faulted() const { return faulted_; }
-  bool stopping() const { return stopping_; }
+  Mode mode() const { return mode_; }
+  bool faulted() const { return mode_ == Mode::kStopping || mode_ == Mode::kStopped; }
+  // Engaged, but the stream does not start where the axes stand (yet).
+  bool waiting() const { return mode_ == Mode::kFollowing && last_cycle_ < 0 && !waiting_reason_.empty(); }
   const std::string& fault_reason() const { return fault_reason_; }
+  const std::string& waiting_reason() const { return waiting_reason_; }
   const AxisArray& commanded() const { return cmd_; }
+  const AxisArray& velocity() const { return vel_; }
   int64_t last_cycle() const { return last_cycle_; }
+  // Cycle of the setpoint the current command heads for; -1 when none.
+  int64_t segment_cycle() const { return seg_cycle_; }
+  double playback_rate() const { return rate_; }
   int64_t setpoint_gaps() const { return gaps_; }
-  int64_t ticks_since_setpoint() const { return ticks_since_setpoint_; }
-  bool active() const { return active_; }
-  // Servo ticks on which the fine interpolation had no coarse setpoint to follow.
+  // Ticks past the newest setpoint, on its velocity (bridging a late one).
+  int64_t bridged_ticks() const { return bridged_ticks_; }
+  // Ticks braking because no setpoint came within the bridging allowance.
   int64_t starved_ticks() const { return starved_ticks_; }
+  // Times the stream came back while braking and was rejoined.
+  int64_t rejoins() const { return rejoins_; }
 
  private:
-  struct Coarse {
+  struct Point {
     int64_t cycle;
     AxisArray pos;
-    int ticks;  // servo ticks this segment spans
+    AxisArray vel;  // the stream's velocity over the step that ends here
   };
+  static constexpr int kPoints = 64;
+  const Point& point(int i) const { return points_[static_cast<size_t>((p_head_ + i) % kPoints)]; }
+  void push(const Point& p);
+  void brake();
+  void path_at(double tau, AxisArray& out);  // the stream's position at τ
+  void play(double tau);
+
   config::MachineConfig cfg_;
-  int n_;                // servo ticks per coarse period
+  int n_;  // servo ticks per coarse period
   double servo_s_;
+  double ipo_s_;
   int naxes_;
-  std::deque<Coarse> queue_;
-  bool active_ = false;  // interpolating segments (not waiting for the first two)
-  AxisArray seg_from_{};
-  Coarse seg_{};
-  int seg_tick_ = 0;
-  bool have_seg_ = false;
+  int lead_window_;  // ticks the lead is averaged over: one coarse period (at most 128)
+  Mode mode_ = Mode::kIdle;
+  std::array<Point, kPoints> points_{};
+  int p_head_ = 0;
+  int p_size_ = 0;
+  double tau_ = 0;       // playback time, in coarse cycles
+  double rate_ = 1.0;    // playback rate
+  // Lead of the newest setpoint over τ (cycles), averaged over the last coarse
+  // period: the average of a sawtooth that repeats every period is flat.
+  std::array<double, 128> lead_ring_{};
+  double lead_sum_ = 0;
+  int lead_i_ = 0;
+  bool braking_ = false; // starved past the bridging allowance
+  AxisArray blend_{};    // offset of the command from the stream when it was rejoined, fading out
+  int blend_ticks_ = 1;
+  int blend_left_ = 0;
+  int64_t rejoins_ = 0;
+  int64_t seg_cycle_ = -1;
   AxisArray cmd_{};
-  AxisArray prev_cmd_{};
   AxisArray vel_{};      // commanded velocity of the last tick, mm/s
-  AxisArray last_sp_{};
+  AxisArray last_sp_{};  // last accepted setpoint
+  AxisArray sp_vel_{};   // velocity of the last accepted coarse step
   int64_t last_cycle_ = -1;
+  int64_t last_gap_ = 1;  // cycles the last accepted step spanned
   int64_t gaps_ = 0;
+  int64_t bridged_ticks_ = 0;
   int64_t starved_ticks_ = 0;
   int64_t ticks_since_setpoint_ = 0;
-  bool stopping_ = false;
-  bool faulted_ = false;
   std::string fault_reason_;
+  std::string waiting_reason_;
 };
 
 }  // namespace cnc::bridge

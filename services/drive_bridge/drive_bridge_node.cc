@@ -3,159 +3,354 @@
 #include <spdlog/spdlog.h>
 
 #include <cmath>
+#include <cstdio>
+#include <filesystem>
 #include <map>
 
 #include "cnc/lcmt_alarm.hpp"
 #include "cnc/lcmt_axis_status.hpp"
-#include "common/drive/sim_profile.h"
+#include "common/config/yaml_reader.h"
+#include "common/drive/loopback_link.h"
+#include "common/drive/modbus_link.h"
+#include "common/util/clock.h"
 
 namespace cnc::bridge {
 
 namespace ch = config::channels;
-namespace sim = drive::sim;
+using cnc::lcmt_axis_status;
 
-DriveBridgeNode::DriveBridgeNode(const config::MachineConfig& cfg, bus::Bus& bus)
-    : cfg_(cfg), bus_(bus), core_(cfg), ch_status_(cfg.channel(ch::kAxisStatus)),
-      ticks_per_ipo_(static_cast<int>(std::lround(cfg.ipo_period_s / cfg.servo_period_s))),
-      ch_alarm_(cfg.channel(ch::kAlarm)) {
-  std::map<std::string, drive::ModbusLink*> by_endpoint;
-  for (const auto& a : cfg.axes) {
-    if (a.drive.transport != "modbus_tcp" || a.drive.profile != "sim") {
-      throw std::runtime_error("axis " + a.name + ": transport '" + a.drive.transport + "' with profile '" +
-                               a.drive.profile + "' is not available in this build (modbus_tcp + sim only)");
+const char* state_name(DriveBridgeNode::State s) {
+  switch (s) {
+    case DriveBridgeNode::State::kStarting: return "starting";
+    case DriveBridgeNode::State::kDisabled: return "disabled";
+    case DriveBridgeNode::State::kEnabling: return "enabling";
+    case DriveBridgeNode::State::kEnabled: return "enabled";
+    case DriveBridgeNode::State::kStopping: return "stopping";
+    case DriveBridgeNode::State::kFault: return "fault";
+  }
+  return "?";
+}
+
+DriveBridgeNode::DriveBridgeNode(const config::MachineConfig& cfg, bus::Bus& bus, Options opt)
+    : cfg_(cfg), bus_(bus), opt_(opt), core_(cfg), ch_status_(cfg.channel(ch::kAxisStatus)),
+      ch_alarm_(cfg.channel(ch::kAlarm)),
+      ticks_per_ipo_(static_cast<int>(std::lround(cfg.ipo_period_s / cfg.servo_period_s))) {
+  std::map<std::string, const drive::DriveProfile*> by_file;
+  std::map<std::string, LinkWorker*> by_link;
+  drive::LoopbackLink* loopback = nullptr;
+  for (size_t i = 0; i < cfg.axes.size(); ++i) {
+    const config::AxisConfig& a = cfg.axes[i];
+    const config::DriveConfig& d = a.drive;
+    const std::string file = drive::find_drive_profile(d.profile, cfg.source_file, cfg.drive_profile_dir);
+    if (!by_file.count(file)) {
+      if (!std::filesystem::exists(file))
+        throw config::ConfigError(cfg.source_file, "axes[" + std::to_string(i) + "].drive.profile",
+                                  "no drive profile '" + d.profile + "' (looked for " + file + ")");
+      profiles_.push_back(std::make_unique<drive::DriveProfile>(drive::load_drive_profile(file)));
+      by_file[file] = profiles_.back().get();
     }
-    const std::string key = a.drive.host + ":" + std::to_string(a.drive.port);
-    auto it = by_endpoint.find(key);
-    if (it == by_endpoint.end()) {
-      links_.push_back(std::make_unique<drive::ModbusLink>(a.drive.host, a.drive.port, a.drive.response_timeout_s));
-      it = by_endpoint.emplace(key, links_.back().get()).first;
+    const drive::DriveProfile* profile = by_file[file];
+    const std::string key = d.link_key();
+    if (!by_link.count(key)) {
+      if (d.transport == "modbus_tcp") {
+        links_.push_back(drive::ModbusLink::tcp(d.host, d.port, d.response_timeout_s));
+      } else if (d.transport == "modbus_rtu") {
+        const char parity = d.parity == "even" ? 'E' : d.parity == "odd" ? 'O' : 'N';
+        links_.push_back(drive::ModbusLink::rtu(d.device, d.baud, parity, d.stop_bits, d.response_timeout_s));
+      } else {
+        auto lb = std::make_unique<drive::LoopbackLink>();
+        loopback = lb.get();
+        links_.push_back(std::move(lb));
+      }
+      workers_.push_back(std::make_unique<LinkWorker>(*links_.back(), cfg.drive_bridge));
+      by_link[key] = workers_.back().get();
     }
+    if (d.transport == "loopback") loopback->add_drive(d.unit_id, *profile, a.home_mm);
     Axis ax;
-    ax.link = it->second;
-    ax.unit = a.drive.unit_id;
+    ax.profile = profile;
+    ax.worker = by_link[key];
+    ax.slot = ax.worker->axes().size();
+    ax.worker->add_axis(static_cast<int>(i), *profile, d.unit_id);
     axes_.push_back(ax);
   }
   bus_.subscribe<cnc::lcmt_setpoint>(cfg.channel(ch::kSetpoints), [this](const auto& m) { on_setpoint(m); });
+  bus_.subscribe<cnc::lcmt_drive_command>(cfg.channel(ch::kDriveCmd),
+                                          [this](const auto& m) { pending_command_ = m.command; });
 }
 
-bool DriveBridgeNode::bring_up(double now_s) {
-  bool all = true;
-  for (auto& l : links_) {
-    const bool was = l->connected();
-    if (!l->ensure_connected(now_s)) {
-      all = false;
-    } else if (!was) {
-      spdlog::info("connected to {}", l->name());
-    }
-  }
-  if (!all) return false;
-  AxisArray actual{};
-  for (size_t i = 0; i < axes_.size(); ++i) {
-    Axis& ax = axes_[i];
-    // Fault reset (rising edge), then enable operation.
-    ax.link->write_register(ax.unit, sim::kControlword, sim::kCwFaultReset, ax.counters);
-    if (ax.link->write_register(ax.unit, sim::kControlword, sim::kCwEnable, ax.counters) != drive::TxResult::kOk)
-      return false;
-    uint16_t regs[sim::kNumRegisters] = {};
-    if (ax.link->read_registers(ax.unit, 0, sim::kNumRegisters, regs, ax.counters) != drive::TxResult::kOk)
-      return false;
-    if ((regs[sim::kStatusword] & sim::kSwEnabled) == 0) return false;
-    ax.statusword = regs[sim::kStatusword];
-    ax.actual_mm = sim::counts_to_mm(sim::get_i32_low_first(&regs[sim::kActualPosition]));
-    ax.state = cnc::lcmt_axis_status::ENABLED;
-    ax.fault.clear();
-    actual[i] = ax.actual_mm;
-  }
-  core_.reset(actual);
-  up_ = true;
-  fault_reported_ = false;
-  spdlog::info("{} drives enabled", axes_.size());
-  return true;
+DriveBridgeNode::~DriveBridgeNode() {
+  for (auto& w : workers_) w->stop();
 }
+
+void DriveBridgeNode::set_write_probe(LinkWorker::WriteProbe p) {
+  for (auto& w : workers_) w->set_probe(p);
+}
+
+void DriveBridgeNode::start() {
+  for (const auto& w : workers_)
+    spdlog::info("link {}: {} drive(s)", w->link().name(), w->axes().size());
+  for (size_t i = 0; i < axes_.size(); ++i)
+    spdlog::info("axis {}: profile {} ({}), unit {}", cfg_.axes[i].name, axes_[i].profile->name,
+                 axes_[i].profile->file, cfg_.axes[i].drive.unit_id);
+  if (opt_.threaded)
+    for (auto& w : workers_) w->start();
+  started_ = true;
+}
+
+drive::Link& DriveBridgeNode::link_of(size_t axis) { return axes_[axis].worker->link(); }
+
+void DriveBridgeNode::command(int8_t c) { pending_command_ = c; }
 
 void DriveBridgeNode::on_setpoint(const cnc::lcmt_setpoint& m) {
-  if (!up_) return;
+  if (core_.mode() != BridgeCore::Mode::kFollowing) return;
   if (m.num_axes != static_cast<int32_t>(axes_.size())) {
-    core_.fault("setpoint seq " + std::to_string(m.seq) + " has " + std::to_string(m.num_axes) + " axes, machine has " +
-                std::to_string(axes_.size()));
+    fault(0, "setpoint seq " + std::to_string(m.seq) + " has " + std::to_string(m.num_axes) + " axes, the machine " +
+                 std::to_string(axes_.size()), false);
     return;
   }
   AxisArray p{};
   for (size_t i = 0; i < axes_.size(); ++i) p[i] = m.position_mm[i];
+  // A late arrival is worth a line in the log: it explains a later watchdog stop.
+  const double now = util::monotonic_s();
+  if (last_setpoint_s_ > 0 && now - last_setpoint_s_ > 3 * cfg_.ipo_period_s)
+    spdlog::warn("setpoint cycle {} arrived {:.1f} ms after the one before (published {:.1f} ms after it)", m.cycle,
+                 (now - last_setpoint_s_) * 1e3, static_cast<double>(m.utime - last_setpoint_utime_) * 1e-3);
+  last_setpoint_s_ = now;
+  last_setpoint_utime_ = m.utime;
   core_.on_setpoint(m.cycle, p);
 }
 
-void DriveBridgeNode::exchange(size_t i, double target_mm) {
-  Axis& ax = axes_[i];
-  uint16_t target[2];
-  sim::put_i32_low_first(target, sim::mm_to_counts(target_mm));
-  uint16_t regs[sim::kNumRegisters - sim::kStatusword] = {};
-  const drive::TxResult r = ax.link->write_and_read(ax.unit, sim::kTargetPosition, 2, target, sim::kStatusword,
-                                                    sim::kNumRegisters - sim::kStatusword, regs, ax.counters);
-  if (r == drive::TxResult::kOk) {
-    ax.statusword = regs[0];
-    ax.actual_mm = sim::counts_to_mm(sim::get_i32_low_first(&regs[sim::kActualPosition - sim::kStatusword]));
-    if (ax.statusword & sim::kSwFault) core_.fault("axis " + cfg_.axes[i].name + ": drive reports a fault");
-  } else if (r == drive::TxResult::kLinkLost) {
-    core_.fault("axis " + cfg_.axes[i].name + ": connection to " + ax.link->name() + " lost (" +
-                ax.link->last_error() + ")");
+AxisArray DriveBridgeNode::actuals() const {
+  AxisArray a{};
+  for (size_t i = 0; i < axes_.size(); ++i) a[i] = axes_[i].rep.have_status ? axes_[i].rep.actual_mm : core_.commanded()[i];
+  return a;
+}
+
+void DriveBridgeNode::alarm(int8_t severity, const std::string& code, const std::string& text) {
+  cnc::lcmt_alarm al{};
+  al.source = "cnc-drive-bridge";
+  al.severity = severity;
+  al.code = code;
+  al.text = text;
+  bus_.publish(ch_alarm_, al);
+}
+
+void DriveBridgeNode::fault(size_t axis, const std::string& why, bool disable_axis) {
+  if (disable_axis) axes_[axis].cmd.goal = drive::Goal::kDisable;
+  if (state_ == State::kEnabling) {
+    for (auto& a : axes_) a.cmd.goal = drive::Goal::kDisable;
+  }
+  core_.fault(why);
+}
+
+void DriveBridgeNode::begin_enable(double now_s) {
+  for (auto& a : axes_) {
+    a.cmd.goal = drive::Goal::kEnable;
+    a.link_down = false;
+  }
+  core_.disengage(actuals());
+  state_ = State::kEnabling;
+  enable_deadline_s_ = now_s + cfg_.drive_bridge.enable_timeout_s;
+  fault_text_.clear();
+  waiting_reported_ = false;
+  spdlog::info("enabling the drives");
+}
+
+void DriveBridgeNode::check_drives() {
+  const bool expect_enabled = state_ == State::kEnabled || state_ == State::kStopping;
+  for (size_t i = 0; i < axes_.size(); ++i) {
+    Axis& a = axes_[i];
+    const std::string& name = cfg_.axes[i].name;
+    if (a.rep.lost_events > a.lost_seen) {
+      a.lost_seen = a.rep.lost_events;
+      a.link_down = true;
+      fault(i, "axis " + name + ": link " + a.worker->link().name() + " lost (" + a.rep.last_error.data() + ")", true);
+    }
+    if (!expect_enabled || a.link_down || !a.rep.have_status) continue;
+    char code[16];
+    std::snprintf(code, sizeof code, "0x%04X", a.rep.error_code);
+    if (a.rep.status.fault) {
+      fault(i, "axis " + name + ": the drive reports a fault (" + a.rep.status.state + ", error code " + code + ")",
+            true);
+    } else if (!a.rep.status.enabled && a.cmd.goal == drive::Goal::kEnable) {
+      fault(i, "axis " + name + ": the drive left the enabled state (" + a.rep.status.state + ")", true);
+    }
+    if (a.rep.fe_samples > a.fe_seen) {
+      a.fe_seen = a.rep.fe_samples;
+      const double limit = cfg_.axes[i].max_following_error_mm;
+      if (std::fabs(a.rep.fe_mm) > limit) {
+        char buf[160];
+        std::snprintf(buf, sizeof buf, "axis %s: following error %.4f mm over its limit %g mm", name.c_str(),
+                      a.rep.fe_mm, limit);
+        fault(i, buf, true);
+      }
+    }
   }
 }
 
 void DriveBridgeNode::servo_tick(double now_s) {
   bus_.drain();
   ++tick_;
-  if (!up_) return;
-  const bool was_faulted = core_.faulted();
-  const AxisArray& cmd = core_.tick();
-  if (!core_.faulted()) {
-    for (size_t i = 0; i < axes_.size(); ++i) exchange(i, cmd[i]);
-    AxisArray actual{};
-    for (size_t i = 0; i < axes_.size(); ++i) actual[i] = axes_[i].actual_mm;
-    core_.check_following(actual);
-  }
-  if (core_.faulted() && !was_faulted) {
-    // Nothing moves: disable every drive still reachable.
-    for (auto& ax : axes_) {
-      ax.link->write_register(ax.unit, sim::kControlword, 0, ax.counters);
-      ax.state = cnc::lcmt_axis_status::FAULT;
-      ax.fault = core_.fault_reason();
+  for (auto& a : axes_) a.rep = a.worker->report(a.slot);
+
+  // Operator commands; ENABLE waits while a controlled stop is still running.
+  if (pending_command_ != 0) {
+    const int8_t c = pending_command_;
+    pending_command_ = 0;
+    if (c == cnc::lcmt_drive_command::ENABLE) {
+      if (state_ == State::kDisabled || state_ == State::kFault) begin_enable(now_s);
+      else if (state_ == State::kStarting || state_ == State::kStopping) pending_command_ = c;
+    } else if (c == cnc::lcmt_drive_command::DISABLE || c == cnc::lcmt_drive_command::FAULT_RESET) {
+      for (auto& a : axes_) {
+        a.cmd.goal = c == cnc::lcmt_drive_command::DISABLE ? drive::Goal::kDisable : drive::Goal::kFaultReset;
+        if (c == cnc::lcmt_drive_command::FAULT_RESET) a.link_down = false;
+      }
+      core_.disengage(actuals());
+      if (state_ != State::kStarting) state_ = State::kDisabled;
+      fault_text_.clear();
+      spdlog::info("drives {}", c == cnc::lcmt_drive_command::DISABLE ? "disabled" : "reset and disabled");
     }
-    spdlog::error("fault: {}", core_.fault_reason());
   }
-  if (core_.faulted() && !fault_reported_) {
-    fault_reported_ = true;
-    cnc::lcmt_alarm al{};
-    al.source = "cnc-drive-bridge";
-    al.severity = cnc::lcmt_alarm::FAULT;
-    al.code = "drive_fault";
-    al.text = core_.fault_reason();
-    bus_.publish(ch_alarm_, al);
+
+  switch (state_) {
+    case State::kStarting: {
+      bool all = true;
+      for (const auto& a : axes_) all = all && a.rep.answering && a.rep.have_status;
+      if (all) {
+        state_ = State::kDisabled;
+        spdlog::info("every drive answers");
+        if (cfg_.drive_bridge.enable_on_start) {
+          begin_enable(now_s);
+        } else {
+          ready_ = true;
+        }
+      }
+      break;
+    }
+    case State::kEnabling: {
+      check_drives();
+      if (core_.faulted()) break;
+      bool all = true;
+      for (const auto& a : axes_) all = all && a.rep.answering && a.rep.status.enabled && a.rep.holding;
+      if (all) {
+        AxisArray hold{};
+        for (size_t i = 0; i < axes_.size(); ++i) hold[i] = axes_[i].rep.hold_mm;
+        core_.engage(hold);
+        state_ = State::kEnabled;
+        ready_ = true;
+        spdlog::info("{} drive(s) enabled", axes_.size());
+        alarm(cnc::lcmt_alarm::INFO, "drives_enabled", "drives enabled; following setpoints from where the axes stand");
+      } else if (now_s > enable_deadline_s_) {
+        for (size_t i = 0; i < axes_.size(); ++i) {
+          const Axis& a = axes_[i];
+          if (a.rep.answering && a.rep.status.enabled) continue;
+          fault(i, "axis " + cfg_.axes[i].name + " did not enable within " +
+                       std::to_string(cfg_.drive_bridge.enable_timeout_s).substr(0, 4) + " s: " +
+                       (a.rep.answering ? std::string("drive state ") + a.rep.status.state
+                                        : std::string("no answer (") + a.rep.last_error.data() + ")"),
+                true);
+          break;
+        }
+      }
+      break;
+    }
+    case State::kEnabled:
+    case State::kStopping:
+    case State::kFault: check_drives(); break;
+    case State::kDisabled: break;
   }
-  (void)now_s;
+  for (size_t i = 0; i < axes_.size(); ++i) {
+    Axis& a = axes_[i];
+    if (a.rep.counters.reconnects > a.reconnects_seen) {
+      a.reconnects_seen = a.rep.counters.reconnects;
+      const std::string text = "axis " + cfg_.axes[i].name + ": the drive answers again on " +
+                               a.worker->link().name() + " (reconnect " + std::to_string(a.reconnects_seen) +
+                               "); it stays disabled until ENABLE";
+      spdlog::warn("{}", text);
+      alarm(cnc::lcmt_alarm::WARNING, "drive_reconnected", text);
+    }
+  }
+
+  const AxisArray& cmd = core_.tick();
+  if (core_.faulted() && fault_text_.empty()) {
+    fault_text_ = core_.fault_reason();
+    spdlog::error("fault: {}", fault_text_);
+    alarm(cnc::lcmt_alarm::FAULT, "drive_fault", fault_text_);
+  }
+  if (core_.faulted()) {
+    if (state_ == State::kEnabled) state_ = State::kStopping;
+    if (state_ == State::kEnabling || state_ == State::kDisabled || state_ == State::kStarting) state_ = State::kFault;
+    if (state_ == State::kStopping && core_.mode() == BridgeCore::Mode::kStopped) state_ = State::kFault;
+    ready_ = true;
+  }
+  if (core_.waiting() && !waiting_reported_) {
+    waiting_reported_ = true;
+    spdlog::warn("{}", core_.waiting_reason());
+    alarm(cnc::lcmt_alarm::WARNING, "setpoint_mismatch", core_.waiting_reason());
+  }
+  if (state_ != detail_state_) {
+    detail_state_ = state_;
+    detail_ = state_name(state_);
+    if (!fault_text_.empty() && (state_ == State::kStopping || state_ == State::kFault)) detail_ += ": " + fault_text_;
+  }
+  const bool following_state = state_ == State::kEnabled || state_ == State::kStopping || state_ == State::kFault;
+  for (size_t i = 0; i < axes_.size(); ++i) {
+    Axis& a = axes_[i];
+    a.cmd.follow = following_state && a.cmd.goal == drive::Goal::kEnable && !a.link_down &&
+                   core_.mode() != BridgeCore::Mode::kIdle;
+    a.cmd.cmd_mm = cmd[i];
+    a.cmd.cmd_cycle = core_.segment_cycle();
+    a.worker->set_command(a.slot, a.cmd);
+  }
+  for (auto& w : workers_) {
+    if (opt_.threaded) {
+      w->post();
+    } else {
+      w->round(now_s);
+    }
+  }
 }
 
 void DriveBridgeNode::publish_status(int64_t overruns) {
   if (tick_ % ticks_per_ipo_ != 0) return;
-  cnc::lcmt_axis_status s{};
+  lcmt_axis_status s{};
   s.setpoint_cycle = core_.last_cycle();
   s.num_axes = static_cast<int32_t>(axes_.size());
   for (size_t i = 0; i < axes_.size(); ++i) {
-    const Axis& ax = axes_[i];
+    const Axis& a = axes_[i];
     s.axis_name.push_back(cfg_.axes[i].name);
     s.commanded_mm.push_back(core_.commanded()[i]);
-    s.actual_mm.push_back(ax.actual_mm);
-    s.following_error_mm.push_back(core_.following_error(static_cast<int>(i), ax.actual_mm));
-    int8_t st = ax.state;
-    if (!up_) st = cnc::lcmt_axis_status::DISABLED;
-    else if (core_.stopping()) st = cnc::lcmt_axis_status::STOPPING;
+    s.actual_mm.push_back(a.rep.actual_mm);
+    s.following_error_mm.push_back(a.rep.fe_mm);
+    int8_t st = lcmt_axis_status::DISABLED;
+    std::string text;
+    switch (state_) {
+      case State::kStarting:
+      case State::kDisabled:
+        st = a.rep.status.fault ? lcmt_axis_status::FAULT : lcmt_axis_status::DISABLED;
+        if (a.rep.status.fault) text = std::string("drive fault (") + a.rep.status.state + ")";
+        break;
+      case State::kEnabling: st = lcmt_axis_status::ENABLING; break;
+      case State::kEnabled:
+        st = lcmt_axis_status::ENABLED;
+        text = core_.waiting() ? core_.waiting_reason() : "";
+        break;
+      case State::kStopping: st = lcmt_axis_status::STOPPING; text = fault_text_; break;
+      case State::kFault: st = lcmt_axis_status::FAULT; text = fault_text_; break;
+    }
+    if (a.link_down || (!a.rep.answering && state_ != State::kStarting)) {
+      st = lcmt_axis_status::FAULT;
+      if (text.empty()) text = std::string("no answer: ") + a.rep.last_error.data();
+    } else if (!a.rep.answering) {
+      text = std::string("waiting for the drive: ") + a.rep.last_error.data();
+    }
     s.drive_state.push_back(st);
-    s.fault.push_back(ax.fault);
-    s.transactions.push_back(ax.counters.transactions);
-    s.timeouts.push_back(ax.counters.timeouts);
-    s.exceptions.push_back(ax.counters.exceptions);
-    s.crc_errors.push_back(ax.counters.crc_errors);
-    s.reconnects.push_back(ax.counters.reconnects);
+    s.fault.push_back(text);
+    s.transactions.push_back(a.rep.counters.transactions);
+    s.timeouts.push_back(a.rep.counters.timeouts);
+    s.exceptions.push_back(a.rep.counters.exceptions);
+    s.crc_errors.push_back(a.rep.counters.crc_errors);
+    s.reconnects.push_back(a.rep.counters.reconnects);
   }
   s.setpoint_gaps = core_.setpoint_gaps();
   s.servo_overruns = overruns;
@@ -163,13 +358,38 @@ void DriveBridgeNode::publish_status(int64_t overruns) {
 }
 
 void DriveBridgeNode::shut_down() {
-  spdlog::info("setpoint gaps {}, servo ticks without a setpoint to follow {}", core_.setpoint_gaps(),
-               core_.starved_ticks());
-  for (auto& ax : axes_) {
-    if (ax.link->connected()) ax.link->write_register(ax.unit, sim::kControlword, 0, ax.counters);
+  for (auto& w : workers_) w->stop();
+  spdlog::info("setpoint gaps {}, ticks bridged {}, ticks braking without setpoints {}", core_.setpoint_gaps(),
+               core_.bridged_ticks(), core_.starved_ticks());
+  for (size_t i = 0; i < axes_.size(); ++i) {
+    Axis& a = axes_[i];
+    a.cmd.goal = drive::Goal::kDisable;
+    a.cmd.follow = false;
+    a.worker->set_command(a.slot, a.cmd);
   }
-  for (auto& l : links_) l->disconnect();
-  up_ = false;
+  // Disable whatever answers: a few rounds, each at most one step of a state machine.
+  for (int round = 0; round < 10; ++round) {
+    bool busy = false;
+    for (auto& w : workers_) {
+      if (!w->link().is_open()) continue;
+      w->round(util::monotonic_s());
+      for (size_t s = 0; s < w->axes().size(); ++s) {
+        const AxisReport r = w->report(s);
+        busy = busy || (r.answering && r.status.enabled);
+      }
+    }
+    if (!busy) break;
+  }
+  for (size_t i = 0; i < axes_.size(); ++i) {
+    const AxisReport r = axes_[i].worker->report(axes_[i].slot);
+    const auto& c = r.counters;
+    const bool failed = c.timeouts + c.exceptions + c.crc_errors + c.other_errors > 0;
+    spdlog::info("axis {}: {} transactions, {} timeouts, {} exceptions, {} CRC errors, {} other errors, {} reconnects{}{}",
+                 cfg_.axes[i].name, c.transactions, c.timeouts, c.exceptions, c.crc_errors, c.other_errors,
+                 c.reconnects, failed ? "; last error: " : "", failed ? r.last_error.data() : "");
+  }
+  for (auto& l : links_) l->close(util::monotonic_s());
+  state_ = State::kDisabled;
 }
 
 }  // namespace cnc::bridge

@@ -1,54 +1,104 @@
 #pragma once
-// LCM and Modbus side of the drive bridge. The servo loop runs at T_servo: take
-// the setpoints that arrived, advance the fine interpolation, exchange target and
-// actual position with every drive (one read-write transaction each), check the
-// following error, and publish the axis status every T_ipo.
+// LCM side of the drive bridge and its servo loop. Every T_servo: take the
+// setpoints and commands that arrived, read what the link workers last got from
+// the drives, apply the safety rules (lost link, drive fault, following error),
+// advance the fine interpolation, hand the commands to the workers; every T_ipo
+// publish AXIS_STATUS. Nothing here blocks on Modbus: the workers do the I/O.
+//
+// States: starting (links not answered yet) -> disabled -> enabling (the profiles'
+// state machines run) -> enabled (following setpoints) -> stopping -> fault.
+// After any fault nothing moves until an ENABLE on DRIVE_CMD (or cnc-ctl --do enable).
 #include <memory>
 #include <string>
 #include <vector>
 
+#include "cnc/lcmt_drive_command.hpp"
 #include "cnc/lcmt_setpoint.hpp"
 #include "common/bus/bus.h"
-#include "common/drive/modbus_link.h"
+#include "common/drive/drive_profile.h"
+#include "common/drive/link.h"
 #include "services/drive_bridge/drive_bridge.h"
+#include "services/drive_bridge/link_worker.h"
 
 namespace cnc::bridge {
 
 class DriveBridgeNode {
  public:
-  DriveBridgeNode(const config::MachineConfig& cfg, bus::Bus& bus);
-  // Connects and enables every drive; false if not all are ready yet (call again).
-  bool bring_up(double now_s);
+  enum class State : int8_t { kStarting, kDisabled, kEnabling, kEnabled, kStopping, kFault };
+  struct Options {
+    bool threaded = true;  // false: each servo tick runs one I/O round inline (deterministic tests)
+  };
+
+  // Loads the drive profiles (a bad one throws config::ConfigError) and opens nothing yet.
+  DriveBridgeNode(const config::MachineConfig& cfg, bus::Bus& bus, Options opt);
+  DriveBridgeNode(const config::MachineConfig& cfg, bus::Bus& bus) : DriveBridgeNode(cfg, bus, Options{}) {}
+  ~DriveBridgeNode();
+  DriveBridgeNode(const DriveBridgeNode&) = delete;
+  DriveBridgeNode& operator=(const DriveBridgeNode&) = delete;
+
+  void set_write_probe(LinkWorker::WriteProbe p);
+  void start();
   void servo_tick(double now_s);
-  // Disables the drives (controlword 0) and closes the links.
-  void shut_down();
   void publish_status(int64_t overruns);
-  bool up() const { return up_; }
+  // Disables the drives that answer and closes the links.
+  void shut_down();
+  void command(int8_t drive_command);
+
+  State state() const { return state_; }
+  // For the heartbeat: past start-up (enabled once when enable_on_start, else disabled or faulted).
+  bool ready() const { return ready_; }
+  // "enabled", "fault: why", ... (kept up to date by servo_tick; no allocation per call).
+  const std::string& detail() const { return detail_; }
+  const BridgeCore& core() const { return core_; }
+  drive::Link& link_of(size_t axis);
+  const AxisReport& report(size_t axis) const { return axes_[axis].rep; }
+  const drive::DriveProfile& profile_of(size_t axis) const { return *axes_[axis].profile; }
+  int64_t tick_count() const { return tick_; }
 
  private:
   struct Axis {
-    drive::ModbusLink* link = nullptr;
-    int unit = 1;
-    drive::LinkCounters counters;
-    double actual_mm = 0;
-    uint16_t statusword = 0;
-    int8_t state = 0;
-    std::string fault;
+    const drive::DriveProfile* profile = nullptr;
+    LinkWorker* worker = nullptr;
+    size_t slot = 0;
+    AxisCommand cmd;
+    AxisReport rep;
+    int64_t lost_seen = 0;
+    int64_t fe_seen = 0;
+    int64_t reconnects_seen = 0;
+    bool link_down = false;  // lost since the last ENABLE: stays disabled
   };
   void on_setpoint(const cnc::lcmt_setpoint& m);
-  void exchange(size_t axis, double target_mm);
+  void fault(size_t axis, const std::string& why, bool disable_axis);
+  void begin_enable(double now_s);
+  void check_drives();
+  void alarm(int8_t severity, const std::string& code, const std::string& text);
+  AxisArray actuals() const;
 
   config::MachineConfig cfg_;
   bus::Bus& bus_;
+  Options opt_;
   BridgeCore core_;
-  std::vector<std::unique_ptr<drive::ModbusLink>> links_;
+  std::vector<std::unique_ptr<drive::DriveProfile>> profiles_;
+  std::vector<std::unique_ptr<drive::Link>> links_;
+  std::vector<std::unique_ptr<LinkWorker>> workers_;
   std::vector<Axis> axes_;
   std::string ch_status_;
+  std::string ch_alarm_;
   int ticks_per_ipo_;
   int64_t tick_ = 0;
-  bool up_ = false;
-  bool fault_reported_ = false;
-  std::string ch_alarm_;
+  State state_ = State::kStarting;
+  bool ready_ = false;
+  bool started_ = false;
+  int8_t pending_command_ = 0;
+  double enable_deadline_s_ = 0;
+  std::string fault_text_;
+  bool waiting_reported_ = false;
+  double last_setpoint_s_ = 0;
+  int64_t last_setpoint_utime_ = 0;
+  std::string detail_ = "starting";
+  State detail_state_ = State::kStarting;
 };
+
+const char* state_name(DriveBridgeNode::State s);
 
 }  // namespace cnc::bridge

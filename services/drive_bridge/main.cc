@@ -1,35 +1,41 @@
-// cnc-drive-bridge: fine interpolation and Modbus I/O to the servo drives.
+// cnc-drive-bridge: fine interpolation, safety, and Modbus I/O to the servo drives.
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+
 #include "cnc/lcmt_heartbeat.hpp"
 #include "common/service/heartbeat.h"
 #include "common/service/service.h"
-#include <spdlog/spdlog.h>
-
 #include "common/util/clock.h"
 #include "common/util/realtime.h"
 #include "common/util/signals.h"
 #include "services/drive_bridge/drive_bridge_node.h"
 
 int main(int argc, char** argv) {
-  cnc::service::Spec spec{"cnc-drive-bridge", "fine interpolation and Modbus I/O to the servo drives", {}, {}};
+  cnc::service::Spec spec{"cnc-drive-bridge", "fine interpolation, safety and Modbus I/O to the servo drives", {}, {}};
   return cnc::service::run(spec, argc, argv, [](const cnc::config::MachineConfig& cfg, const cnc::service::Args&) {
-    // First, so the threads LCM starts (its receive thread) inherit the scheduling.
-    if (const std::string why = cnc::util::make_realtime(cfg.realtime_priority); !why.empty())
+    // First, so the threads LCM starts (its receive thread) inherit the scheduling,
+    // and the Modbus I/O threads too. One priority above the other cyclic services:
+    // neither the interpolator's planning nor the simulator may hold up the servo
+    // loop or the delivery of setpoints to it.
+    const int priority = cfg.realtime_priority > 0 ? std::min(cfg.realtime_priority + 1, 98) : 0;
+    if (const std::string why = cnc::util::make_realtime(priority); !why.empty())
       spdlog::warn("real-time scheduling not available ({}): running with normal scheduling", why);
     cnc::bus::Bus bus(cfg.lcm_url);
     cnc::bridge::DriveBridgeNode node(cfg, bus);
     cnc::service::Heartbeat hb(bus, cfg, "cnc-drive-bridge");
+    node.start();
     cnc::util::PeriodicTimer timer(cfg.servo_period_s);
     while (!cnc::util::stop_requested()) {
       timer.wait();
       if (cnc::util::stop_requested()) break;
-      const double now = cnc::util::monotonic_s();
-      if (!node.up()) node.bring_up(now);
-      node.servo_tick(now);
+      node.servo_tick(cnc::util::monotonic_s());
       node.publish_status(timer.overruns());
-      hb.tick(node.up() ? cnc::lcmt_heartbeat::RUNNING : cnc::lcmt_heartbeat::STARTING, timer.overruns());
+      hb.tick(node.ready() ? cnc::lcmt_heartbeat::RUNNING : cnc::lcmt_heartbeat::STARTING, timer.overruns(),
+              node.detail());
     }
     node.shut_down();
-    hb.tick(cnc::lcmt_heartbeat::STOPPING, timer.overruns(), "", true);
+    hb.tick(cnc::lcmt_heartbeat::STOPPING, timer.overruns(), node.detail(), true);
     return cnc::service::kExitOk;
   });
 }

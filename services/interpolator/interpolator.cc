@@ -370,6 +370,20 @@ bool Interpolator::apply_block(const program::Block& block) {
       return false;
     }
   }
+  // The path is continuous: a block starts where the one before ended, the first
+  // where the machine stands. Anything else would be a jump in one cycle.
+  {
+    double gap = 0;
+    for (int a = 0; a < naxes_; ++a) {
+      const double expected = blocks_.empty() ? pos_[a] : blocks_.back().block.end[a];
+      gap = std::max(gap, std::fabs(block.start[a] - expected));
+    }
+    if (gap > 1e-6) {
+      refusal_ = "block " + std::to_string(block.index) + " (line " + std::to_string(block.source_line) +
+                 ") starts " + std::to_string(gap) + " mm away from where the path is: reload the program here";
+      return false;
+    }
+  }
   if (!(block.feed_mm_per_min >= 0) || !std::isfinite(block.feed_mm_per_min) ||
       (block.kind == program::BlockKind::kLine && block.feed_mm_per_min <= 0) ||
       (block.kind == program::BlockKind::kDwell && !(block.dwell_s >= 0 && std::isfinite(block.dwell_s)))) {

@@ -186,6 +186,9 @@ void InterpolatorNode::publish_state(bool force) {
   m.starved_cycles = core_.starved_cycles();
   m.feed_override = core_.feed_override();
   m.program_time_s = core_.program_time_s();
+  m.num_axes = core_.last().num_axes > 0 ? core_.last().num_axes : static_cast<int32_t>(cfg_.axes.size());
+  for (int a = 0; a < m.num_axes; ++a)
+    m.position_mm.push_back(core_.last().num_axes > 0 ? core_.last().position_mm[a] : cfg_.axes[a].home_mm);
   bus_.publish(ch_state_, m);
 }
 

@@ -1,6 +1,8 @@
-// cnc-logger: records every channel of the cell into standard LCM log files.
+// cnc-logger: records every channel of the cell into standard LCM log files, with
+// its own counts (lcmt_logger_stats on PREFIX + "LOGGER_STATS") written into them.
 #include <spdlog/spdlog.h>
-#include <sys/stat.h>
+
+#include <algorithm>
 
 #include <ctime>
 #include <filesystem>
@@ -8,9 +10,15 @@
 #include "cnc/lcmt_heartbeat.hpp"
 #include "common/service/heartbeat.h"
 #include "common/service/service.h"
+#include "common/util/realtime.h"
 #include "common/util/clock.h"
 #include "common/util/signals.h"
 #include "services/logger/log_writer.h"
+#include "services/logger/logger_node.h"
+
+namespace {
+constexpr int64_t kReceiveBufferBytes = 8 * 1024 * 1024;
+}  // namespace
 
 int main(int argc, char** argv) {
   cnc::service::Spec spec{"cnc-logger", "records every channel of the cell into LCM log files", {"out"}, {}};
@@ -27,30 +35,27 @@ int main(int argc, char** argv) {
     }
     const auto dir = std::filesystem::path(base).parent_path();
     if (!dir.empty()) std::filesystem::create_directories(dir);
-    cnc::bus::Bus bus(cfg.lcm_url);
+    // Above ordinary load, below the cyclic services; first, so LCM's receive thread inherits it.
+    if (const std::string why = cnc::util::make_realtime(std::max(0, cfg.realtime_priority - 5)); !why.empty())
+      spdlog::warn("real-time scheduling not available ({}): running with normal scheduling", why);
+    // A deep queue: the logger must ride out a stalled write without dropping (~10 s at 2 kHz).
+    cnc::bus::Bus bus(cnc::logger::receive_url(cfg.lcm_url, kReceiveBufferBytes), 0, 20000);
     cnc::logger::LogWriter writer(base, cfg.log_rotate_mb * 1024 * 1024);
+    cnc::logger::LoggerNode node(cfg, bus, writer);
     spdlog::info("cnc-logger: writing {}", writer.current_path());
-    bus.subscribe_raw(cnc::bus::exact_channel(cfg.channel_prefix) + ".*",
-                      [&](const std::string& channel, const void* data, size_t size, int64_t recv_utime) {
-                        writer.write(channel, data, size, recv_utime);
-                      });
     cnc::service::Heartbeat hb(bus, cfg, "cnc-logger");
-    double last_flush = cnc::util::monotonic_s();
     while (!cnc::util::stop_requested()) {
       bus.handle(20);
-      const double now = cnc::util::monotonic_s();
-      if (now - last_flush >= cfg.log_flush_period_s) {
-        writer.flush();
-        last_flush = now;
-      }
+      node.tick(cnc::util::monotonic_s());
       hb.tick(cnc::lcmt_heartbeat::RUNNING, writer.dropped(), writer.current_path());
     }
-    // Take what is already queued, then close cleanly.
+    // Take what is already queued, then close cleanly with the stats as the last event.
     bus.drain();
     hb.tick(cnc::lcmt_heartbeat::STOPPING, writer.dropped(), writer.current_path(), true);
     bus.drain();
-    writer.close();
-    spdlog::info("cnc-logger: {} events in {} file(s), last {}", writer.events(), writer.files(), writer.current_path());
+    node.close();
+    spdlog::info("cnc-logger: {} events in {} file(s), {} dropped, last {}", writer.events(), writer.files(),
+                 writer.dropped(), writer.current_path());
     return cnc::service::kExitOk;
   });
 }

@@ -84,8 +84,12 @@ const std::string& ProgramServer::path() const {
   return program_ ? program_->path : kNone;
 }
 
-LoadResult ProgramServer::load(const std::string& path, int64_t token) {
+LoadResult ProgramServer::load(const std::string& path, int64_t token, const std::vector<double>& start_position_mm) {
   LoadResult r;
+  program::ParserState start = parser_.initial_state();
+  // The program starts where the machine is (RS274): its first move, a G91 move
+  // or a NURBS's first control point are taken from there.
+  if (start_position_mm.size() == start.position_mm.size()) start.position_mm = start_position_mm;
   auto next = std::make_unique<Loaded>();
   next->path = path;
   next->token = token;
@@ -93,7 +97,7 @@ LoadResult ProgramServer::load(const std::string& path, int64_t token) {
   try {
     if (!*next->in) throw program::ProgramError(program::SourceLocation{path, 0, 0}, "cannot open the program file");
     Indexer indexer(limits_, &next->checkpoints);
-    parser_.stream(*next->in, path, parser_.initial_state(), indexer);
+    parser_.stream(*next->in, path, start, indexer);
     next->end = indexer.end;
     next->num_blocks = indexer.end.next_index;
   } catch (const program::ProgramError& e) {

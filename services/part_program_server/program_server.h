@@ -39,8 +39,9 @@ class ProgramServer {
   explicit ProgramServer(const config::MachineConfig& cfg, ServerLimits limits = {});
   ProgramServer(program::ParserSettings settings, ServerLimits limits);
 
-  // token: the caller's unique id of this load.
-  LoadResult load(const std::string& path, int64_t token);
+  // token: the caller's unique id of this load. start_position_mm: where the
+  // machine stands (one entry per axis); empty: the config's home position.
+  LoadResult load(const std::string& path, int64_t token, const std::vector<double>& start_position_mm = {});
   bool loaded() const { return program_ != nullptr; }
   int64_t token() const { return program_ ? program_->token : 0; }
   const std::string& path() const;

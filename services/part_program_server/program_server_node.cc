@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <iterator>
 
+#include "cnc/lcmt_interp_state.hpp"
 #include "cnc/lcmt_program_state.hpp"
 #include "common/program/block_msg.h"
 #include "common/util/clock.h"
@@ -18,6 +19,10 @@ ProgramServerNode::ProgramServerNode(const config::MachineConfig& cfg, bus::Bus&
       ch_state_(cfg.channel(ch::kProgramState)), state_(cnc::lcmt_program_state::IDLE) {
   bus_.subscribe<cnc::lcmt_program_command>(cfg.channel(ch::kProgramCmd), [this](const auto& m) { on_command(m); });
   bus_.subscribe<cnc::lcmt_block_request>(cfg.channel(ch::kBlockRequest), [this](const auto& m) { on_request(m); });
+  // Where the machine stands, for the start of the next program.
+  bus_.subscribe<cnc::lcmt_interp_state>(cfg.channel(ch::kInterpState), [this](const cnc::lcmt_interp_state& m) {
+    if (m.num_axes == static_cast<int32_t>(cfg_.axes.size())) machine_position_ = m.position_mm;
+  });
 }
 
 void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {
@@ -27,7 +32,7 @@ void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {
     case C::LOAD: {
       // The token must differ from every earlier one, also across restarts.
       const int64_t token = std::max(util::wall_utime(), core_.token() + 1);
-      const LoadResult r = core_.load(m.program_path, token);
+      const LoadResult r = core_.load(m.program_path, token, machine_position_);
       if (r.ok) {
         spdlog::info("loaded {}: {} blocks (token {})", m.program_path, core_.num_blocks(), token);
         state_ = S::LOADED;

@@ -38,6 +38,7 @@ class ProgramServerNode {
   // requests come in order, so this stays a handful of ranges for any program size.
   std::map<int64_t, int64_t> sent_;
   double last_state_s_ = -1e9;
+  std::vector<double> machine_position_;  // from INTERP_STATE; empty until known (home)
 };
 
 }  // namespace cnc::pps

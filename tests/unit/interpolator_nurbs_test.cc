@@ -45,7 +45,10 @@ struct RunResult {
   std::vector<Setpoint> sps;
 };
 
-RunResult run(const config::MachineConfig& cfg, const Block& b) {
+RunResult run(const config::MachineConfig& machine, const Block& b) {
+  // The machine stands at the curve's start (the path is continuous from there).
+  config::MachineConfig cfg = machine;
+  for (int a = 0; a < 3; ++a) cfg.axes[a].home_mm = b.start[a];
   Interpolator ip(cfg);
   ip.apply_command({Command::Kind::kStart, 1.0});
   EXPECT_TRUE(ip.apply_block(b)) << ip.last_refusal();

@@ -3,6 +3,7 @@
 //
 //   cnc-ctl --machine M --do run --program P [--timeout S]
 //   cnc-ctl --machine M --do load --program P | start | hold | resume | stop | override --value 0.8
+//   cnc-ctl --machine M --do enable [--timeout S] | disable | fault-reset    (drive bridge, DRIVE_CMD)
 //
 // Exit codes: 0 done; 2 bad flags or config; 3 program refused; 4 timeout; 5 fault.
 #include <spdlog/spdlog.h>
@@ -16,6 +17,7 @@
 
 #include "cnc/lcmt_alarm.hpp"
 #include "cnc/lcmt_axis_status.hpp"
+#include "cnc/lcmt_drive_command.hpp"
 #include "cnc/lcmt_heartbeat.hpp"
 #include "cnc/lcmt_interp_state.hpp"
 #include "cnc/lcmt_program_command.hpp"
@@ -97,13 +99,46 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
     bus.publish(cfg.channel(ch::kProgramCmd), c);
   };
 
+  // Drive bridge commands. `enable` waits until every axis reports ENABLED.
+  auto drive_command = [&](int8_t command) {
+    cnc::lcmt_drive_command c{};
+    c.command = command;
+    bus.publish(cfg.channel(ch::kDriveCmd), c);
+  };
+  if (what == "disable") return drive_command(cnc::lcmt_drive_command::DISABLE), 0;
+  if (what == "fault-reset") return drive_command(cnc::lcmt_drive_command::FAULT_RESET), 0;
+  if (what == "enable") {
+    auto all_in = [&](int8_t state) {
+      if (!view.have_axes || view.axes.num_axes == 0) return false;
+      for (int8_t s : view.axes.drive_state)
+        if (s != state) return false;
+      return true;
+    };
+    const double end = cnc::util::monotonic_s() + std::min(timeout_s, 30.0);
+    double next_send = 0;
+    while (!all_in(cnc::lcmt_axis_status::ENABLED)) {
+      if (cnc::util::stop_requested() || cnc::util::monotonic_s() > end) {
+        std::fprintf(stderr, "cnc-ctl: the drives did not enable: %s\n",
+                     view.have_axes && !view.axes.fault.empty() ? view.axes.fault[0].c_str() : "no axis status");
+        return view.have_axes ? kExitFault : kExitTimeout;
+      }
+      // Sent again every second while not enabled: a lost datagram only delays.
+      if (cnc::util::monotonic_s() >= next_send) {
+        drive_command(cnc::lcmt_drive_command::ENABLE);
+        next_send = cnc::util::monotonic_s() + 1.0;
+      }
+      bus.handle(10);
+    }
+    std::printf("drives enabled\n");
+    return 0;
+  }
   if (what == "start") return send(lcmt_program_command::START), 0;
   if (what == "hold") return send(lcmt_program_command::HOLD), 0;
   if (what == "resume") return send(lcmt_program_command::RESUME), 0;
   if (what == "stop") return send(lcmt_program_command::STOP), 0;
   if (what == "override") return send(lcmt_program_command::OVERRIDE, "", std::stod(args.option("value", "1.0"))), 0;
   if (what != "run" && what != "load") {
-    std::fprintf(stderr, "cnc-ctl: --do must be one of run load start hold resume stop override\n");
+    std::fprintf(stderr, "cnc-ctl: --do must be one of run load start hold resume stop override enable disable fault-reset\n");
     return cnc::service::kExitBadInput;
   }
   const std::string program_arg = args.option("program");

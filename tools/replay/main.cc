@@ -149,16 +149,11 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
                                      : cnc::config::load_machine_config(args.machine_file);
   const int naxes = static_cast<int>(cfg.axes.size());
 
-  // --program: the blocks of another program in place of the recorded ones.
+  // --program: the blocks of another program in place of the recorded ones. It is
+  // parsed at each recorded load of a program of that name, from where the machine
+  // then stood, as the live server does.
   std::optional<cnc::pps::ProgramServer> other;
-  if (!args.option("program").empty()) {
-    other.emplace(cfg);
-    const auto r = other->load(args.option("program"), 1);
-    if (!r.ok) {
-      std::fprintf(stderr, "cnc-replay: program refused: %s\n", r.error.c_str());
-      return kExitUnreplayable;
-    }
-  }
+  if (!args.option("program").empty()) other.emplace(cfg);
 
   const auto t0 = std::chrono::steady_clock::now();
   cnc::interp::Interpolator core(cfg);
@@ -172,8 +167,19 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
   for (int64_t cycle = 0; cycle <= last_cycle; ++cycle) {
     while (next_input < mine.size() && mine[next_input].cycle == cycle) {
       cnc::lcmt_interp_input in = mine[next_input++];
-      if (in.kind == cnc::lcmt_interp_input::COMMAND && in.command.command == cnc::lcmt_program_command::LOAD)
+      if (in.kind == cnc::lcmt_interp_input::COMMAND && in.command.command == cnc::lcmt_program_command::LOAD) {
         substituting = other && base_name(in.command.program_path) == other_name;
+        if (substituting) {
+          std::vector<double> here(naxes);
+          for (int a = 0; a < naxes; ++a)
+            here[a] = core.last().num_axes > 0 ? core.last().position_mm[a] : cfg.axes[a].home_mm;
+          const auto r = other->load(args.option("program"), 1, here);
+          if (!r.ok) {
+            std::fprintf(stderr, "cnc-replay: program refused: %s\n", r.error.c_str());
+            return kExitUnreplayable;
+          }
+        }
+      }
       if (substituting && in.kind == cnc::lcmt_interp_input::BLOCK) {
         ++substituted;
         const cnc::program::Block* b = other->block(in.block.block_index);

@@ -1,9 +1,24 @@
-// cnc-servo-sim: a Modbus TCP server that emulates the cell's servo drives, one
-// unit id per axis, with the register map of common/drive/sim_profile.h and the
-// dynamics of ServoModel. Single-threaded: select() on the listening socket and
-// the clients, with the model stepped on a 1 ms grid between requests.
+// cnc-servo-sim: emulates the cell's servo drives over Modbus TCP and Modbus RTU,
+// one unit id per axis, each axis with the drive profile its machine config names
+// (config/drives/*.yaml) and the servo dynamics of its `sim:` section.
+//
+//   cnc-servo-sim --machine M [--port P] [--bind ADDR]      TCP axes: one port
+//                 [--device PTY] [--rtu-timing real|none]   RTU axes: the simulator's end of the line
+//                 [--control FIFO] [--inject "T:CMD; ..."]  fault injection (fault_injector.h)
+//                 [--trace CSV] [--persist FILE] [--final-state FILE]
+//
+// --rtu-timing real (default) holds each RTU reply until a real line at the
+// configured baud would have carried request and reply (a pseudo-terminal moves
+// bytes at once). --persist keeps the axes' positions in FILE (every 50 ms) and
+// starts from them: drives with absolute encoders, for restarts mid-run.
+// Single-threaded: select() on the sockets, the serial line and the control FIFO,
+// with the dynamics stepped on a 1 ms grid between requests.
+#include <fcntl.h>
 #include <modbus.h>
 #include <sys/select.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <termios.h>
 #include <unistd.h>
 
 #include <spdlog/spdlog.h>
@@ -11,172 +26,515 @@
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <memory>
+#include <sstream>
 #include <vector>
 
-#include "common/drive/sim_profile.h"
+#include "common/config/yaml_reader.h"
+#include "common/drive/drive_profile.h"
 #include "common/service/service.h"
 #include "common/util/clock.h"
 #include "common/util/realtime.h"
 #include "common/util/signals.h"
-#include "tools/servo_sim/servo_model.h"
-
-namespace sim = cnc::drive::sim;
+#include "tools/servo_sim/fault_injector.h"
+#include "tools/servo_sim/rtu_frame.h"
+#include "tools/servo_sim/sim_drive.h"
 
 namespace {
 
-struct SimAxis {
-  std::string name;
-  int unit;
-  modbus_mapping_t* map;
-  cnc::servo_sim::ServoModel model;
-  // Velocity feed-forward, estimated from the last two target writes.
-  int32_t last_target_counts = 0;
-  double last_write_s = -1;
-  double feedforward_mm_s = 0;
+using cnc::servo_sim::SimDrive;
+
+double wall_s() {
+  timespec t{};
+  clock_gettime(CLOCK_REALTIME, &t);
+  return static_cast<double>(t.tv_sec) + static_cast<double>(t.tv_nsec) * 1e-9;
+}
+
+void sleep_until_mono(double t_s) {
+  const double now = cnc::util::monotonic_s();
+  if (t_s <= now) return;
+  timespec ts{};
+  const double d = t_s - now;
+  ts.tv_sec = static_cast<time_t>(d);
+  ts.tv_nsec = static_cast<long>((d - static_cast<double>(ts.tv_sec)) * 1e9);
+  nanosleep(&ts, nullptr);
+}
+
+speed_t baud_constant(int baud) {
+  switch (baud) {
+    case 9600: return B9600;
+    case 19200: return B19200;
+    case 38400: return B38400;
+    case 57600: return B57600;
+    case 115200: return B115200;
+    case 230400: return B230400;
+    case 460800: return B460800;
+    case 921600: return B921600;
+    default: return B115200;  // a pseudo-terminal ignores it; the timing model uses the configured baud
+  }
+}
+
+int open_serial(const std::string& device, int baud) {
+  const int fd = ::open(device.c_str(), O_RDWR | O_NOCTTY | O_NONBLOCK);
+  if (fd < 0) return -1;
+  termios t{};
+  if (tcgetattr(fd, &t) == 0) {
+    cfmakeraw(&t);
+    cfsetispeed(&t, baud_constant(baud));
+    cfsetospeed(&t, baud_constant(baud));
+    t.c_cflag |= CLOCAL | CREAD;
+    tcsetattr(fd, TCSANOW, &t);
+  }
+  return fd;
+}
+
+// The holding registers a request wrote: [addr, addr + n); n = 0 when none.
+void written_range(const uint8_t* pdu, int* addr, int* n) {
+  *addr = 0;
+  *n = 0;
+  switch (pdu[0]) {
+    case MODBUS_FC_WRITE_SINGLE_REGISTER:
+      *addr = (pdu[1] << 8) | pdu[2];
+      *n = 1;
+      break;
+    case MODBUS_FC_WRITE_MULTIPLE_REGISTERS:
+      *addr = (pdu[1] << 8) | pdu[2];
+      *n = (pdu[3] << 8) | pdu[4];
+      break;
+    case MODBUS_FC_WRITE_AND_READ_REGISTERS:
+      *addr = (pdu[5] << 8) | pdu[6];
+      *n = (pdu[7] << 8) | pdu[8];
+      break;
+    default: break;
+  }
+}
+
+std::map<std::string, double> read_positions(const std::string& file) {
+  std::map<std::string, double> out;
+  std::ifstream in(file);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  const std::string s = ss.str();
+  size_t at = 0;
+  while ((at = s.find('"', at)) != std::string::npos) {
+    const size_t end = s.find('"', at + 1);
+    if (end == std::string::npos) break;
+    const std::string name = s.substr(at + 1, end - at - 1);
+    const size_t colon = s.find(':', end);
+    if (colon == std::string::npos) break;
+    out[name] = std::strtod(s.c_str() + colon + 1, nullptr);
+    at = colon;
+  }
+  return out;
+}
+
+std::string positions_json(const std::vector<SimDrive*>& drives) {
+  std::string report = "{";
+  for (size_t i = 0; i < drives.size(); ++i) {
+    char buf[96];
+    std::snprintf(buf, sizeof buf, "%s\"%s\": %.7f", i ? ", " : "", drives[i]->name().c_str(),
+                  drives[i]->position_mm());
+    report += buf;
+  }
+  return report + "}";
+}
+
+class Simulator {
+ public:
+  Simulator(const cnc::config::MachineConfig& cfg, const cnc::service::Args& args);
+  ~Simulator();
+  int run();
+
+ private:
+  SimDrive* drive_for(std::vector<SimDrive*>& list, int unit);
+  // The drive reacts to what the request wrote (modbus_reply wrote the registers).
+  void after_reply(SimDrive& d, const uint8_t* pdu);
+  void step_dynamics();
+  void open_listener();
+  void close_tcp();
+  void serve_tcp_client(int fd, std::vector<int>& closed);
+  void serve_rtu_input();
+  void answer_rtu(const uint8_t* frame, int len, double rx_end_s);
+  void read_control();
+  void housekeeping(double now);
+
+  const cnc::config::MachineConfig& cfg_;
+  const cnc::service::Args& args_;
+  std::vector<std::unique_ptr<cnc::drive::DriveProfile>> profiles_;
+  std::vector<std::unique_ptr<SimDrive>> drives_;
+  std::vector<SimDrive*> all_, tcp_, rtu_;
+  cnc::servo_sim::FaultInjector injector_;
+  // TCP
+  std::string bind_;
+  int port_ = -1;
+  modbus_t* tcp_ctx_ = nullptr;
+  int listen_fd_ = -1;
+  std::vector<int> clients_;
+  // RTU
+  std::string device_;
+  int baud_ = 115200;
+  double char_s_ = 0;
+  bool line_timing_ = true;
+  modbus_t* rtu_ctx_ = nullptr;
+  int serial_fd_ = -1;
+  int capture_[2] = {-1, -1};
+  std::vector<uint8_t> rx_;
+  double rx_first_s_ = 0;
+  double line_free_s_ = 0;
+  // control, trace, persistence
+  int control_fd_ = -1;
+  int control_keep_fd_ = -1;
+  std::string control_buf_;
+  std::ofstream trace_;
+  double next_trace_s_ = 0;
+  double next_persist_s_ = 0;
+  double dt_;
+  double next_step_s_;
 };
 
-void note_target_write(SimAxis& a, double now_s) {
-  const int32_t t = sim::get_i32_low_first(&a.map->tab_registers[sim::kTargetPosition]);
-  const double dt = now_s - a.last_write_s;
-  a.feedforward_mm_s = (a.last_write_s > 0 && dt > 1e-4 && dt < 0.02)
-                           ? sim::counts_to_mm(t - a.last_target_counts) / dt
-                           : 0.0;
-  a.last_target_counts = t;
-  a.last_write_s = now_s;
-}
-
-void publish_state(SimAxis& a) {
-  uint16_t* r = a.map->tab_registers;
-  const bool enabled = (r[sim::kControlword] & sim::kCwEnable) != 0;
-  r[sim::kStatusword] = enabled ? sim::kSwEnabled : 0;
-  sim::put_i32_low_first(&r[sim::kActualPosition], sim::mm_to_counts(a.model.position_mm()));
-  sim::put_i32_low_first(&r[sim::kActualVelocity], sim::mm_to_counts(a.model.velocity_mm_s()));
-}
-
-int run_sim(const cnc::config::MachineConfig& cfg, const cnc::service::Args& args) {
-  int port = -1;
-  std::vector<SimAxis> axes;
-  for (const auto& a : cfg.axes) {
-    if (a.drive.transport != "modbus_tcp") continue;
-    if (port < 0) port = a.drive.port;
-    if (a.drive.port != port) {
-      throw std::runtime_error("axis " + a.name + ": the simulator serves one TCP port; axes use " +
-                               std::to_string(port) + " and " + std::to_string(a.drive.port));
-    }
-    modbus_mapping_t* map = modbus_mapping_new(0, 0, sim::kNumRegisters, 0);
-    if (map == nullptr) throw std::runtime_error("modbus_mapping_new failed");
-    axes.push_back(SimAxis{a.name, a.drive.unit_id, map,
-                           cnc::servo_sim::ServoModel(a.sim, a.max_velocity_mm_s, a.home_mm),
-                           sim::mm_to_counts(a.home_mm), -1.0, 0.0});
-    sim::put_i32_low_first(&map->tab_registers[sim::kTargetPosition], sim::mm_to_counts(a.home_mm));
-    publish_state(axes.back());
+Simulator::Simulator(const cnc::config::MachineConfig& cfg, const cnc::service::Args& args)
+    : cfg_(cfg), args_(args), injector_([this](const std::string& axis, uint16_t code) {
+        for (SimDrive* d : all_) {
+          if (d->name() != axis) continue;
+          d->emulator().inject_fault(code);
+          return true;
+        }
+        return false;
+      }),
+      dt_(cfg.servo_period_s) {
+  std::map<std::string, const cnc::drive::DriveProfile*> by_file;
+  std::map<std::string, double> start;
+  const std::string persist = args.option("persist");
+  if (!persist.empty() && std::filesystem::exists(persist)) {
+    start = read_positions(persist);
+    spdlog::info("cnc-servo-sim: starting from the positions in {}", persist);
   }
-  if (axes.empty()) throw std::runtime_error("no axis uses transport modbus_tcp");
-  if (!args.option("port").empty()) port = std::stoi(args.option("port"));
-
-  const std::string bind = args.option("bind", "127.0.0.1");
-  modbus_t* ctx = modbus_new_tcp(bind.c_str(), port);
-  const int listen_fd = modbus_tcp_listen(ctx, 8);
-  if (listen_fd < 0) throw std::runtime_error("cannot listen on " + bind + ":" + std::to_string(port) + ": " +
-                                              modbus_strerror(errno));
-  spdlog::info("cnc-servo-sim: {} drives on {}:{}", axes.size(), bind, port);
-
-  if (const std::string why = cnc::util::make_realtime(cfg.realtime_priority); !why.empty())
-    spdlog::warn("real-time scheduling not available ({}): running with normal scheduling", why);
-  std::map<int, bool> clients;
-  const double dt = cfg.servo_period_s;
-  double next_step = cnc::util::monotonic_s();
-  uint8_t query[MODBUS_TCP_MAX_ADU_LENGTH];
-  const int header = modbus_get_header_length(ctx);
-  while (!cnc::util::stop_requested()) {
-    // Step the dynamics on the servo grid.
-    double now = cnc::util::monotonic_s();
-    int steps = 0;
-    while (now >= next_step && steps < 1000) {
-      for (auto& a : axes) {
-        const uint16_t* r = a.map->tab_registers;
-        const double target = sim::counts_to_mm(sim::get_i32_low_first(&r[sim::kTargetPosition]));
-        // No write for two periods: the target stands still.
-        if (now - a.last_write_s > 2 * dt) a.feedforward_mm_s = 0;
-        a.model.step(dt, target, a.feedforward_mm_s, (r[sim::kControlword] & sim::kCwEnable) != 0);
-        publish_state(a);
-      }
-      next_step += dt;
-      ++steps;
+  for (size_t i = 0; i < cfg.axes.size(); ++i) {
+    const auto& a = cfg.axes[i];
+    const auto& d = a.drive;
+    if (d.transport != "modbus_tcp" && d.transport != "modbus_rtu") continue;
+    const std::string file = cnc::drive::find_drive_profile(d.profile, cfg.source_file, cfg.drive_profile_dir);
+    if (!by_file.count(file)) {
+      if (!std::filesystem::exists(file))
+        throw cnc::config::ConfigError(cfg.source_file, "axes[" + std::to_string(i) + "].drive.profile",
+                                       "no drive profile '" + d.profile + "' (looked for " + file + ")");
+      profiles_.push_back(std::make_unique<cnc::drive::DriveProfile>(cnc::drive::load_drive_profile(file)));
+      by_file[file] = profiles_.back().get();
     }
-    if (steps >= 1000) next_step = now + dt;
+    const double at = start.count(a.name) ? std::clamp(start[a.name], a.min_mm, a.max_mm) : a.home_mm;
+    drives_.push_back(std::make_unique<SimDrive>(a.name, d.unit_id, *by_file[file], a.sim, a.max_velocity_mm_s, at));
+    all_.push_back(drives_.back().get());
+    if (d.transport == "modbus_tcp") {
+      if (port_ < 0) port_ = d.port;
+      if (d.port != port_)
+        throw std::runtime_error("axis " + a.name + ": the simulator serves one TCP port; axes use " +
+                                 std::to_string(port_) + " and " + std::to_string(d.port));
+      tcp_.push_back(all_.back());
+    } else {
+      if (rtu_.empty()) baud_ = d.baud;
+      rtu_.push_back(all_.back());
+      const int bits = 1 + 8 + (d.parity == "none" ? 0 : 1) + d.stop_bits;
+      char_s_ = bits / static_cast<double>(baud_);
+    }
+  }
+  if (all_.empty()) throw std::runtime_error("no axis uses transport modbus_tcp or modbus_rtu");
+  if (!args.option("port").empty()) port_ = std::stoi(args.option("port"));
+  bind_ = args.option("bind", "127.0.0.1");
+  device_ = args.option("device");
+  const std::string timing = args.option("rtu-timing", "real");
+  if (timing != "real" && timing != "none") throw std::runtime_error("--rtu-timing must be real or none");
+  line_timing_ = timing == "real";
+  if (!rtu_.empty() && device_.empty())
+    throw std::runtime_error("RTU axes need --device: the simulator's end of the serial line");
+  if (!args.option("inject").empty()) {
+    try {
+      injector_.schedule(args.option("inject"), cnc::util::monotonic_s());
+    } catch (const std::invalid_argument& e) {
+      throw cnc::config::ConfigError("", "--inject", e.what());
+    }
+  }
+}
 
+Simulator::~Simulator() {
+  close_tcp();
+  if (tcp_ctx_) modbus_free(tcp_ctx_);
+  if (serial_fd_ >= 0) ::close(serial_fd_);
+  if (rtu_ctx_) modbus_free(rtu_ctx_);
+  for (int fd : capture_)
+    if (fd >= 0) ::close(fd);
+  if (control_fd_ >= 0) ::close(control_fd_);
+  if (control_keep_fd_ >= 0) ::close(control_keep_fd_);
+}
+
+SimDrive* Simulator::drive_for(std::vector<SimDrive*>& list, int unit) {
+  for (SimDrive* d : list)
+    if (d->unit() == unit) return d;
+  return nullptr;
+}
+
+void Simulator::after_reply(SimDrive& d, const uint8_t* pdu) {
+  int addr = 0, n = 0;
+  written_range(pdu, &addr, &n);
+  const int first = d.emulator().profile().first_address();
+  const int end = d.emulator().profile().end_address();
+  if (n > 0 && addr >= first && addr + n <= end) d.emulator().after_write(addr, n);
+  d.after_request(cnc::util::monotonic_s());
+}
+
+void Simulator::open_listener() {
+  listen_fd_ = modbus_tcp_listen(tcp_ctx_, 8);
+  if (listen_fd_ < 0)
+    throw std::runtime_error("cannot listen on " + bind_ + ":" + std::to_string(port_) + ": " + modbus_strerror(errno));
+}
+
+void Simulator::close_tcp() {
+  for (int fd : clients_) ::close(fd);
+  clients_.clear();
+  if (listen_fd_ >= 0) ::close(listen_fd_);
+  listen_fd_ = -1;
+}
+
+void Simulator::step_dynamics() {
+  const double now = cnc::util::monotonic_s();
+  int steps = 0;
+  while (now >= next_step_s_ && steps < 1000) {
+    for (SimDrive* d : all_) d->step(dt_, next_step_s_);
+    next_step_s_ += dt_;
+    ++steps;
+  }
+  if (steps >= 1000) next_step_s_ = now + dt_;
+}
+
+void Simulator::serve_tcp_client(int fd, std::vector<int>& closed) {
+  uint8_t query[MODBUS_TCP_MAX_ADU_LENGTH];
+  modbus_set_socket(tcp_ctx_, fd);
+  const int len = modbus_receive(tcp_ctx_, query);
+  if (len <= 0) {
+    if (len < 0) closed.push_back(fd);
+    return;
+  }
+  const int header = modbus_get_header_length(tcp_ctx_);
+  SimDrive* d = drive_for(tcp_, query[header - 1]);
+  const double delay = injector_.reply_delay_s(cnc::util::monotonic_s());
+  if (delay > 0) sleep_until_mono(cnc::util::monotonic_s() + delay);
+  if (d == nullptr) {
+    modbus_reply_exception(tcp_ctx_, query, MODBUS_EXCEPTION_GATEWAY_TARGET);
+    return;
+  }
+  if (const int code = injector_.take_exception()) {
+    modbus_reply_exception(tcp_ctx_, query, static_cast<unsigned>(code));
+    return;
+  }
+  modbus_reply(tcp_ctx_, query, len, d->emulator().mapping());
+  after_reply(*d, query + header);
+}
+
+void Simulator::answer_rtu(const uint8_t* frame, int len, double rx_end_s) {
+  SimDrive* d = drive_for(rtu_, frame[0]);
+  if (d == nullptr) return;  // another unit's request: on a real line nobody here answers
+  // The reply is built into a socket pair first: its length sets the line time,
+  // and a CRC injection corrupts it before it goes out.
+  modbus_set_slave(rtu_ctx_, d->unit());
+  modbus_set_socket(rtu_ctx_, capture_[0]);
+  if (const int code = injector_.take_exception()) {
+    modbus_reply_exception(rtu_ctx_, frame, static_cast<unsigned>(code));
+  } else {
+    modbus_reply(rtu_ctx_, frame, len, d->emulator().mapping());
+    after_reply(*d, frame + 1);
+  }
+  uint8_t reply[MODBUS_RTU_MAX_ADU_LENGTH];
+  const ssize_t n = ::read(capture_[1], reply, sizeof reply);
+  if (n <= 0) return;
+  if (injector_.take_crc()) reply[n - 1] ^= 0x5A;
+  double due = rx_end_s + injector_.reply_delay_s(cnc::util::monotonic_s());
+  if (line_timing_) due += (3.5 + static_cast<double>(n)) * char_s_;
+  sleep_until_mono(due);
+  if (::write(serial_fd_, reply, static_cast<size_t>(n)) != n) spdlog::warn("cnc-servo-sim: short write on the serial line");
+  line_free_s_ = cnc::util::monotonic_s() + (line_timing_ ? 3.5 * char_s_ : 0.0);
+}
+
+void Simulator::serve_rtu_input() {
+  uint8_t buf[512];
+  const ssize_t n = ::read(serial_fd_, buf, sizeof buf);
+  const double now = cnc::util::monotonic_s();
+  if (n < 0) {
+    if (errno == EAGAIN || errno == EINTR) return;
+    // The other end went away (EIO on a pseudo-terminal): reopen it.
+    ::close(serial_fd_);
+    serial_fd_ = -1;
+    rx_.clear();
+    return;
+  }
+  if (rx_.empty()) rx_first_s_ = std::max(now, line_free_s_);
+  rx_.insert(rx_.end(), buf, buf + n);
+  while (!rx_.empty()) {
+    const int need = cnc::servo_sim::rtu_request_length(rx_.data(), static_cast<int>(rx_.size()));
+    if (need < 0) {  // not a function this simulator frames: drop the buffer, the master times out
+      rx_.clear();
+      break;
+    }
+    if (need == 0 || static_cast<int>(rx_.size()) < need) break;
+    const double rx_end = rx_first_s_ + (line_timing_ ? need * char_s_ : 0.0);
+    if (injector_.dropped(now)) {
+      // Silent line.
+    } else if (cnc::servo_sim::rtu_crc_ok(rx_.data(), need)) {
+      answer_rtu(rx_.data(), need, rx_end);
+    } else {
+      spdlog::warn("cnc-servo-sim: request with a bad CRC ignored");
+    }
+    rx_.erase(rx_.begin(), rx_.begin() + need);
+    rx_first_s_ = std::max(cnc::util::monotonic_s(), line_free_s_);
+  }
+}
+
+void Simulator::read_control() {
+  char buf[256];
+  const ssize_t n = ::read(control_fd_, buf, sizeof buf);
+  if (n <= 0) return;
+  control_buf_.append(buf, static_cast<size_t>(n));
+  size_t nl;
+  while ((nl = control_buf_.find('\n')) != std::string::npos) {
+    const std::string line = control_buf_.substr(0, nl);
+    control_buf_.erase(0, nl + 1);
+    const std::string why = injector_.apply(line, cnc::util::monotonic_s());
+    if (why.empty()) {
+      spdlog::warn("cnc-servo-sim: injected '{}'", line);
+    } else {
+      spdlog::error("cnc-servo-sim: control command '{}': {}", line, why);
+    }
+  }
+}
+
+void Simulator::housekeeping(double now) {
+  injector_.poll(now);
+  if (tcp_ctx_ != nullptr) {
+    if (injector_.dropped(now) && listen_fd_ >= 0) {
+      spdlog::warn("cnc-servo-sim: dropping every connection");
+      close_tcp();
+    } else if (!injector_.dropped(now) && listen_fd_ < 0) {
+      open_listener();
+      spdlog::info("cnc-servo-sim: listening again");
+    }
+  }
+  if (!rtu_.empty() && serial_fd_ < 0) serial_fd_ = open_serial(device_, baud_);
+  if (trace_.is_open() && now >= next_trace_s_) {
+    next_trace_s_ = now + 0.01;
+    // One write per row, so a reader never sees half a row.
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%.4f", wall_s());
+    std::string row = buf;
+    for (SimDrive* d : all_) {
+      std::snprintf(buf, sizeof buf, ",%.6f,%.4f,%d", d->position_mm(), d->velocity_mm_s(), d->follows() ? 1 : 0);
+      row += buf;
+    }
+    row += "\n";
+    trace_ << row << std::flush;
+  }
+  if (!args_.option("persist").empty() && now >= next_persist_s_) {
+    next_persist_s_ = now + 0.05;
+    const std::string file = args_.option("persist");
+    std::ofstream(file + ".tmp") << positions_json(all_) << "\n";
+    std::filesystem::rename(file + ".tmp", file);
+  }
+}
+
+int Simulator::run() {
+  if (!tcp_.empty()) {
+    tcp_ctx_ = modbus_new_tcp(bind_.c_str(), port_);
+    if (tcp_ctx_ == nullptr) throw std::runtime_error("cannot create a Modbus TCP context");
+    open_listener();
+    spdlog::info("cnc-servo-sim: {} drive(s) on tcp://{}:{}", tcp_.size(), bind_, port_);
+  }
+  if (!rtu_.empty()) {
+    rtu_ctx_ = modbus_new_rtu(device_.c_str(), baud_, 'N', 8, 1);
+    if (rtu_ctx_ == nullptr || socketpair(AF_UNIX, SOCK_STREAM, 0, capture_) != 0)
+      throw std::runtime_error("cannot set up the RTU reply path");
+    serial_fd_ = open_serial(device_, baud_);
+    if (serial_fd_ < 0) throw std::runtime_error("cannot open " + device_ + ": " + std::strerror(errno));
+    spdlog::info("cnc-servo-sim: {} drive(s) on rtu://{} at {} baud ({} line timing)", rtu_.size(), device_, baud_,
+                 line_timing_ ? "real" : "no");
+  }
+  for (SimDrive* d : all_)
+    spdlog::info("cnc-servo-sim: axis {} unit {} profile {} at {:.4f} mm", d->name(), d->unit(),
+                 d->emulator().profile().name, d->position_mm());
+  if (!args_.option("control").empty()) {
+    const std::string path = args_.option("control");
+    if (!std::filesystem::exists(path) && mkfifo(path.c_str(), 0600) != 0)
+      throw std::runtime_error("cannot create the control FIFO " + path + ": " + std::strerror(errno));
+    control_fd_ = ::open(path.c_str(), O_RDONLY | O_NONBLOCK);
+    // Our own writer keeps the FIFO from signalling end-of-file between writers.
+    control_keep_fd_ = ::open(path.c_str(), O_WRONLY | O_NONBLOCK);
+    if (control_fd_ < 0) throw std::runtime_error("cannot open the control FIFO " + path);
+  }
+  if (!args_.option("trace").empty()) {
+    trace_.open(args_.option("trace"));
+    trace_ << "wall_s";
+    for (SimDrive* d : all_) trace_ << "," << d->name() << "_mm," << d->name() << "_mm_s," << d->name() << "_on";
+    trace_ << "\n";
+  }
+  if (const std::string why = cnc::util::make_realtime(cfg_.realtime_priority); !why.empty())
+    spdlog::warn("real-time scheduling not available ({}): running with normal scheduling", why);
+
+  next_step_s_ = cnc::util::monotonic_s();
+  while (!cnc::util::stop_requested()) {
+    step_dynamics();
+    const double now = cnc::util::monotonic_s();
+    housekeeping(now);
     fd_set rd;
     FD_ZERO(&rd);
-    FD_SET(listen_fd, &rd);
-    int maxfd = listen_fd;
-    for (const auto& [fd, _] : clients) {
+    int maxfd = -1;
+    auto watch = [&](int fd) {
+      if (fd < 0) return;
       FD_SET(fd, &rd);
       maxfd = std::max(maxfd, fd);
-    }
-    const double wait = std::max(0.0, next_step - cnc::util::monotonic_s());
+    };
+    watch(listen_fd_);
+    for (int fd : clients_) watch(fd);
+    watch(serial_fd_);
+    watch(control_fd_);
+    const double wait = std::clamp(next_step_s_ - cnc::util::monotonic_s(), 0.0, 0.01);
     timeval tv{0, static_cast<suseconds_t>(wait * 1e6)};
     const int n = select(maxfd + 1, &rd, nullptr, nullptr, &tv);
     if (n <= 0) continue;
-    if (FD_ISSET(listen_fd, &rd)) {
-      int fd = listen_fd;
-      const int c = modbus_tcp_accept(ctx, &fd);
-      if (c >= 0) clients[c] = true;
+    if (control_fd_ >= 0 && FD_ISSET(control_fd_, &rd)) read_control();
+    if (listen_fd_ >= 0 && FD_ISSET(listen_fd_, &rd)) {
+      int fd = listen_fd_;
+      const int c = modbus_tcp_accept(tcp_ctx_, &fd);
+      if (c >= 0) clients_.push_back(c);
     }
     std::vector<int> closed;
-    for (const auto& [fd, _] : clients) {
-      if (!FD_ISSET(fd, &rd)) continue;
-      modbus_set_socket(ctx, fd);
-      const int len = modbus_receive(ctx, query);
-      if (len <= 0) {
-        if (len < 0) closed.push_back(fd);
-        continue;
-      }
-      const int unit = query[header - 1];
-      SimAxis* target = nullptr;
-      for (auto& a : axes)
-        if (a.unit == unit) target = &a;
-      if (target == nullptr) {
-        modbus_reply_exception(ctx, query, MODBUS_EXCEPTION_GATEWAY_TARGET);
-        continue;
-      }
-      const int function = query[header];
-      modbus_reply(ctx, query, len, target->map);
-      if (function == MODBUS_FC_WRITE_AND_READ_REGISTERS || function == MODBUS_FC_WRITE_MULTIPLE_REGISTERS)
-        note_target_write(*target, cnc::util::monotonic_s());
-      publish_state(*target);
+    for (int fd : std::vector<int>(clients_)) {
+      if (FD_ISSET(fd, &rd)) serve_tcp_client(fd, closed);
     }
     for (int fd : closed) {
-      close(fd);
-      clients.erase(fd);
+      ::close(fd);
+      clients_.erase(std::remove(clients_.begin(), clients_.end(), fd), clients_.end());
     }
+    if (serial_fd_ >= 0 && FD_ISSET(serial_fd_, &rd)) serve_rtu_input();
   }
-  for (const auto& [fd, _] : clients) close(fd);
-  close(listen_fd);
-  modbus_free(ctx);
 
-  // Final positions: for tests and for the demo summary.
-  std::string report = "{";
-  for (size_t i = 0; i < axes.size(); ++i) {
-    char buf[96];
-    std::snprintf(buf, sizeof buf, "%s\"%s\": %.7f", i ? ", " : "", axes[i].name.c_str(), axes[i].model.position_mm());
-    report += buf;
-  }
-  report += "}";
+  const std::string report = positions_json(all_);
   spdlog::info("cnc-servo-sim: final positions {}", report);
-  if (!args.option("final-state").empty()) {
-    std::ofstream(args.option("final-state")) << report << "\n";
-  }
-  for (auto& a : axes) modbus_mapping_free(a.map);
+  if (!args_.option("final-state").empty()) std::ofstream(args_.option("final-state")) << report << "\n";
   return cnc::service::kExitOk;
+}
+
+int run_sim(const cnc::config::MachineConfig& cfg, const cnc::service::Args& args) {
+  Simulator sim(cfg, args);
+  return sim.run();
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  cnc::service::Spec spec{"cnc-servo-sim", "Modbus TCP servo drive simulator", {"port", "bind", "final-state"}, {}};
+  cnc::service::Spec spec{"cnc-servo-sim",
+                          "Modbus TCP / RTU servo drive simulator",
+                          {"port", "bind", "device", "rtu-timing", "control", "inject", "trace", "persist",
+                           "final-state"},
+                          {}};
   return cnc::service::run(spec, argc, argv, run_sim);
 }

@@ -1,0 +1,85 @@
+#pragma once
+// A drive profile: the register map of one kind of servo drive, as data
+// (`config/drives/NAME.yaml`), loaded strictly like the machine config: unknown
+// keys and bad values are errors naming the file and the key path.
+//
+//   name: cia402_modbus
+//   state_machine: cia402          # sim | cia402 | leadshine: the enable / fault-reset logic in code
+//   write_and_read: true           # the drive answers function 23 (write and read in one transaction)
+//   read_gap_max: 0                # unused registers a cyclic read may span to merge two fields
+//   mode_of_operation: 8           # cia402: the mode written before enabling
+//   registers:
+//     controlword:     {address: 0x6040}
+//     target_position: {address: 0x607A, words: 2, signed: true, word_order: low_first, scale: 26214.4}
+//
+// A field is 1 or 2 holding registers; `scale` converts the engineering value
+// (mm, mm/s, or a plain number) to the drive's integer: raw = round(value * scale).
+#include <array>
+#include <cstdint>
+#include <string>
+
+namespace cnc::drive {
+
+enum class Role : int8_t {
+  kControlword,     // control (CiA-402 controlword, sim enable bits, Leadshine-style servo on)
+  kStatusword,      // drive state bits
+  kMode,            // mode of operation (written)
+  kModeDisplay,     // mode of operation display (read)
+  kTargetPosition,  // mm
+  kActualPosition,  // mm
+  kActualVelocity,  // mm/s
+  kErrorCode,       // drive's fault / alarm code (read)
+  kFaultReset,      // a separate alarm-clear register (Leadshine-style)
+};
+inline constexpr int kRoleCount = 9;
+const char* role_name(Role r);
+
+enum class WordOrder : int8_t { kLowFirst, kHighFirst };
+
+struct Field {
+  int address = -1;  // -1: the profile does not have this field
+  int words = 1;     // 1 or 2 registers
+  bool is_signed = false;
+  WordOrder order = WordOrder::kLowFirst;
+  double scale = 1.0;  // drive units per engineering unit
+
+  bool present() const { return address >= 0; }
+  int end() const { return address + words; }
+  // Engineering value -> registers (rounded, saturated to the field's range).
+  void encode(double value, uint16_t* regs) const;
+  double decode(const uint16_t* regs) const;
+  // Integer level, for control words and tests.
+  void encode_raw(int64_t raw, uint16_t* regs) const;
+  int64_t decode_raw(const uint16_t* regs) const;
+  int64_t min_raw() const;
+  int64_t max_raw() const;
+};
+
+struct DriveProfile {
+  std::string name;
+  std::string file;
+  std::string description;
+  std::string state_machine;  // sim | cia402 | leadshine
+  bool write_and_read = false;
+  int read_gap_max = 0;
+  int mode_of_operation = 8;
+  std::array<Field, kRoleCount> fields{};
+
+  const Field& field(Role r) const { return fields[static_cast<size_t>(r)]; }
+  bool has(Role r) const { return field(r).present(); }
+  // Lowest register address and one past the highest of all fields.
+  int first_address() const;
+  int end_address() const;
+};
+
+// Loads and validates; throws config::ConfigError naming the file and key path.
+DriveProfile load_drive_profile(const std::string& file);
+DriveProfile parse_drive_profile(const std::string& yaml_text, const std::string& file_label);
+
+// Where the profile `name` of a machine is: `profile_dir` when set (relative to the
+// machine file's folder), else `config/drives` next to the machine file's folder,
+// else the source tree's config/drives. A name with '/' or ending in .yaml is a path.
+std::string find_drive_profile(const std::string& name, const std::string& machine_file,
+                               const std::string& profile_dir);
+
+}  // namespace cnc::drive

@@ -1,0 +1,71 @@
+#pragma once
+// A Modbus link: one connection (a TCP endpoint, a serial line, or the in-process
+// loopback) shared by the drives behind it, told apart by unit id. The link is
+// kept apart from the register transactions (DriveIo) as LinuxCNC's mb2hal keeps
+// them: a failed transaction is counted by kind and is never fatal; a broken
+// connection is closed and reopened with exponential back-off.
+#include <cstdint>
+#include <string>
+
+namespace cnc::drive {
+
+struct LinkCounters {
+  int64_t transactions = 0;
+  int64_t timeouts = 0;
+  int64_t exceptions = 0;  // the drive answered with a Modbus exception
+  int64_t crc_errors = 0;
+  int64_t other_errors = 0;  // malformed or mismatched answers, I/O errors
+  int64_t reconnects = 0;    // the drive answered again after its link was lost
+};
+
+enum class TxResult : int8_t { kOk, kTimeout, kException, kCrc, kLinkLost, kOther };
+const char* tx_result_name(TxResult r);
+
+class Link {
+ public:
+  explicit Link(std::string name);
+  virtual ~Link() = default;
+  Link(const Link&) = delete;
+  Link& operator=(const Link&) = delete;
+
+  // Opens the link when closed and the back-off allows it; whether it is open.
+  bool ensure_open(double now_s);
+  bool is_open() const { return open_; }
+  // Closes it; the next attempt waits for the back-off.
+  void close(double now_s);
+  void set_backoff(double min_s, double max_s);
+  const std::string& name() const { return name_; }
+  const std::string& last_error() const { return last_error_; }
+
+  TxResult read_registers(int unit, int addr, int n, uint16_t* dest, LinkCounters& c);
+  TxResult write_register(int unit, int addr, uint16_t value, LinkCounters& c);
+  TxResult write_registers(int unit, int addr, int n, const uint16_t* src, LinkCounters& c);
+  // Function 23: the write happens before the read.
+  TxResult write_and_read(int unit, int write_addr, int write_n, const uint16_t* src, int read_addr, int read_n,
+                          uint16_t* dest, LinkCounters& c);
+
+ protected:
+  // Each returns 0 on success or the errno of the failure (libmodbus codes for
+  // exceptions, CRC and protocol errors).
+  virtual int do_open(std::string& error) = 0;
+  virtual void do_close() = 0;
+  virtual int do_read(int unit, int addr, int n, uint16_t* dest) = 0;
+  virtual int do_write1(int unit, int addr, uint16_t value) = 0;
+  virtual int do_write(int unit, int addr, int n, const uint16_t* src) = 0;
+  virtual int do_write_read(int unit, int waddr, int wn, const uint16_t* src, int raddr, int rn, uint16_t* dest) = 0;
+  // After a failed transaction that may leave bytes in flight (timeouts, garbage):
+  // a serial line is flushed, a TCP connection made afresh.
+  virtual void discard_input() {}
+
+ private:
+  TxResult finish(int err, LinkCounters& c);
+  std::string name_;
+  bool open_ = false;
+  double next_attempt_s_ = 0;
+  double backoff_min_s_ = 0.1;
+  double backoff_max_s_ = 2.0;
+  double backoff_s_ = 0.1;
+  std::string last_error_;
+};
+
+}  // namespace cnc::drive

@@ -1,0 +1,88 @@
+#include "common/drive/loopback_link.h"
+
+#include <modbus.h>
+
+#include <cerrno>
+
+namespace cnc::drive {
+
+LoopbackLink::LoopbackLink() : Link("loopback") {}
+
+void LoopbackLink::add_drive(int unit, const DriveProfile& profile, double start_mm) {
+  drives_[unit] = std::make_unique<DriveEmulator>(profile, start_mm);
+}
+
+DriveEmulator* LoopbackLink::drive(int unit) {
+  auto it = drives_.find(unit);
+  return it == drives_.end() ? nullptr : it->second.get();
+}
+
+void LoopbackLink::set_reachable(bool reachable) { reachable_ = reachable; }
+
+void LoopbackLink::inject_exceptions(int count, int code) {
+  exceptions_left_ = count;
+  exception_code_ = code;
+}
+
+void LoopbackLink::inject_timeouts(int count) { timeouts_left_ = count; }
+
+void LoopbackLink::set_stalled(bool stalled) { stalled_ = stalled; }
+
+int LoopbackLink::do_open(std::string& error) {
+  if (reachable_) return 0;
+  error = "loopback unreachable (injected)";
+  return ECONNREFUSED;
+}
+
+int LoopbackLink::injected() {
+  if (!reachable_) return ECONNRESET;
+  if (timeouts_left_ > 0) {
+    --timeouts_left_;
+    return ETIMEDOUT;
+  }
+  if (exceptions_left_ > 0) {
+    --exceptions_left_;
+    return MODBUS_ENOBASE + exception_code_;
+  }
+  return 0;
+}
+
+void LoopbackLink::move(DriveEmulator& d) {
+  // The ideal axis reaches each target by the next write: a read after a write
+  // answers the previous command, as a real drive's would.
+  const Field& f = d.profile().field(Role::kActualPosition);
+  uint16_t regs[2];
+  d.read(f.address, 2, regs);
+  d.set_actual(d.follows() && !stalled_ ? d.target_mm() : f.decode(regs), 0.0);
+}
+
+int LoopbackLink::do_read(int unit, int addr, int n, uint16_t* dest) {
+  if (const int e = injected()) return e;
+  DriveEmulator* d = drive(unit);
+  if (d == nullptr) return ETIMEDOUT;
+  const int x = d->read(addr, n, dest);
+  return x ? MODBUS_ENOBASE + x : 0;
+}
+
+int LoopbackLink::do_write1(int unit, int addr, uint16_t value) { return do_write(unit, addr, 1, &value); }
+
+int LoopbackLink::do_write(int unit, int addr, int n, const uint16_t* src) {
+  if (const int e = injected()) return e;
+  DriveEmulator* d = drive(unit);
+  if (d == nullptr) return ETIMEDOUT;
+  move(*d);
+  const int x = d->write(addr, n, src);
+  return x ? MODBUS_ENOBASE + x : 0;
+}
+
+int LoopbackLink::do_write_read(int unit, int waddr, int wn, const uint16_t* src, int raddr, int rn, uint16_t* dest) {
+  if (const int e = injected()) return e;
+  DriveEmulator* d = drive(unit);
+  if (d == nullptr) return ETIMEDOUT;
+  move(*d);
+  int x = d->write(waddr, wn, src);
+  if (x == 0) x = d->read(raddr, rn, dest);
+  return x ? MODBUS_ENOBASE + x : 0;
+}
+
+}  // namespace cnc::drive

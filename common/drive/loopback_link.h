@@ -1,0 +1,44 @@
+#pragma once
+// The in-process link: drives emulated by DriveEmulator with an ideal axis (the
+// actual position is the target once the drive follows). The whole bridge runs on
+// it without a simulator or a network, as ros2_control's mock hardware does; tests
+// inject link loss, exceptions and drive faults through it.
+#include <map>
+#include <memory>
+
+#include "common/drive/drive_emulator.h"
+#include "common/drive/link.h"
+
+namespace cnc::drive {
+
+class LoopbackLink final : public Link {
+ public:
+  LoopbackLink();
+  void add_drive(int unit, const DriveProfile& profile, double start_mm);
+  DriveEmulator* drive(int unit);
+
+  // Fault injection.
+  void set_reachable(bool reachable);          // false: the link breaks and cannot be opened
+  void inject_exceptions(int count, int code);  // the next `count` transactions answer with `code`
+  void inject_timeouts(int count);
+  void set_stalled(bool stalled);               // the axes stop moving (a blocked axis: following error)
+
+ private:
+  int do_open(std::string& error) override;
+  void do_close() override {}
+  int do_read(int unit, int addr, int n, uint16_t* dest) override;
+  int do_write1(int unit, int addr, uint16_t value) override;
+  int do_write(int unit, int addr, int n, const uint16_t* src) override;
+  int do_write_read(int unit, int waddr, int wn, const uint16_t* src, int raddr, int rn, uint16_t* dest) override;
+  int injected();
+  void move(DriveEmulator& d);
+
+  std::map<int, std::unique_ptr<DriveEmulator>> drives_;
+  bool reachable_ = true;
+  int exceptions_left_ = 0;
+  int exception_code_ = 0;
+  int timeouts_left_ = 0;
+  bool stalled_ = false;
+};
+
+}  // namespace cnc::drive

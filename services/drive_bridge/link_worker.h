@@ -1,0 +1,109 @@
+#pragma once
+// The Modbus side of the drive bridge: one worker per link (TCP endpoint, serial
+// line, loopback) runs the register transactions of the drives on it, on its own
+// thread, so the servo loop never blocks on I/O (mb2hal keeps Modbus out of the
+// real-time thread the same way). Each round it writes every drive's latest
+// command, reads status and position, steps the profile's state machine toward
+// the goal the servo loop set, and detects a lost link: a connection error, or no
+// answer for drive_bridge.link_loss_timeout_s. A lost link is reopened with
+// exponential back-off; the drives on it are then only ever disabled until the
+// servo loop sets the goal "enable" again.
+//
+// Over a slow serial line a round takes longer than a servo tick: the worker then
+// runs back to back and always writes the newest command.
+#include <array>
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "common/config/machine_config.h"
+#include "common/drive/drive_io.h"
+#include "common/drive/link.h"
+
+namespace cnc::bridge {
+
+// What the servo loop and a worker exchange for one axis.
+struct AxisCommand {
+  drive::Goal goal = drive::Goal::kDisable;
+  bool follow = false;    // write `cmd_mm`; otherwise hold where the drive is
+  double cmd_mm = 0;
+  int64_t cmd_cycle = -1;  // setpoint cycle the command heads for (latency probe)
+};
+
+struct AxisReport {
+  bool answering = false;   // the drive answered within the link-loss timeout
+  int64_t lost_events = 0;  // times its link was lost
+  bool have_status = false;
+  uint16_t statusword = 0;
+  drive::DriveStatus status;
+  uint16_t error_code = 0;
+  double actual_mm = 0;
+  double hold_mm = 0;       // the target the drive holds while not following
+  bool holding = false;     // enabled, and its target is the command or the latched hold
+  double fe_mm = 0;         // last target written before this exchange, minus the actual position
+  int64_t fe_samples = 0;
+  drive::LinkCounters counters;
+  std::array<char, 96> last_error{};  // fixed size: reports are copied every tick
+};
+
+class LinkWorker {
+ public:
+  // Called on the worker's thread for every target write while following.
+  using WriteProbe = std::function<void(int axis, int64_t cycle, double mono_s)>;
+
+  LinkWorker(drive::Link& link, const config::DriveBridgeConfig& cfg);
+  ~LinkWorker();
+  void add_axis(int axis_index, const drive::DriveProfile& profile, int unit);
+  const std::vector<int>& axes() const { return axis_index_; }
+  drive::Link& link() { return link_; }
+  void set_probe(WriteProbe p) { probe_ = std::move(p); }
+
+  // Threaded use: start(), then post() after every set_command().
+  void start();
+  void stop();
+  void post();
+  // Inline use (tests, shut-down): one round on the caller's thread.
+  void round(double now_s);
+
+  void set_command(size_t slot, const AxisCommand& c);
+  AxisReport report(size_t slot) const;
+  int64_t rounds() const { return rounds_.load(); }
+
+ private:
+  static constexpr size_t kMaxSlots = 16;
+  struct Slot {
+    std::unique_ptr<drive::DriveIo> io;
+    AxisCommand cmd;       // under mu_
+    AxisReport rep;        // under mu_
+    // Worker-only state.
+    AxisReport work;
+    double last_answer_s = -1;
+    bool lost = false;
+    bool have_written = false;
+    double written_mm = 0;
+    bool hold_valid = false;
+  };
+  void run();
+  void mark_lost(Slot& s);
+
+  drive::Link& link_;
+  config::DriveBridgeConfig cfg_;
+  std::vector<Slot> slots_;
+  std::vector<int> axis_index_;
+  WriteProbe probe_;
+  mutable std::mutex mu_;
+  std::condition_variable cv_;
+  int64_t posted_ = 0;
+  int64_t taken_ = 0;
+  bool stopping_ = false;
+  std::thread thread_;
+  std::atomic<int64_t> rounds_{0};
+};
+
+}  // namespace cnc::bridge

@@ -1,0 +1,272 @@
+// The drive bridge node on the in-process loopback link and an in-memory bus,
+// servo ticks driven by the test (no threads, no clock): enable at start, follow
+// setpoints, publish AXIS_STATUS; a lost link faults, is reconnected with the
+// reconnect counted and the drives kept disabled until ENABLE; a drive fault and a
+// following error fault; exceptions and timeouts are counted and not fatal;
+// DISABLE stops following. Each profile drives the same scenario.
+#include <gtest/gtest.h>
+#include <modbus.h>
+
+#include <cmath>
+#include <string>
+
+#include "cnc/lcmt_alarm.hpp"
+#include "cnc/lcmt_axis_status.hpp"
+#include "cnc/lcmt_drive_command.hpp"
+#include "cnc/lcmt_setpoint.hpp"
+#include "common/bus/bus.h"
+#include "common/config/machine_config.h"
+#include "common/config/yaml_reader.h"
+#include "common/drive/loopback_link.h"
+#include "services/drive_bridge/drive_bridge_node.h"
+
+namespace cnc::bridge {
+namespace {
+
+using State = DriveBridgeNode::State;
+// Read in constant expressions, so the test does not odr-use the generated statics.
+constexpr int kEnabled = cnc::lcmt_axis_status::ENABLED;
+constexpr int kFault = cnc::lcmt_axis_status::FAULT;
+constexpr int kDisabled = cnc::lcmt_axis_status::DISABLED;
+
+std::string machine_yaml(const std::string& profile, bool enable_on_start) {
+  std::string y =
+      "cell: {name: lb, channel_prefix: \"LB.\"}\n"
+      "timing: {ipo_period_s: 0.004, servo_period_s: 0.001, setpoint_timeout_s: 0.05, stop_decel_mm_s2: 2000}\n"
+      "drive_bridge: {enable_on_start: " + std::string(enable_on_start ? "true" : "false") +
+      ", link_loss_timeout_s: 0.05, reconnect_min_s: 0.01, reconnect_max_s: 0.04}\n"
+      "axes:\n";
+  for (int i = 0; i < 2; ++i) {
+    y += "  - {name: " + std::string(i == 0 ? "X" : "Y") +
+         ", min_mm: -5, max_mm: 300, max_velocity_mm_s: 250, max_accel_mm_s2: 3000, max_jerk_mm_s3: 60000,"
+         " max_following_error_mm: 0.5, home_mm: 10,"
+         " drive: {transport: loopback, unit_id: " + std::to_string(i + 1) + ", profile: " + profile + "}}\n";
+  }
+  return y;
+}
+
+class Cell {
+ public:
+  Cell(const std::string& profile, bool enable_on_start)
+      : cfg(config::parse_machine_config(machine_yaml(profile, enable_on_start), "lb.yaml")), bus("memq://"),
+        node(cfg, bus, DriveBridgeNode::Options{false}) {
+    bus.subscribe<cnc::lcmt_axis_status>("LB.AXIS_STATUS", [this](const auto& m) { status = m; });
+    bus.subscribe<cnc::lcmt_alarm>("LB.ALARM", [this](const auto& m) { alarms.push_back(m.code + ": " + m.text); });
+    node.start();
+  }
+  // One servo tick at 1 ms; a setpoint every 4th tick when `sp` is given.
+  void tick() {
+    t += 0.001;
+    node.servo_tick(t);
+    node.publish_status(0);
+    bus.drain();
+  }
+  void ticks(int n) {
+    for (int i = 0; i < n; ++i) tick();
+  }
+  void setpoint(double x, double y) {
+    cnc::lcmt_setpoint m{};
+    m.cycle = cycle++;
+    m.period_s = 0.004;
+    m.num_axes = 2;
+    m.position_mm = {x, y};
+    bus.publish("LB.SETPOINTS", m);
+  }
+  // X from `from` to `to` at up to 25 mm/s, accelerating at 625 mm/s^2 (0.01 mm per cycle per cycle).
+  double move_x(double from, double to, double y = 10) {
+    const double dir = to > from ? 1 : -1;
+    double x = from, v = 0;
+    while (std::fabs(to - x) > 1e-9) {
+      const double left = std::fabs(to - x);
+      // Brake when the distance to go is what braking from v takes.
+      const double brake = v * (v / 0.01 + 1) / 2;
+      v = left <= brake + 1e-12 ? std::max(0.01, v - 0.01) : std::min(0.1, v + 0.01);
+      x = std::fabs(to - x) < v ? to : x + dir * v;
+      setpoint(x, y);
+      ticks(4);
+    }
+    return x;
+  }
+  // The stream of an idle interpolator at (x, y) for n cycles.
+  void hold_stream(double x, double y, int n) {
+    for (int i = 0; i < n; ++i) {
+      setpoint(x, y);
+      ticks(4);
+    }
+  }
+  void command(int8_t c) {
+    cnc::lcmt_drive_command m{};
+    m.command = c;
+    bus.publish("LB.DRIVE_CMD", m);
+  }
+  drive::LoopbackLink& link() { return dynamic_cast<drive::LoopbackLink&>(node.link_of(0)); }
+  double drive_mm(int unit) {
+    drive::DriveEmulator* d = link().drive(unit);
+    const auto& f = d->profile().field(drive::Role::kActualPosition);
+    uint16_t r[2];
+    d->read(f.address, 2, r);
+    return f.decode(r);
+  }
+  bool alarmed(const std::string& code) const {
+    for (const auto& a : alarms)
+      if (a.rfind(code, 0) == 0) return true;
+    return false;
+  }
+
+  config::MachineConfig cfg;
+  bus::Bus bus;
+  DriveBridgeNode node;
+  cnc::lcmt_axis_status status{};
+  std::vector<std::string> alarms;
+  double t = 0;
+  int64_t cycle = 0;
+};
+
+class EveryProfile : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(EveryProfile, EnablesAtStartAndFollowsSetpoints) {
+  Cell c(GetParam(), true);
+  c.ticks(40);
+  ASSERT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  EXPECT_TRUE(c.node.ready());
+  EXPECT_TRUE(c.alarmed("drives_enabled"));
+  const double x = c.move_x(10, 19.5);
+  c.hold_stream(x, 10, 10);
+  EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  EXPECT_NEAR(c.drive_mm(1), x, 2e-3);
+  EXPECT_NEAR(c.drive_mm(2), 10, 2e-3);
+  ASSERT_EQ(c.status.num_axes, 2);
+  EXPECT_EQ(int{c.status.drive_state[0]}, kEnabled);
+  EXPECT_NEAR(c.status.actual_mm[0], x, 2e-3);
+  EXPECT_NEAR(c.status.commanded_mm[0], x, 1e-9);
+  EXPECT_GT(c.status.transactions[0], 400);
+  EXPECT_EQ(c.status.timeouts[0] + c.status.exceptions[0] + c.status.crc_errors[0] + c.status.reconnects[0], 0);
+}
+
+TEST_P(EveryProfile, LostLinkFaultsReconnectsAndStaysDisabledUntilEnable) {
+  Cell c(GetParam(), true);
+  c.ticks(40);
+  c.hold_stream(10, 10, 5);
+  ASSERT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  c.link().set_reachable(false);
+  c.hold_stream(10, 10, 5);
+  EXPECT_EQ(c.node.state(), State::kFault) << c.node.detail();
+  EXPECT_NE(c.node.detail().find("link loopback lost"), std::string::npos) << c.node.detail();
+  EXPECT_TRUE(c.alarmed("drive_fault"));
+  EXPECT_EQ(int{c.status.drive_state[0]}, kFault);
+  // Back: reconnected and counted, the drives disabled, nothing moves.
+  c.link().set_reachable(true);
+  c.hold_stream(10, 10, 30);
+  EXPECT_EQ(c.status.reconnects[0], 1);
+  EXPECT_EQ(c.status.reconnects[1], 1);
+  EXPECT_TRUE(c.alarmed("drive_reconnected"));
+  EXPECT_FALSE(c.link().drive(1)->follows());
+  EXPECT_FALSE(c.link().drive(2)->follows());
+  EXPECT_EQ(c.node.state(), State::kFault);
+  EXPECT_NEAR(c.drive_mm(1), 10, 1e-3);
+  // ENABLE: enabled again, following.
+  c.command(cnc::lcmt_drive_command::ENABLE);
+  c.hold_stream(10, 10, 20);
+  EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  EXPECT_TRUE(c.link().drive(1)->follows());
+  const double x = c.move_x(10, 12);
+  c.hold_stream(x, 10, 5);
+  EXPECT_NEAR(c.drive_mm(1), x, 2e-3);
+}
+
+TEST_P(EveryProfile, DriveFaultFaultsAndEnableResetsIt) {
+  Cell c(GetParam(), true);
+  c.ticks(40);
+  c.hold_stream(10, 10, 5);
+  c.link().drive(2)->inject_fault(0x7500);
+  c.hold_stream(10, 10, 5);
+  EXPECT_EQ(c.node.state(), State::kFault);
+  EXPECT_NE(c.node.detail().find("axis Y: the drive reports a fault"), std::string::npos) << c.node.detail();
+  c.command(cnc::lcmt_drive_command::ENABLE);
+  c.hold_stream(10, 10, 20);
+  EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  EXPECT_TRUE(c.link().drive(2)->follows());
+}
+
+INSTANTIATE_TEST_SUITE_P(Shipped, EveryProfile, ::testing::Values("sim", "cia402_modbus", "leadshine_el"));
+
+TEST(BridgeNode, WithoutEnableOnStartWaitsForEnable) {
+  Cell c("cia402_modbus", false);
+  c.hold_stream(10, 10, 20);
+  EXPECT_EQ(c.node.state(), State::kDisabled);
+  EXPECT_TRUE(c.node.ready());
+  EXPECT_FALSE(c.link().drive(1)->follows());
+  EXPECT_EQ(int{c.status.drive_state[0]}, kDisabled);
+  c.command(cnc::lcmt_drive_command::ENABLE);
+  c.hold_stream(10, 10, 20);
+  EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  c.command(cnc::lcmt_drive_command::DISABLE);
+  c.hold_stream(10, 10, 5);
+  EXPECT_EQ(c.node.state(), State::kDisabled);
+  EXPECT_FALSE(c.link().drive(1)->follows());
+  EXPECT_EQ(int{c.status.drive_state[0]}, kDisabled);
+}
+
+TEST(BridgeNode, ExceptionsAndTimeoutsAreCountedNotFatal) {
+  Cell c("sim", true);
+  c.ticks(40);
+  c.hold_stream(10, 10, 5);
+  c.link().inject_exceptions(5, MODBUS_EXCEPTION_SLAVE_OR_SERVER_BUSY);
+  c.hold_stream(10, 10, 5);
+  c.link().inject_timeouts(3);
+  c.hold_stream(10, 10, 5);
+  EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  EXPECT_EQ(c.status.exceptions[0] + c.status.exceptions[1], 5);
+  EXPECT_EQ(c.status.timeouts[0] + c.status.timeouts[1], 3);
+  EXPECT_EQ(c.status.reconnects[0], 0);
+}
+
+TEST(BridgeNode, FollowingErrorOverTheLimitFaults) {
+  Cell c("leadshine_el", true);
+  c.ticks(40);
+  c.hold_stream(10, 10, 5);
+  c.link().set_stalled(true);  // the axes stop moving
+  double x = 10, v = 0;
+  for (int i = 0; i < 60 && c.node.state() == State::kEnabled; ++i) {
+    v = std::min(0.1, v + 0.01);
+    x += v;
+    c.setpoint(x, 10);
+    c.ticks(4);
+  }
+  c.hold_stream(x, 10, 60);
+  EXPECT_EQ(c.node.state(), State::kFault);
+  EXPECT_NE(c.node.detail().find("axis X: following error"), std::string::npos) << c.node.detail();
+  EXPECT_NE(c.node.detail().find("over its limit 0.5 mm"), std::string::npos) << c.node.detail();
+  EXPECT_FALSE(c.link().drive(1)->follows());  // the axis at fault is disabled
+}
+
+TEST(BridgeNode, SetpointTimeoutIsAControlledStopThenFault) {
+  Cell c("sim", true);
+  c.ticks(40);
+  c.hold_stream(10, 10, 5);
+  c.ticks(100);  // the interpolator went silent
+  EXPECT_EQ(c.node.state(), State::kFault);
+  EXPECT_NE(c.node.detail().find("no setpoint for"), std::string::npos) << c.node.detail();
+  EXPECT_TRUE(c.link().drive(1)->follows());  // holding position, enabled
+  // Setpoints again are not followed until ENABLE.
+  c.hold_stream(10, 10, 5);
+  EXPECT_EQ(c.node.state(), State::kFault);
+  c.command(cnc::lcmt_drive_command::ENABLE);
+  c.hold_stream(10, 10, 10);
+  EXPECT_EQ(c.node.state(), State::kEnabled);
+}
+
+TEST(BridgeNode, MissingProfileIsAConfigErrorNamingTheKey) {
+  const config::MachineConfig cfg = config::parse_machine_config(machine_yaml("no_such_drive", true), "lb.yaml");
+  bus::Bus bus("memq://");
+  try {
+    DriveBridgeNode node(cfg, bus, DriveBridgeNode::Options{false});
+    FAIL() << "constructed with a missing profile";
+  } catch (const config::ConfigError& e) {
+    EXPECT_EQ(e.key_path(), "axes[0].drive.profile");
+    EXPECT_NE(std::string(e.what()).find("no drive profile 'no_such_drive'"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace cnc::bridge

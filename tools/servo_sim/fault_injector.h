@@ -1,0 +1,52 @@
+#pragma once
+// Fault injection of the servo simulator. Commands, one per line, from the
+// control FIFO (--control PATH) or scheduled with --inject "T:CMD; T:CMD" (T in s
+// after start):
+//   drop S           close every connection and answer nothing for S seconds
+//   delay MS [S]     delay every reply by MS milliseconds (for S seconds; default until clear)
+//   exception C [N]  answer the next N requests (default 1) with Modbus exception C
+//   crc [N]          RTU: corrupt the CRC of the next N replies (default 1)
+//   fault AXIS [C]   the drive of AXIS raises a fault (error code C, default 0x7500)
+//   clear            end every injection
+#include <cstdint>
+#include <functional>
+#include <limits>
+#include <string>
+#include <vector>
+
+namespace cnc::servo_sim {
+
+class FaultInjector {
+ public:
+  using AxisFault = std::function<bool(const std::string& axis, uint16_t code)>;
+  explicit FaultInjector(AxisFault on_fault) : on_fault_(std::move(on_fault)) {}
+
+  // Applies one command; "" when done, else what is wrong with it.
+  std::string apply(const std::string& line, double now_s);
+  // Parses --inject; throws std::invalid_argument naming the bad entry.
+  void schedule(const std::string& spec, double start_s);
+  // Applies the scheduled commands that are due.
+  void poll(double now_s);
+
+  bool dropped(double now_s) const { return now_s < drop_until_s_; }
+  double reply_delay_s(double now_s) const { return now_s < delay_until_s_ ? delay_s_ : 0.0; }
+  // Consumes one injected exception; 0 when none is due.
+  int take_exception();
+  bool take_crc();
+
+ private:
+  AxisFault on_fault_;
+  double drop_until_s_ = -1;
+  double delay_s_ = 0;
+  double delay_until_s_ = -1;
+  int exceptions_left_ = 0;
+  int exception_code_ = 0;
+  int crc_left_ = 0;
+  struct Scheduled {
+    double at_s;
+    std::string command;
+  };
+  std::vector<Scheduled> scheduled_;
+};
+
+}  // namespace cnc::servo_sim
