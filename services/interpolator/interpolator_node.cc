@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "cnc/lcmt_alarm.hpp"
 #include "cnc/lcmt_block_request.hpp"
 #include "cnc/lcmt_interp_input.hpp"
 #include "cnc/lcmt_interp_state.hpp"
@@ -21,7 +22,7 @@ InterpolatorNode::InterpolatorNode(const config::MachineConfig& cfg, bus::Bus& b
     : cfg_(cfg), bus_(bus), core_(cfg),
       ch_setpoints_(cfg.channel(ch::kSetpoints)), ch_request_(cfg.channel(ch::kBlockRequest)),
       ch_state_(cfg.channel(ch::kInterpState)), ch_input_(cfg.channel(ch::kInterpInput)),
-      ch_config_(cfg.channel(ch::kInterpConfig)),
+      ch_config_(cfg.channel(ch::kInterpConfig)), ch_alarm_(cfg.channel(ch::kAlarm)),
       config_period_cycles_(std::max<int64_t>(1, std::llround(1.0 / cfg.ipo_period_s))),
       // Re-request after ~100 ms without the block (a lost request or block).
       resend_cycles_(std::max<int64_t>(2, std::llround(0.1 / cfg.ipo_period_s))) {
@@ -138,9 +139,22 @@ void InterpolatorNode::cycle() {
     program::Block b;
     const std::string why = program::from_msg(it->second, static_cast<int>(cfg_.axes.size()), &b);
     if (!why.empty() || !core_.apply_block(b)) {
-      ++rejected_blocks_;
-      spdlog::error("block {} of program {} refused: {}", it->first, token_, why.empty() ? core_.last_refusal() : why);
-      reorder_.erase(it);
+      // A block the core cannot take ends the program: the path stops where it is
+      // (a recorded STOP) and the operator is told why. Nothing more is requested.
+      const std::string text = "block " + std::to_string(it->first) + " (line " + std::to_string(it->second.source_line) +
+                               ") refused: " + (why.empty() ? core_.last_refusal() : why);
+      spdlog::error("{}", text);
+      cnc::lcmt_alarm al{};
+      al.source = "cnc-interpolator";
+      al.severity = cnc::lcmt_alarm::FAULT;
+      al.code = "block_refused";
+      al.text = text;
+      bus_.publish(ch_alarm_, al);
+      cnc::lcmt_program_command stop{};
+      stop.command = cnc::lcmt_program_command::STOP;
+      apply_command(Command{Command::Kind::kStop, 1.0}, stop);
+      token_ = 0;
+      reorder_.clear();
       break;
     }
     cnc::lcmt_interp_input in{};

@@ -34,7 +34,7 @@ class InterpolatorNode {
   config::MachineConfig cfg_;
   bus::Bus& bus_;
   Interpolator core_;
-  std::string ch_setpoints_, ch_request_, ch_state_, ch_input_, ch_config_;
+  std::string ch_setpoints_, ch_request_, ch_state_, ch_input_, ch_config_, ch_alarm_;
   int64_t config_period_cycles_;
 
   // Inputs that arrived since the last cycle, applied in arrival order.
@@ -48,7 +48,6 @@ class InterpolatorNode {
   int64_t last_request_cycle_ = -1000000;
   int64_t resend_cycles_;
   int64_t setpoints_published_ = 0;
-  int64_t rejected_blocks_ = 0;
   RunState last_state_ = RunState::kIdle;
   int64_t last_state_cycle_ = 0;
 };

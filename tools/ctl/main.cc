@@ -215,9 +215,19 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
       if (s == cnc::lcmt_axis_status::FAULT) return true;
     return false;
   };
+  auto block_refused = [&] {
+    for (const auto& a : view.alarms)
+      if (a.code == "block_refused") return true;
+    return false;
+  };
   const bool done = wait_for(bus, timeout_s, [&] {
-    return bridge_fault() || (view.interp.program_token == token && view.interp.state == 3 /* done */);
+    return bridge_fault() || block_refused() ||
+           (view.interp.program_token == token && view.interp.state == 3 /* done */);
   });
+  if (block_refused()) {
+    std::fprintf(stderr, "cnc-ctl: the interpolator refused a block; the program was stopped\n");
+    return kExitRefused;
+  }
   if (bridge_fault()) {
     std::fprintf(stderr, "cnc-ctl: drive fault: %s\n", view.axes.fault.empty() ? "" : view.axes.fault[0].c_str());
     return kExitFault;
