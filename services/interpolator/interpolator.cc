@@ -80,6 +80,21 @@ double norm(const AxisVec& v, int n) {
   return std::sqrt(s);
 }
 
+// The local frame of a curve from its first two derivatives in u: the unit tangent
+// t and the curvature vector k = d²P/ds² (|k| = κ, along the normal). Returns |P'|;
+// 0 at a singular point, where t and k are left untouched.
+double local_frame(const AxisVec& d1, const AxisVec& d2, int n, AxisVec* t, AxisVec* k) {
+  const double sp = norm(d1, n);
+  if (sp <= 0) return 0;
+  double d2t = 0;
+  for (int a = 0; a < n; ++a) {
+    (*t)[a] = d1[a] / sp;
+    d2t += d2[a] * (*t)[a];
+  }
+  for (int a = 0; a < n; ++a) (*k)[a] = (d2[a] - d2t * (*t)[a]) / (sp * sp);
+  return sp;
+}
+
 }  // namespace
 
 const char* to_string(Limit limit) {
@@ -168,20 +183,15 @@ void Interpolator::plan_block(Planned& p) {
     }
     grid.push_back(u1);
     auto vlim = [&](double u) {
-      AxisVec P{}, d1{}, d2{};
+      AxisVec P{}, d1{}, d2{}, t{}, k{};
       p.path.eval(u, &P, &d1, &d2);
-      const double sp = norm(d1, naxes_);
-      if (sp <= 0) return kInf;
-      double d2t = 0, k2 = 0;
-      for (int a = 0; a < naxes_; ++a) d2t += d2[a] * d1[a] / sp;
-      for (int a = 0; a < naxes_; ++a) {
-        const double k = (d2[a] - d2t * d1[a] / sp) / (sp * sp);
-        k2 += k * k;
-      }
-      double v = k2 > 0 ? geometry::chord_step_length(1.0 / std::sqrt(k2), eps) / period_s_ : kInf;
+      if (local_frame(d1, d2, naxes_, &t, &k) <= 0) return kInf;
+      const double kappa = norm(k, naxes_);
+      double v = kappa > 1e-12 ? geometry::chord_step_length(1.0 / kappa, eps) / period_s_ : kInf;
       if (rough && naxes_ >= 3)
-        v = std::min(v, law.feed_mm_per_min(b.spindle_rpm, process::feed_inclination_angle(
-                                                                  Eigen::Vector3d(d1[0], d1[1], d1[2]))) / 60.0);
+        v = std::min(v, law.feed_mm_per_min(b.spindle_rpm,
+                                            process::feed_inclination_angle(Eigen::Vector3d(t[0], t[1], t[2]))) /
+                            60.0);
       return v;
     };
     // Nothing above the fastest the block can go (1.5 × override) needs refining.
@@ -201,28 +211,15 @@ void Interpolator::plan_block(Planned& p) {
   p.samples.assign(n, Sample{0, 0, kInf, Limit::kNone});
   planned_samples_ += static_cast<int64_t>(n);
   std::vector<AxisVec> kvec(n);  // curvature vector d²P/ds²
-  std::vector<double> speed(n);  // |dP/du|
   std::vector<double> v_chord(n, kInf);
   for (size_t i = 0; i < n; ++i) {
     AxisVec P{}, d1{}, d2{};
     p.path.eval(us[i], &P, &d1, &d2);
-    const double sp = norm(d1, naxes_);
-    speed[i] = sp;
+    AxisVec t{};
     Sample& smp = p.samples[i];
     smp.u = us[i];
-    if (sp <= 0) continue;
-    AxisVec t{};
-    double d2t = 0;
-    for (int a = 0; a < naxes_; ++a) {
-      t[a] = d1[a] / sp;
-      d2t += d2[a] * t[a];
-    }
-    double kappa = 0;
-    for (int a = 0; a < naxes_; ++a) {
-      kvec[i][a] = (d2[a] - d2t * t[a]) / (sp * sp);
-      kappa += kvec[i][a] * kvec[i][a];
-    }
-    kappa = std::sqrt(kappa);
+    if (local_frame(d1, d2, naxes_, &t, &kvec[i]) <= 0) continue;
+    const double kappa = norm(kvec[i], naxes_);
     auto take = [&smp](double v, Limit why) {
       if (v < smp.v_geo) {
         smp.v_geo = v;
