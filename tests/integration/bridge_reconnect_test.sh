@@ -46,15 +46,9 @@ for ((i = 0; i < 200; i++)); do
   /usr/bin/python3 -c "import sys; sys.exit(0 if float('${x:-0}') > 60 else 1)" 2>/dev/null && break
   sleep 0.05
 done
-kill -KILL "${TEST_PIDS[servo-sim]}"
-wait "${TEST_PIDS[servo-sim]}" 2>/dev/null || true
-unset "TEST_PIDS[servo-sim]"
+kill_hard servo-sim
 note "simulator SIGKILLed at X = $x mm"
-rc=0
-wait "$ctl_pid" || rc=$?
-cat "$WORK/ctl.out" >&2
-[ "$rc" -eq 5 ] || fail "cnc-ctl exit $rc, expected 5 (drive fault)"
-grep -q "lost" "$WORK/ctl.out" || fail "the bridge did not report the lost link"
+expect_drive_fault "$ctl_pid" "lost"
 
 # Down for a second, then back where it was.
 sleep 1

@@ -33,15 +33,10 @@ for ((i = 0; i < 200; i++)); do
   /usr/bin/python3 -c "import sys; sys.exit(0 if float('${x:-0}') > 100 else 1)" 2>/dev/null && break
   sleep 0.05
 done
-kill -KILL "${TEST_PIDS[interpolator]}"
 kill_time=$(date +%s.%N)
-unset "TEST_PIDS[interpolator]"
+kill_hard interpolator
 note "interpolator SIGKILLed at X = $x mm"
-rc=0
-wait "$ctl_pid" || rc=$?
-cat "$WORK/ctl.out" >&2
-[ "$rc" -eq 5 ] || fail "cnc-ctl exit $rc, expected 5 (drive fault)"
-grep -q "no setpoint for" "$WORK/ctl.out" || fail "the bridge did not report the missing setpoints"
+expect_drive_fault "$ctl_pid" "no setpoint for"
 sleep 0.5
 stop program-server TERM
 stop drive-bridge TERM

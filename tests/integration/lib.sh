@@ -56,3 +56,21 @@ stop() {
 cleanup() {
   for name in "${!TEST_PIDS[@]}"; do kill -KILL "${TEST_PIDS[$name]}" 2>/dev/null || true; done
 }
+
+# kill_hard NAME: SIGKILL a started process and forget it.
+kill_hard() {
+  local pid="${TEST_PIDS[$1]}"
+  kill -KILL "$pid"
+  wait "$pid" 2>/dev/null || true
+  unset "TEST_PIDS[$1]"
+}
+
+# expect_drive_fault CTL_PID PATTERN: cnc-ctl (output in $WORK/ctl.out) ends with
+# exit 5, a drive fault whose report matches PATTERN.
+expect_drive_fault() {
+  local rc=0
+  wait "$1" || rc=$?
+  cat "$WORK/ctl.out" >&2
+  [ "$rc" -eq 5 ] || fail "cnc-ctl exit $rc, expected 5 (drive fault)"
+  grep -q "$2" "$WORK/ctl.out" || fail "the bridge did not report '$2'"
+}
