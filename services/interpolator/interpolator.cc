@@ -95,6 +95,23 @@ double local_frame(const AxisVec& d1, const AxisVec& d2, int n, AxisVec* t, Axis
   return sp;
 }
 
+// The speed of a rapid: the fastest its straight line allows within every axis's
+// velocity limit (for a move of no length, the slowest axis's limit).
+double rapid_speed(const config::MachineConfig& cfg, const program::Block& b, int n) {
+  double len2 = 0;
+  for (int a = 0; a < n; ++a) len2 += (b.end[a] - b.start[a]) * (b.end[a] - b.start[a]);
+  const double len = std::sqrt(len2);
+  double v = cfg.axes[0].max_velocity_mm_s;
+  for (int a = 0; a < n; ++a) v = std::min(v, cfg.axes[a].max_velocity_mm_s);
+  if (!(len > 0)) return v;
+  v = std::numeric_limits<double>::max();
+  for (int a = 0; a < n; ++a) {
+    const double d = std::fabs(b.end[a] - b.start[a]);
+    if (d > 0) v = std::min(v, cfg.axes[a].max_velocity_mm_s * len / d);
+  }
+  return v;
+}
+
 }  // namespace
 
 const char* to_string(Limit limit) {
@@ -146,7 +163,11 @@ Interpolator::~Interpolator() = default;
 
 void Interpolator::plan_block(Planned& p) {
   const program::Block& b = p.block;
-  p.v_prog = b.kind == program::BlockKind::kRapid ? kInf : b.feed_mm_per_min / 60.0;
+  // A rapid has no programmed feed: it goes as fast as its axes allow, a finite
+  // speed set below from the same samples as its axis-velocity limit (so feed hold,
+  // override and look-ahead do arithmetic on finite numbers only: ∞ × 0 is NaN).
+  const bool rapid = b.kind == program::BlockKind::kRapid;
+  p.v_prog = rapid ? rapid_speed(cfg_, b, naxes_) : b.feed_mm_per_min / 60.0;
   p.accel = cfg_.path_accel_mm_s2;
   p.jerk = cfg_.path_jerk_mm_s3;
   if (p.stop_block()) return;
@@ -212,6 +233,7 @@ void Interpolator::plan_block(Planned& p) {
   planned_samples_ += static_cast<int64_t>(n);
   std::vector<AxisVec> kvec(n);  // curvature vector d²P/ds²
   std::vector<double> v_chord(n, kInf);
+  double v_rapid = p.v_prog;  // a rapid's speed: the least axis-velocity limit of its samples
   for (size_t i = 0; i < n; ++i) {
     AxisVec P{}, d1{}, d2{};
     p.path.eval(us[i], &P, &d1, &d2);
@@ -229,7 +251,9 @@ void Interpolator::plan_block(Planned& p) {
     for (int a = 0; a < naxes_; ++a) {
       const double ta = std::fabs(t[a]);
       if (ta > 0) {
-        take(cfg_.axes[a].max_velocity_mm_s / ta, Limit::kAxisVelocity);
+        const double v_axis = cfg_.axes[a].max_velocity_mm_s / ta;
+        take(v_axis, Limit::kAxisVelocity);
+        v_rapid = std::min(v_rapid, v_axis);
         p.accel = std::min(p.accel, share * cfg_.axes[a].max_accel_mm_s2 / ta);
         p.jerk = std::min(p.jerk, share * cfg_.axes[a].max_jerk_mm_s3 / ta);
       }
@@ -243,6 +267,7 @@ void Interpolator::plan_block(Planned& p) {
       take(law.feed_mm_per_min(b.spindle_rpm, alpha) / 60.0, Limit::kRoughness);
     }
   }
+  if (rapid) p.v_prog = v_rapid;
   // The chord limit holds over a whole step, and the curvature may peak between
   // samples: each sample takes the least of its neighbours' chord limits.
   for (size_t i = 0; i < n; ++i) {
@@ -335,9 +360,10 @@ void Interpolator::backward_pass(bool full) {
     const size_t n = p.samples.size();
     const bool fresh = p.v_bw.size() != n;
     if (fresh) p.v_bw.assign(n, -1.0);
-    const double vp = p.v_prog * override_;
+    const double vp = programmed_speed(p);
+    const bool feed_binds = !rapid_at_full_speed(p);
     for (size_t i = n; i-- > 0;) {
-      double cap = std::min(p.samples[i].v_geo, vp);
+      double cap = feed_binds ? std::min(p.samples[i].v_geo, vp) : p.samples[i].v_geo;
       if (i == 0) cap = std::min(cap, p.v_entry);
       const double ds = i + 1 < n ? p.samples[i + 1].s - p.samples[i].s : 0.0;
       const double v = std::min(cap, std::sqrt(carry * carry + 2.0 * p.accel * ds));
@@ -438,6 +464,15 @@ void Interpolator::apply_command(const Command& cmd) {
 
 // ---- motion ----------------------------------------------------------------------
 
+bool Interpolator::rapid_at_full_speed(const Planned& p) const {
+  return p.block.kind == program::BlockKind::kRapid && override_ >= 1.0;
+}
+
+double Interpolator::programmed_speed(const Planned& p) const {
+  // Override above 1 speeds up feed moves only; a rapid already runs at its axes' limit.
+  return p.v_prog * (p.block.kind == program::BlockKind::kRapid ? std::min(override_, 1.0) : override_);
+}
+
 double Interpolator::cap_at(const Planned& p, double s, Limit* why, double* v_geo) const {
   const auto& sm = p.samples;
   size_t i = 0;
@@ -452,7 +487,9 @@ double Interpolator::cap_at(const Planned& p, double s, Limit* why, double* v_ge
   if (!std::isfinite(v)) v = std::min(sm[i].v_geo, sm[i + 1].v_geo);
   *why = f < 0.5 ? sm[i].limit : sm[i + 1].limit;
   if (v_geo != nullptr) *v_geo = v;
-  const double vp = p.v_prog * (p.block.kind == program::BlockKind::kRapid ? std::min(override_, 1.0) : override_);
+  // A rapid at full override runs at its axes' limit, which v already is.
+  if (rapid_at_full_speed(p)) return v;
+  const double vp = programmed_speed(p);
   if (vp <= v) {
     *why = Limit::kProgram;
     return vp;

@@ -102,7 +102,7 @@ class Interpolator {
     motion::PathSegment path;
     std::vector<Sample> samples;  // at least two for a moving block
     double length = 0;
-    double v_prog = 0;            // programmed feed in mm/s (infinite for rapids)
+    double v_prog = 0;            // programmed feed in mm/s (rapids: the axis-limited speed)
     double accel = 0, jerk = 0;   // tangential limits over the block
     double v_entry = 0;           // junction limit with the previous block
     std::vector<double> v_bw;     // backward-pass limits per sample (acceleration-limited)
@@ -118,6 +118,11 @@ class Interpolator {
   // Speed limit at arc length s of block p: programmed feed × override and the
   // geometric limit (also returned alone in *v_geo when not null).
   double cap_at(const Planned& p, double s, Limit* why, double* v_geo = nullptr) const;
+  // Programmed feed × override (a rapid's speed × override up to 1), mm/s.
+  double programmed_speed(const Planned& p) const;
+  // A rapid at override >= 1: its speed is its samples' axis-velocity limit, which
+  // the geometric limit already holds (the programmed term is left out, not ∞).
+  bool rapid_at_full_speed(const Planned& p) const;
   bool safe(double v_next, double a_next, double s_next) const;
   double advance(double ds, bool* reached_stop);
   bool creep_to_stop();
