@@ -92,7 +92,7 @@ std::string quoted(char c) {
 // controller does not support.
 bool word_letter(char c) {
   switch (c) {
-    case 'a': case 'b': case 'c': case 'd': case 'f': case 'g': case 'h': case 'i': case 'j': case 'k':
+    case 'a': case 'b': case 'c': case 'd': case 'e': case 'f': case 'g': case 'h': case 'i': case 'j': case 'k':
     case 'l': case 'm': case 'p': case 'q': case 'r': case 's': case 't': case 'u': case 'v': case 'w':
     case 'x': case 'y': case 'z':
       return true;
@@ -274,6 +274,10 @@ class Reader {
       semicolon_comment();
     } else if (c == '#') {
       setting();
+    } else if (c == 'e' && i_ > 0 && (is_digit(s_[i_ - 1]) || s_[i_ - 1] == '.')) {
+      // E is M66/M67/M68's word; right after a number it is an exponent, which
+      // RS274NGC does not have (LinuxCNC would read X1e400 as X1 E400).
+      fail(col(), "unknown word 'E' (RS274NGC numbers have no exponent)");
     } else if (word_letter(c)) {
       Word w;
       w.letter = upper(c);
@@ -282,8 +286,6 @@ class Reader {
       if (end()) fail(w.column, std::string("word '") + w.letter + "' has no value");
       w.expr = real_value(0);
       out_.words.push_back(w);
-    } else if (c == 'e' && i_ > 0 && (is_digit(s_[i_ - 1]) || s_[i_ - 1] == '.')) {
-      fail(col(), "unknown word 'E' (RS274NGC numbers have no exponent)");
     } else if (c == 'n') {
       fail(col(), "unknown word 'N' (a line number must begin the line)");
     } else if (is_letter(c)) {

@@ -1,0 +1,106 @@
+#pragma once
+// The canonical machining calls: where the language ends. Like LinuxCNC's canon
+// layer, the interpreter hands every effect of a program to one of these calls, in
+// program order, each with the source reference of the block that made it. Motion
+// ends are in program coordinates and program units (the interpreter has already
+// applied G90/G91, G90.1/G91.1 and the axis words); the offsets that turn them into
+// machine coordinates come as calls of their own (SET_G5X_OFFSET, SET_G92_OFFSET,
+// SET_XY_ROTATION, USE_TOOL_LENGTH_OFFSET, USE_LENGTH_UNITS), as in LinuxCNC. The
+// consumers: CanonPrinter (rs274's text, for the conformance harness) and the
+// block builder (machine-coordinate blocks for the interpolator).
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "common/rs274/lexer.h"
+
+namespace cnc::rs274 {
+
+// X Y Z A B C U V W, in that order.
+constexpr int kNumAxes = 9;
+using Pose = std::array<double, kNumAxes>;
+
+enum class Plane : uint8_t { kXY, kYZ, kXZ, kUV, kVW, kUW };
+enum class Units : uint8_t { kInch, kMm };
+enum class FeedMode : uint8_t { kUnitsPerMinute, kInverseTime, kUnitsPerRev };
+enum class PathMode : uint8_t { kExactPath /*G61.1*/, kExactStop /*G61*/, kContinuous /*G64*/ };
+
+// A LinuxCNC-style NURBS control point (G5.2 / Fanuc G6.2): position in the plane
+// or in space, and weight.
+struct NurbsPoint {
+  double x = 0, y = 0, z = 0, w = 1;
+};
+
+class Canon {
+ public:
+  virtual ~Canon() = default;
+
+  // Set-up and modal state.
+  virtual void use_length_units(const SourceRef&, Units) {}
+  virtual void select_plane(const SourceRef&, Plane) {}
+  virtual void set_g5x_offset(const SourceRef&, int /*index 1..9*/, const Pose&) {}
+  virtual void set_g92_offset(const SourceRef&, const Pose&) {}
+  virtual void set_xy_rotation(const SourceRef&, double /*deg*/) {}
+  virtual void set_feed_reference(const SourceRef&) {}
+  virtual void set_feed_rate(const SourceRef&, double /*units/min or 1/min*/) {}
+  virtual void set_feed_mode(const SourceRef&, FeedMode) {}
+  virtual void set_motion_control_mode(const SourceRef&, PathMode, double /*P tolerance, 0: none*/) {}
+  virtual void set_naivecam_tolerance(const SourceRef&, double /*Q*/) {}
+  virtual void use_tool_length_offset(const SourceRef&, const Pose&) {}
+  virtual void on_reset(const SourceRef&) {}
+
+  // Motion. `end` in program coordinates and units.
+  virtual void straight_traverse(const SourceRef&, const Pose& end) = 0;
+  virtual void straight_feed(const SourceRef&, const Pose& end) = 0;
+  // LinuxCNC's ARC_FEED: the two in-plane end coordinates, the centre, the turn
+  // count (positive: counterclockwise, |rotation|-1 extra full turns; negative:
+  // clockwise), the end of the axis normal to the plane, and the other axes' ends.
+  virtual void arc_feed(const SourceRef&, double first_end, double second_end, double first_axis,
+                        double second_axis, int rotation, double axis_end, const Pose& end) = 0;
+  // A rational B-spline of order `order`, control points in the active plane (z used
+  // for Fanuc G6.2 space curves), knots (size = points + order), ending at `end`.
+  virtual void nurbs_feed(const SourceRef&, int order, const std::vector<NurbsPoint>& points,
+                          const std::vector<double>& knots, const Pose& end) = 0;
+  virtual void dwell(const SourceRef&, double seconds) = 0;
+
+  // Tool.
+  virtual void select_tool(const SourceRef&, int /*pocket's tool*/) {}
+  virtual void start_change(const SourceRef&) {}
+  virtual void change_tool(const SourceRef&, int /*tool*/) {}
+  virtual void change_tool_number(const SourceRef&, int /*tool*/) {}
+
+  // Spindle and coolant.
+  virtual void set_spindle_speed(const SourceRef&, double /*rpm*/) {}
+  virtual void start_spindle_clockwise(const SourceRef&) {}
+  virtual void start_spindle_counterclockwise(const SourceRef&) {}
+  virtual void stop_spindle_turning(const SourceRef&) {}
+  virtual void set_spindle_mode(const SourceRef&, double /*G96 max rpm; 0: G97*/) {}
+  virtual void mist_on(const SourceRef&) {}
+  virtual void mist_off(const SourceRef&) {}
+  virtual void flood_on(const SourceRef&) {}
+  virtual void flood_off(const SourceRef&) {}
+
+  // Overrides (M48-M53).
+  virtual void enable_feed_override(const SourceRef&, bool) {}
+  virtual void enable_speed_override(const SourceRef&, bool) {}
+  virtual void enable_adaptive_feed(const SourceRef&, bool) {}
+  virtual void enable_feed_hold(const SourceRef&, bool) {}
+
+  // Outputs (M62-M65 digital, synchronised with motion or immediate; M67/M68 analog).
+  virtual void digital_output(const SourceRef&, int /*index*/, bool /*on*/, bool /*synchronised*/) {}
+  virtual void analog_output(const SourceRef&, int /*index*/, double /*value*/, bool /*synchronised*/) {}
+
+  // Text.
+  virtual void comment(const SourceRef&, const std::string&) {}
+  virtual void message(const SourceRef&, const std::string&) {}
+
+  // Program flow.
+  virtual void program_stop(const SourceRef&) {}           // M0
+  virtual void optional_program_stop(const SourceRef&) {}  // M1
+  virtual void pallet_shuttle(const SourceRef&) {}         // M60
+  virtual void program_end(const SourceRef&) {}            // M2, M30
+  virtual void finish(const SourceRef&) {}                 // a program closed by '%'
+};
+
+}  // namespace cnc::rs274

@@ -1,0 +1,89 @@
+#pragma once
+// Cutter radius compensation (G41/G42/G41.1/G42.1, G40) as LinuxCNC 2.9 does it, as
+// a filter between the interpreter and the canonical calls it makes: the interpreter
+// always calls this Canon; while compensation is off every call passes straight on.
+// While it is on, a move is held until the next move shows the corner it makes with
+// it (LinuxCNC's queue), then the compensated move is emitted, with the calls that
+// came between the two moves kept in their order. LinuxCNC's rules hold: the entry
+// move (the first move after G41/G42) and the exit move (the first after G40) are
+// straight lines from/to the uncompensated point; a concave corner that the tool
+// cannot reach without gouging is refused; an arc whose radius is not larger than
+// the tool's on its inside is refused. Refusals throw Error(0, detail): the
+// interpreter names the place (the line of the move that revealed the fault).
+#include <memory>
+#include <vector>
+
+#include "common/rs274/canon.h"
+
+namespace cnc::rs274 {
+
+class CutterComp : public Canon {
+ public:
+  explicit CutterComp(Canon& out);
+  ~CutterComp() override;
+
+  // G41 (side = +1, left of the path) / G42 (side = -1), radius in program units
+  // (> 0; 0 makes compensation a no-op as in LinuxCNC), in the XY or XZ plane.
+  // `programmed` is where the tool stands (program coordinates).
+  void start(int side, double radius, Plane plane, const Pose& programmed);
+  // G40: the next move is the exit move; compensation is off after it.
+  void stop();
+  bool active() const;
+  // Emits everything held (end of program, and before anything that must not be
+  // reordered: a tool change, a stop).
+  void flush();
+
+  // Canon: see the header comment.
+  void use_length_units(const SourceRef&, Units) override;
+  void select_plane(const SourceRef&, Plane) override;
+  void set_g5x_offset(const SourceRef&, int, const Pose&) override;
+  void set_g92_offset(const SourceRef&, const Pose&) override;
+  void set_xy_rotation(const SourceRef&, double) override;
+  void set_feed_reference(const SourceRef&) override;
+  void set_feed_rate(const SourceRef&, double) override;
+  void set_feed_mode(const SourceRef&, FeedMode) override;
+  void set_motion_control_mode(const SourceRef&, PathMode, double) override;
+  void set_naivecam_tolerance(const SourceRef&, double) override;
+  void use_tool_length_offset(const SourceRef&, const Pose&) override;
+  void on_reset(const SourceRef&) override;
+  void straight_traverse(const SourceRef&, const Pose& end) override;
+  void straight_feed(const SourceRef&, const Pose& end) override;
+  void arc_feed(const SourceRef&, double first_end, double second_end, double first_axis, double second_axis,
+                int rotation, double axis_end, const Pose& end) override;
+  void nurbs_feed(const SourceRef&, int order, const std::vector<NurbsPoint>& points, const std::vector<double>& knots,
+                  const Pose& end) override;
+  void dwell(const SourceRef&, double seconds) override;
+  void select_tool(const SourceRef&, int) override;
+  void start_change(const SourceRef&) override;
+  void change_tool(const SourceRef&, int) override;
+  void change_tool_number(const SourceRef&, int) override;
+  void set_spindle_speed(const SourceRef&, double) override;
+  void start_spindle_clockwise(const SourceRef&) override;
+  void start_spindle_counterclockwise(const SourceRef&) override;
+  void stop_spindle_turning(const SourceRef&) override;
+  void set_spindle_mode(const SourceRef&, double) override;
+  void mist_on(const SourceRef&) override;
+  void mist_off(const SourceRef&) override;
+  void flood_on(const SourceRef&) override;
+  void flood_off(const SourceRef&) override;
+  void enable_feed_override(const SourceRef&, bool) override;
+  void enable_speed_override(const SourceRef&, bool) override;
+  void enable_adaptive_feed(const SourceRef&, bool) override;
+  void enable_feed_hold(const SourceRef&, bool) override;
+  void digital_output(const SourceRef&, int, bool, bool) override;
+  void analog_output(const SourceRef&, int, double, bool) override;
+  void comment(const SourceRef&, const std::string&) override;
+  void message(const SourceRef&, const std::string&) override;
+  void program_stop(const SourceRef&) override;
+  void optional_program_stop(const SourceRef&) override;
+  void pallet_shuttle(const SourceRef&) override;
+  void program_end(const SourceRef&) override;
+  void finish(const SourceRef&) override;
+
+ private:
+  struct Impl;
+  Canon& out_;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace cnc::rs274

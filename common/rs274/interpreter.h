@@ -1,0 +1,182 @@
+#pragma once
+// The RS274NGC interpreter (LinuxCNC 2.9's dialect, milling): modal state, parameters,
+// O-word control flow and subroutines, coordinate systems, tools, and the canonical
+// calls it makes, one program line at a time. It reads its files as it goes, so a
+// loop that runs a million times, or a 200,000-line program, is interpreted in
+// bounded memory; the caller pulls lines (execute_next) only as fast as it needs
+// their canonical calls.
+//
+// Errors: every refusal throws Error with the file, line and column of the word at
+// fault and the chain of subroutine calls that led there; the canonical calls of
+// the refused line are not made (the line is checked, then executed).
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "common/rs274/canon.h"
+#include "common/rs274/lexer.h"
+#include "common/rs274/parameters.h"
+#include "common/rs274/tool_table.h"
+
+namespace cnc::rs274 {
+
+struct MachineSetup {
+  std::string axes = "XYZ";                // axis letters the machine has (of XYZABCUVW)
+  Units machine_units = Units::kMm;        // of the tool table and the var file's offsets
+  std::vector<std::string> subroutine_path;  // folders searched for o<name> call files
+  std::string tool_table;                  // LinuxCNC tool table; empty: no tools
+  std::string var_file;                    // LinuxCNC var file; empty: parameters are not kept
+  bool write_var_file = true;              // at program end (M2/M30/%), atomically
+  bool has_probe = false;                  // G38.x needs one
+  int digital_inputs = 0;                  // M66 needs them
+  int analog_inputs = 0;
+  int digital_outputs = 64;                // M62-M65 indices 0..n-1
+  int analog_outputs = 64;                 // M67/M68
+  bool block_delete = true;                // '/' lines are skipped (LinuxCNC's switch on)
+  bool optional_stop = true;               // M1 stops
+  Pose start_position{};                   // machine coordinates where the program starts
+  int64_t max_call_depth = 100;
+};
+
+class Interpreter {
+ public:
+  Interpreter(MachineSetup setup, Canon& canon);
+  ~Interpreter();
+  Interpreter(const Interpreter&) = delete;
+  Interpreter& operator=(const Interpreter&) = delete;
+
+  // Opens the main program, reads the var file and tool table, and makes the
+  // initial canonical calls (units, offsets, plane) as rs274 does. Throws Error.
+  void open(const std::string& path);
+
+  // Executes the next line of the program. Returns false once the program has
+  // ended (M2, M30, a closing '%'); further calls return false. Throws Error.
+  bool execute_next();
+
+  bool ended() const { return ended_; }
+  int64_t lines_executed() const { return lines_executed_; }
+  const std::vector<std::string>& file_names() const { return file_names_; }
+  const Parameters& parameters() const { return params_; }
+  const MachineSetup& setup() const { return setup_; }
+  // The raw text of the line being executed (for rs274's N field and error reports).
+  const std::string& current_text() const { return text_; }
+
+ private:
+  struct SourceFile;
+  struct Frame;
+  struct Loop;
+  struct Words;
+  struct SubDef {
+    int32_t file = 0;
+    int64_t offset = 0;  // the byte after the `sub` line
+    int32_t line = 0;    // that `sub` line's number
+  };
+
+  // Reading.
+  bool read_line();
+  void execute_line();
+  void execute_o(const OStatement& o);
+  void skip_to(const std::string& name, uint32_t kinds_mask);
+  std::string o_name(const OStatement& o);
+
+  // Blocks.
+  void collect_words(Words& w);
+  void check_words(const Words& w);
+  void apply_settings();
+  void execute_block(Words& w);
+  void comments_of_line();
+  void motion(Words& w);
+  void arc(Words& w, bool cw, const Pose& end);
+  void nurbs_fanuc_open(Words& w);
+  void nurbs_fanuc_line(Words& w);
+  void nurbs_fanuc_close();
+  void nurbs_g5_open(Words& w);
+  void nurbs_g5_point(Words& w);
+  void nurbs_g5_close();
+  void g10(Words& w);
+  void g28_g30(Words& w, bool g30);
+  void g92(Words& w);
+  void tool_change(Words& w);
+  struct SavedModes;
+  void restore_modes(const SavedModes& s, int column);
+  void cycle(Words& w);
+  void set_coord_system(int index);
+  void end_program(bool m30);
+  void update_position_params();
+
+  Pose axis_target(const Words& w, bool machine) const;  // G53: machine coordinates
+  double to_program(double machine_units_value) const;
+  double length_scale() const;
+  double param_len(int base, int i) const;
+  void set_param_len(int base, int i, double mm);
+  [[noreturn]] void fail(int column, const std::string& detail) const;
+  SourceRef ref(int column = 0) const;
+
+  // Parameters as expressions read them (predefined names included).
+  class Reader;
+  double named_value(const std::string& name, int column) const;
+  bool named_exists(const std::string& name) const;
+
+  MachineSetup setup_;
+  Canon& canon_;
+  Parameters params_;
+  ToolTable tools_;
+  std::unique_ptr<Reader> reader_;
+
+  std::vector<std::string> file_names_;
+  std::vector<std::unique_ptr<SourceFile>> files_;
+  int32_t file_ = 0;              // the file being read
+  int32_t line_no_ = 0;           // its current line number
+  Line line_;                     // the current line, lexed
+  std::string text_;              // its text
+  std::vector<Frame> frames_;     // subroutine calls
+  std::vector<Loop> loops_;       // open while/do/repeat/if statements
+  std::unordered_map<std::string, SubDef> subs_;
+  bool ended_ = false;
+  bool started_ = false;          // the first line (maybe '%') was read
+  bool percent_open_ = false;
+  int64_t lines_executed_ = 0;
+  double last_returned_ = 0;
+
+  // Modal state (LinuxCNC's groups).
+  int motion_ = 800;              // G code in tenths; 800 = G80, -1 = none
+  Plane plane_ = Plane::kXY;
+  bool incremental_ = false;      // G91
+  bool arc_incremental_ = true;   // G91.1 (LinuxCNC's default)
+  FeedMode feed_mode_ = FeedMode::kUnitsPerMinute;
+  Units units_ = Units::kMm;
+  int comp_ = 400;                // 400, 410, 420 (tenths); 411/421 for G41.1/G42.1
+  double comp_radius_ = 0;
+  int tool_length_ = 490;         // 430, 431, 432 or 490
+  int coord_ = 1;                 // 1..9 = G54..G59.3
+  bool retract_r_ = false;        // G99
+  PathMode path_ = PathMode::kExactPath;
+  double path_p_ = 0, path_q_ = 0;
+  double feed_ = 0;
+  double speed_ = 0;
+  int spindle_ = 0;               // 0 off, 1 cw, -1 ccw
+  bool mist_ = false, flood_ = false;
+  bool feed_override_ = true, speed_override_ = true, adaptive_feed_ = false, feed_hold_ = true;
+  int tool_ = 0;                  // in the spindle
+  int selected_tool_ = -1;        // T word given
+  Pose tool_offset_{};
+  Pose g92_{};
+  bool g92_active_ = false;
+  double rotation_deg_ = 0;
+  double mu_ = 1.0;               // mm per machine unit
+  Pose position_{};               // current position, program coordinates and units
+  double cycle_old_z_ = 0;        // canned cycles: sticky values
+  double cycle_r_ = 0, cycle_q_ = 0, cycle_p_ = 0, cycle_z_ = 0;
+  bool in_cycle_ = false;
+
+  // NURBS collection (G5.2 / Fanuc G6.2): control points until the curve closes.
+  struct NurbsCollect;
+  std::unique_ptr<NurbsCollect> nurbs_;
+
+  // M70-M73: saved modal state.
+  std::vector<SavedModes> saved_;
+};
+
+}  // namespace cnc::rs274
