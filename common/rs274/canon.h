@@ -75,6 +75,9 @@ class Canon {
   virtual void start_spindle_clockwise(const SourceRef&) {}
   virtual void start_spindle_counterclockwise(const SourceRef&) {}
   virtual void stop_spindle_turning(const SourceRef&) {}
+  // LinuxCNC's ORIENT_SPINDLE(spindle, degrees, mode): G87 calls it with 0 degrees and
+  // the turning direction as LinuxCNC's CANON_DIRECTION (2 clockwise, 3 counterclockwise).
+  virtual void orient_spindle(const SourceRef&, double /*degrees*/, int /*mode*/) {}
   virtual void set_spindle_mode(const SourceRef&, double /*G96 max rpm; 0: G97*/) {}
   virtual void mist_on(const SourceRef&) {}
   virtual void mist_off(const SourceRef&) {}

@@ -1,0 +1,1415 @@
+// Canned cycles (common/rs274/cycles.h) against LinuxCNC 2.9's rs274.
+// Each case names the rs274 program it was measured with; the expected calls are
+// the lines rs274 printed for the program's N9xx blocks (the cycle blocks), with the
+// COMMENT lines that G98/G99/G91 print taken out (those are the interpreter's), run as
+//   HOME=$(mktemp -d) rs274 -g -t TBL -v VAR PROGRAM OUT     (TBL: "T1 P1 Z0 D6", VAR empty)
+// on Debian 12's linuxcnc-uspace 2.9.0~pre1+git20230208.f1270d6ed7. rs274 prints
+// 4 decimals, so numbers compare to 1e-4. For a refusal, the calls rs274 printed
+// before it stopped are expected too, and the message is rs274's.
+// One deliberate divergence: G74/G84 in G18/G19 (the *_lcnc_bug cases), see cycles.cc.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <functional>
+#include <ostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "common/rs274/cycles.h"
+
+namespace cnc::rs274 {
+namespace {
+
+// One canonical call: its rs274 name, its word arguments (CANON_EXACT_PATH ...) and
+// its numbers, in order.
+struct Call {
+  std::string name;
+  std::vector<std::string> words;
+  std::vector<double> numbers;
+};
+
+std::string to_text(const Call& c) {
+  std::string s = c.name + "(";
+  for (const auto& w : c.words) s += w + " ";
+  for (double v : c.numbers) {
+    char buf[48];
+    std::snprintf(buf, sizeof buf, "%.4f ", v);
+    s += buf;
+  }
+  return s + ")";
+}
+
+// "NAME(a, b c)" -> Call: numbers where a token reads as one, words otherwise.
+Call parse(const std::string& line) {
+  Call c;
+  const auto open = line.find('(');
+  c.name = line.substr(0, open);
+  std::string args = line.substr(open + 1, line.rfind(')') - open - 1);
+  for (char& ch : args)
+    if (ch == ',') ch = ' ';
+  std::istringstream in(args);
+  std::string tok;
+  while (in >> tok) {
+    char* end = nullptr;
+    const double v = std::strtod(tok.c_str(), &end);
+    if (end != nullptr && *end == '\0')
+      c.numbers.push_back(v);
+    else
+      c.words.push_back(tok);
+  }
+  return c;
+}
+
+std::vector<Call> parse_all(const std::string& text) {
+  std::vector<Call> calls;
+  std::istringstream in(text);
+  std::string line;
+  while (std::getline(in, line))
+    if (!line.empty()) calls.push_back(parse(line));
+  return calls;
+}
+
+// Records the calls as rs274 names them (spindle 0, the six axes rs274 prints).
+class Recorder : public Canon {
+ public:
+  std::vector<Call> calls;
+  std::vector<Pose> ends;  // the full pose of every motion
+
+  void straight_traverse(const SourceRef&, const Pose& p) override { motion("STRAIGHT_TRAVERSE", p); }
+  void straight_feed(const SourceRef&, const Pose& p) override { motion("STRAIGHT_FEED", p); }
+  void arc_feed(const SourceRef&, double, double, double, double, int, double, const Pose&) override {
+    add("ARC_FEED", {}, {});
+  }
+  void nurbs_feed(const SourceRef&, int, const std::vector<NurbsPoint>&, const std::vector<double>&,
+                  const Pose&) override {
+    add("NURBS_FEED", {}, {});
+  }
+  void dwell(const SourceRef&, double s) override { add("DWELL", {}, {s}); }
+  void set_motion_control_mode(const SourceRef&, PathMode m, double tolerance) override {
+    if (m == PathMode::kContinuous)
+      add("SET_MOTION_CONTROL_MODE", {"CANON_CONTINUOUS"}, {tolerance});
+    else
+      add("SET_MOTION_CONTROL_MODE", {m == PathMode::kExactStop ? "CANON_EXACT_STOP" : "CANON_EXACT_PATH"}, {});
+  }
+  void set_naivecam_tolerance(const SourceRef&, double q) override { add("SET_NAIVECAM_TOLERANCE", {}, {q}); }
+  void set_feed_rate(const SourceRef&, double f) override { add("SET_FEED_RATE", {}, {f}); }
+  void set_spindle_speed(const SourceRef&, double s) override { add("SET_SPINDLE_SPEED", {}, {0, s}); }
+  void start_spindle_clockwise(const SourceRef&) override { add("START_SPINDLE_CLOCKWISE", {}, {0}); }
+  void start_spindle_counterclockwise(const SourceRef&) override { add("START_SPINDLE_COUNTERCLOCKWISE", {}, {0}); }
+  void stop_spindle_turning(const SourceRef&) override { add("STOP_SPINDLE_TURNING", {}, {0}); }
+  void orient_spindle(const SourceRef&, double degrees, int mode) override {
+    add("ORIENT_SPINDLE", {}, {0, degrees, static_cast<double>(mode)});
+  }
+  void enable_feed_override(const SourceRef&, bool on) override {
+    add(on ? "ENABLE_FEED_OVERRIDE" : "DISABLE_FEED_OVERRIDE", {}, {});
+  }
+  void enable_speed_override(const SourceRef&, bool on) override {
+    add(on ? "ENABLE_SPEED_OVERRIDE" : "DISABLE_SPEED_OVERRIDE", {}, {0});
+  }
+  void comment(const SourceRef&, const std::string& s) override { add("COMMENT", {s}, {}); }
+  void program_stop(const SourceRef&) override { add("PROGRAM_STOP", {}, {}); }
+
+ private:
+  void add(std::string name, std::vector<std::string> words, std::vector<double> numbers) {
+    calls.push_back({std::move(name), std::move(words), std::move(numbers)});
+  }
+  void motion(const char* name, const Pose& p) {
+    add(name, {}, {p[0], p[1], p[2], p[3], p[4], p[5]});
+    ends.push_back(p);
+  }
+};
+
+// ---- the inputs ---------------------------------------------------------------------
+
+// G17 G90 G21 F100 S1000 M3 at X0 Y0 Z10 (the first cycle block: old Z = 10), the
+// block's words X1 Y2 Z-5 R2.
+CycleInput g17(int g, bool g99) {
+  CycleInput in;
+  in.g = g;
+  in.plane = Plane::kXY;
+  in.retract_to_r = g99;
+  in.start = {0, 0, 10, 0, 0, 0, 0, 0, 0};
+  in.old_z = 10;
+  in.x = 1;
+  in.y = 2;
+  in.z = -5;
+  in.r = 2;
+  in.has_x = in.has_y = in.has_z = in.has_r = true;
+  in.feed_rate = 100;
+  in.spindle_rpm = 1000;
+  in.spindle_turning = true;
+  in.spindle_cw = true;
+  in.units = Units::kMm;
+  return in;
+}
+
+// G18 at X0 Y10 Z0, words X1 Z2 Y-5 R2: in plane order first Z, second X, depth Y.
+CycleInput xz(int g, bool g99) {
+  CycleInput in = g17(g, g99);
+  in.plane = Plane::kXZ;
+  in.start = {0, 10, 0, 0, 0, 0, 0, 0, 0};
+  in.x = 2;  // Z
+  in.y = 1;  // X
+  in.z = -5;  // Y
+  return in;
+}
+
+// G19 at X10 Y0 Z0, words Y1 Z2 X-5 R2: in plane order first Y, second Z, depth X.
+CycleInput yz(int g, bool g99) {
+  CycleInput in = g17(g, g99);
+  in.plane = Plane::kYZ;
+  in.start = {10, 0, 0, 0, 0, 0, 0, 0, 0};
+  in.x = 1;  // Y
+  in.y = 2;  // Z
+  in.z = -5;  // X
+  return in;
+}
+
+using Blocks = std::vector<CycleInput>;
+
+struct Case {
+  const char* name;
+  std::function<void(Blocks&)> make;  // the cycle blocks, in program order
+  const char* expected;               // rs274's calls for them
+  const char* error;                  // rs274's message; "" when the program ran
+};
+
+void PrintTo(const Case& c, std::ostream* os) { *os << c.name; }
+
+const Case kCases[] = {
+    {"g73_g98",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G98 G73 X1 Y2 Z-5 R2 Q2.2
+     [](Blocks& b) { b = {g17(730, false)}; b[0].q = 2.2; b[0].has_q = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -0.2000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 0.0540, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -2.4000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, -2.1460, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -4.6000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, -4.3460, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g74_g98",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M4
+     //   G0 X0 Y0 Z10
+     //   N901 G98 G74 X1 Y2 Z-5 R2 P0.3
+     [](Blocks& b) { b = {g17(740, false)}; b[0].spindle_cw = false; b[0].p = 0.3; b[0].has_p = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+DISABLE_FEED_OVERRIDE()
+DISABLE_SPEED_OVERRIDE(0)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+START_SPINDLE_CLOCKWISE(0)
+DWELL(0.3000)
+STRAIGHT_FEED(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+START_SPINDLE_COUNTERCLOCKWISE(0)
+ENABLE_FEED_OVERRIDE()
+ENABLE_SPEED_OVERRIDE(0)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g81_g98",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G98 G81 X1 Y2 Z-5 R2 
+     [](Blocks& b) { b = {g17(810, false)};  },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g82_g98",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G98 G82 X1 Y2 Z-5 R2 P0.5
+     [](Blocks& b) { b = {g17(820, false)}; b[0].p = 0.5; b[0].has_p = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+DWELL(0.5000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g83_g98",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G98 G83 X1 Y2 Z-5 R2 Q2.2
+     [](Blocks& b) { b = {g17(830, false)}; b[0].q = 2.2; b[0].has_q = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -0.2000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 0.0540, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -2.4000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, -2.1460, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -4.6000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, -4.3460, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g84_g98",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G98 G84 X1 Y2 Z-5 R2 P0.3
+     [](Blocks& b) { b = {g17(840, false)}; b[0].p = 0.3; b[0].has_p = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+DISABLE_FEED_OVERRIDE()
+DISABLE_SPEED_OVERRIDE(0)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+START_SPINDLE_COUNTERCLOCKWISE(0)
+DWELL(0.3000)
+STRAIGHT_FEED(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+START_SPINDLE_CLOCKWISE(0)
+ENABLE_FEED_OVERRIDE()
+ENABLE_SPEED_OVERRIDE(0)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g85_g98",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G98 G85 X1 Y2 Z-5 R2 
+     [](Blocks& b) { b = {g17(850, false)};  },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g86_g98",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G98 G86 X1 Y2 Z-5 R2 P0.5
+     [](Blocks& b) { b = {g17(860, false)}; b[0].p = 0.5; b[0].has_p = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+DWELL(0.5000)
+STOP_SPINDLE_TURNING(0)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+START_SPINDLE_CLOCKWISE(0)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g87_g98",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G98 G87 X1 Y2 Z-5 R2 I0.5 J0.25 K-3
+     [](Blocks& b) { b = {g17(870, false)}; b[0].i = 0.5; b[0].j = 0.25; b[0].k = -3; b[0].has_i = b[0].has_j = b[0].has_k = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.5000, 2.2500, 2.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+ORIENT_SPINDLE(0, 0.0000, 2)
+STRAIGHT_TRAVERSE(1.5000, 2.2500, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+START_SPINDLE_CLOCKWISE(0)
+STRAIGHT_FEED(1.0000, 2.0000, -3.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+ORIENT_SPINDLE(0, 0.0000, 2)
+STRAIGHT_TRAVERSE(1.5000, 2.2500, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.5000, 2.2500, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+START_SPINDLE_CLOCKWISE(0)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g88_g98",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G98 G88 X1 Y2 Z-5 R2 P0.5
+     [](Blocks& b) { b = {g17(880, false)}; b[0].p = 0.5; b[0].has_p = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+DWELL(0.5000)
+STOP_SPINDLE_TURNING(0)
+PROGRAM_STOP()
+START_SPINDLE_CLOCKWISE(0)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g89_g98",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G98 G89 X1 Y2 Z-5 R2 P0.5
+     [](Blocks& b) { b = {g17(890, false)}; b[0].p = 0.5; b[0].has_p = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+DWELL(0.5000)
+STRAIGHT_FEED(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g73_g99",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G99 G73 X1 Y2 Z-5 R2 Q2.2
+     [](Blocks& b) { b = {g17(730, true)}; b[0].q = 2.2; b[0].has_q = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -0.2000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 0.0540, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -2.4000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, -2.1460, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -4.6000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, -4.3460, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g74_g99",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M4
+     //   G0 X0 Y0 Z10
+     //   N901 G99 G74 X1 Y2 Z-5 R2 P0.3
+     [](Blocks& b) { b = {g17(740, true)}; b[0].spindle_cw = false; b[0].p = 0.3; b[0].has_p = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+DISABLE_FEED_OVERRIDE()
+DISABLE_SPEED_OVERRIDE(0)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+START_SPINDLE_CLOCKWISE(0)
+DWELL(0.3000)
+STRAIGHT_FEED(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+START_SPINDLE_COUNTERCLOCKWISE(0)
+ENABLE_FEED_OVERRIDE()
+ENABLE_SPEED_OVERRIDE(0)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g81_g99",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G99 G81 X1 Y2 Z-5 R2 
+     [](Blocks& b) { b = {g17(810, true)};  },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g82_g99",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G99 G82 X1 Y2 Z-5 R2 P0.5
+     [](Blocks& b) { b = {g17(820, true)}; b[0].p = 0.5; b[0].has_p = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+DWELL(0.5000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g83_g99",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G99 G83 X1 Y2 Z-5 R2 Q2.2
+     [](Blocks& b) { b = {g17(830, true)}; b[0].q = 2.2; b[0].has_q = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -0.2000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 0.0540, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -2.4000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, -2.1460, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -4.6000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, -4.3460, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g84_g99",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G99 G84 X1 Y2 Z-5 R2 P0.3
+     [](Blocks& b) { b = {g17(840, true)}; b[0].p = 0.3; b[0].has_p = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+DISABLE_FEED_OVERRIDE()
+DISABLE_SPEED_OVERRIDE(0)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+START_SPINDLE_COUNTERCLOCKWISE(0)
+DWELL(0.3000)
+STRAIGHT_FEED(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+START_SPINDLE_CLOCKWISE(0)
+ENABLE_FEED_OVERRIDE()
+ENABLE_SPEED_OVERRIDE(0)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g85_g99",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G99 G85 X1 Y2 Z-5 R2 
+     [](Blocks& b) { b = {g17(850, true)};  },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g86_g99",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G99 G86 X1 Y2 Z-5 R2 P0.5
+     [](Blocks& b) { b = {g17(860, true)}; b[0].p = 0.5; b[0].has_p = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+DWELL(0.5000)
+STOP_SPINDLE_TURNING(0)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+START_SPINDLE_CLOCKWISE(0)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g87_g99",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G99 G87 X1 Y2 Z-5 R2 I0.5 J0.25 K-3
+     [](Blocks& b) { b = {g17(870, true)}; b[0].i = 0.5; b[0].j = 0.25; b[0].k = -3; b[0].has_i = b[0].has_j = b[0].has_k = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.5000, 2.2500, 2.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+ORIENT_SPINDLE(0, 0.0000, 2)
+STRAIGHT_TRAVERSE(1.5000, 2.2500, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+START_SPINDLE_CLOCKWISE(0)
+STRAIGHT_FEED(1.0000, 2.0000, -3.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+ORIENT_SPINDLE(0, 0.0000, 2)
+STRAIGHT_TRAVERSE(1.5000, 2.2500, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.5000, 2.2500, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+START_SPINDLE_CLOCKWISE(0)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g88_g99",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G99 G88 X1 Y2 Z-5 R2 P0.5
+     [](Blocks& b) { b = {g17(880, true)}; b[0].p = 0.5; b[0].has_p = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+DWELL(0.5000)
+STOP_SPINDLE_TURNING(0)
+PROGRAM_STOP()
+START_SPINDLE_CLOCKWISE(0)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g89_g99",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G99 G89 X1 Y2 Z-5 R2 P0.5
+     [](Blocks& b) { b = {g17(890, true)}; b[0].p = 0.5; b[0].has_p = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+DWELL(0.5000)
+STRAIGHT_FEED(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g81_g91_l3_g98",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G91 G98 G81 X5 Y1 R-8 Z-7 L3
+     [](Blocks& b) { b = {g17(810, false)}; b[0].incremental = true; b[0].x = 5; b[0].y = 1; b[0].r = -8; b[0].z = -7; b[0].repeats = 3; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(5.0000, 1.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(5.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(5.0000, 1.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(5.0000, 1.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(10.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(10.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(10.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(10.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(15.0000, 3.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(15.0000, 3.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(15.0000, 3.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(15.0000, 3.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g81_g91_l3_g99",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G91 G99 G81 X5 Y1 R-8 Z-7 L3
+     [](Blocks& b) { b = {g17(810, true)}; b[0].incremental = true; b[0].x = 5; b[0].y = 1; b[0].r = -8; b[0].z = -7; b[0].repeats = 3; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(5.0000, 1.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(5.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(5.0000, 1.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(5.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(10.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(10.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(10.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(15.0000, 3.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(15.0000, 3.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(15.0000, 3.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g83_g91_l3_g99",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G91 G99 G83 X5 Y1 R-8 Z-7 Q3 L3
+     [](Blocks& b) { b = {g17(830, true)}; b[0].incremental = true; b[0].x = 5; b[0].y = 1; b[0].r = -8; b[0].z = -7; b[0].repeats = 3; b[0].q = 3; b[0].has_q = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(5.0000, 1.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(5.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(5.0000, 1.0000, -1.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(5.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(5.0000, 1.0000, -0.7460, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(5.0000, 1.0000, -4.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(5.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(5.0000, 1.0000, -3.7460, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(5.0000, 1.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(5.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(10.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(10.0000, 2.0000, -1.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(10.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(10.0000, 2.0000, -0.7460, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(10.0000, 2.0000, -4.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(10.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(10.0000, 2.0000, -3.7460, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(10.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(10.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(15.0000, 3.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(15.0000, 3.0000, -1.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(15.0000, 3.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(15.0000, 3.0000, -0.7460, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(15.0000, 3.0000, -4.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(15.0000, 3.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(15.0000, 3.0000, -3.7460, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(15.0000, 3.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(15.0000, 3.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g87_g91_l2_g98",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G91 G98 G87 X5 Y1 R-8 Z-7 I0.5 J-0.5 K2 L2
+     [](Blocks& b) { b = {g17(870, false)}; b[0].incremental = true; b[0].x = 5; b[0].y = 1; b[0].r = -8; b[0].z = -7; b[0].repeats = 2; b[0].i = 0.5; b[0].j = -0.5; b[0].k = 2; b[0].has_i = b[0].has_j = b[0].has_k = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(5.0000, 1.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(5.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(5.5000, 0.5000, 2.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+ORIENT_SPINDLE(0, 0.0000, 2)
+STRAIGHT_TRAVERSE(5.5000, 0.5000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(5.0000, 1.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+START_SPINDLE_CLOCKWISE(0)
+STRAIGHT_FEED(5.0000, 1.0000, -3.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(5.0000, 1.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+ORIENT_SPINDLE(0, 0.0000, 2)
+STRAIGHT_TRAVERSE(5.5000, 0.5000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(5.5000, 0.5000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(5.0000, 1.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+START_SPINDLE_CLOCKWISE(0)
+STRAIGHT_TRAVERSE(10.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(10.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(10.5000, 1.5000, 2.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+ORIENT_SPINDLE(0, 0.0000, 2)
+STRAIGHT_TRAVERSE(10.5000, 1.5000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(10.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+START_SPINDLE_CLOCKWISE(0)
+STRAIGHT_FEED(10.0000, 2.0000, -3.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(10.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+ORIENT_SPINDLE(0, 0.0000, 2)
+STRAIGHT_TRAVERSE(10.5000, 1.5000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(10.5000, 1.5000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(10.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+START_SPINDLE_CLOCKWISE(0)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g81_g90_l2",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G99 G81 X1 Y2 Z-5 R2 L2
+     [](Blocks& b) { b = {g17(810, true)}; b[0].repeats = 2; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"below_r_run",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z1
+     //   N901 G98 G81 X1 Y2 Z-5 R2
+     //   N902 X3
+     //   N903 G99 X4
+     [](Blocks& b) { b = {g17(810, false), g17(810, false), g17(810, true)}; for (auto& c : b) { c.start[2] = 1; c.old_z = 1; } b[1].continuing = b[2].continuing = true; b[1].x = 3; b[2].x = 4; b[1].has_y = b[2].has_y = false; b[1].has_z = b[2].has_z = b[1].has_r = b[2].has_r = false; },
+     R"(STRAIGHT_TRAVERSE(0.0000, 0.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(3.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(3.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(3.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000)
+STRAIGHT_TRAVERSE(3.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(4.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(4.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(4.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g18_g81_g98",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G90 F100 S1000 M3
+     //   G0 X0 Y10 Z0
+     //   G18
+     //   N901 G98 G81 X1 Z2 Y-5 R2
+     [](Blocks& b) { b = {xz(810, false)}; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 10.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, -5.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 10.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g18_g87_g99",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G90 F100 S1000 M3
+     //   G0 X0 Y10 Z0
+     //   G18
+     //   N901 G99 G87 X1 Z2 Y-5 R2 I0.5 J-3 K0.25
+     [](Blocks& b) { b = {xz(870, true)}; b[0].i = 0.25; b[0].j = 0.5; b[0].k = -3; b[0].has_i = b[0].has_j = b[0].has_k = true;  /* K0.25 I0.5 J-3 */ },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 10.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.5000, 2.0000, 2.2500, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+ORIENT_SPINDLE(0, 0.0000, 2)
+STRAIGHT_TRAVERSE(1.5000, -5.0000, 2.2500, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, -5.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+START_SPINDLE_CLOCKWISE(0)
+STRAIGHT_FEED(1.0000, -3.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, -5.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+ORIENT_SPINDLE(0, 0.0000, 2)
+STRAIGHT_TRAVERSE(1.5000, -5.0000, 2.2500, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.5000, 2.0000, 2.2500, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+START_SPINDLE_CLOCKWISE(0)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g19_g83_g98",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G90 F100 S1000 M3
+     //   G0 X10 Y0 Z0
+     //   G19
+     //   N901 G98 G83 Y1 Z2 X-5 R2 Q3
+     [](Blocks& b) { b = {yz(830, false)}; b[0].q = 3; b[0].has_q = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(10.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(2.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(-1.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(2.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(-0.7460, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(-4.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(2.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(-3.7460, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(-5.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(10.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g19_g87_g91_l2",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G90 F100 S1000 M4
+     //   G0 X10 Y0 Z0
+     //   G19
+     //   N901 G91 G98 G87 Y1 Z2 X-7 R-8 I2 J0.5 K0.25 L2
+     [](Blocks& b) { b = {yz(870, false)}; b[0].incremental = true; b[0].spindle_cw = false; b[0].z = -7; b[0].r = -8; b[0].repeats = 2; b[0].i = 0.5; b[0].j = 0.25; b[0].k = 2; b[0].has_i = b[0].has_j = b[0].has_k = true;  /* J0.5 K0.25 I2 */ },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(10.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(2.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(2.0000, 1.5000, 2.2500, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+ORIENT_SPINDLE(0, 0.0000, 3)
+STRAIGHT_TRAVERSE(-5.0000, 1.5000, 2.2500, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(-5.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+START_SPINDLE_COUNTERCLOCKWISE(0)
+STRAIGHT_FEED(-3.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(-5.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+ORIENT_SPINDLE(0, 0.0000, 3)
+STRAIGHT_TRAVERSE(-5.0000, 1.5000, 2.2500, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(10.0000, 1.5000, 2.2500, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(10.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+START_SPINDLE_COUNTERCLOCKWISE(0)
+STRAIGHT_TRAVERSE(10.0000, 2.0000, 4.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(2.0000, 2.0000, 4.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(2.0000, 2.5000, 4.2500, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+ORIENT_SPINDLE(0, 0.0000, 3)
+STRAIGHT_TRAVERSE(-5.0000, 2.5000, 4.2500, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(-5.0000, 2.0000, 4.0000, 0.0000, 0.0000, 0.0000)
+START_SPINDLE_COUNTERCLOCKWISE(0)
+STRAIGHT_FEED(-3.0000, 2.0000, 4.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(-5.0000, 2.0000, 4.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+ORIENT_SPINDLE(0, 0.0000, 3)
+STRAIGHT_TRAVERSE(-5.0000, 2.5000, 4.2500, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(10.0000, 2.5000, 4.2500, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(10.0000, 2.0000, 4.0000, 0.0000, 0.0000, 0.0000)
+START_SPINDLE_COUNTERCLOCKWISE(0)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g18_g84_lcnc_bug",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G90 F100 S1000 M3
+     //   G0 X0 Y10 Z0
+     //   G18
+     //   N901 G98 G84 X1 Z2 Y-5 R2
+     // rs274 prints for the two tapping feeds (LinuxCNC 2.9 bug, not reproduced):
+     //   STRAIGHT_FEED(-5.0000, 2.0000, 1.0000, 0.0000, 0.0000, 0.0000)
+     //   STRAIGHT_FEED(10.0000, 2.0000, 1.0000, 0.0000, 0.0000, 0.0000)
+     [](Blocks& b) { b = {xz(840, false)}; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 10.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+DISABLE_FEED_OVERRIDE()
+DISABLE_SPEED_OVERRIDE(0)
+STRAIGHT_FEED(1.0000, -5.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+START_SPINDLE_COUNTERCLOCKWISE(0)
+DWELL(0.0000)
+STRAIGHT_FEED(1.0000, 10.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+START_SPINDLE_CLOCKWISE(0)
+ENABLE_FEED_OVERRIDE()
+ENABLE_SPEED_OVERRIDE(0)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g19_g74_lcnc_bug",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G90 F100 S1000 M4
+     //   G0 X10 Y0 Z0
+     //   G19
+     //   N901 G99 G74 Y1 Z2 X-5 R2 P0.3
+     // rs274 prints for the two tapping feeds (LinuxCNC 2.9 bug, not reproduced):
+     //   STRAIGHT_FEED(2.0000, -5.0000, 1.0000, 0.0000, 0.0000, 0.0000)
+     //   STRAIGHT_FEED(2.0000, 2.0000, 1.0000, 0.0000, 0.0000, 0.0000)
+     [](Blocks& b) { b = {yz(740, true)}; b[0].spindle_cw = false; b[0].p = 0.3; b[0].has_p = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(10.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(2.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+DISABLE_FEED_OVERRIDE()
+DISABLE_SPEED_OVERRIDE(0)
+STRAIGHT_FEED(-5.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+START_SPINDLE_CLOCKWISE(0)
+DWELL(0.3000)
+STRAIGHT_FEED(2.0000, 1.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+START_SPINDLE_COUNTERCLOCKWISE(0)
+ENABLE_FEED_OVERRIDE()
+ENABLE_SPEED_OVERRIDE(0)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g74_a_axis",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M4
+     //   G0 X0 Y0 Z10 A5
+     //   N901 G99 G74 X1 Y2 Z-5 R2 P0.3
+     [](Blocks& b) { b = {g17(740, true)}; b[0].start[3] = 5; b[0].spindle_cw = false; b[0].p = 0.3; b[0].has_p = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 5.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 5.0000, 0.0000, 0.0000)
+DISABLE_FEED_OVERRIDE()
+DISABLE_SPEED_OVERRIDE(0)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 5.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+START_SPINDLE_CLOCKWISE(0)
+DWELL(0.3000)
+STRAIGHT_FEED(1.0000, 2.0000, 2.0000, 5.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+START_SPINDLE_COUNTERCLOCKWISE(0)
+ENABLE_FEED_OVERRIDE()
+ENABLE_SPEED_OVERRIDE(0)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g64_m49_g84",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   G64 P0.1 Q0.05
+     //   M49
+     //   N901 G98 G84 X1 Y2 Z-5 R2 P0.2
+     [](Blocks& b) { b = {g17(840, false)}; b[0].p = 0.2; b[0].has_p = true; b[0].path_tolerance = 0.1; b[0].naivecam_tolerance = 0.05; b[0].feed_override_enabled = b[0].speed_override_enabled = false; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+DISABLE_FEED_OVERRIDE()
+DISABLE_SPEED_OVERRIDE(0)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+START_SPINDLE_COUNTERCLOCKWISE(0)
+DWELL(0.2000)
+STRAIGHT_FEED(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+START_SPINDLE_CLOCKWISE(0)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.100000)
+SET_NAIVECAM_TOLERANCE(0.0500))",
+     ""},
+    {"m50p0_g84",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   M50 P0
+     //   N901 G98 G84 X1 Y2 Z-5 R2 P0.2
+     [](Blocks& b) { b = {g17(840, false)}; b[0].p = 0.2; b[0].has_p = true; b[0].feed_override_enabled = false; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+DISABLE_FEED_OVERRIDE()
+DISABLE_SPEED_OVERRIDE(0)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+START_SPINDLE_COUNTERCLOCKWISE(0)
+DWELL(0.2000)
+STRAIGHT_FEED(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STOP_SPINDLE_TURNING(0)
+START_SPINDLE_CLOCKWISE(0)
+ENABLE_SPEED_OVERRIDE(0)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"g61_g611",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   G61
+     //   N901 G98 G81 X1 Y2 Z-5 R2
+     //   G61.1
+     //   N902 X3
+     [](Blocks& b) { b = {g17(810, false), g17(810, false)}; b[0].path_mode = PathMode::kExactPath; b[1].path_mode = PathMode::kExactStop; b[1].continuing = true; b[1].x = 3; b[1].has_y = b[1].has_z = b[1].has_r = false; },
+     R"(STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(3.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(3.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(3.0000, 2.0000, -5.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(3.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_EXACT_STOP)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"inch_g73",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G20 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z1
+     //   N901 G98 G73 X1 Y2 Z-0.5 R0.2 Q0.25
+     [](Blocks& b) { b = {g17(730, false)}; b[0].units = Units::kInch; b[0].start[2] = 1; b[0].old_z = 1; b[0].z = -0.5; b[0].r = 0.2; b[0].q = 0.25; b[0].has_q = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 1.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 0.2000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -0.0500, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, -0.0400, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -0.3000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, -0.2900, 0.0000, 0.0000, 0.0000)
+STRAIGHT_FEED(1.0000, 2.0000, -0.5000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 1.0000, 0.0000, 0.0000, 0.0000)
+SET_MOTION_CONTROL_MODE(CANON_CONTINUOUS, 0.000000)
+SET_NAIVECAM_TOLERANCE(0.0000))",
+     ""},
+    {"r_less_z",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G81 X1 Y2 Z3 R2
+     [](Blocks& b) { b = {g17(810, true)}; b[0].z = 3; },
+     R"()",
+     "R less than z in cycle in xy plane"},
+    {"r_less_y_g18",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   G18
+     //   N901 G81 X1 Y3 Z2 R2
+     [](Blocks& b) { b = {xz(810, true)}; b[0].start = {}; b[0].start[2] = 10; b[0].old_z = 0; b[0].z = 3;  /* X1 Y3 Z2 R2 */ },
+     R"()",
+     "R less than y in cycle in xz plane"},
+    {"r_less_x_g19",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   G19
+     //   N901 G81 X3 Y1 Z2 R2
+     [](Blocks& b) { b = {yz(810, true)}; b[0].start = {}; b[0].start[2] = 10; b[0].old_z = 0; b[0].z = 3;  /* X3 Y1 Z2 R2 */ },
+     R"()",
+     "R less than x in cycle in yz plane"},
+    {"q0_g73",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G73 X1 Y2 Z-5 R2 Q0
+     [](Blocks& b) { b = {g17(730, true)}; b[0].q = 0; b[0].has_q = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000))",
+     "Negative or zero q value used"},
+    {"qneg_g83",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G83 X1 Y2 Z-5 R2 Q-2
+     [](Blocks& b) { b = {g17(830, true)}; b[0].q = -2; b[0].has_q = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000))",
+     "Negative or zero q value used"},
+    {"qmiss_g73",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G73 X1 Y2 Z-5 R2
+     [](Blocks& b) { b = {g17(730, true)}; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH))",
+     "Q word missing with g73"},
+    {"qmiss_g83",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G83 X1 Y2 Z-5 R2
+     [](Blocks& b) { b = {g17(830, true)}; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH))",
+     "Q word missing with g83"},
+    {"pmiss_g82",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G82 X1 Y2 Z-5 R2
+     [](Blocks& b) { b = {g17(820, true)}; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH))",
+     "Dwell time p word missing with g82"},
+    {"pmiss_g86",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G86 X1 Y2 Z-5 R2
+     [](Blocks& b) { b = {g17(860, true)}; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH))",
+     "Dwell time p word missing with g86"},
+    {"pmiss_g88",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G88 X1 Y2 Z-5 R2
+     [](Blocks& b) { b = {g17(880, true)}; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH))",
+     "Dwell time p word missing with g88"},
+    {"pmiss_g89",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G89 X1 Y2 Z-5 R2
+     [](Blocks& b) { b = {g17(890, true)}; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH))",
+     "Dwell time p word missing with g89"},
+    {"imiss",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G87 X1 Y2 Z-5 R2 J1 K1
+     [](Blocks& b) { b = {g17(870, true)}; b[0].i = 1; b[0].j = 1; b[0].k = 1; b[0].has_i = b[0].has_j = b[0].has_k = true; b[0].has_i = false; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH))",
+     "I word missing with g87"},
+    {"jmiss",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G87 X1 Y2 Z-5 R2 I1 K1
+     [](Blocks& b) { b = {g17(870, true)}; b[0].i = 1; b[0].j = 1; b[0].k = 1; b[0].has_i = b[0].has_j = b[0].has_k = true; b[0].has_j = false; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH))",
+     "J word missing with g87"},
+    {"kmiss",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G87 X1 Y2 Z-5 R2 I1 J1
+     [](Blocks& b) { b = {g17(870, true)}; b[0].i = 1; b[0].j = 1; b[0].k = 1; b[0].has_i = b[0].has_j = b[0].has_k = true; b[0].has_k = false; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH))",
+     "K word missing with g87"},
+    {"rmiss",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G81 X1 Y2 Z-5
+     [](Blocks& b) { b = {g17(810, true)}; b[0].has_r = false; },
+     R"()",
+     "R clearance plane unspecified in cycle"},
+    {"zmiss",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G81 X1 Y2 R2
+     [](Blocks& b) { b = {g17(810, true)}; b[0].has_z = false; },
+     R"()",
+     "Z value unspecified in xy plane canned cycle"},
+    {"l0",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G81 X1 Y2 Z-5 R2 L0
+     [](Blocks& b) { b = {g17(810, true)}; b[0].repeats = 0; },
+     R"()",
+     "Cannot do zero repeats of cycle"},
+    {"stopped_g86",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   M5
+     //   N901 G86 X1 Y2 Z-5 R2 P1
+     [](Blocks& b) { b = {g17(860, true)}; b[0].spindle_turning = false; b[0].p = 1; b[0].has_p = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000))",
+     "Spindle not turning in g86"},
+    {"stopped_g87",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   M5
+     //   N901 G87 X1 Y2 Z-5 R2 I1 J1 K-1
+     [](Blocks& b) { b = {g17(870, true)}; b[0].spindle_turning = false; b[0].i = 1; b[0].j = 1; b[0].k = -1; b[0].has_i = b[0].has_j = b[0].has_k = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000))",
+     "Spindle not turning in g87"},
+    {"stopped_g88",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   M5
+     //   N901 G88 X1 Y2 Z-5 R2 P1
+     [](Blocks& b) { b = {g17(880, true)}; b[0].spindle_turning = false; b[0].p = 1; b[0].has_p = true; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000))",
+     "Spindle not turning in g88"},
+    {"stopped_g84",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   M5
+     //   N901 G84 X1 Y2 Z-5 R2
+     [](Blocks& b) { b = {g17(840, true)}; b[0].spindle_turning = false; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000))",
+     "Spindle not turning in G84"},
+    {"stopped_g74",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   M5
+     //   N901 G74 X1 Y2 Z-5 R2
+     [](Blocks& b) { b = {g17(740, true)}; b[0].spindle_turning = false; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000))",
+     "Spindle not turning in G74"},
+    {"ccw_g84",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M4
+     //   G0 X0 Y0 Z10
+     //   N901 G84 X1 Y2 Z-5 R2
+     [](Blocks& b) { b = {g17(840, true)}; b[0].spindle_cw = false; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000))",
+     "Spindle turning counterclockwise in G84"},
+    {"cw_g74",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G74 X1 Y2 Z-5 R2
+     [](Blocks& b) { b = {g17(740, true)}; },
+     R"(SET_MOTION_CONTROL_MODE(CANON_EXACT_PATH)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 10.0000, 0.0000, 0.0000, 0.0000)
+STRAIGHT_TRAVERSE(1.0000, 2.0000, 2.0000, 0.0000, 0.0000, 0.0000))",
+     "Spindle turning clockwise in G74"},
+    {"f0",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   N901 G81 X1 Y2 Z-5 R2
+     [](Blocks& b) { b = {g17(810, true)}; b[0].feed_rate = 0; },
+     R"()",
+     "Cannot feed with zero feed rate"},
+    {"g93",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   G93
+     //   N901 G81 X1 Y2 Z-5 R2
+     [](Blocks& b) { b = {g17(810, true)}; b[0].inverse_time = true; },
+     R"()",
+     "Cannot use inverse time feed with canned cycles"},
+    {"ccomp",
+     // rs274 program (then G80 M2); the cycle blocks are the N9xx lines:
+     //   G21 G17 G90 F100 S1000 M3
+     //   G0 X0 Y0 Z10
+     //   G41 D1 G1 X-200
+     //   N901 G81 X1 Y2 Z-5 R2
+     [](Blocks& b) { b = {g17(810, true)}; b[0].cutter_comp = true; },
+     R"()",
+     "Cannot use canned cycles with cutter compensation on"},
+};
+
+void expect_calls(const std::vector<Call>& got, const std::vector<Call>& want, const std::string& name) {
+  const size_t n = std::max(got.size(), want.size());
+  for (size_t i = 0; i < n; ++i) {
+    if (i >= got.size()) {
+      ADD_FAILURE() << name << ": call " << i << " missing, rs274: " << to_text(want[i]);
+      return;
+    }
+    if (i >= want.size()) {
+      ADD_FAILURE() << name << ": call " << i << " extra: " << to_text(got[i]);
+      return;
+    }
+    const Call& g = got[i];
+    const Call& w = want[i];
+    bool same = g.name == w.name && g.words == w.words && g.numbers.size() == w.numbers.size();
+    for (size_t k = 0; same && k < g.numbers.size(); ++k) same = std::abs(g.numbers[k] - w.numbers[k]) <= 1e-4;
+    if (!same) {
+      ADD_FAILURE() << name << ": call " << i << " is " << to_text(g) << ", rs274: " << to_text(w);
+      return;
+    }
+  }
+}
+
+class CyclesVsRs274 : public ::testing::TestWithParam<Case> {};
+
+TEST_P(CyclesVsRs274, SameCallsAsRs274) {
+  const Case& c = GetParam();
+  Blocks blocks;
+  c.make(blocks);
+  ASSERT_FALSE(blocks.empty());
+  Recorder rec;
+  std::string error;
+  Pose at = blocks.front().start;
+  try {
+    for (size_t i = 0; i < blocks.size(); ++i) {
+      if (i > 0) blocks[i].start = at;  // consecutive cycle blocks: each starts where the last ended
+      const CycleResult r = run_cycle(blocks[i], SourceRef{1, static_cast<int32_t>(i + 1), 0}, rec);
+      at = r.end;
+    }
+  } catch (const Error& e) {
+    error = e.detail();
+    EXPECT_EQ(e.column(), 0);
+  }
+  EXPECT_EQ(error, c.error) << c.name;
+  expect_calls(rec.calls, parse_all(c.expected), c.name);
+  // The axes rs274 does not print (U V W) never move.
+  for (const Pose& p : rec.ends)
+    for (int k = 6; k < kNumAxes; ++k) EXPECT_EQ(p[static_cast<size_t>(k)], 0.0) << c.name;
+}
+
+std::string case_name(const ::testing::TestParamInfo<Case>& param) { return param.param.name; }
+
+INSTANTIATE_TEST_SUITE_P(Rs274, CyclesVsRs274, ::testing::ValuesIn(kCases), case_name);
+
+// ---- what the interpreter keeps -------------------------------------------------------
+
+TEST(Cycles, ResultIsWhereTheToolStandsAndTheRLevel) {
+  // G91 G98 G81 X5 Y1 R-8 Z-7 L3 from X0 Y0 Z10: three holes, back at Z10 (old Z).
+  CycleInput in = g17(810, false);
+  in.incremental = true;
+  in.x = 5;
+  in.y = 1;
+  in.r = -8;
+  in.z = -7;
+  in.repeats = 3;
+  in.start[3] = 7;  // A stays
+  Recorder rec;
+  const CycleResult r = run_cycle(in, SourceRef{}, rec);
+  EXPECT_DOUBLE_EQ(r.end[0], 15);
+  EXPECT_DOUBLE_EQ(r.end[1], 3);
+  EXPECT_DOUBLE_EQ(r.end[2], 10);
+  EXPECT_DOUBLE_EQ(r.end[3], 7);
+  EXPECT_DOUBLE_EQ(r.r_plane, 2);
+  // G99: at R.
+  in.retract_to_r = true;
+  EXPECT_DOUBLE_EQ(run_cycle(in, SourceRef{}, rec).end[2], 2);
+}
+
+TEST(Cycles, G19EndsOnTheDepthAxisX) {
+  CycleInput in = yz(810, true);  // G99 G81 Y1 Z2 X-5 R2 from X10
+  Recorder rec;
+  const CycleResult r = run_cycle(in, SourceRef{}, rec);
+  EXPECT_DOUBLE_EQ(r.end[0], 2);
+  EXPECT_DOUBLE_EQ(r.end[1], 1);
+  EXPECT_DOUBLE_EQ(r.end[2], 2);
+}
+
+TEST(Cycles, CallsCarryTheBlocksReference) {
+  struct RefCheck : Recorder {
+    std::vector<SourceRef> refs;
+    void straight_feed(const SourceRef& r, const Pose& p) override {
+      refs.push_back(r);
+      Recorder::straight_feed(r, p);
+    }
+  } rec;
+  run_cycle(g17(810, true), SourceRef{3, 42, 7}, rec);
+  ASSERT_EQ(rec.refs.size(), 1u);
+  EXPECT_EQ(rec.refs[0].file, 3);
+  EXPECT_EQ(rec.refs[0].line, 42);
+  EXPECT_EQ(rec.refs[0].column, 7);
+}
+
+TEST(Cycles, UvwPlaneMovesOnlyUvw) {
+  // G17.1 (not measurable with rs274, which has no U V W without an INI): the same
+  // cycle as G17 on U V W, X Y Z where they stand.
+  CycleInput in = g17(810, false);
+  in.plane = Plane::kUV;
+  in.start = {4, 5, 6, 0, 0, 0, 0, 0, 10};
+  Recorder rec;
+  const CycleResult r = run_cycle(in, SourceRef{}, rec);
+  ASSERT_EQ(rec.ends.size(), 4u);
+  const Pose want[] = {{4, 5, 6, 0, 0, 0, 1, 2, 10}, {4, 5, 6, 0, 0, 0, 1, 2, 2}, {4, 5, 6, 0, 0, 0, 1, 2, -5},
+                       {4, 5, 6, 0, 0, 0, 1, 2, 10}};
+  for (size_t i = 0; i < 4; ++i) EXPECT_EQ(rec.ends[i], want[i]) << i;
+  EXPECT_EQ(r.end, want[3]);
+  in.z = 3;
+  EXPECT_THROW(
+      {
+        try {
+          run_cycle(in, SourceRef{}, rec);
+        } catch (const Error& e) {
+          EXPECT_EQ(e.detail(), "R less than W in cycle in UV plane");
+          throw;
+        }
+      },
+      Error);
+}
+
+TEST(Cycles, NotACycleIsRefused) {
+  Recorder rec;
+  EXPECT_THROW(run_cycle(g17(800, true), SourceRef{}, rec), Error);
+  EXPECT_THROW(run_cycle(g17(761, true), SourceRef{}, rec), Error);
+  EXPECT_TRUE(rec.calls.empty());
+}
+
+}  // namespace
+}  // namespace cnc::rs274
