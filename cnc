@@ -9,6 +9,7 @@
 #   ./cnc replay LOG [--machine F] [--program P]   re-run the interpolator from a log, bit for bit
 #   ./cnc plan PROGRAM [--machine FILE] --csv OUT [--plot PNG]  dry run: setpoints, time, feed plot
 #   ./cnc report LOG --out DIR [--tolerance-um U] [--target-rmax-um U]  run report to open in a browser
+#   ./cnc conformance [conformance.py options]     our interpreter against LinuxCNC's rs274
 #   ./cnc build                                    set up and build only
 set -euo pipefail
 
@@ -28,6 +29,7 @@ PACKAGES=(
   socat                                  # pseudo-terminal pairs standing in for RS-485 (Modbus RTU tests)
   python3-pymodbus python3-serial python3-serial-asyncio python3-yaml  # drive emulated with pymodbus (interop test)
   mbpoll                                 # reads the simulator's registers (interop test)
+  linuxcnc-uspace                        # rs274: LinuxCNC's interpreter, the conformance oracle (tools/conformance)
 )
 
 # Service name -> executable, in start order. The logger starts first and stops
@@ -200,6 +202,21 @@ cmd_report() {
   say "open $out/index.html in a browser"
 }
 
+# conformance [--generate N] [--samples] [--corpus DIR] [conformance.py options]
+# Our interpreter (cnc-rs274) against LinuxCNC's rs274; see tools/conformance/README.md.
+# Without options: 200 random programs, the project's programs and LinuxCNC's samples.
+cmd_conformance() {
+  local ours="$BUILD/tools/rs274/cnc-rs274" conf="$ROOT/tools/conformance"
+  [ -x "$ours" ] || die "conformance: $ours is not built yet"
+  [ -x /usr/bin/rs274 ] || die "conformance: /usr/bin/rs274 missing (apt-get install linuxcnc-uspace)"
+  if [ $# -eq 0 ]; then
+    set -- --generate 200 --seed 1 --samples /usr/share/linuxcnc/ncfiles \
+      --corpus "$ROOT/config/programs" --corpus "$ROOT/tests/golden/programs/valid" \
+      --corpus "$ROOT/tests/unit/rs274_comp" --expected-refusals "$conf/expected-refusals.txt"
+  fi
+  python3 "$conf/conformance.py" --ours "$ours" --theirs /usr/bin/rs274 "$@"
+}
+
 cmd_test() {
   build
   cd "$BUILD"
@@ -221,6 +238,7 @@ main() {
     replay) [ $# -gt 0 ] || die "replay: LOG is required"; log="$1"; shift; exec "$BUILD/tools/cnc-replay" --log "$log" "$@" ;;
     plan) [ -x "$BUILD/tools/cnc-plan" ] || build; cmd_plan "$@" ;;
     report) [ -x "$BUILD/tools/cnc-logexport" ] || build; cmd_report "$@" ;;
+    conformance) [ -x "$BUILD/tools/rs274/cnc-rs274" ] || build; cmd_conformance "$@" ;;
     *) awk 'NR > 1 && /^#/ {sub(/^# ?/, ""); print; next} NR > 1 {exit}' "$0"; [ -z "$cmd" ] || exit 2 ;;
   esac
 }

@@ -102,14 +102,14 @@ def collect(args):
                 continue
             for f in sorted(files):
                 if f.endswith('.ngc'):
-                    progs.append(('corpus', os.path.join(root, f)))
+                    progs.append(('corpus', os.path.abspath(os.path.join(root, f))))
     for f in args.program or []:
         progs.append(('corpus', os.path.abspath(f)))
     if args.samples:
         for root, _, files in os.walk(args.samples):
             for f in sorted(files):
                 if f.endswith('.ngc'):
-                    progs.append(('samples', os.path.join(root, f)))
+                    progs.append(('samples', os.path.abspath(os.path.join(root, f))))
     return sorted(set(progs), key=lambda x: (x[0], x[1]))
 
 
