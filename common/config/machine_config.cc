@@ -1,12 +1,14 @@
 #include "common/config/machine_config.h"
 
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <map>
 #include <set>
 
 #include "common/config/yaml_reader.h"
+#include "common/program/block.h"
 
 namespace cnc::config {
 namespace {
@@ -91,10 +93,41 @@ MachineConfig read_machine(MapReader top) {
   {
     MapReader r = top.map("process");
     c.process.ball_radius_mm = r.get_double("ball_radius_mm", 0.0, 0.0, 100.0);
-    c.process.flutes = static_cast<int>(r.get_int("flutes", 0, 0, 64));
+    c.process.flutes = static_cast<int>(r.get_int("flutes", 0, 0, program::kMaxFlutes));
     c.process.pick_feed_mm = r.get_double("pick_feed_mm", 0.0, 0.0, 100.0);
     c.process.target_rmax_um = r.get_double("target_rmax_um", 0.0, 0.0, 1000.0);
     c.process.spindle_rpm = r.get_double("spindle_rpm", 0.0, 0.0, 200000.0);
+    r.finish();
+  }
+  {
+    MapReader r = top.map("program");
+    ProgramConfig& p = c.program;
+    const std::string base = std::filesystem::path(top.file()).parent_path().string();
+    const auto resolve = [&](const std::string& v) {
+      if (v.empty() || v[0] == '/') return v;
+      return (std::filesystem::path(base) / v).lexically_normal().string();
+    };
+    const std::string sub = r.get_string("subroutine_path", "");
+    for (size_t b = 0; b < sub.size();) {
+      size_t e = sub.find(':', b);
+      if (e == std::string::npos) e = sub.size();
+      if (e > b) p.subroutine_path.push_back(resolve(sub.substr(b, e - b)));
+      b = e + 1;
+    }
+    for (const std::string& d : p.subroutine_path)
+      if (!std::filesystem::is_directory(d)) r.fail("subroutine_path", "'" + d + "' is not a folder");
+    p.tool_table = resolve(r.get_string("tool_table", ""));
+    if (!p.tool_table.empty() && !std::filesystem::is_regular_file(p.tool_table))
+      r.fail("tool_table", "'" + p.tool_table + "' is not a file");
+    p.var_file = resolve(r.get_string("var_file", ""));
+    p.probe = r.get_bool("probe", p.probe);
+    p.digital_inputs = static_cast<int>(r.get_int("digital_inputs", p.digital_inputs, 0, 64));
+    p.analog_inputs = static_cast<int>(r.get_int("analog_inputs", p.analog_inputs, 0, 64));
+    p.digital_outputs = static_cast<int>(r.get_int("digital_outputs", p.digital_outputs, 0, 64));
+    p.analog_outputs = static_cast<int>(r.get_int("analog_outputs", p.analog_outputs, 0, 64));
+    p.block_delete = r.get_bool("block_delete", p.block_delete);
+    p.optional_stop = r.get_bool("optional_stop", p.optional_stop);
+    p.max_validation_lines = r.get_int("max_validation_lines", p.max_validation_lines, 1000, int64_t{1} << 40);
     r.finish();
   }
   {

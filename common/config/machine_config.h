@@ -60,6 +60,22 @@ struct ProcessConfig {
   double spindle_rpm = 0;
 };
 
+// The part-program language's machine-dependent settings (LinuxCNC's [RS274NGC]
+// section and tool/var files). Paths are relative to the config file's folder.
+struct ProgramConfig {
+  std::vector<std::string> subroutine_path;  // folders searched for o<name> call files
+  std::string tool_table;                    // LinuxCNC tool table (mm); "" = no tools
+  std::string var_file;                      // LinuxCNC var file (mm); "" = parameters not kept
+  bool probe = false;                        // G38.x needs a probe input
+  int digital_inputs = 0;                    // M66 needs inputs
+  int analog_inputs = 0;
+  int digital_outputs = 8;                   // M62-M65 P index range
+  int analog_outputs = 4;                    // M67/M68 E index range
+  bool block_delete = true;                  // '/' lines are skipped
+  bool optional_stop = true;                 // M1 stops
+  int64_t max_validation_lines = 200'000'000;  // lines interpreted to validate a program at load
+};
+
 struct MachineConfig {
   std::string source_file;
   std::string source_text;  // the YAML as loaded: the interpolator records it in the log for replay
@@ -95,6 +111,7 @@ struct MachineConfig {
   std::string param_update = "corrected";
 
   ProcessConfig process;
+  ProgramConfig program;
 
   DriveBridgeConfig drive_bridge;
   // drive_bridge.profile_dir: where drive profiles are; "" = config/drives beside the machine's folder.

@@ -9,7 +9,42 @@ namespace cnc::program {
 
 constexpr int kMaxAxes = 9;
 
-enum class BlockKind : int8_t { kRapid = 0, kLine = 1, kArcCw = 2, kArcCcw = 3, kNurbs = 4, kDwell = 5, kEnd = 6 };
+enum class BlockKind : int8_t { kRapid = 0, kLine = 1, kArcCw = 2, kArcCcw = 3, kNurbs = 4, kDwell = 5, kEnd = 6, kEvent = 7 };
+
+// What a program does besides moving, in program order between the moves (the
+// interpolator comes to rest at each, as at a dwell of 0 s). Program stops (M0, M1;
+// M60 is a shuttle and a stop) and tool changes (M6) hold the motion until the
+// operator resumes.
+enum class EventKind : int8_t {
+  kNone = 0,
+  kProgramStop = 1,    // M0
+  kOptionalStop = 2,   // M1
+  kPalletShuttle = 3,  // M60
+  kToolChange = 4,     // M6: number = tool
+  kSpindle = 5,        // M3/M4/M5/S: number = 1 cw, -1 ccw, 0 off; value = rpm
+  kCoolant = 6,        // M7/M8/M9: number = bit 0 mist, bit 1 flood
+  kMessage = 7,        // (MSG,...), (DEBUG,...): text
+  kDigitalOutput = 8,  // M62-M65: number = index, value = 0/1
+  kAnalogOutput = 9,   // M67/M68: number = index, value
+  kOverrides = 10,     // M48-M53: number = bits feed, speed, adaptive, hold
+  kLast = kOverrides,
+};
+
+const char* to_string(EventKind kind);
+
+struct Event {
+  EventKind kind = EventKind::kNone;
+  int32_t number = 0;
+  double value = 0;
+  std::string text;
+  // Holds the motion until the operator resumes.
+  bool pauses() const {
+    return kind == EventKind::kProgramStop || kind == EventKind::kOptionalStop || kind == EventKind::kToolChange;
+  }
+};
+
+// Limits shared by the config, the program's PROCESS directive and the network check.
+constexpr int kMaxFlutes = 64;
 
 const char* to_string(BlockKind kind);
 
@@ -44,6 +79,8 @@ struct NurbsGeometry {
 struct Block {
   int64_t index = 0;
   int32_t source_line = 0;
+  int32_t source_column = 0;
+  std::string source_file;  // the file the block's line is in (subroutine files included)
   BlockKind kind = BlockKind::kLine;
   std::vector<double> start;  // one entry per machine axis, mm
   std::vector<double> end;
@@ -53,6 +90,7 @@ struct Block {
   ProcessParams process;
   ArcGeometry arc;      // kArcCw, kArcCcw
   NurbsGeometry nurbs;  // kNurbs
+  Event event;          // kEvent
 };
 
 }  // namespace cnc::program

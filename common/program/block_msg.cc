@@ -24,6 +24,8 @@ cnc::lcmt_program_block to_msg(const Block& b, int64_t program_token) {
   m.program_token = program_token;
   m.block_index = b.index;
   m.source_line = b.source_line;
+  m.source_column = b.source_column;
+  m.source_file = b.source_file;
   m.kind = static_cast<int8_t>(b.kind);
   m.num_axes = static_cast<int32_t>(b.end.size());
   m.start = b.start;
@@ -56,6 +58,10 @@ cnc::lcmt_program_block to_msg(const Block& b, int64_t program_token) {
   m.flutes = b.process.flutes;
   m.pick_feed_mm = b.process.pick_feed_mm;
   m.target_rmax_um = b.process.target_rmax_um;
+  m.event_kind = static_cast<int8_t>(b.event.kind);
+  m.event_number = b.event.number;
+  m.event_value = b.event.value;
+  m.event_text = b.event.text;
   return m;
 }
 
@@ -65,18 +71,30 @@ std::string from_msg(const cnc::lcmt_program_block& m, int num_axes, Block* out)
   // A message built in memory (not decoded) may disagree with its own counts.
   const auto n = static_cast<size_t>(m.num_axes);
   if (m.start.size() != n || m.end.size() != n || m.center.size() != n) return "axis arrays disagree with num_axes";
-  if (m.kind < 0 || m.kind > static_cast<int8_t>(BlockKind::kEnd)) return "unknown block kind " + std::to_string(m.kind);
+  if (m.kind < 0 || m.kind > static_cast<int8_t>(BlockKind::kEvent)) return "unknown block kind " + std::to_string(m.kind);
   if (m.block_index < 0) return "negative block index";
   if (!finite(m.start) || !finite(m.end)) return "non-finite coordinate";
   if (!std::isfinite(m.feed_mm_per_min) || m.feed_mm_per_min < 0) return "bad feed";
   if (!std::isfinite(m.dwell_s) || m.dwell_s < 0) return "bad dwell time";
   if (!std::isfinite(m.spindle_rpm) || m.spindle_rpm < 0) return "bad spindle speed";
-  if (!std::isfinite(m.ball_radius_mm) || m.ball_radius_mm < 0 || m.flutes < 0 || !std::isfinite(m.pick_feed_mm) ||
+  if (!std::isfinite(m.ball_radius_mm) || m.ball_radius_mm < 0 || m.flutes < 0 || m.flutes > kMaxFlutes || !std::isfinite(m.pick_feed_mm) ||
       m.pick_feed_mm < 0 || !std::isfinite(m.target_rmax_um) || m.target_rmax_um < 0)
     return "bad process parameters";
+  if (m.kind == static_cast<int8_t>(BlockKind::kEvent) &&
+      (m.event_kind <= 0 || m.event_kind > static_cast<int8_t>(EventKind::kLast) || !std::isfinite(m.event_value)))
+    return "bad event";
+  if (m.source_file.size() > 4096 || m.event_text.size() > 4096) return "source file or event text too long";
   Block b;
   b.index = m.block_index;
   b.source_line = m.source_line;
+  b.source_column = m.source_column;
+  b.source_file = m.source_file;
+  if (b.index >= 0 && m.kind == static_cast<int8_t>(BlockKind::kEvent)) {
+    b.event.kind = static_cast<EventKind>(m.event_kind);
+    b.event.number = m.event_number;
+    b.event.value = m.event_value;
+    b.event.text = m.event_text;
+  }
   b.kind = static_cast<BlockKind>(m.kind);
   b.start = m.start;
   b.end = m.end;

@@ -10,19 +10,6 @@
 
 namespace cnc::program {
 
-const char* to_string(BlockKind kind) {
-  switch (kind) {
-    case BlockKind::kRapid: return "rapid";
-    case BlockKind::kLine: return "line";
-    case BlockKind::kArcCw: return "arc_cw";
-    case BlockKind::kArcCcw: return "arc_ccw";
-    case BlockKind::kNurbs: return "nurbs";
-    case BlockKind::kDwell: return "dwell";
-    case BlockKind::kEnd: return "end";
-  }
-  return "?";
-}
-
 ProgramError::ProgramError(SourceLocation where, const std::string& what)
     : std::runtime_error(where.str() + ": " + what), where_(std::move(where)), detail_(what) {}
 

@@ -24,12 +24,22 @@ using Pose = std::array<double, kNumAxes>;
 enum class Plane : uint8_t { kXY, kYZ, kXZ, kUV, kVW, kUW };
 enum class Units : uint8_t { kInch, kMm };
 enum class FeedMode : uint8_t { kUnitsPerMinute, kInverseTime, kUnitsPerRev };
-enum class PathMode : uint8_t { kExactPath /*G61.1*/, kExactStop /*G61*/, kContinuous /*G64*/ };
+enum class PathMode : uint8_t { kExactPath /*G61*/, kExactStop /*G61.1*/, kContinuous /*G64*/ };
 
 // A LinuxCNC-style NURBS control point (G5.2 / Fanuc G6.2): position in the plane
 // or in space, and weight.
 struct NurbsPoint {
   double x = 0, y = 0, z = 0, w = 1;
+  bool has_z = false;  // Fanuc G6.2: x y z are X Y Z; G5.2: x y are the plane's two axes
+};
+
+// Seed 000's process parameters, changed from a program line by the comment
+// directive (PROCESS, BALL_RADIUS=5, FLUTES=2, PICK_FEED=0.5, RMAX_UM=10.67); has_*
+// says which keys the directive named.
+struct ProcessSettings {
+  double ball_radius_mm = 0, pick_feed_mm = 0, target_rmax_um = 0;
+  int flutes = 0;
+  bool has_ball_radius = false, has_flutes = false, has_pick_feed = false, has_target_rmax = false;
 };
 
 class Canon {
@@ -93,6 +103,9 @@ class Canon {
   // Outputs (M62-M65 digital, synchronised with motion or immediate; M67/M68 analog).
   virtual void digital_output(const SourceRef&, int /*index*/, bool /*on*/, bool /*synchronised*/) {}
   virtual void analog_output(const SourceRef&, int /*index*/, double /*value*/, bool /*synchronised*/) {}
+
+  // The PROCESS directive (after the COMMENT call of the same comment).
+  virtual void set_process(const SourceRef&, const ProcessSettings&) {}
 
   // Text.
   virtual void comment(const SourceRef&, const std::string&) {}

@@ -99,6 +99,9 @@ void CanonPrinter::start_spindle_clockwise(const SourceRef&) { line("START_SPIND
 void CanonPrinter::start_spindle_counterclockwise(const SourceRef&) { line("START_SPINDLE_COUNTERCLOCKWISE(0)"); }
 void CanonPrinter::stop_spindle_turning(const SourceRef&) { line("STOP_SPINDLE_TURNING(0)"); }
 void CanonPrinter::set_spindle_mode(const SourceRef&, double max_rpm) { line("SET_SPINDLE_MODE(0 %.4f)", max_rpm); }
+void CanonPrinter::orient_spindle(const SourceRef&, double deg, int mode) {
+  line("ORIENT_SPINDLE(0, %.4f, %d)", deg, mode);
+}
 void CanonPrinter::mist_on(const SourceRef&) { line("MIST_ON()"); }
 void CanonPrinter::mist_off(const SourceRef&) { line("MIST_OFF()"); }
 void CanonPrinter::flood_on(const SourceRef&) { line("FLOOD_ON()"); }

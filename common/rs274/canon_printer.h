@@ -44,6 +44,7 @@ class CanonPrinter : public Canon {
   void start_spindle_counterclockwise(const SourceRef&) override;
   void stop_spindle_turning(const SourceRef&) override;
   void set_spindle_mode(const SourceRef&, double) override;
+  void orient_spindle(const SourceRef&, double, int) override;
   void mist_on(const SourceRef&) override;
   void mist_off(const SourceRef&) override;
   void flood_on(const SourceRef&) override;

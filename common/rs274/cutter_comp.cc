@@ -523,6 +523,9 @@ void CutterComp::set_spindle_speed(const SourceRef& r, double s) {
 void CutterComp::set_spindle_mode(const SourceRef& r, double max_rpm) {
   impl_->queueable([r, max_rpm](Canon& c) { c.set_spindle_mode(r, max_rpm); });
 }
+void CutterComp::orient_spindle(const SourceRef& r, double deg, int mode) {
+  impl_->queueable([r, deg, mode](Canon& c) { c.orient_spindle(r, deg, mode); });
+}
 void CutterComp::start_spindle_clockwise(const SourceRef& r) {
   impl_->queueable([r](Canon& c) { c.start_spindle_clockwise(r); });
 }
@@ -546,6 +549,10 @@ void CutterComp::flood_off(const SourceRef& r) {
 }
 void CutterComp::comment(const SourceRef& r, const std::string& s) {
   impl_->queueable([r, s](Canon& c) { c.comment(r, s); });
+}
+// Not a LinuxCNC call: the PROCESS directive follows its COMMENT, so it waits with it.
+void CutterComp::set_process(const SourceRef& r, const ProcessSettings& p) {
+  impl_->queueable([r, p](Canon& c) { c.set_process(r, p); });
 }
 
 // ---- calls that go straight through (before a waiting move, as in LinuxCNC) -------

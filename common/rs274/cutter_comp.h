@@ -62,6 +62,7 @@ class CutterComp : public Canon {
   void start_spindle_counterclockwise(const SourceRef&) override;
   void stop_spindle_turning(const SourceRef&) override;
   void set_spindle_mode(const SourceRef&, double) override;
+  void orient_spindle(const SourceRef&, double, int) override;
   void mist_on(const SourceRef&) override;
   void mist_off(const SourceRef&) override;
   void flood_on(const SourceRef&) override;
@@ -72,6 +73,7 @@ class CutterComp : public Canon {
   void enable_feed_hold(const SourceRef&, bool) override;
   void digital_output(const SourceRef&, int, bool, bool) override;
   void analog_output(const SourceRef&, int, double, bool) override;
+  void set_process(const SourceRef&, const ProcessSettings&) override;
   void comment(const SourceRef&, const std::string&) override;
   void message(const SourceRef&, const std::string&) override;
   void program_stop(const SourceRef&) override;

@@ -11,6 +11,7 @@
 #include <filesystem>
 
 #include "common/rs274/cycles.h"
+#include "common/rs274/process_directive.h"
 
 namespace cnc::rs274 {
 
@@ -238,7 +239,10 @@ class Interpreter::Reader : public ParamReader {
 // ---- set-up ------------------------------------------------------------------------
 
 Interpreter::Interpreter(MachineSetup setup, Canon& canon)
-    : setup_(std::move(setup)), canon_(canon), reader_(std::make_unique<Reader>(*this)) {
+    : setup_(std::move(setup)),
+      comp_filter_(std::make_unique<CutterComp>(canon)),
+      canon_(*comp_filter_),
+      reader_(std::make_unique<Reader>(*this)) {
   for (char& c : setup_.axes) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
 }
 
@@ -261,8 +265,8 @@ SourceRef Interpreter::ref(int column) const { return SourceRef{file_, line_no_,
 void Interpreter::fail(int column, const std::string& detail) const {
   std::vector<std::string> chain;
   for (auto it = frames_.rbegin(); it != frames_.rend(); ++it) {
-    chain.push_back("in o<" + it->sub + "> called at " + file_names_[static_cast<size_t>(it->return_file)] + ":" +
-                    std::to_string(it->return_line) + ":" + std::to_string(it->call_column));
+    chain.push_back(file_names_[static_cast<size_t>(it->return_file)] + ":" + std::to_string(it->return_line) + ":" +
+                    std::to_string(it->call_column) + " (o<" + it->sub + "> call)");
   }
   throw Error(file_names_.empty() ? std::string() : file_names_[static_cast<size_t>(file_)], ref(column), detail,
               std::move(chain));
@@ -422,7 +426,14 @@ bool Interpreter::execute_next() {
   } catch (const Error& e) {
     fail(e.column(), e.detail());
   }
-  execute_line();
+  try {
+    execute_line();
+  } catch (const Error& e) {
+    // A consumer of the canonical calls (the block builder) refuses with a column
+    // only: the place is this line.
+    if (!e.file_name().empty()) throw;
+    fail(e.column(), e.detail());
+  }
   return !ended_;
 }
 
@@ -875,10 +886,26 @@ void Interpreter::comments_of_line() {
     switch (c.kind) {
       case CommentKind::kMsg: canon_.message(r, c.text); break;
       case CommentKind::kPlain:
+      case CommentKind::kProcess: {
         // LinuxCNC makes COMMENT calls of ( ) comments only, not of ';' ones.
-        if (c.column >= 1 && static_cast<size_t>(c.column) <= text_.size() && text_[static_cast<size_t>(c.column - 1)] == ';') break;
-        canon_.comment(r, c.text);
+        const size_t open = static_cast<size_t>(c.column - 1);
+        if (open >= text_.size() || text_[open] != '(') break;
+        const size_t close = text_.find(')', open);
+        const std::string_view body(text_.data() + open + 1, (close == std::string::npos ? text_.size() : close) - open - 1);
+        ProcessSettings ps;
+        bool directive = false;
+        try {
+          directive = parse_process_directive(body, c.column + 1, &ps);
+        } catch (const Error& e) {
+          fail(e.column(), e.detail());
+        }
+        if (directive && nurbs_)
+          fail(c.column + 1, "process parameters cannot change inside a NURBS curve (opened at line " +
+                                 std::to_string(nurbs_->line) + ")");
+        canon_.comment(r, c.kind == CommentKind::kProcess ? std::string(body.substr(body.find_first_not_of(" \t"))) : c.text);
+        if (directive) canon_.set_process(r, ps);
         break;
+      }
       case CommentKind::kPrint:
       case CommentKind::kDebug: {
         // #n and #<name> in the text are replaced by their values (LinuxCNC's %lf).
@@ -933,9 +960,6 @@ void Interpreter::comments_of_line() {
           std::fprintf(stderr, "%s\n", out.c_str());
         break;
       }
-      case CommentKind::kProcess:
-        canon_.comment(r, "PROCESS," + c.text);
-        break;
       case CommentKind::kLogOpen: case CommentKind::kLogAppend: case CommentKind::kLogClose: case CommentKind::kLog:
         break;  // file logging from a program is not supported: the cell's logger records messages
       case CommentKind::kAbort:
@@ -1155,6 +1179,7 @@ void Interpreter::execute_block(Words& w) {
     const int g = w.g[7];
     if (g == 400) {
       canon_.comment(ref(w.gcol[7]), "interpreter: cutter radius compensation off");
+      comp_filter_->stop();
       comp_ = 400;
       comp_radius_ = 0;
     } else {
@@ -1171,9 +1196,19 @@ void Interpreter::execute_block(Words& w) {
         if (t != 0 && tool == nullptr) fail(w.on('D') ? w.column('D') : w.gcol[7], "tool " + std::to_string(t) + " is not in the tool table");
         radius = tool ? tool->diameter / 2 : 0;
       }
+      // A negative radius (G41.1 D-) swaps the side, as in LinuxCNC.
+      int side = g == 410 || g == 411 ? 1 : -1;
+      if (radius < 0) {
+        radius = -radius;
+        side = -side;
+      }
       comp_ = g;
       comp_radius_ = radius;
-      fail(w.gcol[7], "cutter radius compensation (" + g_text(g) + ") is not supported yet");
+      canon_.comment(ref(w.gcol[7]), side < 0 ? "interpreter: cutter radius compensation on right"
+                                              : "interpreter: cutter radius compensation on left");
+      Pose programmed{};
+      for (size_t i = 0; i < programmed.size(); ++i) programmed[i] = i < 3 || i >= 6 ? to_program(position_[i]) : position_[i];
+      comp_filter_->start(side, to_program(radius), plane_, programmed);
     }
   }
   // 18. Tool length compensation.
@@ -1272,6 +1307,7 @@ void Interpreter::execute_block(Words& w) {
   }
   if (w.g[0] >= 920 && w.g[0] <= 923) g92(w);
   // 24. Motion.
+  prev_motion_ = motion_;
   if (w.g[1] >= 0) {
     motion_ = w.g[1];
     if (motion_ == 800) {
@@ -1372,6 +1408,7 @@ void Interpreter::restore_modes(const SavedModes& sm, int column) {
 
 void Interpreter::tool_change(Words& w) {
   const SourceRef r = ref(w.mcol[6]);
+  if (comp_ != 400) fail(w.mcol[6], "cannot change tools with cutter radius compensation on");
   if (selected_tool_ < 0) fail(w.mcol[6], "M6 without a tool selected (T word)");
   canon_.start_change(r);
   if (spindle_ != 0) {
@@ -1540,6 +1577,7 @@ void Interpreter::motion(Words& w) {
     return;
   }
   const bool g53 = w.g[0] == 530;
+  if (!(m >= 730 && m <= 890)) in_cycle_ = false;
   if (m == 0 || m == 10) {
     if (w.axes == 0 && w.g[1] < 0) return;  // G0/G1 on its line moves even to where it is (LinuxCNC)
     const Pose end = axis_target(w, g53);
@@ -1674,46 +1712,68 @@ void Interpreter::cycle(Words& w) {
   const int m = motion_;
   const int col = w.g[1] >= 0 ? w.gcol[1] : 0;
   if (plane_ != Plane::kXY && plane_ != Plane::kXZ && plane_ != Plane::kYZ) fail(col, "canned cycle in this plane");
-  if (comp_ != 400) fail(col, "cannot use a canned cycle with cutter radius compensation on");
   if (w.axes == 0 && w.g[1] < 0) return;
-  if (feed_ <= 0 && m != 800) fail(col, "cannot do a canned cycle with zero feed rate");
+  // LinuxCNC's plane order: the two plane axes, then the depth axis; I J K follow.
   int a1 = 0, a2 = 1, a3 = 2;
-  if (plane_ == Plane::kXZ) { a1 = 2; a2 = 0; a3 = 1; }
-  if (plane_ == Plane::kYZ) { a1 = 1; a2 = 2; a3 = 0; }
+  char o1 = 'I', o2 = 'J', o3 = 'K';
+  if (plane_ == Plane::kXZ) { a1 = 2; a2 = 0; a3 = 1; o1 = 'K'; o2 = 'I'; o3 = 'J'; }
+  if (plane_ == Plane::kYZ) { a1 = 1; a2 = 2; a3 = 0; o1 = 'J'; o2 = 'K'; o3 = 'I'; }
   const char l1 = kAxisLetters[a1], l2 = kAxisLetters[a2], l3 = kAxisLetters[a3];
-  const bool first = !in_cycle_ || w.g[1] >= 0;
-  if (first) cycle_old_z_ = to_program(position_[static_cast<size_t>(a3)]);
-  if (w.on(l3)) cycle_z_ = w[l3];
-  else if (first && !in_cycle_) fail(col, g_text(m) + std::string(" needs a ") + l3 + " word (the bottom) the first time");
-  if (w.on('R')) cycle_r_ = w['R'];
-  else if (!in_cycle_) fail(col, g_text(m) + " needs an R word (the retract level) the first time");
-  if (w.on('Q')) cycle_q_ = w['Q'];
-  if (w.on('P')) cycle_p_ = w['P'];
+  // The depth-axis level where a run of cycle blocks started (G98 returns to it).
+  if (!in_cycle_) cycle_old_z_ = to_program(position_[static_cast<size_t>(a3)]);
+  const bool continuing = prev_motion_ == m;
   CycleInput in;
   in.g = m;
   in.plane = plane_;
   in.incremental = incremental_;
   in.retract_to_r = retract_r_;
   for (size_t i = 0; i < in.start.size(); ++i) in.start[i] = i < 3 || i >= 6 ? to_program(position_[i]) : position_[i];
-  in.x = w.on(l1) ? w[l1] : (incremental_ ? 0 : in.start[static_cast<size_t>(a1)]);
-  in.y = w.on(l2) ? w[l2] : (incremental_ ? 0 : in.start[static_cast<size_t>(a2)]);
   in.has_x = w.on(l1);
   in.has_y = w.on(l2);
+  in.x = in.has_x ? w[l1] : (incremental_ ? 0 : in.start[static_cast<size_t>(a1)]);
+  in.y = in.has_y ? w[l2] : (incremental_ ? 0 : in.start[static_cast<size_t>(a2)]);
+  // Sticky words: R, the depth, P, Q and G87's I J K keep their last values.
+  in.has_z = w.on(l3);
+  if (in.has_z) cycle_z_ = w[l3];
+  in.has_r = w.on('R');
+  if (in.has_r) cycle_r_ = w['R'];
+  // P-1 and Q-1 are LinuxCNC's marks of an absent word.
+  in.has_p = w.on('P') && w['P'] != -1;
+  if (in.has_p) cycle_p_ = w['P'];
+  in.has_q = w.on('Q') && w['Q'] != -1;
+  if (in.has_q) cycle_q_ = w['Q'];
+  in.has_i = w.on(o1);
+  if (in.has_i) cycle_i_ = w[o1];
+  in.has_j = w.on(o2);
+  if (in.has_j) cycle_j_ = w[o2];
+  in.has_k = w.on(o3);
+  if (in.has_k) cycle_k_ = w[o3];
   in.z = cycle_z_;
   in.r = cycle_r_;
-  in.q = cycle_q_;
-  in.has_q = w.on('Q') || cycle_q_ != 0;
   in.p = cycle_p_;
-  in.has_p = w.on('P') || cycle_p_ != 0;
-  in.k = w.on('K') ? w['K'] : 0;
+  in.q = cycle_q_;
+  in.i = cycle_i_;
+  in.j = cycle_j_;
+  in.k = cycle_k_;
+  in.continuing = continuing;
   if (w.on('L')) {
     const double l = w['L'];
     in.repeats = static_cast<int>(std::lround(l));
-    if (std::fabs(l - in.repeats) > 1e-4 || in.repeats < 0) fail(w.column('L'), "L (repeats) must be a whole number >= 0");
+    if (std::fabs(l - in.repeats) > 1e-4) fail(w.column('L'), "L (repeats) must be a whole number");
   }
   in.old_z = cycle_old_z_;
   in.spindle_rpm = speed_;
   in.spindle_cw = spindle_ >= 0;
+  in.spindle_turning = spindle_ != 0;
+  in.units = units_;
+  in.feed_rate = feed_;
+  in.inverse_time = feed_mode_ == FeedMode::kInverseTime;
+  in.cutter_comp = comp_ != 400;
+  in.path_mode = path_;
+  in.path_tolerance = path_p_;
+  in.naivecam_tolerance = path_q_;
+  in.feed_override_enabled = feed_override_;
+  in.speed_override_enabled = speed_override_;
   CycleResult res;
   try {
     res = run_cycle(in, ref(col), canon_);
@@ -1853,6 +1913,7 @@ void Interpreter::nurbs_fanuc_line(Words& w) {
   p.y = to_program(n.last[1]);
   p.z = to_program(n.last[2]);
   p.w = w.on('R') ? w['R'] : 1;
+  p.has_z = true;
   if (p.w <= 0) fail(w.column('R'), "NURBS weight R must be positive");
   n.points.push_back(p);
 }
@@ -1876,6 +1937,8 @@ void Interpreter::nurbs_fanuc_close() {
 
 void Interpreter::end_program(bool m30) {
   const SourceRef r = ref();
+  comp_filter_->flush();
+  comp_filter_->stop();
   // LinuxCNC's end of program (M2, M30): G54 with its rotation, the XY plane, G90,
   // G94 with no feed, feed and speed overrides on, spindle off, coolant off, G40, G1.
   // G92 and the tool length offset stay.

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "common/rs274/canon.h"
+#include "common/rs274/cutter_comp.h"
 #include "common/rs274/lexer.h"
 #include "common/rs274/parameters.h"
 #include "common/rs274/tool_table.h"
@@ -120,6 +121,9 @@ class Interpreter {
   bool named_exists(const std::string& name) const;
 
   MachineSetup setup_;
+  // Every canonical call goes through the cutter-compensation filter, which passes
+  // calls straight on while compensation is off.
+  std::unique_ptr<CutterComp> comp_filter_;
   Canon& canon_;
   Parameters params_;
   ToolTable tools_;
@@ -151,7 +155,7 @@ class Interpreter {
   double comp_radius_ = 0;
   int tool_length_ = 490;         // 430, 431, 432 or 490
   int coord_ = 1;                 // 1..9 = G54..G59.3
-  bool retract_r_ = false;        // G99
+  bool retract_r_ = true;         // G99 (rs274 starts in it)
   PathMode path_ = PathMode::kExactPath;
   double path_p_ = 0, path_q_ = 0;
   double feed_ = 0;
@@ -168,7 +172,8 @@ class Interpreter {
   double mu_ = 1.0;               // mm per machine unit
   Pose position_{};               // current position, program coordinates and units
   double cycle_old_z_ = 0;        // canned cycles: sticky values
-  double cycle_r_ = 0, cycle_q_ = 0, cycle_p_ = 0, cycle_z_ = 0;
+  double cycle_r_ = 0, cycle_q_ = 0, cycle_p_ = 0, cycle_z_ = 0, cycle_i_ = 0, cycle_j_ = 0, cycle_k_ = 0;
+  int prev_motion_ = 800;         // the motion mode before this block's
   bool in_cycle_ = false;
 
   // NURBS collection (G5.2 / Fanuc G6.2): control points until the curve closes.

@@ -17,7 +17,8 @@ constexpr size_t kMaxSetpoints = 2048;
 Monitor::Monitor(const config::MachineConfig& cfg) : cfg_(cfg), naxes_(static_cast<int>(cfg.axes.size())) {}
 
 void Monitor::on_block(const program::Block& b, int64_t token) {
-  if (b.kind == program::BlockKind::kDwell || b.kind == program::BlockKind::kEnd) return;
+  if (b.kind == program::BlockKind::kDwell || b.kind == program::BlockKind::kEnd || b.kind == program::BlockKind::kEvent)
+    return;
   Known k;
   k.block = b;
   try {

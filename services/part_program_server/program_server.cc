@@ -1,112 +1,181 @@
 #include "services/part_program_server/program_server.h"
 
 #include <algorithm>
+#include <cstring>
 
 namespace cnc::pps {
 
-namespace {
-
-// The load pass: counts blocks, drops them, and keeps a checkpoint every chunk.
-class Indexer : public program::BlockSink {
- public:
-  Indexer(const ServerLimits& limits, std::vector<program::ParserState>* checkpoints)
-      : limits_(limits), checkpoints_(checkpoints) {}
-  bool block(program::Block&&) override { return true; }
-  bool resume_point(const program::ParserState& s) override {
-    const program::ParserState* last = checkpoints_->empty() ? nullptr : &checkpoints_->back();
-    if (!last || s.next_index - last->next_index >= limits_.blocks_per_chunk ||
-        (s.offset - last->offset >= limits_.bytes_per_chunk && s.next_index > last->next_index))
-      checkpoints_->push_back(s);
-    return true;
-  }
-  void finished(const program::ParserState& s) override { end = s; }
-
-  program::ParserState end;
-
- private:
-  const ServerLimits& limits_;
-  std::vector<program::ParserState>* checkpoints_;
-};
-
-// The serve pass: the blocks of one chunk, up to the next checkpoint's offset.
-class ChunkReader : public program::BlockSink {
- public:
-  ChunkReader(int64_t stop_offset, std::vector<program::Block>* out) : stop_offset_(stop_offset), out_(out) {}
-  bool block(program::Block&& b) override {
-    out_->push_back(std::move(b));
-    return true;
-  }
-  bool resume_point(const program::ParserState& s) override {
-    if (stop_offset_ < 0 || s.offset < stop_offset_) return true;
-    reached = s;
-    return false;
-  }
-  void finished(const program::ParserState& s) override { reached = s; }
-
-  program::ParserState reached;
-
- private:
-  int64_t stop_offset_;
-  std::vector<program::Block>* out_;
-};
-
-bool same_place(const program::ParserState& a, const program::ParserState& b) {
-  return a.offset == b.offset && a.next_index == b.next_index && a.content_hash == b.content_hash;
+uint64_t block_hash(const program::Block& b, uint64_t h) {
+  const auto mix = [&h](const void* p, size_t n) {
+    const auto* c = static_cast<const unsigned char*>(p);
+    for (size_t i = 0; i < n; ++i) {
+      h ^= c[i];
+      h *= 1099511628211ull;
+    }
+  };
+  const auto d = [&](double v) { mix(&v, sizeof v); };
+  const auto vec = [&](const std::vector<double>& v) {
+    for (double x : v) d(x);
+  };
+  mix(&b.index, sizeof b.index);
+  mix(&b.kind, sizeof b.kind);
+  mix(&b.source_line, sizeof b.source_line);
+  mix(&b.source_column, sizeof b.source_column);
+  mix(b.source_file.data(), b.source_file.size());
+  vec(b.start);
+  vec(b.end);
+  d(b.feed_mm_per_min);
+  d(b.dwell_s);
+  d(b.spindle_rpm);
+  d(b.process.ball_radius_mm);
+  mix(&b.process.flutes, sizeof b.process.flutes);
+  d(b.process.pick_feed_mm);
+  d(b.process.target_rmax_um);
+  vec(b.arc.center);
+  mix(&b.arc.plane, sizeof b.arc.plane);
+  mix(&b.arc.turns, sizeof b.arc.turns);
+  mix(&b.nurbs.order, sizeof b.nurbs.order);
+  vec(b.nurbs.knots);
+  vec(b.nurbs.weights);
+  for (const auto& p : b.nurbs.control_points) mix(p.data(), sizeof(double) * p.size());
+  mix(&b.event.kind, sizeof b.event.kind);
+  mix(&b.event.number, sizeof b.event.number);
+  d(b.event.value);
+  mix(b.event.text.data(), b.event.text.size());
+  return h;
 }
 
-}  // namespace
-
-program::ParserSettings parser_settings(const config::MachineConfig& cfg) {
-  program::ParserSettings s;
-  for (const auto& a : cfg.axes) {
-    s.axis_names.push_back(a.name);
-    s.start_position_mm.push_back(a.home_mm);
+// One pass of the interpreter through the program, block by block.
+class ProgramServer::Run {
+ public:
+  Run(const ProgramSetup& s, const std::vector<double>& start, bool validating)
+      : builder_(builder_setup(s.builder, start),
+                 [this](int32_t f) -> const std::string& { return interp_->file_names()[static_cast<size_t>(f)]; }),
+        max_lines_(validating ? s.max_validation_lines : -1) {
+    rs274::MachineSetup m = s.machine;
+    for (size_t i = 0; i < s.builder.axis_names.size() && i < start.size(); ++i) {
+      static const char kAxes[] = "XYZABCUVW";
+      const char* at = s.builder.axis_names[i].size() == 1 ? std::strchr(kAxes, s.builder.axis_names[i][0]) : nullptr;
+      if (at != nullptr && *at != '\0') m.start_position[static_cast<size_t>(at - kAxes)] = start[i];
+    }
+    // Only the run that serves the program (and so runs it) keeps parameters.
+    m.write_var_file = !validating && m.write_var_file;
+    interp_ = std::make_unique<rs274::Interpreter>(std::move(m), builder_);
   }
-  s.default_feed_mm_per_min = 0;  // a G1 needs an F: a silent default feed surprises machinists
-  s.spindle_rpm = cfg.process.spindle_rpm;
-  s.process = program::ProcessParams{cfg.process.ball_radius_mm, cfg.process.flutes, cfg.process.pick_feed_mm,
-                                     cfg.process.target_rmax_um};
+
+  void open(const std::string& path) { interp_->open(path); }
+
+  // The next block; false after the end block. Throws rs274::Error.
+  bool next(program::Block* out) {
+    auto& q = builder_.blocks();
+    while (q.empty()) {
+      if (!interp_->execute_next() && q.empty()) return false;
+      if (max_lines_ > 0 && interp_->lines_executed() > max_lines_)
+        throw rs274::Error(interp_->file_names().front(), rs274::SourceRef{},
+                           "the program ran more than " + std::to_string(max_lines_) +
+                               " lines without ending: not validated (program.max_validation_lines)");
+    }
+    *out = std::move(q.front());
+    q.pop_front();
+    return true;
+  }
+
+  int64_t lines() const { return interp_->lines_executed(); }
+
+ private:
+  static rs274::BuilderSetup builder_setup(rs274::BuilderSetup b, const std::vector<double>& start) {
+    if (start.size() == b.axis_names.size()) b.start_position_mm = start;
+    return b;
+  }
+
+  rs274::BlockBuilder builder_;
+  std::unique_ptr<rs274::Interpreter> interp_;
+  int64_t max_lines_;
+};
+
+ProgramSetup program_setup(const config::MachineConfig& cfg) {
+  ProgramSetup s;
+  s.machine.axes.clear();
+  for (const auto& a : cfg.axes) {
+    s.machine.axes += a.name;
+    s.builder.axis_names.push_back(a.name);
+    s.builder.start_position_mm.push_back(a.home_mm);
+  }
+  s.machine.machine_units = rs274::Units::kMm;
+  s.machine.subroutine_path = cfg.program.subroutine_path;
+  s.machine.tool_table = cfg.program.tool_table;
+  s.machine.var_file = cfg.program.var_file;
+  s.machine.has_probe = cfg.program.probe;
+  s.machine.digital_inputs = cfg.program.digital_inputs;
+  s.machine.analog_inputs = cfg.program.analog_inputs;
+  s.machine.digital_outputs = cfg.program.digital_outputs;
+  s.machine.analog_outputs = cfg.program.analog_outputs;
+  s.machine.block_delete = cfg.program.block_delete;
+  s.machine.optional_stop = cfg.program.optional_stop;
+  s.builder.spindle_rpm = cfg.process.spindle_rpm;
+  s.builder.process = program::ProcessParams{cfg.process.ball_radius_mm, cfg.process.flutes, cfg.process.pick_feed_mm,
+                                             cfg.process.target_rmax_um};
+  s.max_validation_lines = cfg.program.max_validation_lines;
   return s;
 }
 
 ProgramServer::ProgramServer(const config::MachineConfig& cfg, ServerLimits limits)
-    : ProgramServer(parser_settings(cfg), limits) {}
+    : ProgramServer(program_setup(cfg), limits) {}
 
-ProgramServer::ProgramServer(program::ParserSettings settings, ServerLimits limits)
-    : parser_(std::move(settings)), limits_(limits) {
+ProgramServer::ProgramServer(ProgramSetup setup, ServerLimits limits) : setup_(std::move(setup)), limits_(limits) {
   limits_.blocks_per_chunk = std::max(1, limits_.blocks_per_chunk);
-  limits_.bytes_per_chunk = std::max<int64_t>(1, limits_.bytes_per_chunk);
   limits_.cached_chunks = std::max(1, limits_.cached_chunks);
 }
+
+ProgramServer::~ProgramServer() = default;
 
 const std::string& ProgramServer::path() const {
   static const std::string kNone;
   return program_ ? program_->path : kNone;
 }
 
+std::unique_ptr<ProgramServer::Run> ProgramServer::start_run(const Loaded& p, bool validating) const {
+  auto run = std::make_unique<Run>(setup_, p.start, validating);
+  run->open(p.path);
+  return run;
+}
+
 LoadResult ProgramServer::load(const std::string& path, int64_t token, const std::vector<double>& start_position_mm) {
   LoadResult r;
-  program::ParserState start = parser_.initial_state();
-  // The program starts where the machine is (RS274): its first move, a G91 move
-  // or a NURBS's first control point are taken from there.
-  if (start_position_mm.size() == start.position_mm.size()) start.position_mm = start_position_mm;
   auto next = std::make_unique<Loaded>();
   next->path = path;
   next->token = token;
-  next->in = std::make_unique<std::ifstream>(path, std::ios::binary);
+  next->start = start_position_mm.size() == setup_.builder.axis_names.size() ? start_position_mm
+                                                                              : setup_.builder.start_position_mm;
   try {
-    if (!*next->in) throw program::ProgramError(program::SourceLocation{path, 0, 0}, "cannot open the program file");
-    Indexer indexer(limits_, &next->checkpoints);
-    parser_.stream(*next->in, path, start, indexer);
-    next->end = indexer.end;
-    next->num_blocks = indexer.end.next_index;
-  } catch (const program::ProgramError& e) {
+    std::unique_ptr<Run> run = start_run(*next, true);
+    program::Block b;
+    uint64_t h = 14695981039346656037ull;
+    int64_t n = 0;
+    while (run->next(&b)) {
+      h = block_hash(b, h);
+      ++n;
+      if (n % limits_.blocks_per_chunk == 0) {
+        next->chunk_hashes.push_back(h);
+        h = 14695981039346656037ull;
+      }
+    }
+    if (n % limits_.blocks_per_chunk != 0) next->chunk_hashes.push_back(h);
+    next->num_blocks = n;
+    next->lines = run->lines();
+  } catch (const rs274::Error& e) {
     r.error = e.what();
+    r.file = e.file_name().empty() ? path : e.file_name();
     r.line = e.where().line;
     r.column = e.where().column;
     return r;
+  } catch (const std::exception& e) {
+    r.error = path + ": " + e.what();
+    r.file = path;
+    return r;
   }
   program_ = std::move(next);
+  serving_.reset();
   cache_.clear();
   serving_error_.clear();
   r.ok = true;
@@ -123,63 +192,66 @@ const program::Block* ProgramServer::block(int64_t index) {
 }
 
 const ProgramServer::Chunk* ProgramServer::chunk_for(int64_t index) {
-  const auto& cps = program_->checkpoints;
-  // The last checkpoint at or before `index`.
-  const auto it = std::upper_bound(cps.begin(), cps.end(), index,
-                                   [](int64_t i, const program::ParserState& s) { return i < s.next_index; });
-  const size_t c = static_cast<size_t>(it - cps.begin()) - 1;
-  const int64_t first = cps[c].next_index;
+  const int64_t per = limits_.blocks_per_chunk;
+  const int64_t first = index / per * per;
   for (Chunk& ch : cache_) {
     if (ch.first == first) {
       ch.last_use = ++use_clock_;
       return &ch;
     }
   }
-  Chunk fresh;
-  if (!read_chunk(c, &fresh)) {
-    program_.reset();  // nothing more of this file is served
+  const std::string changed = program_->path + ": the program no longer interprets as when it was loaded";
+  try {
+    // The serving interpreter is at block `serving_next_`; an earlier chunk means
+    // starting over.
+    if (!serving_ || serving_next_ > first) {
+      if (serving_) ++restarts_;
+      serving_ = start_run(*program_, false);
+      serving_next_ = 0;
+    }
+    Chunk fresh;
+    program::Block b;
+    while (serving_next_ < first + per && serving_next_ < program_->num_blocks) {
+      const int64_t c = serving_next_ / per;
+      if (serving_next_ % per == 0) {
+        ++chunk_reads_;
+        fresh.first = serving_next_;
+        fresh.blocks.clear();
+        chunk_hash_ = 14695981039346656037ull;
+      }
+      if (!serving_->next(&b)) {
+        serving_error_ = changed + " (it ended early)";
+        program_.reset();
+        cache_.clear();
+        return nullptr;
+      }
+      chunk_hash_ = block_hash(b, chunk_hash_);
+      ++serving_next_;
+      if (serving_next_ > first) fresh.blocks.push_back(std::move(b));
+      if (serving_next_ % per == 0 || serving_next_ == program_->num_blocks) {
+        if (chunk_hash_ != program_->chunk_hashes[static_cast<size_t>(c)]) {
+          serving_error_ = changed;
+          program_.reset();
+          cache_.clear();
+          return nullptr;
+        }
+      }
+    }
+    fresh.last_use = ++use_clock_;
+    if (static_cast<int>(cache_.size()) < limits_.cached_chunks) {
+      cache_.push_back(std::move(fresh));
+      return &cache_.back();
+    }
+    Chunk& victim = *std::min_element(cache_.begin(), cache_.end(),
+                                      [](const Chunk& a, const Chunk& b2) { return a.last_use < b2.last_use; });
+    victim = std::move(fresh);
+    return &victim;
+  } catch (const std::exception& e) {
+    serving_error_ = changed + " (" + e.what() + ")";
+    program_.reset();
     cache_.clear();
     return nullptr;
   }
-  fresh.last_use = ++use_clock_;
-  if (static_cast<int>(cache_.size()) < limits_.cached_chunks) {
-    cache_.push_back(std::move(fresh));
-    return &cache_.back();
-  }
-  Chunk& victim = *std::min_element(cache_.begin(), cache_.end(),
-                                    [](const Chunk& a, const Chunk& b) { return a.last_use < b.last_use; });
-  victim = std::move(fresh);
-  return &victim;
-}
-
-bool ProgramServer::read_chunk(size_t c, Chunk* out) {
-  Loaded& p = *program_;
-  const program::ParserState& from = p.checkpoints[c];
-  const bool last = c + 1 == p.checkpoints.size();
-  const program::ParserState& to = last ? p.end : p.checkpoints[c + 1];
-  ++chunk_reads_;
-  out->first = from.next_index;
-  out->blocks.clear();
-  out->blocks.reserve(static_cast<size_t>(std::min<int64_t>(to.next_index - from.next_index, 1 << 16)));
-  const std::string changed = p.path + ": the program file changed since it was loaded";
-  try {
-    p.in->clear();
-    p.in->seekg(from.offset);
-    if (!*p.in) {
-      serving_error_ = p.path + ": cannot seek in the program file";
-      return false;
-    }
-    ChunkReader reader(last ? -1 : to.offset, &out->blocks);
-    parser_.stream(*p.in, p.path, from, reader);
-    if (!same_place(reader.reached, to) || out->first + static_cast<int64_t>(out->blocks.size()) != to.next_index) {
-      serving_error_ = changed;
-      return false;
-    }
-  } catch (const program::ProgramError& e) {
-    serving_error_ = changed + " (" + e.what() + ")";
-    return false;
-  }
-  return true;
 }
 
 }  // namespace cnc::pps

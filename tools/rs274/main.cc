@@ -129,10 +129,10 @@ int main(int argc, char** argv) {
       status = 1;
     }
     // rs274 resets once when it exits, and once more when it ran without an INI file.
+    interp_ptr = nullptr;  // rs274's closing resets carry no block's N word
     const cnc::rs274::SourceRef r{};
     printer.on_reset(r);
     if (!have_ini) printer.on_reset(r);
-    interp_ptr = nullptr;
   }
   if (out != stdout) std::fclose(out);
   return status;

@@ -1,0 +1,102 @@
+#pragma once
+// Canonical calls → the interpolator's blocks: machine axes, mm, mm/min. Applies
+// what LinuxCNC's canon layer applies (units, G92, XY rotation, G5x, tool length
+// offset), keeps the spindle and process state that each motion block carries, and
+// turns the non-motion calls the cell acts on into event blocks in program order.
+// The checks of block geometry that the interpolator relies on (arc radii, NURBS
+// knots and weights, axes the machine has) are made here, at the source line of the
+// call, so a program that would be refused on the network is refused at its place.
+#include <deque>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "common/program/block.h"
+#include "common/rs274/canon.h"
+
+namespace cnc::rs274 {
+
+struct BuilderSetup {
+  std::vector<std::string> axis_names;     // machine axes in order, e.g. X Y Z
+  std::vector<double> start_position_mm;   // where the machine stands
+  double spindle_rpm = 0;                  // speed before any S word
+  program::ProcessParams process;          // before any PROCESS directive
+};
+
+class BlockBuilder : public Canon {
+ public:
+  // `file_name(i)` names file i of the interpreter's file table (for block sources).
+  BlockBuilder(BuilderSetup setup, std::function<const std::string&(int32_t)> file_name);
+
+  // Blocks made so far and not yet taken, oldest first; the caller pops them.
+  std::deque<program::Block>& blocks() { return out_; }
+  int64_t blocks_made() const { return next_index_; }
+  bool ended() const { return ended_; }
+
+  void use_length_units(const SourceRef&, Units) override;
+  void select_plane(const SourceRef&, Plane) override;
+  void set_g5x_offset(const SourceRef&, int, const Pose&) override;
+  void set_g92_offset(const SourceRef&, const Pose&) override;
+  void set_xy_rotation(const SourceRef&, double) override;
+  void set_feed_rate(const SourceRef&, double) override;
+  void set_feed_mode(const SourceRef&, FeedMode) override;
+  void use_tool_length_offset(const SourceRef&, const Pose&) override;
+  void straight_traverse(const SourceRef&, const Pose& end) override;
+  void straight_feed(const SourceRef&, const Pose& end) override;
+  void arc_feed(const SourceRef&, double first_end, double second_end, double first_axis, double second_axis,
+                int rotation, double axis_end, const Pose& end) override;
+  void nurbs_feed(const SourceRef&, int order, const std::vector<NurbsPoint>& points, const std::vector<double>& knots,
+                  const Pose& end) override;
+  void dwell(const SourceRef&, double seconds) override;
+  void change_tool(const SourceRef&, int) override;
+  void orient_spindle(const SourceRef&, double, int) override;
+  void set_spindle_speed(const SourceRef&, double) override;
+  void start_spindle_clockwise(const SourceRef&) override;
+  void start_spindle_counterclockwise(const SourceRef&) override;
+  void stop_spindle_turning(const SourceRef&) override;
+  void mist_on(const SourceRef&) override;
+  void mist_off(const SourceRef&) override;
+  void flood_on(const SourceRef&) override;
+  void flood_off(const SourceRef&) override;
+  void enable_feed_override(const SourceRef&, bool) override;
+  void enable_speed_override(const SourceRef&, bool) override;
+  void enable_adaptive_feed(const SourceRef&, bool) override;
+  void enable_feed_hold(const SourceRef&, bool) override;
+  void digital_output(const SourceRef&, int, bool, bool) override;
+  void analog_output(const SourceRef&, int, double, bool) override;
+  void set_process(const SourceRef&, const ProcessSettings&) override;
+  void message(const SourceRef&, const std::string&) override;
+  void program_stop(const SourceRef&) override;
+  void optional_program_stop(const SourceRef&) override;
+  void pallet_shuttle(const SourceRef&) override;
+  void program_end(const SourceRef&) override;
+  void finish(const SourceRef&) override;
+
+ private:
+  program::Block& begin(const SourceRef& ref, program::BlockKind kind);
+  void event(const SourceRef& ref, program::EventKind kind, int32_t number, double value, std::string text = {});
+  std::vector<double> to_machine(const SourceRef& ref, const Pose& p) const;
+  double feed_mm_per_min(const SourceRef& ref) const;
+
+  BuilderSetup setup_;
+  std::function<const std::string&(int32_t)> file_name_;
+  std::vector<int> axis_of_pose_;  // pose index (X..W) → machine axis, -1: the machine has none
+  std::deque<program::Block> out_;
+  int64_t next_index_ = 0;
+  bool ended_ = false;
+
+  double scale_ = 1.0;  // mm per program unit
+  Plane plane_ = Plane::kXY;
+  Pose g5x_{}, g92_{}, tool_{};  // mm (degrees for A B C)
+  double rotation_deg_ = 0;
+  std::vector<double> position_;  // machine mm
+  double feed_ = 0;               // program units / min (or / rev)
+  FeedMode feed_mode_ = FeedMode::kUnitsPerMinute;
+  double speed_rpm_ = 0;
+  int spindle_dir_ = 0;
+  int coolant_ = 0;
+  int overrides_ = 0xF;
+  program::ProcessParams process_;
+};
+
+}  // namespace cnc::rs274
