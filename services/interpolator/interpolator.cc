@@ -52,6 +52,29 @@ double brake_distance(double v, double a, double vt, double A, double J) {
   return s;
 }
 
+// The acceleration with which a path at speed v approaches the speed v + gap in
+// cycles of T: the largest a (at most A) from which lowering the acceleration by
+// J·T per cycle down to zero gains no more than the gap, this cycle included. Taken
+// afresh every cycle, it never overshoots and lands on the speed with the
+// acceleration at zero, each step of the acceleration within J·T (the continuous
+// ramp sqrt(2·J·gap), rounded to whole cycles, overshot and had to be clipped,
+// a jerk step of up to ~2 J·T at the landing). A negative gap mirrors it.
+double landing_accel(double gap, double A, double J, double T) {
+  const double g = std::fabs(gap) / T;  // the speed gain, in units of acceleration × cycle
+  const double q = J * T;               // the largest step of the acceleration per cycle
+  if (!(g >= 0)) return 0.0;
+  // From a in [m·q, (m+1)·q) the steps a, a − q, ..., a − m·q gain
+  // G(a) = (m+1)·a − q·m(m+1)/2; G(m·q) = q·m(m+1)/2. A gap at least G(A) (an
+  // unlimited cap included) takes the full acceleration.
+  const double m_a = std::floor(A / q);
+  if (g >= (m_a + 1) * A - 0.5 * q * m_a * (m_a + 1)) return gap >= 0 ? A : -A;
+  double m = std::floor(0.5 * (std::sqrt(1.0 + 8.0 * g / q) - 1.0));
+  while (m > 0 && 0.5 * q * m * (m + 1) > g) m -= 1;
+  while (0.5 * q * (m + 1) * (m + 2) <= g) m += 1;
+  const double a = std::min(A, (g + 0.5 * q * m * (m + 1)) / (m + 1));
+  return gap >= 0 ? a : -a;
+}
+
 // Appends u0 and the points that refine (u0, u1) until the local speed limit v(u)
 // (chord error, roughness) changes by at most 0.5 % between neighbours, so that
 // interpolating it linearly between samples never overestimates it by more than
@@ -488,7 +511,7 @@ double Interpolator::cap_at(const Planned& p, double s, Limit* why, double* v_ge
   *why = f < 0.5 ? sm[i].limit : sm[i + 1].limit;
   if (v_geo != nullptr) *v_geo = v;
   // A rapid at full override runs at its axes' limit, which v already is.
-  if (rapid_at_full_speed(p)) return v;
+  if (rapid_at_full_speed(p)) return std::isfinite(v) ? v : p.v_prog;
   const double vp = programmed_speed(p);
   if (vp <= v) {
     *why = Limit::kProgram;
@@ -497,7 +520,7 @@ double Interpolator::cap_at(const Planned& p, double s, Limit* why, double* v_ge
   return v;
 }
 
-bool Interpolator::safe(double v_n, double a_n, double s_n) const {
+bool Interpolator::safe(double v_n, double a_n, double s_n, double* v_target) const {
   double A = kInf, J = kInf;
   // The brake is continuous-time; executed in whole cycles it needs about half a
   // cycle's travel at the speed it sheds more room.
@@ -508,8 +531,10 @@ bool Interpolator::safe(double v_n, double a_n, double s_n) const {
     A = std::min(A, p.accel);
     J = std::min(J, p.jerk);
     if (horizon < 0) horizon = brake_distance(v_n, a_n, 0.0, A, J) + v_n * period_s_ + 1e-9;
-    if (p.stop_block() || (p.v_entry == 0 && offset > 0))
+    if (p.stop_block() || (p.v_entry == 0 && offset > 0)) {
+      if (v_target != nullptr) *v_target = 0;
       return brake_distance(v_n, a_n, 0.0, A, J) + 0.5 * v_n * T <= offset - s_n + 1e-9;
+    }
     const size_t n = p.samples.size();
     for (size_t i = 0; i < n; ++i) {
       const double d = offset + p.samples[i].s - s_n;
@@ -517,8 +542,10 @@ bool Interpolator::safe(double v_n, double a_n, double s_n) const {
       if (d > horizon) return true;
       const double vt = p.v_bw[i];
       if (vt < v_n + a_n * a_n / (2 * J) &&
-          brake_distance(v_n, a_n, vt, A, J) + 0.5 * std::max(0.0, v_n - vt) * T > d + 1e-9)
+          brake_distance(v_n, a_n, vt, A, J) + 0.5 * std::max(0.0, v_n - vt) * T > d + 1e-9) {
+        if (v_target != nullptr) *v_target = vt;
         return false;
+      }
     }
     offset += p.length;
   }
@@ -665,23 +692,23 @@ const Setpoint& Interpolator::step() {
       const double cap = pausing ? 0.0 : cap_at(p, s_, &why, &geo_here);
       const double A = p.accel, J = p.jerk;
       const double a_lo = std::max(-A, a_ - J * T), a_hi = std::min(A, a_ + J * T);
-      // Acceleration that approaches the cap with a jerk-limited ramp (discrete form).
-      const double gap = cap - v_;
-      const double ramp = -0.5 * J * T + std::sqrt(0.25 * J * J * T * T + 2.0 * J * std::fabs(gap));
-      double a_des = gap >= 0 ? std::min(A, ramp) : -std::min(A, ramp);
-      // Close enough to land on the cap in this cycle within the jerk limit.
-      if (std::fabs(gap / T - a_) <= J * T && std::fabs(gap) <= J * T * T) a_des = gap / T;
-      double a_n = std::clamp(a_des, a_lo, a_hi);
+      // Acceleration that approaches the cap and lands on it within the jerk limit.
+      double a_n = std::clamp(landing_accel(cap - v_, A, J, T), a_lo, a_hi);
       auto next_v = [&](double a) { return std::max(0.0, v_ + a * T); };
-      auto ok = [&](double a) {
+      auto ok = [&](double a, double* v_target = nullptr) {
         const double vn = next_v(a);
-        return safe(vn, a, s_ + 0.5 * (v_ + vn) * T);
+        return safe(vn, a, s_ + 0.5 * (v_ + vn) * T, v_target);
       };
       bool limited = false;
       if (!ok(a_n)) {
         limited = true;
-        if (!ok(a_lo)) {
-          a_n = a_lo;
+        double v_target = 0;
+        if (!ok(a_lo, &v_target)) {
+          // Even the hardest brake misses a limit ahead (an override dropped it under
+          // the current speed): brake towards it as hard as the jerk limit lets the
+          // brake still land on it, rather than braking flat out and hitting zero
+          // speed with the brake still on.
+          a_n = std::clamp(landing_accel(std::min(cap, v_target) - v_, A, J, T), a_lo, a_hi);
         } else {
           double lo = a_lo, hi = a_n;
           for (int i = 0; i < 14; ++i) {

@@ -123,7 +123,9 @@ class Interpolator {
   // A rapid at override >= 1: its speed is its samples' axis-velocity limit, which
   // the geometric limit already holds (the programmed term is left out, not ∞).
   bool rapid_at_full_speed(const Planned& p) const;
-  bool safe(double v_next, double a_next, double s_next) const;
+  // Whether a jerk-limited brake from (v_next, a_next) at s_next still meets every
+  // limit ahead; when not, *v_target (if given) is the speed limit it misses.
+  bool safe(double v_next, double a_next, double s_next, double* v_target = nullptr) const;
   double advance(double ds, bool* reached_stop);
   bool creep_to_stop();
 
