@@ -47,6 +47,22 @@ declare -A EXE=(
 say() { printf '%s\n' "cnc: $*" >&2; }
 die() { say "$*"; exit 2; }
 
+# run_child CMD...: runs CMD as a child and hands SIGTERM and SIGINT on to it (as
+# SIGTERM: a background child of a script ignores SIGINT), so that `timeout` or
+# Ctrl-C on ./cnc ends what it runs; returns the child's status.
+run_child() {
+  "$@" &
+  local pid=$! rc=0
+  trap "kill -TERM $pid 2>/dev/null || true" TERM INT
+  while :; do
+    rc=0
+    wait "$pid" || rc=$?
+    kill -0 "$pid" 2>/dev/null || break  # wait was only interrupted by a signal: wait on
+  done
+  trap - TERM INT
+  return "$rc"
+}
+
 install_missing() {
   local missing=()
   for p in "${PACKAGES[@]}"; do
@@ -149,8 +165,10 @@ cmd_demo() {
   "$ROOT/cnc" up --machine "$machine" --log-out "$run_dir/cell" --sim-final-state "$run_dir/final-positions.json" \
     >"$run_dir/services.log" 2>&1 &
   local up_pid=$!
+  # A signal to the demo stops the cell (up stops its services in reverse order).
+  trap "kill -TERM $up_pid 2>/dev/null || true" TERM INT
   local ctl_rc=0
-  "$BUILD/tools/cnc-ctl" --machine "$machine" --do run --program "$program" --timeout 300 || ctl_rc=$?
+  run_child "$BUILD/tools/cnc-ctl" --machine "$machine" --do run --program "$program" --timeout 300 || ctl_rc=$?
   kill -TERM "$up_pid"
   local up_rc=0
   wait "$up_pid" || up_rc=$?
@@ -178,10 +196,11 @@ cmd_plan() {
     esac
   done
   [ -n "$csv" ] || { [ -z "$plot" ] || csv="${plot%.png}.csv"; }
-  "$BUILD/tools/cnc-plan" --machine "$machine" --program "$program" ${csv:+--csv "$csv"} "${rest[@]}"
-  if [ -n "$plot" ]; then
-    /usr/bin/python3 "$ROOT/tools/report/plot_plan.py" "$csv" --out "$plot" --title "$(basename "$program")"
-  fi
+  local plan=("$BUILD/tools/cnc-plan" --machine "$machine" --program "$program" ${csv:+--csv "$csv"} "${rest[@]}")
+  # Without a plot the dry run is the whole command: it takes the script's place and its signals.
+  [ -n "$plot" ] || exec "${plan[@]}"
+  run_child "${plan[@]}"
+  run_child /usr/bin/python3 "$ROOT/tools/report/plot_plan.py" "$csv" --out "$plot" --title "$(basename "$program")"
 }
 
 # report LOG --out DIR [--tolerance-um U] [--target-rmax-um U] [--title T]
@@ -197,8 +216,8 @@ cmd_report() {
     esac
   done
   [ -n "$out" ] || die "report: --out DIR is required"
-  "$BUILD/tools/cnc-logexport" --log "$log" --out "$out"
-  /usr/bin/python3 "$ROOT/tools/report/make_report.py" "$out" "${rest[@]}"
+  run_child "$BUILD/tools/cnc-logexport" --log "$log" --out "$out"
+  run_child /usr/bin/python3 "$ROOT/tools/report/make_report.py" "$out" "${rest[@]}"
   say "open $out/index.html in a browser"
 }
 
@@ -221,7 +240,7 @@ cmd_test() {
   build
   cd "$BUILD"
   local start=$SECONDS
-  ctest --output-on-failure -j "$(nproc)" --timeout 900 "$@"
+  run_child ctest --output-on-failure -j "$(nproc)" --timeout 900 "$@"
   say "test suite passed in $((SECONDS - start)) s"
 }
 

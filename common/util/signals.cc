@@ -19,6 +19,14 @@ void install_stop_handlers() {
   std::signal(SIGPIPE, SIG_IGN);  // a dropped Modbus TCP peer must not kill the process
 }
 
+void end_at_once_on_stop_signals() {
+  struct sigaction sa {};
+  sa.sa_handler = SIG_DFL;
+  sigemptyset(&sa.sa_mask);
+  sigaction(SIGTERM, &sa, nullptr);
+  sigaction(SIGINT, &sa, nullptr);
+}
+
 bool stop_requested() { return g_stop_signal != 0; }
 int stop_signal() { return g_stop_signal; }
 void request_stop() { g_stop_signal = -1; }

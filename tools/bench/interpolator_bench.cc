@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "common/service/service.h"
+#include "common/util/signals.h"
 #include "services/interpolator/interpolator.h"
 
 namespace {
@@ -121,6 +122,7 @@ Result run(const cnc::config::MachineConfig& cfg, const std::vector<Block>& bloc
 }
 
 int bench(const cnc::config::MachineConfig& machine, const cnc::service::Args& args) {
+  cnc::util::end_at_once_on_stop_signals();  // no loop here polls the stop flag
   cnc::config::MachineConfig cfg = machine;
   cfg.ipo_period_s = 0.001;
   const int n_blocks = std::stoi(args.option("blocks", "2000"));

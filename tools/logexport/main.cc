@@ -15,6 +15,7 @@
 #include "cnc/lcmt_config.hpp"
 #include "common/bus/bus.h"
 #include "common/service/service.h"
+#include "common/util/signals.h"
 #include "tools/logexport/log_export.h"
 
 namespace {
@@ -43,6 +44,7 @@ std::vector<std::string> log_parts(const std::string& log) {
 }
 
 int run_export(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
+  cnc::util::end_at_once_on_stop_signals();  // no loop here polls the stop flag
   const std::string log = args.option("log"), out = args.option("out");
   if (log.empty() || out.empty()) {
     std::fprintf(stderr, "cnc-logexport: --log LOG and --out DIR are required\n");

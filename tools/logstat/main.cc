@@ -25,6 +25,7 @@
 #include "cnc/lcmt_program_state.hpp"
 #include "common/bus/bus.h"
 #include "common/service/service.h"
+#include "common/util/signals.h"
 
 namespace {
 
@@ -99,6 +100,7 @@ int compare_monitor(const std::string& log, const std::string& other) {
 }
 
 int run_logstat(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
+  cnc::util::end_at_once_on_stop_signals();  // no loop here polls the stop flag
   const std::string log = args.option("log");
   if (log.empty()) {
     std::fprintf(stderr, "cnc-logstat: --log FILE is required\n");

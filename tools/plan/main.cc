@@ -8,10 +8,12 @@
 #include <cinttypes>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <memory>
 
 #include "common/program/gcode_parser.h"
 #include "common/service/service.h"
+#include "common/util/signals.h"
 #include "services/interpolator/interpolator.h"
 #include "services/part_program_server/program_server.h"
 
@@ -34,7 +36,19 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
   if (!args.option("param-update").empty())
     core.set_param_update(cnc::interp::param_update_from_string(args.option("param-update")));
   if (!args.option("override").empty()) {
-    cnc::interp::Command c{cnc::interp::Command::Kind::kOverride, std::stod(args.option("override"))};
+    // At override 0 the path never moves on without an operator's resume: a dry run
+    // of it could never end.
+    const std::string text = args.option("override");
+    char* end = nullptr;
+    const double value = std::strtod(text.c_str(), &end);
+    if (end == text.c_str() || *end != '\0' || !(value > 0) || value > 1.5) {
+      std::fprintf(stderr,
+                   "cnc-plan: --override %s: expected a feed override in (0, 1.5]; at override 0 the motion "
+                   "stands still until resumed, so the program can never finish\n",
+                   text.c_str());
+      return cnc::service::kExitBadInput;
+    }
+    cnc::interp::Command c{cnc::interp::Command::Kind::kOverride, value};
     core.apply_command(c);
   }
   core.apply_command(cnc::interp::Command{cnc::interp::Command::Kind::kLoad, 1.0});
@@ -52,7 +66,8 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
   const int64_t num_blocks = server.num_blocks();
   const size_t window = static_cast<size_t>(cfg.block_window);
   int64_t next = 0;
-  const int64_t max_cycles = 2'000'000'000;
+  // At most a day of program time: a dry run that long is a mistake, not a plan.
+  const int64_t max_cycles = static_cast<int64_t>(std::ceil(86400.0 / cfg.ipo_period_s));
   double max_feed = 0;
   const auto t0 = std::chrono::steady_clock::now();
   int64_t cycles = 0;
@@ -76,6 +91,11 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
     p_prev = p;
   };
   while (core.state() != cnc::interp::RunState::kDone && cycles < max_cycles) {
+    if (cnc::util::stop_requested()) {  // SIGTERM / SIGINT: end here, the CSV holds what was computed
+      std::fprintf(stderr, "cnc-plan: stopped by signal %d after %" PRId64 " cycles\n", cnc::util::stop_signal(),
+                   cycles);
+      return 128 + std::max(0, cnc::util::stop_signal());
+    }
     // Keep the look-ahead window full, as the live node does by requesting blocks,
     // within the same planning budget per cycle.
     const int64_t planned_before = core.planned_samples();
@@ -104,7 +124,8 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
   account(p_prev);
   account(p_prev);
   if (core.state() != cnc::interp::RunState::kDone) {
-    std::fprintf(stderr, "cnc-plan: program did not finish within %" PRId64 " cycles\n", max_cycles);
+    std::fprintf(stderr, "cnc-plan: program did not finish within %" PRId64 " cycles (a day of program time)\n",
+                 max_cycles);
     return 1;
   }
   std::printf("program time %.3f s (%" PRId64 " cycles of %.3f ms), %" PRId64 " blocks, peak feed %.1f mm/min, "

@@ -24,6 +24,7 @@
 #include "common/bus/bus.h"
 #include "common/program/block_msg.h"
 #include "common/service/service.h"
+#include "common/util/signals.h"
 #include "services/interpolator/inputs.h"
 #include "services/part_program_server/program_server.h"
 
@@ -77,6 +78,7 @@ std::string compare(const cnc::lcmt_setpoint& logged, const cnc::interp::Setpoin
 }
 
 int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
+  cnc::util::end_at_once_on_stop_signals();  // no loop here polls the stop flag
   const std::string log = args.option("log");
   if (log.empty()) {
     std::fprintf(stderr, "cnc-replay: --log FILE is required\n");
