@@ -248,8 +248,12 @@ CycleResult Runner::run() {
   k_ = in_.incremental ? bottom + in_.k : in_.k;  // G87's level: relative to the bottom in G91
 
   for (int repeat = in_.repeats; repeat > 0; --repeat) {
-    a += inc_a;
-    b += inc_b;
+    if (in_.next_hole) {
+      in_.next_hole(&a, &b);
+    } else {
+      a += inc_a;
+      b += inc_b;
+    }
     if (repeat == in_.repeats && current_c > r) {
       traverse(a, b, current_c);
       traverse(a, b, r);

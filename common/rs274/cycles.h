@@ -3,6 +3,8 @@
 // the hole's position at the clearance level, a rapid to R, the cycle's feeds,
 // dwells and spindle calls, and the retract (G98: to the old Z or R, the higher;
 // G99: to R). Pure: inputs in, canonical calls out, the interpreter keeps the state.
+#include <functional>
+
 #include "common/rs274/canon.h"
 
 namespace cnc::rs274 {
@@ -62,6 +64,10 @@ struct CycleInput {
   // only those that were enabled.
   bool feed_override_enabled = true;
   bool speed_override_enabled = true;
+  // Polar words (@ ^): each repeat's hole comes from the one before (program
+  // coordinates of the plane's two axes, updated in place), as LinuxCNC recomputes
+  // them at every repeat. Empty: X Y increments (G91) or the same hole (G90).
+  std::function<void(double* a, double* b)> next_hole;
 };
 
 struct CycleResult {

@@ -30,7 +30,8 @@ constexpr double kArcRToleranceInch = 0.0005;
 constexpr double kArcRToleranceMm = 0.005;
 constexpr double kTiny = 1e-12;
 
-int letter_index(char c) { return c - 'A'; }
+// Word slots: A..Z, then @ (polar distance) and ^ (polar angle).
+int letter_index(char c) { return c == '@' ? 26 : c == '^' ? 27 : c - 'A'; }
 uint32_t bit(char c) { return 1u << letter_index(c); }
 
 int axis_of_letter(char c) {
@@ -173,8 +174,8 @@ struct Interpreter::Loop {
 };
 
 struct Interpreter::Words {
-  std::array<double, 26> v{};
-  std::array<int32_t, 26> col{};
+  std::array<double, 28> v{};
+  std::array<int32_t, 28> col{};
   uint32_t has = 0;
   std::array<int, 16> g{};
   std::array<int32_t, 16> gcol{};
@@ -256,6 +257,37 @@ double Interpreter::to_program(double mm) const { return mm / length_scale(); }
 double Interpreter::param_len(int base, int i) const {
   return params_.get(base + i) * (i < 3 || i >= 6 ? mu_ : 1.0);
 }
+// Program coordinates (mm) ↔ machine coordinates (mm) in coordinate system `cs`:
+// machine = rotate_z(program + G92, R) + G5x + tool offset (LinuxCNC's order).
+Pose Interpreter::machine_of(const Pose& p, int cs) const {
+  Pose m{};
+  for (size_t i = 0; i < m.size(); ++i) m[i] = p[i] + g92_[i];
+  const double r = params_.get(5210 + 20 * cs);
+  if (r != 0) {
+    const double t = r * M_PI / 180.0, c = std::cos(t), sn = std::sin(t);
+    const double x = m[0] * c - m[1] * sn, y = m[0] * sn + m[1] * c;
+    m[0] = x;
+    m[1] = y;
+  }
+  for (int i = 0; i < kNumAxes; ++i) m[static_cast<size_t>(i)] += param_len(5201 + 20 * cs, i) + tool_offset_[static_cast<size_t>(i)];
+  return m;
+}
+
+Pose Interpreter::program_of(const Pose& machine, int cs) const {
+  Pose p{};
+  for (int i = 0; i < kNumAxes; ++i)
+    p[static_cast<size_t>(i)] = machine[static_cast<size_t>(i)] - param_len(5201 + 20 * cs, i) - tool_offset_[static_cast<size_t>(i)];
+  const double r = params_.get(5210 + 20 * cs);
+  if (r != 0) {
+    const double t = -r * M_PI / 180.0, c = std::cos(t), sn = std::sin(t);
+    const double x = p[0] * c - p[1] * sn, y = p[0] * sn + p[1] * c;
+    p[0] = x;
+    p[1] = y;
+  }
+  for (size_t i = 0; i < p.size(); ++i) p[i] -= g92_[i];
+  return p;
+}
+
 void Interpreter::set_param_len(int base, int i, double mm) {
   params_.set(base + i, mm / (i < 3 || i >= 6 ? mu_ : 1.0));
 }
@@ -305,10 +337,7 @@ void Interpreter::open(const std::string& path) {
   if (!g92_active_) g92_.fill(0);
   rotation_deg_ = params_.get(5210 + 20 * coord_);
   // The start position, machine coordinates → program coordinates.
-  for (int i = 0; i < kNumAxes; ++i) {
-    const size_t k = static_cast<size_t>(i);
-    position_[k] = setup_.start_position[k] - param_len(5201 + 20 * coord_, i) - g92_[k];
-  }
+  position_ = program_of(setup_.start_position, coord_);
   const SourceRef r0{0, 0, 0};
   canon_.use_length_units(r0, units_);
   Pose g5x{};
@@ -341,7 +370,7 @@ double Interpreter::named_value(const std::string& name, int column) const {
     for (int i = 0; i < kNumAxes; ++i)
       if (name == kAbs[i]) {
         const size_t k = static_cast<size_t>(i);
-        return (position_[k] + param_len(5201 + 20 * coord_, i) + g92_[k] + tool_offset_[k]) / s;
+        return machine_of(position_, coord_)[k] / s;
       }
     if (name == "_line") return line_no_;
     if (name == "_motion_mode") return motion_ < 0 ? 800 : motion_;
@@ -445,6 +474,8 @@ void Interpreter::execute_line() {
       percent_open_ = true;
       return;
     }
+    if (!percent_open_)
+      fail(1, "a '%' line ends the program only when the program's first line is '%' (LinuxCNC: bad character '%')");
     if (percent_open_) {
       canon_.finish(ref());
       ended_ = true;
@@ -576,7 +607,11 @@ void Interpreter::execute_o(const OStatement& o) {
         line_no_ = here_line;
         text_ = text_saved;
         if (!found) {
-          for (const std::string& dir : setup_.subroutine_path) {
+          // The subroutine path, then the main program's folder (LinuxCNC's program prefix).
+          std::vector<std::string> dirs = setup_.subroutine_path;
+          dirs.push_back(std::filesystem::path(file_names_.front()).parent_path().string());
+          if (dirs.back().empty()) dirs.back() = ".";
+          for (const std::string& dir : dirs) {
             const std::string p = dir + "/" + name + ".ngc";
             if (!std::filesystem::exists(p)) continue;
             auto sf = std::make_unique<SourceFile>();
@@ -809,6 +844,7 @@ void Interpreter::collect_words(Words& w) {
       fail(word.column, std::string(1, c) + " word, but the machine has no " + c + " axis (axes: " + setup_.axes + ")");
     }
     if (ax >= 0) w.axes |= 1u << ax;
+    if (c == '@' || c == '^') w.axes |= 3u;  // polar coordinates set X and Y
     w.has |= bit(c);
     w.v[i] = v;
     w.col[i] = word.column;
@@ -841,14 +877,17 @@ void Interpreter::check_words(const Words& w) {
     if (w.on('R')) not_with('R', "with no G code that uses it (G2/G3, a canned cycle, G10)");
     if (w.on('I') || w.on('J')) not_with(w.on('I') ? 'I' : 'J', "with no G code that uses it (G2/G3, G5, G87)");
   }
-  if (!arc && !cyc && g0 != 100 && !nurbs_g && w.on('K')) not_with('K', "with no G code that uses it (G2/G3, G33, G73/G83 ...)");
+  const bool synced = motion == 330 || motion == 331 || motion == 760;
+  if (!arc && !cyc && g0 != 100 && !nurbs_g && !synced && w.on('K')) not_with('K', "with no G code that uses it (G2/G3, G33, G73/G83 ...)");
   if (w.on('P') && !(g0 == 40 || g0 == 100 || arc || cyc || nurbs_g || w.g[13] == 640 || w.g[7] == 410 ||
                      w.g[7] == 420 || w.m[5] >= 0 || w.g[8] == 432))
     not_with('P', "with no G code or M code that uses it");
-  if (w.on('Q') && !(cyc || nurbs_g || w.g[13] == 640 || w.m[5] >= 0)) not_with('Q', "with no G code that uses it");
+  if (w.on('Q') && !(cyc || nurbs_g || w.g[13] == 640 || w.m[5] >= 0 || w.m[6] == 61 || g0 == 100))
+    not_with('Q', "with no G code or M code that uses it");
   if (w.on('L') && !(g0 == 100 || cyc || nurbs_g)) not_with('L', "with no G code that uses it (G10, canned cycles)");
   if (w.on('H') && !(w.g[8] == 430 || w.g[8] == 432 || g0 == 100)) not_with('H', "with no G43 that uses it");
-  if (w.on('D') && !(w.g[7] == 410 || w.g[7] == 420)) not_with('D', "with no G41/G42 that uses it");
+  if (w.on('D') && !(w.g[7] == 410 || w.g[7] == 420 || w.g[7] == 411 || w.g[7] == 421))
+    not_with('D', "with no G41/G42 that uses it");
   if (w.on('E') && w.m[5] < 0) not_with('E', "with no M code that uses it (M66, M67, M68)");
   if (w.on('F') && w.v[static_cast<size_t>(letter_index('F'))] < 0) fail(w.column('F'), "negative feed rate");
   if (w.on('S') && w.v[static_cast<size_t>(letter_index('S'))] < 0) fail(w.column('S'), "negative spindle speed");
@@ -971,6 +1010,28 @@ void Interpreter::comments_of_line() {
 Pose Interpreter::axis_target(const Words& w, bool machine) const {
   Pose p = position_;
   const double s = length_scale();
+  const bool polar = w.on('@') || w.on('^');
+  if (polar) {
+    // LinuxCNC's polar coordinates: @ distance and ^ angle (degrees, from +X) about
+    // the XY zero of the current system; under G91 both add to the current ones.
+    const int col = w.on('@') ? w.column('@') : w.column('^');
+    if (machine) fail(col, "cannot use polar coordinates with G53");
+    if (w.on('X') || w.on('Y')) fail(col, "cannot specify X or Y words with polar coordinates");
+    const double px = position_[0], py = position_[1];
+    double radius = std::hypot(px, py), theta = std::atan2(py, px);
+    if (incremental_) {
+      if (px == 0 && py == 0) fail(col, "G91 motion with polar coordinates is indeterminate when at the origin");
+      if (w.on('@')) radius += w['@'] * s;
+      if (w.on('^')) theta += w['^'] * M_PI / 180.0;
+    } else {
+      if (w.on('@') && !w.on('^') && px == 0 && py == 0)
+        fail(col, "must specify the angle (^) in polar coordinates when at the origin");
+      if (w.on('@')) radius = w['@'] * s;
+      if (w.on('^')) theta = w['^'] * M_PI / 180.0;
+    }
+    p[0] = radius * std::cos(theta);
+    p[1] = radius * std::sin(theta);
+  }
   for (int i = 0; i < kNumAxes; ++i) {
     const char c = kAxisLetters[i];
     if (!w.on(c)) continue;
@@ -978,12 +1039,19 @@ Pose Interpreter::axis_target(const Words& w, bool machine) const {
     const double lin = i < 3 || i >= 6 ? s : 1.0;  // A B C are degrees
     const double v = w[c] * lin;
     if (machine) {
-      p[k] = v - param_len(5201 + 20 * coord_, i) - g92_[k] - tool_offset_[k];
+      p[k] = v;  // machine coordinates, turned into program ones below
     } else if (incremental_) {
       p[k] += v;
     } else {
       p[k] = v;
     }
+  }
+  if (machine) {
+    // Axes not named keep their machine position.
+    Pose m = machine_of(position_, coord_);
+    for (int i = 0; i < kNumAxes; ++i)
+      if (w.on(kAxisLetters[i])) m[static_cast<size_t>(i)] = p[static_cast<size_t>(i)];
+    return program_of(m, coord_);
   }
   return p;
 }
@@ -991,10 +1059,7 @@ Pose Interpreter::axis_target(const Words& w, bool machine) const {
 void Interpreter::set_coord_system(int index) {
   if (comp_ != 400) fail(0, "cannot change the coordinate system with cutter radius compensation on");
   // The machine position stays; the program position moves with the origin.
-  for (int i = 0; i < kNumAxes; ++i) {
-    const size_t k = static_cast<size_t>(i);
-    position_[k] += param_len(5201 + 20 * coord_, i) - param_len(5201 + 20 * index, i);
-  }
+  position_ = program_of(machine_of(position_, coord_), index);
   coord_ = index;
   params_.set(5220, index);
   rotation_deg_ = params_.get(5210 + 20 * index);
@@ -1301,7 +1366,7 @@ void Interpreter::execute_block(Words& w) {
     const int base = w.g[0] == 281 ? 5161 : 5181;
     for (int i = 0; i < kNumAxes; ++i) {
       const size_t k = static_cast<size_t>(i);
-      set_param_len(base, i, position_[k] + param_len(5201 + 20 * coord_, i) + g92_[k] + tool_offset_[k]);
+      set_param_len(base, i, machine_of(position_, coord_)[k]);
     }
     if (w.axes != 0) fail(w.gcol[0], g_text(w.g[0]) + " takes no axis words");
   }
@@ -1446,7 +1511,7 @@ void Interpreter::g10(Words& w) {
       double off = w[c] * lin;
       if (l == 20) {
         // The current position in system cs becomes the value.
-        const double machine = position_[k] + param_len(5201 + 20 * coord_, i) + g92_[k] + tool_offset_[k];
+        const double machine = machine_of(position_, coord_)[k];
         off = machine - g92_[k] - tool_offset_[k] - w[c] * lin;
       }
       const double old = param_len(5201 + 20 * cs, i);
@@ -1482,7 +1547,7 @@ void Interpreter::g10(Words& w) {
         // L10: the offset that makes the current position read as the value in the
         // current system; L11: in G59.3.
         const int cs = l == 11 ? 9 : coord_;
-        const double machine = position_[k] + param_len(5201 + 20 * coord_, i) + g92_[k] + tool_offset_[k];
+        const double machine = machine_of(position_, coord_)[k];
         const double g92 = l == 11 ? 0 : g92_[k];
         t.offset[k] = machine - param_len(5201 + 20 * cs, i) - g92 - w[c] * lin;
       }
@@ -1512,13 +1577,14 @@ void Interpreter::g28_g30(Words& w, bool g30) {
     }());
     position_ = via;
   }
-  Pose home = position_;
+  Pose home_m = machine_of(position_, coord_);
   for (int i = 0; i < kNumAxes; ++i) {
     const size_t k = static_cast<size_t>(i);
     if (w.axes != 0 && !w.on(kAxisLetters[i])) continue;
     if (setup_.axes.find(kAxisLetters[i]) == std::string::npos) continue;
-    home[k] = param_len(base, i) - param_len(5201 + 20 * coord_, i) - g92_[k] - tool_offset_[k];
+    home_m[k] = param_len(base, i);
   }
+  const Pose home = program_of(home_m, coord_);
   Pose shown{};
   for (size_t i = 0; i < shown.size(); ++i) shown[i] = i < 3 || i >= 6 ? to_program(home[i]) : home[i];
   canon_.straight_traverse(r, shown);
@@ -1616,7 +1682,10 @@ void Interpreter::motion(Words& w) {
     cycle(w);
     return;
   }
-  if (m == 50 || m == 51) fail(col, g_text(m) + " splines are not supported yet");
+  if (m == 50 || m == 51) {
+    spline(w, m == 50, col);
+    return;
+  }
   if (m == 330 || m == 331 || m == 760) fail(col, g_text(m) + " needs spindle synchronisation, which this machine lacks");
   if (m >= 382 && m <= 385) fail(col, g_text(m) + " probes, and this machine's config has no probe input");
   fail(col, "motion " + g_text(m) + " is not supported");
@@ -1774,6 +1843,20 @@ void Interpreter::cycle(Words& w) {
   in.naivecam_tolerance = path_q_;
   in.feed_override_enabled = feed_override_;
   in.speed_override_enabled = speed_override_;
+  // Polar words (@ ^) in a cycle: LinuxCNC recomputes the hole's XY from them at each
+  // repeat (G91 ^60 L6 drills a bolt circle).
+  if ((w.on('@') || w.on('^')) && plane_ == Plane::kXY) {
+    const double s = length_scale();
+    in.next_hole = [this, &w, s](double* x, double* y) {
+      Pose saved = position_;
+      position_[0] = *x * s;
+      position_[1] = *y * s;
+      const Pose t = axis_target(w, false);
+      position_ = saved;
+      *x = to_program(t[0]);
+      *y = to_program(t[1]);
+    };
+  }
   CycleResult res;
   try {
     res = run_cycle(in, ref(col), canon_);
@@ -1781,9 +1864,67 @@ void Interpreter::cycle(Words& w) {
     if (!e.file_name().empty()) throw;
     fail(e.column() > 0 ? e.column() : col, e.detail());
   }
-  in_cycle_ = true;
   for (size_t i = 0; i < res.end.size(); ++i) position_[i] = i < 3 || i >= 6 ? res.end[i] * length_scale() : res.end[i];
+  in_cycle_ = true;
   w.axes = 0;
+}
+
+// G5 (cubic) and G5.1 (quadratic) splines in the XY plane, as LinuxCNC makes them:
+// a Bezier segment, handed on as a NURBS of order 4 or 3 with clamped knots. G5's I J
+// (start to first control point) default to the mirror of the previous G5's P Q, or
+// to 0 when the move before was not a G5.
+void Interpreter::spline(Words& w, bool cubic, int col) {
+  if (plane_ != Plane::kXY) fail(col, "splines must be in the XY plane");
+  if (feed_mode_ != FeedMode::kInverseTime && feed_ <= 0) fail(col, "cannot do a spline with zero feed rate");
+  const Pose end = axis_target(w, false);
+  for (size_t i = 2; i < end.size(); ++i)
+    if (end[i] != position_[i]) fail(col, "splines may not have motion in Z, A, B, or C");
+  const double s = length_scale();
+  const double x0 = position_[0], y0 = position_[1], x1 = end[0], y1 = end[1];
+  std::vector<NurbsPoint> pts;
+  auto pt = [&](double x, double y) {
+    NurbsPoint p;
+    p.x = to_program(x);
+    p.y = to_program(y);
+    p.w = 1;
+    pts.push_back(p);
+  };
+  pt(x0, y0);
+  if (cubic) {
+    double i = 0, j = 0;
+    if (w.on('I') || w.on('J')) {
+      if (!(w.on('I') && w.on('J'))) fail(col, "G5: I and J must be given together");
+      i = w['I'] * s;
+      j = w['J'] * s;
+    } else if (prev_motion_ == 50 && spline_continues_) {
+      i = -spline_pq_[0];
+      j = -spline_pq_[1];
+    }
+    if (!(w.on('P') && w.on('Q'))) fail(col, "G5 needs P and Q (the end's control point offset)");
+    const double pp = w['P'] * s, qq = w['Q'] * s;
+    pt(x0 + i, y0 + j);
+    pt(x1 + pp, y1 + qq);
+    spline_pq_ = {pp, qq};
+  } else {
+    if (!w.on('I') && !w.on('J')) fail(col, "G5.1 needs I or J (the control point's offset from the start)");
+    const double i = w.on('I') ? w['I'] * s : 0, j = w.on('J') ? w['J'] * s : 0;
+    pt(x0 + i, y0 + j);
+  }
+  pt(x1, y1);
+  const int order = cubic ? 4 : 3;
+  std::vector<double> knots;
+  for (int k = 0; k < order; ++k) knots.push_back(0);
+  for (int k = 0; k < order; ++k) knots.push_back(1);
+  Pose shown{};
+  for (size_t i = 0; i < shown.size(); ++i) shown[i] = i < 3 || i >= 6 ? to_program(end[i]) : end[i];
+  if (feed_mode_ == FeedMode::kInverseTime) {
+    if (!w.on('F')) fail(col, "a spline in inverse time mode (G93) needs an F word");
+    feed_ = w['F'] * std::hypot(to_program(x1 - x0), to_program(y1 - y0));
+    canon_.set_feed_rate(ref(col), feed_);
+  }
+  canon_.nurbs_feed(ref(col), order, pts, knots, shown);
+  position_ = end;
+  spline_continues_ = cubic;
 }
 
 // ---- NURBS --------------------------------------------------------------------------
@@ -1943,10 +2084,7 @@ void Interpreter::end_program(bool m30) {
   // G94 with no feed, feed and speed overrides on, spindle off, coolant off, G40, G1.
   // G92 and the tool length offset stay.
   if (coord_ != 1) {
-    for (int i = 0; i < kNumAxes; ++i) {
-      const size_t k = static_cast<size_t>(i);
-      position_[k] += param_len(5201 + 20 * coord_, i) - param_len(5221, i);
-    }
+    position_ = program_of(machine_of(position_, coord_), 1);
     coord_ = 1;
     params_.set(5220, 1);
   }

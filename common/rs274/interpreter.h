@@ -103,6 +103,7 @@ class Interpreter {
   struct SavedModes;
   void restore_modes(const SavedModes& s, int column);
   void cycle(Words& w);
+  void spline(Words& w, bool cubic, int col);
   void set_coord_system(int index);
   void end_program(bool m30);
   void update_position_params();
@@ -111,6 +112,8 @@ class Interpreter {
   double to_program(double machine_units_value) const;
   double length_scale() const;
   double param_len(int base, int i) const;
+  Pose machine_of(const Pose& program_mm, int cs) const;
+  Pose program_of(const Pose& machine_mm, int cs) const;
   void set_param_len(int base, int i, double mm);
   [[noreturn]] void fail(int column, const std::string& detail) const;
   SourceRef ref(int column = 0) const;
@@ -156,7 +159,7 @@ class Interpreter {
   int tool_length_ = 490;         // 430, 431, 432 or 490
   int coord_ = 1;                 // 1..9 = G54..G59.3
   bool retract_r_ = true;         // G99 (rs274 starts in it)
-  PathMode path_ = PathMode::kExactPath;
+  PathMode path_ = PathMode::kContinuous;  // G64 without P (rs274 starts in it)
   double path_p_ = 0, path_q_ = 0;
   double feed_ = 0;
   double speed_ = 0;
@@ -174,6 +177,8 @@ class Interpreter {
   double cycle_old_z_ = 0;        // canned cycles: sticky values
   double cycle_r_ = 0, cycle_q_ = 0, cycle_p_ = 0, cycle_z_ = 0, cycle_i_ = 0, cycle_j_ = 0, cycle_k_ = 0;
   int prev_motion_ = 800;         // the motion mode before this block's
+  std::array<double, 2> spline_pq_{};  // the last G5's P Q (mm), for a following G5 without I J
+  bool spline_continues_ = false;
   bool in_cycle_ = false;
 
   // NURBS collection (G5.2 / Fanuc G6.2): control points until the curve closes.

@@ -169,7 +169,8 @@ ParamUpdate param_update_from_string(const std::string& s) {
 }
 
 bool Interpolator::Planned::stop_block() const {
-  return block.kind == program::BlockKind::kDwell || block.kind == program::BlockKind::kEnd;
+  return block.kind == program::BlockKind::kDwell || block.kind == program::BlockKind::kEnd ||
+         block.kind == program::BlockKind::kEvent;
 }
 
 bool Interpolator::Planned::stop_at_start() const { return stop_block() || v_entry == 0; }
@@ -677,6 +678,12 @@ const Setpoint& Interpolator::step() {
         blocks_.clear();
         stopping_ = false;
         state_ = RunState::kIdle;
+      } else if (!pausing && p.block.kind == program::BlockKind::kEvent && p.block.event.pauses() &&
+                 !event_paused_ && !auto_resume_pauses_) {
+        // M0, M1, M6: at rest here until the operator resumes (a RESUME input).
+        event_paused_ = true;
+        hold_ = true;
+        state_ = RunState::kHeld;
         v_ = a_ = 0;
       } else {
         state_ = RunState::kStarved;
@@ -685,6 +692,7 @@ const Setpoint& Interpolator::step() {
     } else if (!pausing && creep_to_stop()) {
       // A discrete brake ended a hair short of a stop point: step onto it.
       out_.limit = Limit::kLookahead;
+          event_paused_ = false;
     } else {
       Planned& p = blocks_.front();
       Limit why = Limit::kNone;

@@ -73,6 +73,9 @@ class Interpolator {
   void apply_command(const Command& cmd);
 
   // Computes the setpoint of the current cycle and advances the cycle counter.
+  // Program stops and tool changes (M0, M1, M6) hold the path until a RESUME; the dry
+  // run resumes them at once, as an operator pressing resume without delay.
+  void set_auto_resume_pauses(bool on) { auto_resume_pauses_ = on; }
   const Setpoint& step();
 
   int64_t cycle() const { return cycle_; }
@@ -139,6 +142,8 @@ class Interpolator {
   bool stopping_ = false;
   double override_ = 1.0;
 
+  bool event_paused_ = false;       // the program stop / tool change at the front has paused once
+  bool auto_resume_pauses_ = false;
   std::deque<Planned> blocks_;  // front: the block being executed
   int64_t next_index_ = 0;
   double u_ = 0;     // parameter in the front block

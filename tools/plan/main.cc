@@ -3,6 +3,7 @@
 // of the same program and config give identical files, byte for byte.
 //
 //   cnc-plan --machine M --program P --csv OUT [--override 1.0] [--param-update corrected]
+//            [--subroutine-path DIR:DIR] [--tool-table FILE]
 #include <array>
 #include <chrono>
 #include <cinttypes>
@@ -11,7 +12,6 @@
 #include <cstdlib>
 #include <memory>
 
-#include "common/program/gcode_parser.h"
 #include "common/service/service.h"
 #include "common/util/signals.h"
 #include "services/interpolator/interpolator.h"
@@ -26,13 +26,27 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
     std::fprintf(stderr, "cnc-plan: --program FILE is required\n");
     return cnc::service::kExitBadInput;
   }
-  cnc::pps::ProgramServer server(cfg);
+  // The language's files from the command line, over the machine config's.
+  cnc::config::MachineConfig program_cfg = cfg;
+  if (!args.option("subroutine-path").empty()) {
+    program_cfg.program.subroutine_path.clear();
+    const std::string dirs = args.option("subroutine-path");
+    for (size_t b = 0; b < dirs.size();) {
+      size_t e = dirs.find(':', b);
+      if (e == std::string::npos) e = dirs.size();
+      if (e > b) program_cfg.program.subroutine_path.push_back(dirs.substr(b, e - b));
+      b = e + 1;
+    }
+  }
+  if (!args.option("tool-table").empty()) program_cfg.program.tool_table = args.option("tool-table");
+  cnc::pps::ProgramServer server(program_cfg);
   const cnc::pps::LoadResult loaded = server.load(program_path, 1);
   if (!loaded.ok) {
     std::fprintf(stderr, "cnc-plan: program refused: %s\n", loaded.error.c_str());
     return 3;
   }
   cnc::interp::Interpolator core(cfg);
+  core.set_auto_resume_pauses(true);  // M0/M1/M6: a dry run does not wait for an operator
   if (!args.option("param-update").empty())
     core.set_param_update(cnc::interp::param_update_from_string(args.option("param-update")));
   if (!args.option("override").empty()) {
@@ -143,6 +157,6 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
 
 int main(int argc, char** argv) {
   cnc::service::Spec spec{"cnc-plan", "dry run of a part program: setpoints to CSV, program time",
-                          {"program", "csv", "override", "param-update"}, {}};
+                          {"program", "csv", "override", "param-update", "subroutine-path", "tool-table"}, {}};
   return cnc::service::run(spec, argc, argv, run_plan);
 }
