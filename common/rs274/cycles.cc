@@ -254,7 +254,9 @@ CycleResult Runner::run() {
       a += inc_a;
       b += inc_b;
     }
-    if (repeat == in_.repeats && current_c > r) {
+    // The tolerance absorbs the interpreter's mm round trip of an inch position
+    // (0.1051 in -> mm -> in), which LinuxCNC, keeping program units, never makes.
+    if (repeat == in_.repeats && current_c > r + 1e-9 * std::max(1.0, std::fabs(r))) {
       traverse(a, b, current_c);
       traverse(a, b, r);
     } else {

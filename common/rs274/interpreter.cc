@@ -1284,6 +1284,7 @@ void Interpreter::execute_block(Words& w) {
     if (g == 430) {
       int t = tool_;
       if (w.on('H')) t = static_cast<int>(std::lround(w['H']));
+      if (t == 0) t = tool_;  // H0: LinuxCNC's table entry 0, the tool in the spindle
       if (t != 0) {
         const Tool* tool = tools_.find(t);
         if (tool == nullptr) fail(w.on('H') ? w.column('H') : w.gcol[8], "tool " + std::to_string(t) + " is not in the tool table");
