@@ -3,6 +3,7 @@
 // 2.9.0~pre1 (see tests/unit/rs274_cycles_test.cc).
 #include "common/rs274/cycles.h"
 
+#include <cmath>
 #include <string>
 
 namespace cnc::rs274 {
