@@ -2,6 +2,8 @@
 
 #include <unistd.h>
 
+#include <cerrno>
+#include <cstdio>
 #include <cstring>
 
 namespace cnc::bus {
@@ -113,14 +115,35 @@ void Bus::account(const std::string& channel, const void* data, size_t size) {
 
 int64_t Bus::next_seq(const std::string& channel) { return out_seq_[channel]++; }
 
-void Bus::publish_encoded(const std::string& channel, const void* data, size_t size) {
-  if (lcm_publish(lcm_, channel.c_str(), data, static_cast<unsigned int>(size)) != 0)
-    throw BusError("publish failed on " + channel);
+bool Bus::publish_encoded(const std::string& channel, const void* data, size_t size, bool stamped) {
+  if (inject_failures_ > 0) {
+    --inject_failures_;
+    publish_failed(channel, EPERM, stamped);
+    return false;
+  }
+  errno = 0;
+  if (lcm_publish(lcm_, channel.c_str(), data, static_cast<unsigned int>(size)) != 0) {
+    publish_failed(channel, errno != 0 ? errno : EIO, stamped);
+    return false;
+  }
   ++stats_[channel].published;
+  return true;
 }
 
-void Bus::publish_raw(const std::string& channel, const void* data, size_t size) {
-  publish_encoded(channel, data, size);
+void Bus::publish_failed(const std::string& channel, int err, bool stamped) {
+  // The sequence number was not used: the next message on the channel takes it.
+  if (stamped) {
+    auto it = out_seq_.find(channel);
+    if (it != out_seq_.end() && it->second > 0) --it->second;
+  }
+  ++stats_[channel].publish_failures;
+  ++publish_failures_;
+  std::snprintf(last_publish_error_.data(), last_publish_error_.size(), "publish on %s failed: %s", channel.c_str(),
+                err < 0 ? "the message does not encode" : std::strerror(err));
+}
+
+bool Bus::publish_raw(const std::string& channel, const void* data, size_t size) {
+  return publish_encoded(channel, data, size, false);
 }
 
 int Bus::handle(int timeout_ms) {

@@ -10,7 +10,14 @@
 // * Every message type of the cell begins with `int64_t utime; int64_t seq;
 //   int32_t sender;`, so the wrapper reads the header from the raw bytes and counts
 //   sequence gaps per channel and sender, for typed and raw subscribers alike.
+// * A publish that fails (sendto refused: no route, a firewall rule, a full
+//   buffer) never throws: it returns false, is counted per channel and in total,
+//   keeps its cause (channel and errno text) and consumes no sequence number, so a
+//   message sent again later keeps its stream contiguous. Cyclic code checks
+//   publish_failures() once per cycle and brings its process to a controlled stop.
 #include <lcm/lcm.h>
+
+#include <array>
 
 #include <cstdint>
 #include <functional>
@@ -42,6 +49,7 @@ struct ChannelStats {
   int64_t seq_gaps = 0;         // messages missing between two received from one sender
   int64_t seq_restarts = 0;     // a sender's seq went backwards (it restarted)
   int64_t published = 0;
+  int64_t publish_failures = 0;  // sends that failed (not counted as published)
 };
 
 class BusError : public std::runtime_error {
@@ -74,10 +82,18 @@ class Bus {
   void subscribe_raw(const std::string& channel_regex, RawHandler handler);
 
   // Stamps utime (wall clock), seq (per channel, from 0) and sender, then publishes.
+  // false when the message could not be encoded or sent (counted; see above).
   template <class Msg>
-  void publish(const std::string& channel, Msg& msg);
+  bool publish(const std::string& channel, Msg& msg);
   // Publishes already encoded bytes unchanged (a log player, a fault injector).
-  void publish_raw(const std::string& channel, const void* data, size_t size);
+  bool publish_raw(const std::string& channel, const void* data, size_t size);
+
+  // Failed publishes since the bus was opened, and the cause of the last one
+  // ("T.SETPOINTS: Network is unreachable"); fixed storage, no allocation.
+  int64_t publish_failures() const { return publish_failures_; }
+  const char* last_publish_error() const { return last_publish_error_.data(); }
+  // Tests: the next `n` publishes fail as if sendto had refused them (EPERM).
+  void inject_publish_failures(int n) { inject_failures_ = n; }
 
   // Waits up to timeout_ms for one message and dispatches it. Returns 1 when a
   // message was handled, 0 on timeout, -1 on error or at the end of a log.
@@ -103,7 +119,9 @@ class Bus {
                         std::function<void(const std::string&, const void*, size_t, int64_t)> dispatch);
   void account(const std::string& channel, const void* data, size_t size);
   int64_t next_seq(const std::string& channel);
-  void publish_encoded(const std::string& channel, const void* data, size_t size);
+  // stamped: the message took a sequence number from next_seq (given back on failure).
+  bool publish_encoded(const std::string& channel, const void* data, size_t size, bool stamped);
+  void publish_failed(const std::string& channel, int err, bool stamped);
 
   std::string url_;
   int32_t sender_;
@@ -116,6 +134,9 @@ class Bus {
   const lcm_recv_buf_t* last_accounted_ = nullptr;
   std::map<std::string, int64_t> out_seq_;
   std::vector<uint8_t> encode_buf_;
+  int64_t publish_failures_ = 0;
+  std::array<char, 160> last_publish_error_{};
+  int inject_failures_ = 0;
 };
 
 template <class Msg>
@@ -143,14 +164,25 @@ void Bus::subscribe(const std::string& channel, std::function<void(const Msg&)> 
 }
 
 template <class Msg>
-void Bus::publish(const std::string& channel, Msg& msg) {
+bool Bus::publish(const std::string& channel, Msg& msg) {
   msg.utime = util::wall_utime();
   msg.seq = next_seq(channel);
   msg.sender = sender_;
-  const int size = msg.getEncodedSize();
-  encode_buf_.resize(static_cast<size_t>(size));
-  if (msg.encode(encode_buf_.data(), 0, size) != size) throw BusError("encode failed on " + channel);
-  publish_encoded(channel, encode_buf_.data(), encode_buf_.size());
+  bool ok = false;
+  try {
+    const int size = msg.getEncodedSize();
+    if (size >= 0) {
+      encode_buf_.resize(static_cast<size_t>(size));
+      ok = msg.encode(encode_buf_.data(), 0, size) == size;
+    }
+  } catch (...) {
+    ok = false;
+  }
+  if (!ok) {
+    publish_failed(channel, -1, true);  // -1: the message did not encode
+    return false;
+  }
+  return publish_encoded(channel, encode_buf_.data(), encode_buf_.size(), true);
 }
 
 }  // namespace cnc::bus

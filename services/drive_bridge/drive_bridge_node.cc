@@ -34,7 +34,8 @@ const char* state_name(DriveBridgeNode::State s) {
 DriveBridgeNode::DriveBridgeNode(const config::MachineConfig& cfg, bus::Bus& bus, Options opt)
     : cfg_(cfg), bus_(bus), opt_(opt), core_(cfg), ch_status_(cfg.channel(ch::kAxisStatus)),
       ch_alarm_(cfg.channel(ch::kAlarm)),
-      ticks_per_ipo_(static_cast<int>(std::lround(cfg.ipo_period_s / cfg.servo_period_s))) {
+      ticks_per_ipo_(static_cast<int>(std::lround(cfg.ipo_period_s / cfg.servo_period_s))),
+      health_(bus, cfg.channel(ch::kAlarm), "cnc-drive-bridge", cnc::lcmt_alarm::FAULT) {
   std::map<std::string, const drive::DriveProfile*> by_file;
   std::map<std::string, LinkWorker*> by_link;
   drive::LoopbackLink* loopback = nullptr;
@@ -136,6 +137,7 @@ void DriveBridgeNode::alarm(int8_t severity, const std::string& code, const std:
 }
 
 void DriveBridgeNode::fault(size_t axis, const std::string& why, bool disable_axis) {
+  if (pending_command_ == cnc::lcmt_drive_command::ENABLE) pending_command_ = 0;  // sent before this fault
   if (disable_axis) axes_[axis].cmd.goal = drive::Goal::kDisable;
   if (state_ == State::kEnabling) {
     for (auto& a : axes_) a.cmd.goal = drive::Goal::kDisable;
@@ -189,17 +191,63 @@ void DriveBridgeNode::check_drives() {
 }
 
 void DriveBridgeNode::servo_tick(double now_s) {
+  try {
+    servo_tick_inner(now_s);
+  } catch (const std::exception& e) {
+    on_exception("servo tick", e.what());
+  } catch (...) {
+    on_exception("servo tick", "unknown exception");
+  }
+  // A failed publish (this tick's ALARM, the last AXIS_STATUS, a heartbeat): the
+  // cell no longer sees the axes. Controlled stop, FAULT until ENABLE.
+  if (health_.check(now_s)) {
+    fault(0, std::string("the bus failed: ") + health_.cause(), false);  // logged with the fault
+  }
+  health_.report(now_s, "the drive bridge brought the axes to a controlled stop and is in FAULT until ENABLE");
+}
+
+void DriveBridgeNode::on_exception(const char* where, const char* what) {
+  try {
+    spdlog::error("fault: exception in the {}: {}", where, what);
+    fault(0, std::string("exception in the ") + where + ": " + what, false);
+  } catch (...) {
+    core_.fault("exception");  // no memory for a text: the stop still happens
+  }
+}
+
+void DriveBridgeNode::publish_status(int64_t overruns) {
+  try {
+    publish_status_inner(overruns);
+  } catch (const std::exception& e) {
+    on_exception("status publish", e.what());
+  } catch (...) {
+    on_exception("status publish", "unknown exception");
+  }
+}
+
+void DriveBridgeNode::servo_tick_inner(double now_s) {
   bus_.drain();
   ++tick_;
   for (auto& a : axes_) a.rep = a.worker->report(a.slot);
 
-  // Operator commands; ENABLE waits while a controlled stop is still running.
+  // Operator commands. ENABLE acts only on drives that are disabled or stand in
+  // FAULT; it waits only for the start-up. An ENABLE that arrives while a controlled
+  // stop runs was sent before its sender knew of the fault (the drives looked
+  // enabled): kept, it would enable them again once the stop ended, with nobody
+  // having asked after the fault. It is refused; the operator sends it again.
   if (pending_command_ != 0) {
     const int8_t c = pending_command_;
     pending_command_ = 0;
     if (c == cnc::lcmt_drive_command::ENABLE) {
-      if (state_ == State::kDisabled || state_ == State::kFault) begin_enable(now_s);
-      else if (state_ == State::kStarting || state_ == State::kStopping) pending_command_ = c;
+      if (state_ == State::kDisabled || state_ == State::kFault) {
+        begin_enable(now_s);
+      } else if (state_ == State::kStarting) {
+        pending_command_ = c;
+      } else if (state_ == State::kStopping) {
+        spdlog::warn("ENABLE ignored: a controlled stop is running ({}); send it again when it has ended", fault_text_);
+        alarm(cnc::lcmt_alarm::WARNING, "enable_ignored",
+              "ENABLE ignored: a controlled stop is running; send it again when the axes stand");
+      }
     } else if (c == cnc::lcmt_drive_command::DISABLE || c == cnc::lcmt_drive_command::FAULT_RESET) {
       for (auto& a : axes_) {
         a.cmd.goal = c == cnc::lcmt_drive_command::DISABLE ? drive::Goal::kDisable : drive::Goal::kFaultReset;
@@ -311,7 +359,7 @@ void DriveBridgeNode::servo_tick(double now_s) {
   }
 }
 
-void DriveBridgeNode::publish_status(int64_t overruns) {
+void DriveBridgeNode::publish_status_inner(int64_t overruns) {
   if (tick_ % ticks_per_ipo_ != 0) return;
   lcmt_axis_status s{};
   s.setpoint_cycle = core_.last_cycle();

@@ -8,6 +8,11 @@
 // States: starting (links not answered yet) -> disabled -> enabling (the profiles'
 // state machines run) -> enabled (following setpoints) -> stopping -> fault.
 // After any fault nothing moves until an ENABLE on DRIVE_CMD (or cnc-ctl --do enable).
+//
+// servo_tick and publish_status never throw: an exception inside, and a failed
+// publish (the bus counts them; service::BusHealth), are faults like any other: the
+// axes brake to a controlled stop at timing.stop_decel_mm_s2 and the bridge stays in
+// FAULT until ENABLE; the ALARM naming the cause goes out when the bus works again.
 #include <memory>
 #include <string>
 #include <vector>
@@ -17,6 +22,7 @@
 #include "common/bus/bus.h"
 #include "common/drive/drive_profile.h"
 #include "common/drive/link.h"
+#include "common/service/bus_health.h"
 #include "services/drive_bridge/drive_bridge.h"
 #include "services/drive_bridge/link_worker.h"
 
@@ -67,6 +73,9 @@ class DriveBridgeNode {
     int64_t reconnects_seen = 0;
     bool link_down = false;  // lost since the last ENABLE: stays disabled
   };
+  void servo_tick_inner(double now_s);
+  void publish_status_inner(int64_t overruns);
+  void on_exception(const char* where, const char* what);
   void on_setpoint(const cnc::lcmt_setpoint& m);
   void fault(size_t axis, const std::string& why, bool disable_axis);
   void begin_enable(double now_s);
@@ -97,6 +106,7 @@ class DriveBridgeNode {
   int64_t last_setpoint_utime_ = 0;
   std::string detail_ = "starting";
   State detail_state_ = State::kStarting;
+  service::BusHealth health_;
 };
 
 const char* state_name(DriveBridgeNode::State s);

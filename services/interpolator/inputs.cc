@@ -1,5 +1,7 @@
 #include "services/interpolator/inputs.h"
 
+#include <cmath>
+
 #include "common/program/block_msg.h"
 
 namespace cnc::interp {
@@ -7,12 +9,23 @@ namespace cnc::interp {
 bool to_core_command(const cnc::lcmt_program_command& m, Command* out) {
   using C = cnc::lcmt_program_command;
   switch (m.command) {
-    case C::LOAD: *out = {Command::Kind::kLoad, 1.0}; return true;
-    case C::START: *out = {Command::Kind::kStart, 1.0}; return true;
-    case C::HOLD: *out = {Command::Kind::kHold, 1.0}; return true;
-    case C::RESUME: *out = {Command::Kind::kResume, 1.0}; return true;
-    case C::STOP: *out = {Command::Kind::kStop, 1.0}; return true;
-    case C::OVERRIDE: *out = {Command::Kind::kOverride, m.feed_override}; return true;
+    case C::LOAD: *out = {Command::Kind::kLoad, 1.0, {}}; return true;
+    case C::START: *out = {Command::Kind::kStart, 1.0, {}}; return true;
+    case C::HOLD: *out = {Command::Kind::kHold, 1.0, {}}; return true;
+    case C::RESUME: *out = {Command::Kind::kResume, 1.0, {}}; return true;
+    case C::STOP: *out = {Command::Kind::kStop, 1.0, {}}; return true;
+    case C::OVERRIDE: *out = {Command::Kind::kOverride, m.feed_override, {}}; return true;
+    case C::RESET: {
+      // As applied, a reset carries the position taken, one finite value per axis.
+      if (m.num_axes <= 0 || m.num_axes > program::kMaxAxes || m.position_mm.size() != static_cast<size_t>(m.num_axes))
+        return false;
+      *out = {Command::Kind::kReset, 1.0, {}};
+      for (int a = 0; a < m.num_axes; ++a) {
+        if (!std::isfinite(m.position_mm[static_cast<size_t>(a)])) return false;
+        out->position_mm[static_cast<size_t>(a)] = m.position_mm[static_cast<size_t>(a)];
+      }
+      return true;
+    }
     default: return false;
   }
 }
@@ -20,7 +33,9 @@ bool to_core_command(const cnc::lcmt_program_command& m, Command* out) {
 std::string apply_recorded_input(Interpolator& core, const cnc::lcmt_interp_input& in, int num_axes) {
   if (in.kind == cnc::lcmt_interp_input::COMMAND) {
     Command c;
-    if (!to_core_command(in.command, &c)) return "unknown command " + std::to_string(in.command.command);
+    if (!to_core_command(in.command, &c)) return "unknown or malformed command " + std::to_string(in.command.command);
+    if (c.kind == Command::Kind::kReset && in.command.num_axes != num_axes)
+      return "reset with " + std::to_string(in.command.num_axes) + " axes, the machine has " + std::to_string(num_axes);
     core.apply_command(c);
     return "";
   }

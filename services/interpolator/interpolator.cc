@@ -477,6 +477,22 @@ void Interpolator::apply_command(const Command& cmd) {
     case Command::Kind::kStop:
       if (state_ != RunState::kIdle && state_ != RunState::kDone) stopping_ = true;
       break;
+    case Command::Kind::kReset:
+      // After a fault: nothing of the program is left, the path rests where the drives are.
+      blocks_.clear();
+      next_index_ = 0;
+      blocks_done_ = 0;
+      program_cycles_ = 0;
+      starved_cycles_ = 0;
+      u_ = s_ = v_ = a_ = 0;
+      dwell_left_ = -1;
+      hold_ = false;
+      stopping_ = false;
+      state_ = RunState::kIdle;
+      for (int a = 0; a < naxes_; ++a)
+        if (std::isfinite(cmd.position_mm[a])) pos_[a] = cmd.position_mm[a];
+      out_.position_mm = pos_;
+      break;
     case Command::Kind::kOverride:
       if (std::isfinite(cmd.feed_override)) {
         override_ = std::clamp(cmd.feed_override, 0.0, 1.5);

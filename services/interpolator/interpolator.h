@@ -44,9 +44,12 @@ const char* to_string(RunState state);
 ParamUpdate param_update_from_string(const std::string& s);
 
 struct Command {
-  enum class Kind : int8_t { kLoad = 1, kStart = 2, kHold = 3, kResume = 4, kStop = 5, kOverride = 6 };
+  enum class Kind : int8_t { kLoad = 1, kStart = 2, kHold = 3, kResume = 4, kStop = 5, kOverride = 6, kReset = 7 };
   Kind kind = Kind::kStart;
   double feed_override = 1.0;  // kOverride: 0.0 .. 1.5
+  // kReset: the program is dropped, the path is at rest at this position (where
+  // the drives stand, as the node took it from AXIS_STATUS); one finite value per axis.
+  std::array<double, program::kMaxAxes> position_mm{};
 };
 
 struct Setpoint {

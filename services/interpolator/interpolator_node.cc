@@ -12,11 +12,32 @@
 #include "cnc/lcmt_setpoint.hpp"
 #include "cnc/lcmt_config.hpp"
 #include "common/program/block_msg.h"
+#include "common/util/clock.h"
 #include "services/interpolator/inputs.h"
 
 namespace cnc::interp {
 
 namespace ch = config::channels;
+
+namespace {
+// Inputs kept for a later publish while the bus fails (about 16 s of a busy program).
+constexpr size_t kMaxUnsent = 4096;
+// An AXIS_STATUS older than this does not tell where the drives are now.
+constexpr double kStatusFresh_s = 0.5;
+
+const char* drive_state_name(int8_t s) {
+  switch (s) {
+    case cnc::lcmt_axis_status::DISABLED: return "disabled";
+    case cnc::lcmt_axis_status::ENABLING: return "enabling";
+    case cnc::lcmt_axis_status::ENABLED: return "enabled";
+    case cnc::lcmt_axis_status::STOPPING: return "stopping";
+    case cnc::lcmt_axis_status::FAULT: return "in fault";
+  }
+  return "in an unknown state";
+}
+
+bool active(RunState s) { return s == RunState::kRunning || s == RunState::kHeld || s == RunState::kStarved; }
+}  // namespace
 
 InterpolatorNode::InterpolatorNode(const config::MachineConfig& cfg, bus::Bus& bus)
     : cfg_(cfg), bus_(bus), core_(cfg),
@@ -25,12 +46,18 @@ InterpolatorNode::InterpolatorNode(const config::MachineConfig& cfg, bus::Bus& b
       ch_config_(cfg.channel(ch::kInterpConfig)), ch_alarm_(cfg.channel(ch::kAlarm)),
       config_period_cycles_(std::max<int64_t>(1, std::llround(1.0 / cfg.ipo_period_s))),
       // Re-request after ~100 ms without the block (a lost request or block).
-      resend_cycles_(std::max<int64_t>(2, std::llround(0.1 / cfg.ipo_period_s))) {
+      resend_cycles_(std::max<int64_t>(2, std::llround(0.1 / cfg.ipo_period_s))),
+      health_(bus, cfg.channel(ch::kAlarm), "cnc-interpolator", cnc::lcmt_alarm::FAULT) {
   bus_.subscribe<cnc::lcmt_program_command>(cfg.channel(ch::kProgramCmd),
                                             [this](const auto& m) { on_command(m); });
   bus_.subscribe<cnc::lcmt_program_state>(cfg.channel(ch::kProgramState),
                                           [this](const auto& m) { on_program_state(m); });
   bus_.subscribe<cnc::lcmt_program_block>(cfg.channel(ch::kProgramBlocks), [this](const auto& m) { on_block(m); });
+  bus_.subscribe<cnc::lcmt_axis_status>(cfg.channel(ch::kAxisStatus), [this](const cnc::lcmt_axis_status& m) {
+    if (m.num_axes != static_cast<int32_t>(cfg_.axes.size())) return;
+    axis_status_ = m;
+    axis_status_s_ = util::monotonic_s();
+  });
 }
 
 void InterpolatorNode::on_command(const cnc::lcmt_program_command& m) { pending_commands_.push_back(m); }
@@ -38,6 +65,8 @@ void InterpolatorNode::on_command(const cnc::lcmt_program_command& m) { pending_
 void InterpolatorNode::on_program_state(const cnc::lcmt_program_state& m) {
   const bool loaded = m.state == cnc::lcmt_program_state::LOADED || m.state == cnc::lcmt_program_state::RUNNING;
   if (!loaded || m.program_token == token_) return;
+  // In FAULT nothing new is taken; after it, no program loaded before it.
+  if (fault_ || m.program_token <= retired_token_) return;
   const RunState s = core_.state();
   if (s == RunState::kRunning || s == RunState::kHeld || s == RunState::kStarved) {
     spdlog::warn("program {} loaded while a program runs: ignored until it ends", m.program_path);
@@ -64,7 +93,87 @@ void InterpolatorNode::apply_command(const Command& c, const cnc::lcmt_program_c
   in.kind = cnc::lcmt_interp_input::COMMAND;
   in.command = m;
   in.block.num_axes = 0;
-  bus_.publish(ch_input_, in);
+  publish_input(in);
+}
+
+void InterpolatorNode::publish_input(const cnc::lcmt_interp_input& in) {
+  if (unsent_inputs_.empty()) {
+    cnc::lcmt_interp_input copy = in;
+    if (bus_.publish(ch_input_, copy)) return;
+  }
+  if (unsent_inputs_.size() < kMaxUnsent) {
+    unsent_inputs_.push_back(in);
+  } else if (inputs_dropped_++ == 0) {
+    spdlog::error("more than {} inputs could not be published: this run can no longer be replayed", kMaxUnsent);
+  }
+}
+
+void InterpolatorNode::flush_inputs() {
+  while (!unsent_inputs_.empty()) {
+    if (!bus_.publish(ch_input_, unsent_inputs_.front())) return;
+    unsent_inputs_.pop_front();
+  }
+}
+
+void InterpolatorNode::alarm(int8_t severity, const std::string& code, const std::string& text) {
+  cnc::lcmt_alarm al{};
+  al.source = "cnc-interpolator";
+  al.severity = severity;
+  al.code = code;
+  al.text = text;
+  bus_.publish(ch_alarm_, al);  // a failure is counted and reported by health_
+}
+
+void InterpolatorNode::fault(const std::string& cause) {
+  if (fault_) return;
+  fault_ = true;
+  fault_cause_ = cause;
+  detail_ = "fault: " + cause;
+  spdlog::error("fault: {}; the program is stopped, RESET to continue", cause);
+  if (active(core_.state())) {
+    cnc::lcmt_program_command stop{};
+    stop.command = cnc::lcmt_program_command::STOP;
+    apply_command(Command{Command::Kind::kStop, 1.0, {}}, stop);
+  }
+  retired_token_ = std::max(retired_token_, token_);
+  token_ = 0;
+  num_blocks_ = 0;
+  load_pending_ = false;
+  reorder_.clear();
+  alarm(cnc::lcmt_alarm::FAULT, "interp_fault", "program stopped: " + cause + "; RESET to continue");
+}
+
+std::string InterpolatorNode::reset_position(cnc::lcmt_program_command* out) const {
+  if (active(core_.state()))
+    return fault_ ? "the path is still braking after the fault: try again when it stands"
+                  : "a program is running: STOP it first";
+  if (util::monotonic_s() - axis_status_s_ > kStatusFresh_s)
+    return "no AXIS_STATUS from the drive bridge within the last 0.5 s: where the drives stand is unknown";
+  const int n = static_cast<int>(cfg_.axes.size());
+  for (int a = 0; a < n; ++a) {
+    const auto i = static_cast<size_t>(a);
+    if (axis_status_.drive_state[i] != cnc::lcmt_axis_status::ENABLED)
+      return "axis " + cfg_.axes[i].name + " is " + drive_state_name(axis_status_.drive_state[i]) +
+             ": enable the drives first (cnc-ctl --do reset does)";
+    if (!std::isfinite(axis_status_.actual_mm[i]))
+      return "axis " + cfg_.axes[i].name + ": the drive reports a position that is not a number";
+  }
+  out->num_axes = n;
+  out->position_mm.assign(axis_status_.actual_mm.begin(), axis_status_.actual_mm.begin() + n);
+  return "";
+}
+
+void InterpolatorNode::watch_drives() {
+  // A drive that leaves the enabled state while a program runs: the program cannot
+  // go on where the machine is not following it.
+  if (!active(core_.state()) || fault_ || util::monotonic_s() - axis_status_s_ > kStatusFresh_s) return;
+  for (size_t i = 0; i < cfg_.axes.size(); ++i) {
+    if (axis_status_.drive_state[i] == cnc::lcmt_axis_status::ENABLED) continue;
+    const std::string& text = axis_status_.fault[i];
+    fault("axis " + cfg_.axes[i].name + " is " + drive_state_name(axis_status_.drive_state[i]) +
+          (text.empty() ? std::string() : " (" + text + ")"));
+    return;
+  }
 }
 
 void InterpolatorNode::request_blocks() {
@@ -93,7 +202,22 @@ void InterpolatorNode::request_blocks() {
 }
 
 void InterpolatorNode::cycle() {
+  try {
+    run_cycle();
+  } catch (const std::exception& e) {
+    fault(std::string("exception in cycle ") + std::to_string(core_.cycle()) + ": " + e.what());
+  } catch (...) {
+    fault("unknown exception in cycle " + std::to_string(core_.cycle()));
+  }
+  const double now = util::monotonic_s();
+  if (health_.check(now)) fault(health_.cause());
+  health_.report(now, "the interpolator stopped the program (recorded STOP) and is in FAULT until RESET");
+}
+
+void InterpolatorNode::run_cycle() {
   bus_.drain();
+  flush_inputs();
+  watch_drives();
   const int64_t cyc = core_.cycle();
   // The config as loaded, at start and about once a second: a log alone replays.
   if (cyc % config_period_cycles_ == 0) {
@@ -113,8 +237,50 @@ void InterpolatorNode::cycle() {
     last_request_first_ = -1;
   }
   for (const auto& m : pending_commands_) {
+    if (m.command == cnc::lcmt_program_command::RESET) {
+      cnc::lcmt_program_command r = m;
+      const std::string why = reset_position(&r);
+      Command c;
+      if (!why.empty() || !to_core_command(r, &c)) {
+        spdlog::warn("RESET refused: {}", why);
+        alarm(cnc::lcmt_alarm::WARNING, "reset_refused", "RESET refused: " + why);
+        continue;
+      }
+      apply_command(c, r);
+      const bool was_fault = fault_;
+      fault_ = false;
+      fault_cause_.clear();
+      detail_.clear();
+      retired_token_ = std::max(retired_token_, token_);
+      token_ = 0;
+      num_blocks_ = 0;
+      load_pending_ = false;
+      reorder_.clear();
+      std::string where;
+      for (size_t a = 0; a < cfg_.axes.size(); ++a)
+        where += (a ? ", " : "") + cfg_.axes[a].name + " " + std::to_string(r.position_mm[a]);
+      spdlog::info("reset{}: the path stands where the drives are ({})", was_fault ? " from FAULT" : "", where);
+      alarm(cnc::lcmt_alarm::INFO, "reset", std::string(was_fault ? "fault cleared; " : "") +
+                                                "the path stands where the drives are: " + where + " mm");
+      continue;
+    }
     Command c;
     if (m.command == cnc::lcmt_program_command::LOAD || !to_core_command(m, &c)) continue;  // LOAD: via PROGRAM_STATE
+    if (fault_ && (c.kind == Command::Kind::kStart || c.kind == Command::Kind::kResume)) {
+      spdlog::warn("{} refused: in FAULT ({}); RESET first", c.kind == Command::Kind::kStart ? "START" : "RESUME",
+                   fault_cause_);
+      continue;
+    }
+    if (c.kind == Command::Kind::kStart && util::monotonic_s() - axis_status_s_ <= kStatusFresh_s) {
+      std::string why;
+      for (size_t i = 0; i < cfg_.axes.size() && why.empty(); ++i)
+        if (axis_status_.drive_state[i] != cnc::lcmt_axis_status::ENABLED)
+          why = "axis " + cfg_.axes[i].name + " is " + drive_state_name(axis_status_.drive_state[i]);
+      if (!why.empty()) {
+        spdlog::warn("START refused: {}: enable the drives first", why);
+        continue;
+      }
+    }
     if (c.kind == Command::Kind::kStart) {
       if (token_ == 0) {
         spdlog::warn("START without a loaded program: ignored");
@@ -152,7 +318,7 @@ void InterpolatorNode::cycle() {
       bus_.publish(ch_alarm_, al);
       cnc::lcmt_program_command stop{};
       stop.command = cnc::lcmt_program_command::STOP;
-      apply_command(Command{Command::Kind::kStop, 1.0}, stop);
+      apply_command(Command{Command::Kind::kStop, 1.0, {}}, stop);
       token_ = 0;
       reorder_.clear();
       break;
@@ -161,7 +327,7 @@ void InterpolatorNode::cycle() {
     in.cycle = cyc;
     in.kind = cnc::lcmt_interp_input::BLOCK;
     in.block = it->second;
-    bus_.publish(ch_input_, in);
+    publish_input(in);
     reorder_.erase(it);
   }
   request_blocks();
@@ -187,12 +353,13 @@ void InterpolatorNode::cycle() {
 void InterpolatorNode::publish_state(bool force) {
   const RunState s = core_.state();
   const int64_t now = core_.cycle();
-  if (!force && s == last_state_ && now - last_state_cycle_ < resend_cycles_) return;
+  if (!force && s == last_state_ && fault_ == last_fault_ && now - last_state_cycle_ < resend_cycles_) return;
   last_state_ = s;
+  last_fault_ = fault_;
   last_state_cycle_ = now;
   cnc::lcmt_interp_state m{};
   m.cycle = now;
-  m.state = static_cast<int8_t>(s);
+  m.state = fault_ ? cnc::lcmt_setpoint::FAULT : static_cast<int8_t>(s);
   m.program_token = token_;
   m.blocks_done = core_.blocks_done();
   m.blocks_buffered = static_cast<int64_t>(core_.queued_blocks() + reorder_.size());

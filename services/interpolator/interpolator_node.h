@@ -3,14 +3,26 @@
 // a bounded window (re-requesting what does not arrive), applies inputs to the core
 // at the start of a cycle, and publishes each applied input with its cycle index,
 // the setpoint and the run state.
+//
+// Faults: a failed publish, an exception in a cycle, or a drive that leaves the
+// enabled state while a program runs stop the program (a recorded STOP: the path
+// brakes jerk-limited) and put the node in FAULT (INTERP_STATE state FAULT): START,
+// RESUME and new programs are refused until RESET. RESET takes the position from
+// the drives (the newest AXIS_STATUS, actual positions) and is recorded with that
+// position as an input, so replay reproduces it.
+#include <deque>
 #include <map>
+#include <string>
 #include <vector>
 
+#include "cnc/lcmt_axis_status.hpp"
+#include "cnc/lcmt_interp_input.hpp"
 #include "cnc/lcmt_program_block.hpp"
 #include "cnc/lcmt_program_command.hpp"
 #include "cnc/lcmt_program_state.hpp"
 #include "common/bus/bus.h"
 #include "common/config/machine_config.h"
+#include "common/service/bus_health.h"
 #include "services/interpolator/interpolator.h"
 
 namespace cnc::interp {
@@ -18,8 +30,15 @@ namespace cnc::interp {
 class InterpolatorNode {
  public:
   InterpolatorNode(const config::MachineConfig& cfg, bus::Bus& bus);
-  // One interpolation cycle. Call every T_ipo.
+  // One interpolation cycle. Call every T_ipo. Never throws: an exception inside
+  // becomes a fault (controlled stop, ALARM, FAULT until RESET).
   void cycle();
+  // A fault from outside the cycle (main's last-resort catch): as above.
+  void fault(const std::string& cause);
+  bool faulted() const { return fault_; }
+  const std::string& fault_cause() const { return fault_cause_; }
+  // For the heartbeat: "" or "fault: cause" (no allocation per call).
+  const std::string& detail() const { return detail_; }
   void publish_state(bool force);
   const Interpolator& core() const { return core_; }
   int64_t setpoints_published() const { return setpoints_published_; }
@@ -30,6 +49,13 @@ class InterpolatorNode {
   void on_block(const cnc::lcmt_program_block& m);
   void apply_command(const Command& c, const cnc::lcmt_program_command& m);
   void request_blocks();
+  void run_cycle();
+  void publish_input(const cnc::lcmt_interp_input& in);
+  void flush_inputs();
+  void alarm(int8_t severity, const std::string& code, const std::string& text);
+  // "" when RESET can be applied now (and fills `out` with the position), else why not.
+  std::string reset_position(cnc::lcmt_program_command* out) const;
+  void watch_drives();
 
   config::MachineConfig cfg_;
   bus::Bus& bus_;
@@ -49,7 +75,22 @@ class InterpolatorNode {
   int64_t resend_cycles_;
   int64_t setpoints_published_ = 0;
   RunState last_state_ = RunState::kIdle;
+  bool last_fault_ = false;
   int64_t last_state_cycle_ = 0;
+
+  // Fault handling.
+  bool fault_ = false;
+  std::string fault_cause_;
+  std::string detail_;
+  int64_t retired_token_ = 0;  // programs up to this token are never taken again (after a fault)
+  service::BusHealth health_;
+  // Inputs whose publish failed, sent again in order before any newer one: the
+  // record of inputs stays complete and contiguous across a bus outage.
+  std::deque<cnc::lcmt_interp_input> unsent_inputs_;
+  int64_t inputs_dropped_ = 0;  // beyond kMaxUnsent: the run is no longer replayable
+  cnc::lcmt_axis_status axis_status_{};
+  double axis_status_s_ = -1e9;  // monotonic time it arrived
+  bool drives_seen_enabled_ = false;  // every axis ENABLED in a status since the program started
 };
 
 }  // namespace cnc::interp

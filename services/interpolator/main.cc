@@ -23,8 +23,8 @@ int main(int argc, char** argv) {
     while (!cnc::util::stop_requested()) {
       timer.wait();
       if (cnc::util::stop_requested()) break;
-      node.cycle();
-      hb.tick(cnc::lcmt_heartbeat::RUNNING, timer.overruns());
+      node.cycle();  // never throws: a fault stops the program and waits for RESET
+      hb.tick(cnc::lcmt_heartbeat::RUNNING, timer.overruns(), node.detail());
     }
     node.publish_state(true);
     hb.tick(cnc::lcmt_heartbeat::STOPPING, timer.overruns(), "", true);

@@ -61,6 +61,9 @@ class Monitor {
   // A block the interpolator applied (INTERP_INPUT), of program `token`.
   void on_block(const program::Block& b, int64_t token);
   void on_setpoint(const SetpointIn& sp);
+  // A RESET the interpolator applied: its path jumps to where the drives stand, so
+  // the next setpoint is no step of the machine (no chord error across it).
+  void on_reset() { last_sp_.reset(); }
   // An axis status (utime: when the bridge read the actual positions); returns the
   // report and appends raised alarms to *alarms.
   Report on_status(int64_t utime, int64_t setpoint_cycle, const std::vector<double>& actual_mm,

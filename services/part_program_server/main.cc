@@ -2,6 +2,7 @@
 #include "cnc/lcmt_heartbeat.hpp"
 #include "common/service/heartbeat.h"
 #include "common/service/service.h"
+#include "common/util/clock.h"
 #include "common/util/signals.h"
 #include "services/part_program_server/program_server_node.h"
 
@@ -14,6 +15,7 @@ int main(int argc, char** argv) {
     while (!cnc::util::stop_requested()) {
       bus.handle(20);
       node.publish_state(false);
+      node.poll(cnc::util::monotonic_s());
       hb.tick(cnc::lcmt_heartbeat::RUNNING, 0);
     }
     hb.tick(cnc::lcmt_heartbeat::STOPPING, 0, "", true);

@@ -5,8 +5,10 @@
 #include <algorithm>
 #include <iterator>
 
+#include "cnc/lcmt_alarm.hpp"
 #include "cnc/lcmt_interp_state.hpp"
 #include "cnc/lcmt_program_state.hpp"
+#include "cnc/lcmt_setpoint.hpp"
 #include "common/program/block_msg.h"
 #include "common/util/clock.h"
 
@@ -16,18 +18,116 @@ namespace ch = config::channels;
 
 ProgramServerNode::ProgramServerNode(const config::MachineConfig& cfg, bus::Bus& bus)
     : cfg_(cfg), bus_(bus), core_(cfg), ch_blocks_(cfg.channel(ch::kProgramBlocks)),
-      ch_state_(cfg.channel(ch::kProgramState)), state_(cnc::lcmt_program_state::IDLE) {
+      ch_state_(cfg.channel(ch::kProgramState)), state_(cnc::lcmt_program_state::IDLE),
+      health_(bus, cfg.channel(ch::kAlarm), "cnc-program-server", cnc::lcmt_alarm::WARNING) {
   bus_.subscribe<cnc::lcmt_program_command>(cfg.channel(ch::kProgramCmd), [this](const auto& m) { on_command(m); });
   bus_.subscribe<cnc::lcmt_block_request>(cfg.channel(ch::kBlockRequest), [this](const auto& m) { on_request(m); });
   // Where the machine stands, for the start of the next program.
   bus_.subscribe<cnc::lcmt_interp_state>(cfg.channel(ch::kInterpState), [this](const cnc::lcmt_interp_state& m) {
     if (m.num_axes == static_cast<int32_t>(cfg_.axes.size())) machine_position_ = m.position_mm;
+    on_interp_state(m);
   });
+  bus_.subscribe<cnc::lcmt_axis_status>(cfg.channel(ch::kAxisStatus), [this](const cnc::lcmt_axis_status& m) {
+    if (m.num_axes != static_cast<int32_t>(cfg_.axes.size())) return;
+    axes_ = m;
+    axes_s_ = util::monotonic_s();
+  });
+  // The interpolator's fault, by its own words.
+  bus_.subscribe<cnc::lcmt_alarm>(cfg.channel(ch::kAlarm), [this](const cnc::lcmt_alarm& m) {
+    if (m.source == "cnc-interpolator" && (m.code == "interp_fault" || m.code == "publish_failed"))
+      interp_fault_text_ = m.text;
+  });
+}
+
+void ProgramServerNode::on_interp_state(const cnc::lcmt_interp_state& m) {
+  using S = cnc::lcmt_program_state;
+  using P = cnc::lcmt_setpoint;
+  const bool fault = m.state == P::FAULT;
+  if (fault != interp_fault_) {
+    interp_fault_ = fault;
+    if (fault) {
+      program_ready_ = false;
+      if (state_ == S::RUNNING || state_ == S::HELD) state_ = S::STOPPED;
+    }
+    publish_state(true);
+  }
+  if (fault || !core_.loaded() || m.program_token != core_.token()) return;
+  int8_t next = state_;
+  if (m.state == P::RUNNING || m.state == P::STARVED) {
+    if (state_ == S::RUNNING || state_ == S::HELD) next = S::RUNNING;
+    start_s_ = -1e9;  // the interpolator runs it: its state counts from now on
+  } else if (m.state == P::HELD) {
+    if (state_ == S::RUNNING || state_ == S::HELD) next = S::HELD;
+    start_s_ = -1e9;
+  } else if (m.state == P::DONE) {
+    if (state_ == S::RUNNING || state_ == S::HELD) next = S::DONE;
+  } else if (m.state == P::IDLE) {
+    // Stopped, unless the START is still on its way to the interpolator.
+    if ((state_ == S::RUNNING || state_ == S::HELD) && util::monotonic_s() - start_s_ > 1.0) next = S::STOPPED;
+  }
+  if (next != state_) {
+    state_ = next;
+    publish_state(true);
+  }
+}
+
+CellView ProgramServerNode::view(double now_s) const {
+  using S = cnc::lcmt_program_state;
+  CellView v;
+  v.program = core_.path();
+  if (own_fault_ || interp_fault_) {
+    v.state = CellState::kFault;
+    v.fault = own_fault_ ? own_fault_text_
+                         : (interp_fault_text_.empty() ? std::string("the interpolator is in FAULT") : interp_fault_text_);
+  } else if (state_ == S::RUNNING) {
+    v.state = CellState::kRunning;
+  } else if (state_ == S::HELD) {
+    v.state = CellState::kHeld;
+  } else if (program_ready_ && core_.loaded()) {
+    v.state = CellState::kLoaded;
+  } else {
+    v.state = CellState::kIdle;
+  }
+  if (now_s - axes_s_ <= 0.5) {
+    for (size_t i = 0; i < axes_.drive_state.size() && v.drives.empty(); ++i) {
+      if (axes_.drive_state[i] == cnc::lcmt_axis_status::ENABLED) continue;
+      static const char* const kNames[] = {"disabled", "enabling", "enabled", "stopping", "in fault"};
+      const int8_t st = axes_.drive_state[i];
+      v.drives = "axis " + axes_.axis_name[i] + " is " + (st >= 0 && st <= 4 ? kNames[st] : "in an unknown state");
+    }
+  }
+  return v;
+}
+
+void ProgramServerNode::refuse(const cnc::lcmt_program_command& m, const std::string& why) {
+  static const char* const kNames[] = {"?", "LOAD", "START", "HOLD", "RESUME", "STOP", "OVERRIDE", "RESET"};
+  const char* name = m.command >= 1 && m.command <= 7 ? kNames[m.command] : "?";
+  refusal_ = std::string(name) + (m.command == cnc::lcmt_program_command::LOAD ? " " + m.program_path : "") +
+             " refused: " + why;
+  refused_sender_ = m.sender;
+  refused_seq_ = m.seq;
+  ++refusals_;
+  spdlog::warn("{}", refusal_);
+  publish_state(true);
+}
+
+void ProgramServerNode::poll(double now_s) {
+  if (health_.check(now_s) && !own_fault_) {
+    own_fault_ = true;
+    own_fault_text_ = std::string("the program server could not publish: ") + health_.cause();
+    program_ready_ = false;
+    spdlog::error("fault: {}", own_fault_text_);
+  }
+  health_.report(now_s, "the program server is in FAULT until RESET");
 }
 
 void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {
   using C = cnc::lcmt_program_command;
   using S = cnc::lcmt_program_state;
+  if (const std::string why = refusal(m, view(util::monotonic_s())); !why.empty()) {
+    refuse(m, why);
+    return;
+  }
   switch (m.command) {
     case C::LOAD: {
       // The token must differ from every earlier one, also across restarts.
@@ -36,6 +136,7 @@ void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {
       if (r.ok) {
         spdlog::info("loaded {}: {} blocks (token {})", m.program_path, core_.num_blocks(), token);
         state_ = S::LOADED;
+        program_ready_ = true;
         last_refusal_ = LoadResult{};
         sent_.clear();
         blocks_sent_ = blocks_resent_ = 0;
@@ -49,11 +150,24 @@ void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {
       break;
     }
     case C::START:
-      if (core_.loaded()) state_ = S::RUNNING;
+      if (core_.loaded()) {
+        state_ = S::RUNNING;
+        program_ready_ = false;  // it runs once; after its end it is loaded again
+        start_s_ = util::monotonic_s();
+      }
       publish_state(true);
       break;
     case C::STOP:
-      if (core_.loaded()) state_ = S::STOPPED;
+      if (core_.loaded() && (state_ == S::RUNNING || state_ == S::HELD)) state_ = S::STOPPED;
+      publish_state(true);
+      break;
+    case C::RESET:
+      // The interpolator takes the position from the drives; a program loaded
+      // before (from where the machine stood then) is not started any more.
+      own_fault_ = false;
+      own_fault_text_.clear();
+      program_ready_ = false;
+      state_ = S::IDLE;
       publish_state(true);
       break;
     default: break;
@@ -120,7 +234,7 @@ void ProgramServerNode::publish_state(bool force) {
   if (!force && now - last_state_s_ < 0.1) return;
   last_state_s_ = now;
   cnc::lcmt_program_state s{};
-  s.state = state_;
+  s.state = (own_fault_ || interp_fault_) ? cnc::lcmt_program_state::FAULT : state_;
   s.program_token = core_.token();
   s.program_path = state_ == cnc::lcmt_program_state::REFUSED ? refused_path_ : core_.path();
   s.num_blocks = core_.num_blocks();
@@ -129,6 +243,10 @@ void ProgramServerNode::publish_state(bool force) {
   s.error = last_refusal_.error;
   s.error_line = last_refusal_.line;
   s.error_column = last_refusal_.column;
+  s.refusal = refusal_;
+  s.refused_sender = refused_sender_;
+  s.refused_seq = refused_seq_;
+  s.refusals = refusals_;
   bus_.publish(ch_state_, s);
 }
 

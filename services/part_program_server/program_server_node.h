@@ -1,9 +1,13 @@
 #pragma once
 #include <map>
 
+#include "cnc/lcmt_axis_status.hpp"
 #include "cnc/lcmt_block_request.hpp"
+#include "cnc/lcmt_interp_state.hpp"
 #include "cnc/lcmt_program_command.hpp"
 #include "common/bus/bus.h"
+#include "common/service/bus_health.h"
+#include "services/part_program_server/interlock.h"
 #include "services/part_program_server/program_server.h"
 
 namespace cnc::pps {
@@ -12,15 +16,27 @@ namespace cnc::pps {
 // only on request (the interpolator asks for a bounded window and asks again after
 // a silence), each stamped with the bus's per-channel sequence number, so a lost
 // datagram delays a block but never loses it.
+//
+// Interlock (interlock.h): a command the cell's state does not allow (LOAD or START
+// while a program runs, START in FAULT, ...) is refused: PROGRAM_STATE carries the
+// reason and the refused command's sender and seq, the state stays as it was. The
+// state follows the interpolator (INTERP_STATE: running, held, done, fault) and the
+// drives (AXIS_STATUS). A failed publish here puts the server in FAULT until RESET.
 class ProgramServerNode {
  public:
   ProgramServerNode(const config::MachineConfig& cfg, bus::Bus& bus);
   // Publishes the program state when it changed or every `period_s`.
   void publish_state(bool force);
+  // Once per loop: watches this node's publishes (FAULT on a failure, ALARM once the bus works).
+  void poll(double now_s);
   int8_t state() const { return state_; }
+  // The interlock's view of the cell now.
+  CellView view(double now_s) const;
 
  private:
   void on_command(const cnc::lcmt_program_command& m);
+  void on_interp_state(const cnc::lcmt_interp_state& m);
+  void refuse(const cnc::lcmt_program_command& m, const std::string& why);
   void on_request(const cnc::lcmt_block_request& m);
   // Counts block `i` as sent; returns whether it was sent before.
   bool mark_sent(int64_t i);
@@ -39,6 +55,21 @@ class ProgramServerNode {
   std::map<int64_t, int64_t> sent_;
   double last_state_s_ = -1e9;
   std::vector<double> machine_position_;  // from INTERP_STATE; empty until known (home)
+
+  // Interlock state.
+  bool program_ready_ = false;   // a loaded program not started yet
+  double start_s_ = -1e9;        // when START was accepted (until the interpolator reports it)
+  bool interp_fault_ = false;    // INTERP_STATE says FAULT
+  std::string interp_fault_text_;
+  bool own_fault_ = false;       // a publish of this node failed
+  std::string own_fault_text_;
+  cnc::lcmt_axis_status axes_{};
+  double axes_s_ = -1e9;
+  std::string refusal_;
+  int32_t refused_sender_ = 0;
+  int64_t refused_seq_ = -1;
+  int64_t refusals_ = 0;
+  service::BusHealth health_;
 };
 
 }  // namespace cnc::pps

@@ -4,8 +4,13 @@
 //   cnc-ctl --machine M --do run --program P [--timeout S]
 //   cnc-ctl --machine M --do load --program P | start | hold | resume | stop | override --value 0.8
 //   cnc-ctl --machine M --do enable [--timeout S] | disable | fault-reset    (drive bridge, DRIVE_CMD)
+//   cnc-ctl --machine M --do reset [--timeout S]   after a fault: enable the drives (DRIVE_CMD), then
+//                                                  RESET (the interpolator takes their position)
 //
-// Exit codes: 0 done; 2 bad flags or config; 3 program refused; 4 timeout; 5 fault.
+// A command the cell refuses in its state (LOAD or START while a program runs, ...)
+// ends cnc-ctl at once with the reason from PROGRAM_STATE and exit 3.
+// Exit codes: 0 done; 1 the command could not be sent; 2 bad flags or config;
+// 3 program or command refused; 4 timeout; 5 fault.
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
@@ -33,6 +38,7 @@ using cnc::lcmt_program_command;
 
 namespace {
 
+constexpr int kExitSendFailed = 1;
 constexpr int kExitRefused = 3;
 constexpr int kExitTimeout = 4;
 constexpr int kExitFault = 5;
@@ -91,30 +97,50 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
     std::fprintf(stderr, "ALARM %s [%s] %s\n", m.source.c_str(), m.code.c_str(), m.text.c_str());
   });
 
+  // The seq of the last program command sent: the server names it when it refuses it.
+  int64_t sent_seq = -1;
   auto send = [&](int8_t command, const std::string& path = "", double value = 1.0) {
     lcmt_program_command c{};
     c.command = command;
     c.program_path = path;
     c.feed_override = value;
-    bus.publish(cfg.channel(ch::kProgramCmd), c);
+    if (!bus.publish(cfg.channel(ch::kProgramCmd), c)) {
+      std::fprintf(stderr, "cnc-ctl: %s\n", bus.last_publish_error());
+      std::exit(kExitSendFailed);
+    }
+    sent_seq = c.seq;
+  };
+  // The refusal of the last command sent, "" while none came.
+  auto refused = [&]() -> std::string {
+    if (!view.have_program || sent_seq < 0) return "";
+    if (view.program.refused_sender != bus.sender() || view.program.refused_seq != sent_seq) return "";
+    return view.program.refusal;
+  };
+  // Sends a program command and waits up to `wait_s` for its refusal: "" when none came.
+  auto send_checked = [&](int8_t command, double wait_s, const std::string& path = "", double value = 1.0) {
+    send(command, path, value);
+    wait_for(bus, wait_s, [&] { return !refused().empty(); });
+    return refused();
   };
 
   // Drive bridge commands. `enable` waits until every axis reports ENABLED.
   auto drive_command = [&](int8_t command) {
     cnc::lcmt_drive_command c{};
     c.command = command;
-    bus.publish(cfg.channel(ch::kDriveCmd), c);
+    if (!bus.publish(cfg.channel(ch::kDriveCmd), c)) {
+      std::fprintf(stderr, "cnc-ctl: %s\n", bus.last_publish_error());
+      std::exit(kExitSendFailed);
+    }
   };
-  if (what == "disable") return drive_command(cnc::lcmt_drive_command::DISABLE), 0;
-  if (what == "fault-reset") return drive_command(cnc::lcmt_drive_command::FAULT_RESET), 0;
-  if (what == "enable") {
-    auto all_in = [&](int8_t state) {
-      if (!view.have_axes || view.axes.num_axes == 0) return false;
-      for (int8_t s : view.axes.drive_state)
-        if (s != state) return false;
-      return true;
-    };
-    const double end = cnc::util::monotonic_s() + std::min(timeout_s, 30.0);
+  auto all_in = [&](int8_t state) {
+    if (!view.have_axes || view.axes.num_axes == 0) return false;
+    for (int8_t s : view.axes.drive_state)
+      if (s != state) return false;
+    return true;
+  };
+  // ENABLE until every axis reports ENABLED: 0, or an exit code.
+  auto enable_drives = [&](double limit_s) {
+    const double end = cnc::util::monotonic_s() + limit_s;
     double next_send = 0;
     while (!all_in(cnc::lcmt_axis_status::ENABLED)) {
       if (cnc::util::stop_requested() || cnc::util::monotonic_s() > end) {
@@ -129,16 +155,76 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
       }
       bus.handle(10);
     }
+    return 0;
+  };
+  if (what == "disable") return drive_command(cnc::lcmt_drive_command::DISABLE), 0;
+  if (what == "fault-reset") return drive_command(cnc::lcmt_drive_command::FAULT_RESET), 0;
+  if (what == "reset") {
+    // 1. The drives: enabled through their profiles' state machines (a drive fault is
+    //    reset on the way), unless they are already.
+    wait_for(bus, 1.0, [&] { return view.have_axes && view.have_interp && view.have_program; });
+    if (!view.have_axes) {
+      std::fprintf(stderr, "cnc-ctl: no AXIS_STATUS from the drive bridge: cannot reset\n");
+      return kExitTimeout;
+    }
+    if (const int rc = enable_drives(std::min(timeout_s, 30.0)); rc != 0) return rc;
+    // 2. RESET: the interpolator takes the position of the drives and leaves FAULT.
+    //    Sent again while it says why not yet (the path still braking after a fault).
+    const double end = cnc::util::monotonic_s() + std::min(timeout_s, 30.0);
+    auto in_place = [&] {
+      if (!view.have_interp || view.interp.state == cnc::lcmt_setpoint::FAULT) return false;
+      if (view.have_program && view.program.state == cnc::lcmt_program_state::FAULT) return false;
+      if (view.interp.num_axes != view.axes.num_axes) return false;
+      for (int i = 0; i < view.axes.num_axes; ++i)
+        if (std::fabs(view.interp.position_mm[static_cast<size_t>(i)] - view.axes.actual_mm[static_cast<size_t>(i)]) >
+            0.01)
+          return false;
+      return true;
+    };
+    size_t alarms_seen = view.alarms.size();
+    bool applied = false;
+    while (!applied) {
+      if (cnc::util::stop_requested() || cnc::util::monotonic_s() > end) {
+        std::fprintf(stderr, "cnc-ctl: the reset did not take effect\n");
+        return kExitTimeout;
+      }
+      if (const std::string why = send_checked(lcmt_program_command::RESET, 0.5); !why.empty()) {
+        std::fprintf(stderr, "cnc-ctl: %s\n", why.c_str());
+        return kExitRefused;
+      }
+      for (; alarms_seen < view.alarms.size(); ++alarms_seen)
+        if (view.alarms[alarms_seen].code == "reset") applied = true;
+    }
+    wait_for(bus, 1.0, in_place);
+    if (!in_place()) {
+      std::fprintf(stderr, "cnc-ctl: after the reset the interpolator does not stand where the drives are\n");
+      return kExitFault;
+    }
+    std::printf("reset: the drives are enabled and the interpolator stands where they are\n");
+    return 0;
+  }
+  if (what == "enable") {
+    if (const int rc = enable_drives(std::min(timeout_s, 30.0)); rc != 0) return rc;
     std::printf("drives enabled\n");
     return 0;
   }
-  if (what == "start") return send(lcmt_program_command::START), 0;
-  if (what == "hold") return send(lcmt_program_command::HOLD), 0;
-  if (what == "resume") return send(lcmt_program_command::RESUME), 0;
-  if (what == "stop") return send(lcmt_program_command::STOP), 0;
-  if (what == "override") return send(lcmt_program_command::OVERRIDE, "", std::stod(args.option("value", "1.0"))), 0;
+  // Plain program commands: sent, and refused at once with the server's reason.
+  const std::map<std::string, int8_t> plain = {{"start", lcmt_program_command::START},
+                                               {"hold", lcmt_program_command::HOLD},
+                                               {"resume", lcmt_program_command::RESUME},
+                                               {"stop", lcmt_program_command::STOP},
+                                               {"override", lcmt_program_command::OVERRIDE}};
+  if (auto it = plain.find(what); it != plain.end()) {
+    wait_for(bus, 0.5, [&] { return view.have_program; });  // the server's state first: it answers a refusal
+    const double value = what == "override" ? std::stod(args.option("value", "1.0")) : 1.0;
+    if (const std::string why = send_checked(it->second, 0.5, "", value); !why.empty()) {
+      std::fprintf(stderr, "cnc-ctl: %s\n", why.c_str());
+      return kExitRefused;
+    }
+    return 0;
+  }
   if (what != "run" && what != "load") {
-    std::fprintf(stderr, "cnc-ctl: --do must be one of run load start hold resume stop override enable disable fault-reset\n");
+    std::fprintf(stderr, "cnc-ctl: --do must be one of run load start hold resume stop override reset enable disable fault-reset\n");
     return cnc::service::kExitBadInput;
   }
   const std::string program_arg = args.option("program");
@@ -178,7 +264,11 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
   bool got = false;
   for (int attempt = 0; attempt < 5 && !got; ++attempt) {
     send(lcmt_program_command::LOAD, program);
-    got = wait_for(bus, 2.0, answered);
+    got = wait_for(bus, 2.0, [&] { return answered() || !refused().empty(); });
+  }
+  if (const std::string why = refused(); !why.empty()) {
+    std::fprintf(stderr, "cnc-ctl: %s\n", why.c_str());
+    return kExitRefused;
   }
   if (!got) {
     std::fprintf(stderr, "cnc-ctl: the program server did not answer the load of %s\n", program.c_str());
@@ -202,7 +292,11 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
   got = false;
   for (int attempt = 0; attempt < 5 && !got; ++attempt) {
     send(lcmt_program_command::START);
-    got = wait_for(bus, 1.0, started);
+    got = wait_for(bus, 1.0, [&] { return started() || !refused().empty(); });
+  }
+  if (const std::string why = refused(); !why.empty()) {
+    std::fprintf(stderr, "cnc-ctl: %s\n", why.c_str());
+    return kExitRefused;
   }
   if (!got) {
     std::fprintf(stderr, "cnc-ctl: the interpolator did not start\n");
@@ -220,13 +314,24 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
       if (a.code == "block_refused") return true;
     return false;
   };
+  auto cell_fault = [&] {
+    return (view.interp.program_token == token || view.interp.program_token == 0) &&
+           view.interp.state == cnc::lcmt_setpoint::FAULT;
+  };
   const bool done = wait_for(bus, timeout_s, [&] {
-    return bridge_fault() || block_refused() ||
+    return bridge_fault() || block_refused() || cell_fault() ||
            (view.interp.program_token == token && view.interp.state == 3 /* done */);
   });
   if (block_refused()) {
     std::fprintf(stderr, "cnc-ctl: the interpolator refused a block; the program was stopped\n");
     return kExitRefused;
+  }
+  if (cell_fault() && !bridge_fault()) {
+    std::string why = "the interpolator is in FAULT";
+    for (const auto& a : view.alarms)
+      if (a.source == "cnc-interpolator" && a.code == "interp_fault") why = a.text;
+    std::fprintf(stderr, "cnc-ctl: fault: %s\n", why.c_str());
+    return kExitFault;
   }
   if (bridge_fault()) {
     std::fprintf(stderr, "cnc-ctl: drive fault: %s\n", view.axes.fault.empty() ? "" : view.axes.fault[0].c_str());

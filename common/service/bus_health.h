@@ -1,0 +1,90 @@
+#pragma once
+// Watches a service's failed publishes (Bus::publish never throws; it counts).
+// Once per cycle:
+//
+//   if (health.check(now_s)) enter_fault(health.cause());   // new failures this cycle
+//   health.report(now_s, "program stopped; RESET to continue");
+//
+// check() is true on the cycle where a failure streak begins (the caller stops its
+// axes and goes to FAULT). report() sends one ALARM naming the cause, the number of
+// failed publishes and the time the streak lasted, once the bus carries messages
+// again: it tries at most every 100 ms, and a try that fails counts in the streak.
+// No allocation while the bus fails (the cause is kept in fixed storage).
+#include <array>
+#include <cstdio>
+#include <cstring>
+#include <string>
+
+#include "cnc/lcmt_alarm.hpp"
+#include "common/bus/bus.h"
+
+namespace cnc::service {
+
+class BusHealth {
+ public:
+  BusHealth(bus::Bus& bus, std::string alarm_channel, std::string source, int8_t severity)
+      : bus_(bus), channel_(std::move(alarm_channel)), source_(std::move(source)), severity_(severity),
+        seen_(bus.publish_failures()) {}
+
+  // True when publishes failed since the last call and no streak was open: a new
+  // fault. Further failures extend the open streak (counted, false).
+  bool check(double now_s) {
+    const int64_t n = bus_.publish_failures();
+    if (n == seen_) return false;
+    const int64_t added = n - seen_;
+    seen_ = n;
+    streak_failures_ += added;
+    last_failure_s_ = now_s;
+    if (open_) return false;
+    open_ = true;
+    first_failure_s_ = now_s;
+    std::snprintf(cause_.data(), cause_.size(), "%s", bus_.last_publish_error());
+    return true;
+  }
+
+  // Sends the streak's ALARM once the bus works again. `action`: what the service did.
+  // Returns true when the alarm went out.
+  bool report(double now_s, const char* action) {
+    if (!open_ || now_s - last_try_s_ < 0.1) return false;
+    last_try_s_ = now_s;
+    cnc::lcmt_alarm al{};
+    al.source = source_;
+    al.severity = severity_;
+    al.code = "publish_failed";
+    char text[512];
+    std::snprintf(text, sizeof text, "%lld publish(es) failed over %.3f s (first: %s); %s",
+                  static_cast<long long>(streak_failures_), last_failure_s_ - first_failure_s_, cause_.data(), action);
+    al.text = text;
+    if (!bus_.publish(channel_, al)) {
+      check(now_s);  // the try failed too: part of the streak, not a new one
+      return false;
+    }
+    total_failures_ += streak_failures_;
+    ++streaks_;
+    streak_failures_ = 0;
+    open_ = false;
+    return true;
+  }
+
+  bool failing() const { return open_; }
+  const char* cause() const { return cause_.data(); }
+  int64_t streaks_reported() const { return streaks_; }
+  int64_t failures_reported() const { return total_failures_; }
+
+ private:
+  bus::Bus& bus_;
+  std::string channel_;
+  std::string source_;
+  int8_t severity_;
+  int64_t seen_;
+  bool open_ = false;
+  int64_t streak_failures_ = 0;
+  int64_t total_failures_ = 0;
+  int64_t streaks_ = 0;
+  double first_failure_s_ = 0;
+  double last_failure_s_ = 0;
+  double last_try_s_ = -1e9;
+  std::array<char, 160> cause_{};
+};
+
+}  // namespace cnc::service

@@ -1,0 +1,233 @@
+// The command interlock (every cell of the README's table), the program server
+// node refusing LOAD / START while a program runs and in FAULT, a failed publish
+// (counted, no sequence number used, FAULT until RESET), and RESET as a recorded
+// interpolator input.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+
+#include "cnc/lcmt_interp_input.hpp"
+#include "cnc/lcmt_interp_state.hpp"
+#include "cnc/lcmt_program_state.hpp"
+#include "cnc/lcmt_setpoint.hpp"
+#include "common/bus/bus.h"
+#include "common/config/machine_config.h"
+#include "services/interpolator/inputs.h"
+#include "services/interpolator/interpolator.h"
+#include "services/part_program_server/interlock.h"
+#include "services/part_program_server/program_server_node.h"
+
+namespace cnc {
+namespace {
+
+namespace fs = std::filesystem;
+using C = cnc::lcmt_program_command;
+using pps::CellState;
+
+lcmt_program_command cmd(int8_t c, double value = 1.0) {
+  lcmt_program_command m{};
+  m.command = c;
+  m.feed_override = value;
+  return m;
+}
+
+// ---- the table ---------------------------------------------------------------------
+
+TEST(Interlock, EveryCellOfTheTable) {
+  const CellState states[] = {CellState::kIdle, CellState::kLoaded, CellState::kRunning, CellState::kHeld,
+                              CellState::kFault};
+  // Expected: "" allowed, else a fragment of the reason. Columns: idle loaded running held fault.
+  struct Row {
+    int8_t command;
+    const char* expect[5];
+  };
+  const Row rows[] = {
+      {C::LOAD, {"", "", "p.ngc is running: STOP it first", "p.ngc is held: STOP it first", "FAULT (why): RESET first"}},
+      {C::START, {"no program is loaded", "", "p.ngc is running already", "p.ngc is held: RESUME it", "FAULT (why)"}},
+      {C::HOLD, {"no program is running", "no program is running", "", "", "nothing runs"}},
+      {C::RESUME, {"no program is held", "no program is held", "", "", "RESET first"}},
+      {C::STOP, {"", "", "", "", ""}},
+      {C::OVERRIDE, {"", "", "", "", ""}},
+      {C::RESET, {"", "", "p.ngc is running: STOP it first", "p.ngc is held: STOP it first", ""}},
+  };
+  for (const Row& r : rows) {
+    for (int s = 0; s < 5; ++s) {
+      pps::CellView v;
+      v.state = states[s];
+      v.program = "/x/p.ngc";
+      v.fault = "why";
+      const std::string got = pps::refusal(cmd(r.command), v);
+      const std::string want = r.expect[s];
+      if (want.empty()) {
+        EXPECT_EQ(got, "") << "command " << int(r.command) << " in " << to_string(states[s]);
+      } else {
+        EXPECT_NE(got.find(want), std::string::npos)
+            << "command " << int(r.command) << " in " << to_string(states[s]) << ": '" << got << "'";
+      }
+    }
+  }
+}
+
+TEST(Interlock, StartNeedsEnabledDrivesAndOverrideItsRange) {
+  pps::CellView v;
+  v.state = CellState::kLoaded;
+  v.program = "p.ngc";
+  v.drives = "axis Y is in fault";
+  EXPECT_EQ(pps::refusal(cmd(C::START), v), "axis Y is in fault: enable the drives first");
+  EXPECT_NE(pps::refusal(cmd(C::OVERRIDE, 1.6), v).find("outside 0 .. 1.5"), std::string::npos);
+  EXPECT_NE(pps::refusal(cmd(C::OVERRIDE, std::nan("")), v).find("outside"), std::string::npos);
+  EXPECT_EQ(pps::refusal(cmd(C::OVERRIDE, 0.0), v), "");
+}
+
+// ---- the bus -------------------------------------------------------------------------
+
+TEST(BusPublishFailure, IsCountedNamedAndUsesNoSequenceNumber) {
+  bus::Bus bus("memq://", 5);
+  std::vector<int64_t> seqs;
+  bus.subscribe<lcmt_program_command>("CMD", [&](const lcmt_program_command& m) { seqs.push_back(m.seq); });
+  lcmt_program_command m{};
+  ASSERT_TRUE(bus.publish("CMD", m));
+  bus.inject_publish_failures(2);
+  EXPECT_FALSE(bus.publish("CMD", m));  // no throw
+  EXPECT_FALSE(bus.publish("CMD", m));
+  ASSERT_TRUE(bus.publish("CMD", m));
+  while (bus.drain() > 0) {
+  }
+  EXPECT_EQ(seqs, (std::vector<int64_t>{0, 1}));  // contiguous: the failures took no number
+  EXPECT_EQ(bus.publish_failures(), 2);
+  EXPECT_EQ(bus.stats("CMD").publish_failures, 2);
+  EXPECT_EQ(bus.stats("CMD").published, 2);
+  EXPECT_STREQ(bus.last_publish_error(), "publish on CMD failed: Operation not permitted");
+}
+
+// ---- the program server node -------------------------------------------------------------
+
+class ServerInterlock : public ::testing::Test {
+ protected:
+  ServerInterlock()
+      : cfg_(config::load_machine_config(std::string(CNC_SOURCE_DIR) + "/config/machines/sim3.yaml")),
+        bus_("memq://", 77), dir_(fs::temp_directory_path() / ("cnc-interlock-" + std::to_string(::getpid()))) {
+    fs::create_directories(dir_);
+    for (const char* name : {"a.ngc", "b.ngc"}) std::ofstream(dir_ / name) << "G1 X10 F1000\nM30\n";
+    bus_.subscribe<lcmt_program_state>(cfg_.channel(config::channels::kProgramState),
+                                       [this](const lcmt_program_state& m) { states_.push_back(m); });
+  }
+  ~ServerInterlock() override { fs::remove_all(dir_); }
+  void pump() {
+    while (bus_.drain() > 0) {
+    }
+  }
+  int64_t send(int8_t c, const std::string& path = "") {
+    lcmt_program_command m = cmd(c);
+    m.program_path = path;
+    bus_.publish(cfg_.channel(config::channels::kProgramCmd), m);
+    pump();
+    return m.seq;
+  }
+  void interp(int8_t state, int64_t token) {
+    lcmt_interp_state s{};
+    s.state = state;
+    s.program_token = token;
+    s.num_axes = 3;
+    s.position_mm = {0, 0, 0};
+    bus_.publish(cfg_.channel(config::channels::kInterpState), s);
+    pump();
+  }
+  std::string path(const char* name) const { return (dir_ / name).string(); }
+
+  config::MachineConfig cfg_;
+  bus::Bus bus_;
+  fs::path dir_;
+  std::vector<lcmt_program_state> states_;
+};
+
+TEST_F(ServerInterlock, LoadAndStartWhileRunningAreRefusedNamingTheProgram) {
+  pps::ProgramServerNode node(cfg_, bus_);
+  send(C::LOAD, path("a.ngc"));
+  ASSERT_EQ(states_.back().state, int8_t{lcmt_program_state::LOADED});
+  const int64_t token = states_.back().program_token;
+  send(C::START);
+  interp(lcmt_setpoint::RUNNING, token);
+  ASSERT_EQ(states_.back().state, int8_t{lcmt_program_state::RUNNING});
+
+  const int64_t seq = send(C::LOAD, path("b.ngc"));
+  const lcmt_program_state& s = states_.back();
+  EXPECT_EQ(s.state, int8_t{lcmt_program_state::RUNNING});  // the running program goes on
+  EXPECT_EQ(s.program_token, token);
+  EXPECT_EQ(s.refused_sender, bus_.sender());
+  EXPECT_EQ(s.refused_seq, seq);
+  EXPECT_EQ(s.refusal, "LOAD " + path("b.ngc") + " refused: program " + path("a.ngc") + " is running: STOP it first");
+
+  send(C::START);
+  EXPECT_NE(states_.back().refusal.find("START refused: program " + path("a.ngc") + " is running already"),
+            std::string::npos);
+  EXPECT_EQ(states_.back().refusals, 2);
+
+  // The program ends: a new one loads.
+  interp(lcmt_setpoint::DONE, token);
+  EXPECT_EQ(states_.back().state, int8_t{lcmt_program_state::DONE});
+  send(C::LOAD, path("b.ngc"));
+  EXPECT_EQ(states_.back().state, int8_t{lcmt_program_state::LOADED});
+  EXPECT_NE(states_.back().program_token, token);
+}
+
+TEST_F(ServerInterlock, InterpolatorFaultRefusesLoadUntilReset) {
+  pps::ProgramServerNode node(cfg_, bus_);
+  interp(lcmt_setpoint::FAULT, 0);
+  EXPECT_EQ(states_.back().state, int8_t{lcmt_program_state::FAULT});
+  send(C::LOAD, path("a.ngc"));
+  EXPECT_NE(states_.back().refusal.find("refused: the cell is in FAULT"), std::string::npos) << states_.back().refusal;
+  interp(lcmt_setpoint::IDLE, 0);  // the interpolator took RESET
+  send(C::RESET);
+  send(C::LOAD, path("a.ngc"));
+  EXPECT_EQ(states_.back().state, int8_t{lcmt_program_state::LOADED}) << states_.back().refusal;
+}
+
+TEST_F(ServerInterlock, AFailedPublishIsAFaultUntilReset) {
+  pps::ProgramServerNode node(cfg_, bus_);
+  bus_.inject_publish_failures(1);
+  node.publish_state(true);  // fails
+  node.poll(1.0);            // FAULT; the alarm goes out now that the bus works
+  pump();
+  send(C::LOAD, path("a.ngc"));
+  EXPECT_EQ(states_.back().state, int8_t{lcmt_program_state::FAULT});
+  EXPECT_NE(states_.back().refusal.find("could not publish: publish on"), std::string::npos) << states_.back().refusal;
+  send(C::RESET);
+  send(C::LOAD, path("a.ngc"));
+  EXPECT_EQ(states_.back().state, int8_t{lcmt_program_state::LOADED});
+}
+
+// ---- RESET as an interpolator input ------------------------------------------------------
+
+TEST(InterpolatorReset, TheRecordedPositionIsWhereThePathRestsAndReplaysTheSame) {
+  const auto cfg = config::load_machine_config(std::string(CNC_SOURCE_DIR) + "/config/machines/sim3.yaml");
+  lcmt_interp_input in{};
+  in.kind = lcmt_interp_input::COMMAND;
+  in.command.command = C::RESET;
+  in.command.num_axes = 3;
+  in.command.position_mm = {147.3404, 12.5, -0.25};
+  interp::Interpolator live(cfg), replayed(cfg);
+  ASSERT_EQ(interp::apply_recorded_input(live, in, 3), "");
+  ASSERT_EQ(interp::apply_recorded_input(replayed, in, 3), "");
+  const interp::Setpoint a = live.step(), b = replayed.step();
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_EQ(a.position_mm[static_cast<size_t>(i)], in.command.position_mm[static_cast<size_t>(i)]);
+    EXPECT_EQ(a.position_mm[static_cast<size_t>(i)], b.position_mm[static_cast<size_t>(i)]);
+  }
+  EXPECT_TRUE(a.state == interp::RunState::kIdle);
+  // Malformed: no position, a NaN, the wrong axis count.
+  in.command.num_axes = 0;
+  in.command.position_mm.clear();
+  EXPECT_NE(interp::apply_recorded_input(live, in, 3), "");
+  in.command.num_axes = 3;
+  in.command.position_mm = {1, std::nan(""), 2};
+  EXPECT_NE(interp::apply_recorded_input(live, in, 3), "");
+  in.command.num_axes = 2;
+  in.command.position_mm = {1, 2};
+  EXPECT_NE(interp::apply_recorded_input(live, in, 3), "");
+}
+
+}  // namespace
+}  // namespace cnc
