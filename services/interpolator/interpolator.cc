@@ -678,6 +678,12 @@ const Setpoint& Interpolator::step() {
         blocks_.pop_front();
         ++blocks_done_;
         state_ = RunState::kDone;
+      } else if (!pausing && p.block.kind == program::BlockKind::kEvent && p.block.event.pauses() &&
+                 !event_paused_ && !auto_resume_pauses_) {
+        // M0, M1, M6: at rest here until the operator resumes (a RESUME input).
+        event_paused_ = true;
+        hold_ = true;
+        state_ = RunState::kHeld;
       } else if (!pausing) {
         if (dwell_left_ < 0) dwell_left_ = static_cast<int64_t>(std::ceil(p.block.dwell_s / T - 1e-9));
         if (dwell_left_ > 0) --dwell_left_;
@@ -686,6 +692,7 @@ const Setpoint& Interpolator::step() {
           blocks_.pop_front();
           ++blocks_done_;
           dwell_left_ = -1;
+          event_paused_ = false;
           if (!blocks_.empty()) u_ = blocks_.front().path.u_begin();
         }
       }
@@ -694,12 +701,6 @@ const Setpoint& Interpolator::step() {
         blocks_.clear();
         stopping_ = false;
         state_ = RunState::kIdle;
-      } else if (!pausing && p.block.kind == program::BlockKind::kEvent && p.block.event.pauses() &&
-                 !event_paused_ && !auto_resume_pauses_) {
-        // M0, M1, M6: at rest here until the operator resumes (a RESUME input).
-        event_paused_ = true;
-        hold_ = true;
-        state_ = RunState::kHeld;
         v_ = a_ = 0;
       } else {
         state_ = RunState::kStarved;
@@ -708,7 +709,6 @@ const Setpoint& Interpolator::step() {
     } else if (!pausing && creep_to_stop()) {
       // A discrete brake ended a hair short of a stop point: step onto it.
       out_.limit = Limit::kLookahead;
-          event_paused_ = false;
     } else {
       Planned& p = blocks_.front();
       Limit why = Limit::kNone;
