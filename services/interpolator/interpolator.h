@@ -73,12 +73,12 @@ class Interpolator {
   // Inputs, applied before the next step(). Blocks must come in index order
   // (0, 1, 2, ... of the current program); anything else is refused (false).
   bool apply_block(const program::Block& block);
-  void apply_command(const Command& cmd);
-
-  // Computes the setpoint of the current cycle and advances the cycle counter.
   // Program stops and tool changes (M0, M1, M6) hold the path until a RESUME; the dry
   // run resumes them at once, as an operator pressing resume without delay.
   void set_auto_resume_pauses(bool on) { auto_resume_pauses_ = on; }
+  void apply_command(const Command& cmd);
+
+  // Computes the setpoint of the current cycle and advances the cycle counter.
   const Setpoint& step();
 
   int64_t cycle() const { return cycle_; }
@@ -142,11 +142,11 @@ class Interpolator {
 
   RunState state_ = RunState::kIdle;
   bool hold_ = false;
+  bool event_paused_ = false;       // the program stop / tool change at the front has paused once
+  bool auto_resume_pauses_ = false;
   bool stopping_ = false;
   double override_ = 1.0;
 
-  bool event_paused_ = false;       // the program stop / tool change at the front has paused once
-  bool auto_resume_pauses_ = false;
   std::deque<Planned> blocks_;  // front: the block being executed
   int64_t next_index_ = 0;
   double u_ = 0;     // parameter in the front block
