@@ -281,7 +281,9 @@ void BlockBuilder::message(const SourceRef& ref, const std::string& text) {
 }
 void BlockBuilder::program_stop(const SourceRef& ref) { event(ref, program::EventKind::kProgramStop, 0, 0); }
 void BlockBuilder::optional_program_stop(const SourceRef& ref) { event(ref, program::EventKind::kOptionalStop, 0, 0); }
-void BlockBuilder::pallet_shuttle(const SourceRef& ref) { event(ref, program::EventKind::kPalletShuttle, 0, 0); }
+// The cell has no pallet changer: M30's shuttle (LinuxCNC makes one) is no event;
+// M60 still holds the program through its program stop.
+void BlockBuilder::pallet_shuttle(const SourceRef&) {}
 void BlockBuilder::program_end(const SourceRef& ref) {
   begin(ref, program::BlockKind::kEnd);
   ended_ = true;

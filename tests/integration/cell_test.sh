@@ -45,7 +45,7 @@ start interpolator "$BUILD/services/cnc-interpolator" --machine "$M"
 rc=0
 "$BUILD/tools/cnc-ctl" --machine "$M" --do load --program "$WORK/bad.ngc" 2>"$WORK/bad.err" || rc=$?
 [ "$rc" -eq 3 ] || fail "bad program: cnc-ctl exit $rc, expected 3 (refused)"
-grep -q "bad.ngc:3:8: unknown word 'Q'" "$WORK/bad.err" || { cat "$WORK/bad.err" >&2; fail "refusal does not name bad.ngc:3:8"; }
+grep -q "bad.ngc:3:8: Q word with no G code" "$WORK/bad.err" || { cat "$WORK/bad.err" >&2; fail "refusal does not name bad.ngc:3:8"; }
 note "malformed program refused: $(cat "$WORK/bad.err")"
 
 rc=0
