@@ -2,6 +2,8 @@
 
 #include <charconv>
 #include <cmath>
+#include <cstdint>
+#include <iterator>
 #include <string>
 #include <utility>
 
@@ -100,6 +102,11 @@ bool word_letter(char c) {
       return false;
   }
 }
+
+// Numbers: below 2^53 an integer is an exact double, as is every power of ten to 1e22.
+constexpr uint64_t kMaxExactMantissa = (uint64_t{1} << 53) - 1;
+constexpr double kPowersOf10[] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1e7,  1e8,  1e9,  1e10, 1e11,
+                                  1e12, 1e13, 1e14, 1e15, 1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
 
 // Deeper nesting than this is no part program; the limit keeps the recursive
 // reader's stack bounded whatever the line holds.
@@ -202,10 +209,14 @@ class Reader {
   }
   // Consumes `word` (lower case) when the next non-blank characters spell it.
   bool match(const char* word) {
-    int k = 0;
-    for (const char* w = word; *w; ++w, ++k)
-      if (peek_at(k) != *w) return false;
-    for (int n = 0; n < k; ++n) advance();
+    size_t j = i_;
+    for (const char* w = word; *w; ++w) {
+      while (j < s_.size() && blank(s_[j])) ++j;
+      if (j >= s_.size() || lower(s_[j]) != *w) return false;
+      ++j;
+    }
+    i_ = j;  // as advance() once per character: past the last one and the blanks after it
+    skip();
     return true;
   }
 
@@ -500,6 +511,7 @@ class Reader {
 
   int32_t number() {
     const int at = col();
+    if (const int32_t id = contiguous_number(at); id >= 0) return id;
     char buf[320];
     size_t n = 0;
     const auto put = [&](char ch) {
@@ -510,18 +522,26 @@ class Reader {
       put(peek());
       advance();
     }
-    int digits = 0;
-    while (is_digit(peek())) {
-      put(peek());
+    // The digits as an integer and the count of decimals, while they fit exactly.
+    int digits = 0, decimals = 0;
+    uint64_t mantissa = 0;
+    bool exact = true;
+    const auto digit = [&](char ch) {
+      put(ch);
       ++digits;
+      if (mantissa > (kMaxExactMantissa - 9) / 10) exact = false;
+      else mantissa = mantissa * 10 + static_cast<uint64_t>(ch - '0');
+    };
+    while (is_digit(peek())) {
+      digit(peek());
       advance();
     }
     if (peek() == '.') {
       put('.');
       advance();
       while (is_digit(peek())) {
-        put(peek());
-        ++digits;
+        digit(peek());
+        ++decimals;
         advance();
       }
       if (peek() == '.') fail(col(), "number has a second decimal point");
@@ -531,9 +551,42 @@ class Reader {
       fail(at, "number has no digits");
     }
     double v = 0;
-    const char* first = buf[0] == '+' ? buf + 1 : buf;
-    const auto r = std::from_chars(first, buf + n, v);
-    if (r.ec != std::errc() || !std::isfinite(v)) fail(at, "number out of range");
+    if (exact && decimals < static_cast<int>(std::size(kPowersOf10))) {
+      // Clinger's fast path: an integer below 2^53 and a power of ten up to 1e22 are
+      // both exact doubles, so their one correctly rounded quotient is the correctly
+      // rounded value of the decimal, the very double from_chars gives.
+      v = static_cast<double>(mantissa) / kPowersOf10[decimals];
+      if (buf[0] == '-') v = -v;
+    } else {
+      const char* first = buf[0] == '+' ? buf + 1 : buf;
+      const auto r = std::from_chars(first, buf + n, v);
+      if (r.ec != std::errc() || !std::isfinite(v)) fail(at, "number out of range");
+    }
+    const int32_t id = add(Op::kNumber, at);
+    out_.arena.nodes[static_cast<size_t>(id)].value = v;
+    return id;
+  }
+
+  // The common case read in one pass: a number written without blanks inside it,
+  // short enough to be exact by Clinger's fast path (see below), not followed by a
+  // blank (which could continue it: "X1 2" is X12) or a second '.'. -1: any other
+  // number, for the general reader.
+  int32_t contiguous_number(int at) {
+    size_t j = i_;
+    const bool negative = s_[j] == '-';
+    if (s_[j] == '+' || s_[j] == '-') ++j;
+    uint64_t mantissa = 0;
+    int digits = 0, decimals = 0;
+    for (; j < s_.size() && is_digit(s_[j]); ++j, ++digits) mantissa = mantissa * 10 + static_cast<uint64_t>(s_[j] - '0');
+    if (j < s_.size() && s_[j] == '.') {
+      for (++j; j < s_.size() && is_digit(s_[j]); ++j, ++digits, ++decimals)
+        mantissa = mantissa * 10 + static_cast<uint64_t>(s_[j] - '0');
+    }
+    if (digits == 0 || digits > 15 || decimals >= static_cast<int>(std::size(kPowersOf10))) return -1;
+    if (j < s_.size() && (blank(s_[j]) || s_[j] == '.')) return -1;
+    double v = static_cast<double>(mantissa) / kPowersOf10[decimals];  // 15 digits: below 2^53
+    if (negative) v = -v;
+    i_ = j;
     const int32_t id = add(Op::kNumber, at);
     out_.arena.nodes[static_cast<size_t>(id)].value = v;
     return id;
@@ -620,16 +673,20 @@ class Reader {
     return e;
   }
 
+  // Precedence climbing: the operands and operators of levels >= `level`, left to
+  // right within a level (the same tree, node for node in the same order, as one
+  // recursive reader per level).
   int32_t binary(int level, int depth, int open) {
-    int32_t left = level == 6 ? real_value(depth) : binary(level + 1, depth, open);
+    int32_t left = real_value(depth);
     for (;;) {
       int at = 0;
       int len = 0;
       const Op op = peek_operator(open, &at, &len);
-      if (precedence(op) != level) return left;
+      const int p = precedence(op);  // 0 at ']'
+      if (p < level) return left;
       for (int k = 0; k < len; ++k) advance();
       if (end()) fail(open, "missing ']' to close this '['");
-      const int32_t right = level == 6 ? real_value(depth) : binary(level + 1, depth, open);
+      const int32_t right = binary(p + 1, depth, open);
       left = add(op, at, left, right);
     }
   }
@@ -640,15 +697,13 @@ class Reader {
     *at = col();
     *len = 1;
     const char c = peek();
-    const char c1 = peek_at(1);
-    const char c2 = peek_at(2);
     switch (c) {
       case ']': return Op::kNumber;
       case '+': return Op::kAdd;
       case '-': return Op::kSub;
       case '/': return Op::kDiv;
       case '*':
-        if (c1 == '*') {
+        if (peek_at(1) == '*') {
           *len = 2;
           return Op::kPow;
         }
@@ -656,6 +711,7 @@ class Reader {
       case '\0': fail(open, "missing ']' to close this '['");
       default: break;
     }
+    const char c1 = peek_at(1);
     *len = 2;
     if (c == 'o' && c1 == 'r') return Op::kOr;
     if (c == 'e' && c1 == 'q') return Op::kEq;
@@ -665,6 +721,7 @@ class Reader {
     if (c == 'l' && c1 == 't') return Op::kLt;
     if (c == 'l' && c1 == 'e') return Op::kLe;
     *len = 3;
+    const char c2 = peek_at(2);
     if (c == 'a' && c1 == 'n' && c2 == 'd') return Op::kAnd;
     if (c == 'm' && c1 == 'o' && c2 == 'd') return Op::kMod;
     if (c == 'x' && c1 == 'o' && c2 == 'r') return Op::kXor;
