@@ -1,8 +1,8 @@
 #pragma once
-// Checks of a block's geometry, shared by the parser (which maps a fault to the word
-// of the program that caused it) and by from_msg (which refuses a block arriving
-// from the network). Header-only: the checks are small and used by both sides of
-// cnc_program.
+// Checks of a block's geometry, shared by the block builder (common/rs274, which
+// refuses the fault at the program line that made the block) and by from_msg (which
+// refuses a block arriving from the network). Header-only: the checks are small and
+// used by both sides of cnc_program.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>

@@ -6,27 +6,14 @@
 #include <cmath>
 #include <functional>
 #include <limits>
-#include <sstream>
 #include <string>
 #include <vector>
 
 #include "common/program/block_msg.h"
-#include "common/program/gcode_parser.h"
+#include "tests/unit/program_test_util.h"
 
 namespace cnc::program {
 namespace {
-
-ParserSettings xyz() {
-  ParserSettings s;
-  s.axis_names = {"X", "Y", "Z"};
-  s.start_position_mm = {0, 0, 0};
-  return s;
-}
-
-Program parse(const std::string& text) {
-  std::istringstream in(text);
-  return GcodeParser(xyz()).parse(in, "t.nc");
-}
 
 const std::string kProgram =
     "(PROCESS, BALL_RADIUS=5, FLUTES=2, PICK_FEED=0.5, RMAX_UM=10.67)\n"
@@ -37,7 +24,25 @@ const std::string kProgram =
     "G06.2 P4 K0 X11 Y0 Z0 R1 F2000\n"
     "K0 X21 R0.5\nK0 X31 Z-10 R2\nK0 X41 Z-20\nK0.5 X51 Z-20\nK1\nK1\nK1\nK1\n"
     "G4 P0.5\n"
+    "(MSG, half way)\n"
     "M30\n";
+
+// The blocks of kProgram, through the interpreter and the block builder.
+const std::vector<Block>& program_blocks() {
+  static const std::vector<Block> blocks = [] {
+    test::TempDir dir;
+    test::write_file(dir / "t.ngc", kProgram);
+    return test::run_program((dir / "t.ngc").string());
+  }();
+  return blocks;
+}
+
+const Block& first_of(BlockKind kind) {
+  for (const Block& b : program_blocks())
+    if (b.kind == kind) return b;
+  ADD_FAILURE() << "no " << to_string(kind) << " block";
+  return program_blocks().front();
+}
 
 // Decodes what `m` encodes: the bytes a subscriber gets.
 cnc::lcmt_program_block over_the_wire(const cnc::lcmt_program_block& m) {
@@ -51,6 +56,8 @@ cnc::lcmt_program_block over_the_wire(const cnc::lcmt_program_block& m) {
 void expect_same(const Block& a, const Block& b) {
   EXPECT_EQ(a.index, b.index);
   EXPECT_EQ(a.source_line, b.source_line);
+  EXPECT_EQ(a.source_column, b.source_column);
+  EXPECT_EQ(a.source_file, b.source_file);
   EXPECT_EQ(a.kind, b.kind);
   EXPECT_EQ(a.start, b.start);
   EXPECT_EQ(a.end, b.end);
@@ -70,16 +77,25 @@ void expect_same(const Block& a, const Block& b) {
   EXPECT_EQ(a.nurbs.knots, b.nurbs.knots);
   EXPECT_EQ(a.nurbs.control_points, b.nurbs.control_points);
   EXPECT_EQ(a.nurbs.weights, b.nurbs.weights);
+  EXPECT_EQ(a.event.kind, b.event.kind);
+  EXPECT_EQ(a.event.number, b.event.number);
+  EXPECT_EQ(a.event.value, b.event.value);
+  EXPECT_EQ(a.event.text, b.event.text);
 }
 
 TEST(BlockMsg, RoundTripOfEveryKind) {
-  const Program p = parse(kProgram);
-  ASSERT_EQ(p.blocks.size(), 6u);
-  const std::vector<BlockKind> kinds = {BlockKind::kLine, BlockKind::kArcCw, BlockKind::kRapid,
-                                        BlockKind::kNurbs, BlockKind::kDwell, BlockKind::kEnd};
-  for (size_t i = 0; i < p.blocks.size(); ++i) {
+  const std::vector<Block>& p = program_blocks();
+  // The spindle start, the moves, the message, M30's spindle stop (the cell makes no
+  // event of M30's pallet shuttle), the end.
+  const std::vector<BlockKind> kinds = {BlockKind::kEvent, BlockKind::kLine,  BlockKind::kArcCw,
+                                        BlockKind::kRapid, BlockKind::kNurbs, BlockKind::kDwell,
+                                        BlockKind::kEvent, BlockKind::kEvent, BlockKind::kEnd};
+  ASSERT_EQ(p.size(), kinds.size());
+  EXPECT_EQ(p[6].event.kind, EventKind::kMessage);
+  EXPECT_EQ(p[6].event.text, " half way");  // LinuxCNC keeps the space after the comma
+  for (size_t i = 0; i < p.size(); ++i) {
     SCOPED_TRACE(i);
-    const Block& b = p.blocks[i];
+    const Block& b = p[i];
     EXPECT_EQ(b.kind, kinds[i]);
     const cnc::lcmt_program_block m = to_msg(b, 42);
     EXPECT_EQ(m.program_token, 42);
@@ -93,14 +109,13 @@ TEST(BlockMsg, RoundTripOfEveryKind) {
 }
 
 TEST(BlockMsg, ArcAndNurbsFieldsOnTheWire) {
-  const Program p = parse(kProgram);
-  const cnc::lcmt_program_block arc = to_msg(p.blocks[1], 1);
+  const cnc::lcmt_program_block arc = to_msg(first_of(BlockKind::kArcCw), 1);
   EXPECT_EQ(arc.kind, int8_t{cnc::lcmt_program_block::ARC_CW});
   EXPECT_EQ(arc.plane, 18);
   EXPECT_EQ(arc.turns, 1);
   EXPECT_EQ(arc.center, (std::vector<double>{6, 0, 0}));
   EXPECT_EQ(arc.num_knots, 0);
-  const cnc::lcmt_program_block n = to_msg(p.blocks[3], 1);
+  const cnc::lcmt_program_block n = to_msg(first_of(BlockKind::kNurbs), 1);
   EXPECT_EQ(n.kind, int8_t{cnc::lcmt_program_block::NURBS});
   EXPECT_EQ(n.order, 4);
   EXPECT_EQ(n.num_knots, 9);
@@ -118,8 +133,8 @@ TEST(BlockMsg, ArcAndNurbsFieldsOnTheWire) {
 const double kNaN = std::numeric_limits<double>::quiet_NaN();
 const double kInf = std::numeric_limits<double>::infinity();
 
-cnc::lcmt_program_block nurbs_msg() { return to_msg(parse(kProgram).blocks[3], 1); }
-cnc::lcmt_program_block arc_msg() { return to_msg(parse(kProgram).blocks[1], 1); }
+cnc::lcmt_program_block nurbs_msg() { return to_msg(first_of(BlockKind::kNurbs), 1); }
+cnc::lcmt_program_block arc_msg() { return to_msg(first_of(BlockKind::kArcCw), 1); }
 
 void expect_refused(cnc::lcmt_program_block m, const std::function<void(cnc::lcmt_program_block&)>& spoil,
                     const std::string& fragment) {
@@ -176,13 +191,27 @@ TEST(BlockMsgRefuses, Arcs) {
 
 TEST(BlockMsgRefuses, CommonFields) {
   expect_refused(arc_msg(), [](auto& m) { m.num_axes = 4; }, "block has 4 axes, machine has 3");
-  expect_refused(arc_msg(), [](auto& m) { m.kind = 7; }, "unknown block kind");
+  expect_refused(arc_msg(), [](auto& m) { m.kind = 8; }, "unknown block kind");
   expect_refused(arc_msg(), [](auto& m) { m.end[1] = kInf; }, "non-finite coordinate");
   expect_refused(arc_msg(), [](auto& m) { m.feed_mm_per_min = 0; }, "without a feed");
   expect_refused(arc_msg(), [](auto& m) { m.feed_mm_per_min = kNaN; }, "bad feed");
   expect_refused(arc_msg(), [](auto& m) { m.spindle_rpm = -1; }, "bad spindle speed");
   expect_refused(arc_msg(), [](auto& m) { m.target_rmax_um = kNaN; }, "bad process parameters");
   expect_refused(arc_msg(), [](auto& m) { m.block_index = -1; }, "negative block index");
+}
+
+TEST(BlockMsgRefuses, Events) {
+  const auto message = [] {
+    for (const Block& b : program_blocks())
+      if (b.kind == BlockKind::kEvent && b.event.kind == EventKind::kMessage) return to_msg(b, 1);
+    ADD_FAILURE() << "no message block";
+    return to_msg(program_blocks().front(), 1);
+  };
+  expect_refused(message(), [](auto& m) { m.event_kind = 0; }, "bad event");
+  expect_refused(message(), [](auto& m) { m.event_kind = static_cast<int8_t>(EventKind::kLast) + 1; }, "bad event");
+  expect_refused(message(), [](auto& m) { m.event_value = kNaN; }, "bad event");
+  expect_refused(message(), [](auto& m) { m.event_text = std::string(5000, 'x'); }, "event text too long");
+  expect_refused(arc_msg(), [](auto& m) { m.kind = static_cast<int8_t>(BlockKind::kEvent); }, "bad event");
 }
 
 }  // namespace
