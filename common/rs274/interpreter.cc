@@ -1077,8 +1077,11 @@ void Interpreter::execute_block(Words& w) {
   comments_of_line();
   // NURBS curve collection takes the lines until it closes.
   if (nurbs_ && nurbs_->fanuc) {
-    if (w.on('K') && w.g[1] < 0) {
+    // LinuxCNC's newer G6.2 repeats the G code on its knot-only lines ("G6.2 K29").
+    if (w.on('K') && (w.g[1] < 0 || w.g[1] == 62)) {
       nurbs_fanuc_line(w);
+      // A curve whose knots are complete (control points + order) ends here.
+      if (nurbs_->knots.size() == nurbs_->points.size() + static_cast<size_t>(nurbs_->order)) nurbs_fanuc_close();
       return;
     }
     nurbs_fanuc_close();
@@ -2021,6 +2024,10 @@ void Interpreter::nurbs_fanuc_open(Words& w) {
   n->last = position_;
   nurbs_ = std::move(n);
   if (!w.on('K')) fail(w.gcol[1], "G06.2 needs a knot K with its first control point");
+  // LinuxCNC's G6.2 takes Q1..Q3 (its interpolation method: biarcs, lines, arcs);
+  // the cell always interpolates the exact curve.
+  if (w.on('Q') && (w['Q'] < 1 || w['Q'] > 3 || w['Q'] != std::floor(w['Q'])))
+    fail(w.column('Q'), "G6.2 Q (LinuxCNC's interpolation method) must be 1, 2 or 3");
   nurbs_fanuc_line(w);
   // The first control point is where the tool is.
   const NurbsPoint& p0 = nurbs_->points.front();
