@@ -1075,7 +1075,9 @@ void Interpreter::set_coord_system(int index) {
 void Interpreter::execute_block(Words& w) {
   // 1. Comments and messages.
   comments_of_line();
-  // NURBS curve collection takes the lines until it closes.
+  // NURBS curve collection takes the lines until it closes; a line of comments only
+  // (or an empty one) leaves the curve open.
+  if (nurbs_ && line_.words.empty()) return;
   if (nurbs_ && nurbs_->fanuc) {
     // LinuxCNC's newer G6.2 repeats the G code on its knot-only lines ("G6.2 K29").
     if (w.on('K') && (w.g[1] < 0 || w.g[1] == 62)) {
