@@ -189,7 +189,9 @@ void ProgramServerNode::on_request(const cnc::lcmt_block_request& m) {
     if (b == nullptr) {
       // The file no longer reads as validated: serve nothing more of it.
       spdlog::error("program {} withdrawn: {}", token, core_.serving_error());
-      last_refusal_ = LoadResult{false, core_.serving_error(), 0, 0};
+      last_refusal_ = LoadResult{};
+      last_refusal_.error = core_.serving_error();
+      last_refusal_.file = path;
       refused_path_ = path;
       state_ = cnc::lcmt_program_state::REFUSED;
       publish_state(true);
