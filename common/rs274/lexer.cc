@@ -568,9 +568,9 @@ class Reader {
   }
 
   // The common case read in one pass: a number written without blanks inside it,
-  // short enough to be exact by Clinger's fast path (see below), not followed by a
-  // blank (which could continue it: "X1 2" is X12) or a second '.'. -1: any other
-  // number, for the general reader.
+  // short enough to be exact by Clinger's fast path (see below), and not continued
+  // after blanks ("X1 2" is X12) or by a second '.'. -1: any other number, for the
+  // general reader.
   int32_t contiguous_number(int at) {
     size_t j = i_;
     const bool negative = s_[j] == '-';
@@ -583,10 +583,12 @@ class Reader {
         mantissa = mantissa * 10 + static_cast<uint64_t>(s_[j] - '0');
     }
     if (digits == 0 || digits > 15 || decimals >= static_cast<int>(std::size(kPowersOf10))) return -1;
-    if (j < s_.size() && (blank(s_[j]) || s_[j] == '.')) return -1;
+    size_t next = j;  // the cursor's rule: on the next non-blank character
+    while (next < s_.size() && blank(s_[next])) ++next;
+    if (next < s_.size() && (is_digit(s_[next]) || s_[next] == '.')) return -1;
     double v = static_cast<double>(mantissa) / kPowersOf10[decimals];  // 15 digits: below 2^53
     if (negative) v = -v;
-    i_ = j;
+    i_ = next;
     const int32_t id = add(Op::kNumber, at);
     out_.arena.nodes[static_cast<size_t>(id)].value = v;
     return id;
