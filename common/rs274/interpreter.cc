@@ -19,6 +19,7 @@ namespace {
 
 constexpr double kMmPerInch = 25.4;
 constexpr char kAxisLetters[] = "XYZABCUVW";
+constexpr double kToleranceEqual = 1e-6;  // LinuxCNC 2.9's TOLERANCE_EQUAL (2.9.0-pre1: 1e-4)
 // LinuxCNC's arc tolerances (interp_internal.hh), in mm; inch values are these / 25.4
 // except where LinuxCNC gives its own.
 constexpr double kRadiusToleranceInch = 0.00005;
@@ -438,6 +439,8 @@ bool Interpreter::read_line() {
   SourceFile& f = *files_[static_cast<size_t>(file_)];
   if (!f.getline(text_)) return false;
   ++line_no_;
+  // LinuxCNC reads at most LINELEN (255) characters a line ("Command too long").
+  if (text_.size() > 255) fail(256, "line longer than 255 characters (LinuxCNC's limit: command too long)");
   return true;
 }
 
@@ -878,6 +881,10 @@ void Interpreter::check_words(const Words& w) {
     if (w.on('I') || w.on('J')) not_with(w.on('I') ? 'I' : 'J', "with no G code that uses it (G2/G3, G5, G87)");
   }
   const bool synced = motion == 330 || motion == 331 || motion == 760;
+  if (w.on('K') && fanuc_closed_line_ > 0 && fanuc_closed_line_ == line_no_ - 1 && w.g[1] < 0)
+    fail(w.column('K'),
+         "a knot after the G6.2 curve's knots were complete (control points + order) at line " +
+             std::to_string(fanuc_closed_line_));
   if (!arc && !cyc && g0 != 100 && !nurbs_g && !synced && w.on('K')) not_with('K', "with no G code that uses it (G2/G3, G33, G73/G83 ...)");
   if (w.on('P') && !(g0 == 40 || g0 == 100 || arc || cyc || nurbs_g || w.g[13] == 640 || w.g[7] == 410 ||
                      w.g[7] == 420 || w.m[5] >= 0 || w.g[8] == 432))
@@ -947,34 +954,60 @@ void Interpreter::comments_of_line() {
       }
       case CommentKind::kPrint:
       case CommentKind::kDebug: {
-        // #n and #<name> in the text are replaced by their values (LinuxCNC's %lf).
+        // #n and #<name> in the text are replaced by their values, as LinuxCNC's
+        // convert_param_comment: "%lf" until a %d (%.0f), %f (%.4f) or %.Nf changes the
+        // format for the rest of the text; a value within TOLERANCE_EQUAL of 0 prints as 0
+        // (no "-0.000000"); a parameter that does not exist prints "######".
         std::string out;
+        std::string format = "%lf";
         const std::string& t = c.text;
+        const auto put_value = [&](bool found, double v) {
+          if (!found) {
+            out += "######";
+            return;
+          }
+          if (std::fabs(v) < kToleranceEqual) v = 0.0;
+          char buf[400];
+          const int n = std::snprintf(buf, sizeof buf, format.c_str(), v);
+          out += (n < 0 || n >= 350) ? "######" : buf;  // LinuxCNC's VAL_LEN is 350
+        };
         for (size_t i = 0; i < t.size(); ++i) {
+          if (t[i] == '%') {
+            const char f = i + 1 < t.size() ? t[i + 1] : '\0';
+            if (f == 'd') {
+              format = "%.0f";
+              ++i;
+            } else if (f == 'f') {
+              format = "%.4f";
+              ++i;
+            } else if (f == '.') {
+              ++i;
+              if (i + 2 < t.size() && std::isdigit(static_cast<unsigned char>(t[i + 1])) && t[i + 2] == 'f') {
+                format = std::string("%.") + t[i + 1] + "f";
+                i += 2;
+              } else {
+                out += '.';  // LinuxCNC drops the '%' of a "%." that is no format
+              }
+            } else {
+              out += '%';
+            }
+            continue;
+          }
           if (t[i] != '#') {
             out += t[i];
             continue;
           }
-          size_t j = i + 1;
-          char buf[64];
-          if (j < t.size() && t[j] == '<') {
+          const size_t j = i + 1;
+          if (j >= t.size()) fail(c.column + 1, "named parameter not terminated in a DEBUG/PRINT comment");
+          if (t[j] == '<') {
             const size_t e = t.find('>', j);
-            if (e == std::string::npos) {
-              out += t[i];
-              continue;
-            }
+            if (e == std::string::npos) fail(c.column + 1, "named parameter not terminated in a DEBUG/PRINT comment");
             std::string name;
             for (size_t k = j + 1; k < e; ++k)
               if (!std::isspace(static_cast<unsigned char>(t[k])))
                 name += static_cast<char>(std::tolower(static_cast<unsigned char>(t[k])));
-            double v = 0;
-            if (named_exists(name)) {
-              v = named_value(name, c.column);
-              std::snprintf(buf, sizeof buf, "%lf", v);
-              out += buf;
-            } else {
-              out += "######";
-            }
+            const bool found = named_exists(name);
+            put_value(found, found ? named_value(name, c.column) : 0.0);
             i = e;
             continue;
           }
@@ -984,13 +1017,9 @@ void Interpreter::comments_of_line() {
             out += t[i];
             continue;
           }
-          const int n = std::atoi(t.substr(j, k - j).c_str());
-          if (n >= 1 && n <= kMaxParameter) {
-            std::snprintf(buf, sizeof buf, "%lf", params_.get(n));
-            out += buf;
-          } else {
-            out += t.substr(i, k - i);
-          }
+          const long n = std::strtol(t.substr(j, k - j).c_str(), nullptr, 10);
+          const bool found = n >= 0 && n <= kMaxParameter;
+          put_value(found, n >= 1 && found ? params_.get(static_cast<int>(n)) : 0.0);
           i = k - 1;
         }
         if (c.kind == CommentKind::kDebug)
@@ -1083,18 +1112,33 @@ void Interpreter::execute_block(Words& w) {
     if (w.on('K') && (w.g[1] < 0 || w.g[1] == 62)) {
       nurbs_fanuc_line(w);
       // A curve whose knots are complete (control points + order) ends here.
-      if (nurbs_->knots.size() == nurbs_->points.size() + static_cast<size_t>(nurbs_->order)) nurbs_fanuc_close();
+      if (nurbs_->knots.size() == nurbs_->points.size() + static_cast<size_t>(nurbs_->order)) {
+        nurbs_fanuc_close();
+        fanuc_closed_line_ = line_no_;
+      }
       return;
     }
     nurbs_fanuc_close();
   }
   if (nurbs_ && !nurbs_->fanuc) {
     if (w.g[1] == 53) {
+      w53_column_ = w.gcol[1];
       nurbs_g5_close();
       return;
     }
-    if (w.g[1] < 0 && (w.axes != 0 || w.on('P'))) {
-      nurbs_g5_point(w);
+    // Control point lines: X Y P, where LinuxCNC also takes G5.2 again, a new order L
+    // (checked at G5.3) and an S word (a spindle speed for what follows).
+    if ((w.g[1] < 0 || w.g[1] == 52) && (w.axes != 0 || w.on('P') || w.on('L'))) {
+      if (w.on('S')) {
+        speed_ = w['S'];
+        canon_.set_spindle_speed(ref(w.column('S')), speed_);
+      }
+      if (w.on('L')) {
+        if (w['L'] != std::floor(w['L']) || w['L'] < 3 || w['L'] > 8)
+          fail(w.column('L'), "G5.2 L (order) must be a whole number from 3 to 8");
+        nurbs_->order = static_cast<int>(w['L']);
+      }
+      if (w.axes != 0 || w.on('P')) nurbs_g5_point(w);
       return;
     }
     fail(w.g[1] >= 0 ? w.gcol[1] : 0, "inside a G5.2 curve: expected X Y P control points or G5.3");
@@ -1480,7 +1524,7 @@ void Interpreter::restore_modes(const SavedModes& sm, int column) {
 void Interpreter::tool_change(Words& w) {
   const SourceRef r = ref(w.mcol[6]);
   if (comp_ != 400) fail(w.mcol[6], "cannot change tools with cutter radius compensation on");
-  if (selected_tool_ < 0) fail(w.mcol[6], "M6 without a tool selected (T word)");
+  if (selected_tool_ < 0) selected_tool_ = 0;  // LinuxCNC changes to tool 0 (an empty spindle)
   canon_.start_change(r);
   if (spindle_ != 0) {
     // LinuxCNC stops the spindle for the change and leaves it stopped.
@@ -1509,22 +1553,32 @@ void Interpreter::g10(Words& w) {
     const int cs = p == 0 ? coord_ : p;
     if (comp_ != 400 && cs == coord_) fail(w.gcol[0], "cannot change the active coordinate system with cutter radius compensation on");
     if (w.on('R') && l == 20) fail(w.column('R'), "R not allowed in G10 L20");
+    // The tool does not move: the current position is re-expressed in the changed system
+    // (LinuxCNC's convert_setup; it differs only when G10 L2 R changes the rotation of the
+    // active system while a G92 offset is on, where LinuxCNC's formula leaves the G92 offset
+    // rotated: expected-differences.md).
+    const Pose machine = machine_of(position_, coord_);
+    if (w.on('R')) params_.set(5210 + 20 * cs, w['R']);
     for (int i = 0; i < kNumAxes; ++i) {
       const char c = kAxisLetters[i];
-      if (!w.on(c)) continue;
+      if (!w.on(c) || (l == 20 && i < 2)) continue;
       const size_t k = static_cast<size_t>(i);
       const double lin = i < 3 || i >= 6 ? s : 1.0;
       double off = w[c] * lin;
-      if (l == 20) {
-        // The current position in system cs becomes the value.
-        const double machine = machine_of(position_, coord_)[k];
-        off = machine - g92_[k] - tool_offset_[k] - w[c] * lin;
-      }
-      const double old = param_len(5201 + 20 * cs, i);
+      if (l == 20) off = machine[k] - g92_[k] - tool_offset_[k] - w[c] * lin;  // the current position becomes the value
       set_param_len(5201 + 20 * cs, i, off);
-      if (cs == coord_) position_[k] += old - off;
     }
-    if (w.on('R')) params_.set(5210 + 20 * cs, w['R']);
+    if (l == 20 && (w.on('X') || w.on('Y'))) {
+      // X and Y are values in the rotated frame of system cs: the offset is the machine point
+      // less the rotated (value + G92), so both offsets change when the system is rotated.
+      const Pose cur = program_of(machine, cs);
+      const double x = (w.on('X') ? w['X'] * s : cur[0]) + g92_[0];
+      const double y = (w.on('Y') ? w['Y'] * s : cur[1]) + g92_[1];
+      const double t = params_.get(5210 + 20 * cs) * M_PI / 180.0, co = std::cos(t), sn = std::sin(t);
+      set_param_len(5201 + 20 * cs, 0, machine[0] - tool_offset_[0] - (x * co - y * sn));
+      set_param_len(5201 + 20 * cs, 1, machine[1] - tool_offset_[1] - (x * sn + y * co));
+    }
+    if (cs == coord_) position_ = program_of(machine, coord_);
     w.axes = 0;
     if (cs == coord_) {
       rotation_deg_ = params_.get(5210 + 20 * cs);
@@ -1718,6 +1772,13 @@ void Interpreter::arc(Words& w, bool cw, const Pose& end) {
   }
   double cen1 = 0, cen2 = 0;
   const char an1 = kAxisLetters[a1], an2 = kAxisLetters[a2];
+  {
+    // LinuxCNC: the offset along the plane's normal is an error, not ignored.
+    const char normal_offset = plane_ == Plane::kXY ? 'K' : plane_ == Plane::kXZ ? 'J' : 'I';
+    const char* plane_name = plane_ == Plane::kXY ? "XY" : plane_ == Plane::kXZ ? "XZ" : "YZ";
+    if (w.on(normal_offset))
+      fail(w.column(normal_offset), std::string(1, normal_offset) + " word given for an arc in the " + plane_name + " plane");
+  }
   if (w.on('R')) {
     if (w.on(o1) || w.on(o2)) fail(w.column('R'), "an arc takes R or centre offsets, not both");
     const double radius = w['R'];
@@ -1945,7 +2006,8 @@ void Interpreter::nurbs_g5_open(Words& w) {
   n->fanuc = false;
   n->order = 3;
   if (w.on('L')) {
-    n->order = static_cast<int>(std::lround(w['L']));
+    if (w['L'] != std::floor(w['L'])) fail(w.column('L'), "G5.2 L (order) must be a whole number");
+    n->order = static_cast<int>(w['L']);
     if (n->order < 3 || n->order > 8) fail(w.column('L'), "G5.2 L (order) must be 3 to 8");
   }
   n->column = w.gcol[1];
@@ -1959,14 +2021,13 @@ void Interpreter::nurbs_g5_open(Words& w) {
   if (plane_ == Plane::kYZ) { a1 = 1; a2 = 2; }
   p0.x = to_program(position_[static_cast<size_t>(a1)]);
   p0.y = to_program(position_[static_cast<size_t>(a2)]);
-  p0.w = w.on('P') ? w['P'] : 1;
+  // LinuxCNC: the opening line's P weighs the start point when the line has no X Y;
+  // with X Y it is that control point's weight and the start point weighs 1.
+  p0.w = w.axes == 0 && w.on('P') ? w['P'] : 1;
   if (p0.w <= 0) fail(w.column('P'), "NURBS weight P must be positive");
   nurbs_->points.push_back(p0);
   nurbs_->last = position_;
-  if (w.axes != 0) {
-    w.has &= ~bit('P');
-    nurbs_g5_point(w);
-  }
+  if (w.axes != 0) nurbs_g5_point(w);
 }
 
 void Interpreter::nurbs_g5_point(Words& w) {
@@ -1987,7 +2048,9 @@ void Interpreter::nurbs_g5_point(Words& w) {
   }
   p.x = v1 / s;
   p.y = v2 / s;
-  p.w = w.on('P') ? w['P'] : 1;
+  // LinuxCNC: "Must specify positive weight P for every Control Point".
+  if (!w.on('P')) fail(w.column(l1), "a G5.2 control point needs its weight P (> 0)");
+  p.w = w['P'];
   if (p.w <= 0) fail(w.column('P'), "NURBS weight P must be positive");
   nurbs_->points.push_back(p);
   nurbs_->last[static_cast<size_t>(a1)] = v1;
@@ -1997,7 +2060,9 @@ void Interpreter::nurbs_g5_point(Words& w) {
 void Interpreter::nurbs_g5_close() {
   NurbsCollect& n = *nurbs_;
   const int npts = static_cast<int>(n.points.size());
-  if (npts < n.order) fail(0, "G5.3: a curve of order " + std::to_string(n.order) + " needs at least that many control points (has " + std::to_string(npts) + ")");
+  if (npts < n.order)
+    fail(w53_column_, "G5.3: a curve of order L = " + std::to_string(n.order) +
+                          " needs at least that many control points, the start point included (has " + std::to_string(npts) + ")");
   // LinuxCNC's knot vector: order zeros, then 1, 2, ..., then order copies of the last.
   std::vector<double> knots;
   for (int i = 0; i < n.order; ++i) knots.push_back(0);
@@ -2018,7 +2083,8 @@ void Interpreter::nurbs_fanuc_open(Words& w) {
   if (!w.on('P')) fail(w.gcol[1], "G06.2 needs the curve's order: expected a P word (2 to 8)");
   auto n = std::make_unique<NurbsCollect>();
   n->fanuc = true;
-  n->order = static_cast<int>(std::lround(w['P']));
+  if (w['P'] != std::floor(w['P'])) fail(w.column('P'), "G06.2 P (order) must be a whole number");
+  n->order = static_cast<int>(w['P']);
   if (n->order < 2 || n->order > 8) fail(w.column('P'), "G06.2 P (order) must be 2 to 8");
   n->column = w.gcol[1];
   n->line = line_no_;

@@ -179,6 +179,8 @@ class Interpreter {
   int prev_motion_ = 800;         // the motion mode before this block's
   std::array<double, 2> spline_pq_{};  // the last G5's P Q (mm), for a following G5 without I J
   bool spline_continues_ = false;
+  int32_t fanuc_closed_line_ = 0;  // the line where the last G6.2 curve's knots were complete
+  int32_t w53_column_ = 0;         // column of the G5.3 closing the curve
   bool in_cycle_ = false;
 
   // NURBS collection (G5.2 / Fanuc G6.2): control points until the curve closes.

@@ -532,8 +532,8 @@ TEST(Rs274BlocksNurbs, FanucFig11) {
   ASSERT_EQ(m.size(), 3u);  // G0, the NURBS, G0
   const Block& n = m[1];
   EXPECT_EQ(n.kind, BlockKind::kNurbs);
-  // The curve's block is made when it closes: at the first line after its knots.
-  EXPECT_EQ(n.source_line, 17);
+  // The curve's block is made when it closes: at the line of its last knot.
+  EXPECT_EQ(n.source_line, 16);
   EXPECT_EQ(n.nurbs.order, 4);
   expect_values(n.nurbs.knots, {0, 0, 0, 0, 0.2, 0.4, 0.6, 0.8, 1, 1, 1, 1});
   expect_points(n.nurbs.control_points,
@@ -589,10 +589,8 @@ TEST(Rs274BlocksNurbs, CurveEndsBeforeTheNextCurveAndAtTheProgramEnd) {
   EXPECT_EQ(p[2].kind, BlockKind::kEnd);
 }
 
-// DISABLED: an interpreter bug (see the port's report). A comment or blank line ends
-// a curve: "G06.2 ... / (a remark)" is refused at the remark, and so is the same in
-// a G5.2 curve, which rs274 accepts.
-TEST(Rs274BlocksNurbs, DISABLED_CommentsInsideACurve) {
+// A comment or blank line inside a curve leaves it open (rs274 accepts them).
+TEST(Rs274BlocksNurbs, CommentsInsideACurve) {
   const std::vector<Block> p = run("G06.2 P2 K0 X0 Y0 Z0 F100\n(a remark)\nK0 X1 ; more\n\nK1\nK1\nM30\n");
   EXPECT_EQ(p[0].kind, BlockKind::kNurbs);
 }
@@ -614,7 +612,7 @@ TEST(Rs274BlocksNurbsError, NurbsNeedsXyz) {
   s.machine.axes = "XY";
   s.builder.axis_names = {"X", "Y"};
   s.builder.start_position_mm = {0, 0};
-  expect_error_at("G06.2 P2 K0 X0 F100\nK0 X1\nK1\nK1\nM2\n", 5, 1, "NURBS need the machine's first three axes", s);
+  expect_error_at("G06.2 P2 K0 X0 F100\nK0 X1\nK1\nK1\nM2\n", 4, 1, "NURBS need the machine's first three axes", s);
 }
 
 TEST(Rs274BlocksNurbsError, OtherAxesCannotTakePart) {
@@ -645,15 +643,14 @@ TEST(Rs274BlocksNurbs, LinuxCncDocumentationExample) {
 }
 
 TEST(Rs274BlocksNurbs, LinuxCncDefaultsAndFirstLinePoint) {
-  // Without L the order is 3; X Y on the G5.2 line is the second control point. The
-  // opening line's P weighs the start point (control point 0) and that point weighs
-  // 1: the interpreter's reading of LinuxCNC, which rs274's printout cannot confirm
-  // (NURBS_FEED(3, ...) shows no weights). The old parser gave P to the X Y point.
+  // Without L the order is 3; X Y on the G5.2 line is the second control point and
+  // the line's P its weight; the start point weighs 1 (LinuxCNC's convert_nurbs: the
+  // opening P weighs the start point only on a line without X Y).
   const std::vector<Block> p = run("G0 X1 Y1\nG5.2 X2 Y3 P4 F100\nX5 Y5 P1\nG5.3\nM2\n");
   const Block& n = p[1];
   EXPECT_EQ(n.nurbs.order, 3);
   expect_points(n.nurbs.control_points, {{1, 1, 0}, {2, 3, 0}, {5, 5, 0}});
-  expect_values(n.nurbs.weights, {4, 1, 1});
+  expect_values(n.nurbs.weights, {1, 4, 1});
   expect_values(n.nurbs.knots, {0, 0, 0, 1, 1, 1});
 }
 
@@ -681,9 +678,8 @@ TEST(Rs274BlocksNurbs, LinuxCncInches) {
   EXPECT_NEAR(p[0].nurbs.control_points[2][1], 25.4, kTol);
 }
 
-// DISABLED: an interpreter bug (see the port's report). rs274 accepts G5.2 repeated
-// on the control point lines (one NURBS_FEED); the interpreter refuses line 3.
-TEST(Rs274BlocksNurbs, DISABLED_LinuxCncRepeatedG52ContinuesTheCurve) {
+// rs274 accepts G5.2 repeated on the control point lines (one NURBS_FEED).
+TEST(Rs274BlocksNurbs, LinuxCncRepeatedG52ContinuesTheCurve) {
   const std::vector<Block> p = run("F100\nG5.2 P1\nG5.2 X1 Y0 P1\nG5.2 X2 Y1 P1\nG5.3\nM2\n");
   ASSERT_EQ(p.size(), 2u);
   EXPECT_EQ(p[0].nurbs.control_points.size(), 3u);
@@ -696,8 +692,8 @@ TEST(Rs274BlocksNurbsError, LinuxCncXWithoutY) {
 TEST(Rs274BlocksNurbsError, LinuxCncG53WithoutG52) { expect_error_at("F100\nG5.3\nM2\n", 2, 1, "G5.3 without G5.2"); }
 
 TEST(Rs274BlocksNurbsError, LinuxCncTooFewPoints) {
-  expect_error_at("F100\nG5.2 P1 L4\nX1 Y0 P1\nX2 Y1 P1\nG5.3\nM2\n", 5, 0,
-                  "a curve of order 4 needs at least that many control points");
+  expect_error_at("F100\nG5.2 P1 L4\nX1 Y0 P1\nX2 Y1 P1\nG5.3\nM2\n", 5, 1,
+                  "a curve of order L = 4 needs at least that many control points");
 }
 
 TEST(Rs274BlocksNurbsError, FanucOrderOutOfRange) {
@@ -708,7 +704,7 @@ TEST(Rs274BlocksNurbsError, AtMostTenThousandControlPoints) {
   std::string prog = "G06.2 P2 K0 X0 Y0 Z0 F100\n";
   for (int i = 1; i <= 10000; ++i) prog += "K0 X" + std::to_string(i) + "\n";
   prog += "K1\nK1\nM2\n";
-  expect_error_at(prog, 10004, 1, "10001 control points: at most 10000 in one curve");
+  expect_error_at(prog, 10003, 1, "10001 control points: at most 10000 in one curve");
 }
 
 // ---- process directive -------------------------------------------------------------
@@ -760,10 +756,11 @@ TEST(Rs274BlocksProcessError, MissingSeparator) {
 
 // ---- limits ------------------------------------------------------------------------
 
-// DISABLED: an interpreter bug (see the port's report). rs274 refuses a line longer
+// rs274 refuses a line longer
 // than LinuxCNC's limit ("Command too long"); the interpreter accepts 5000 spaces.
-TEST(Rs274BlocksError, DISABLED_OverlongLine) {
-  expect_error_at("G0 X1\n" + std::string(5000, ' ') + "X2\nM2\n", 2, 4097, "line longer than");
+TEST(Rs274BlocksError, OverlongLine) {
+  // LinuxCNC's LINELEN: "Command too long" past 255 characters.
+  expect_error_at("G0 X1\n" + std::string(5000, ' ') + "X2\nM2\n", 2, 256, "line longer than 255 characters");
 }
 
 // ---- what the block builder adds: offsets, units, tools, rotation --------------------
@@ -972,11 +969,10 @@ TEST(Rs274BlocksFlow, ALoopRunsTenThousandTimes) {
   EXPECT_EQ(server.num_checkpoints(), (10001u + 255u) / 256u);
 }
 
-// ---- differences from rs274 found by the port: interpreter bugs, disabled until fixed ----
+// ---- differences from rs274 found by the port, fixed ----------------------------------
 
-// rs274 accepts M6 without a T word (START_CHANGE, CHANGE_TOOL(0)); the interpreter
-// refuses it ("M6 without a tool selected").
-TEST(Rs274BlocksRs274Differences, DISABLED_M6WithoutATWord) {
+// rs274 accepts M6 without a T word (START_CHANGE, CHANGE_TOOL(0)).
+TEST(Rs274BlocksRs274Differences, M6WithoutATWord) {
   const std::vector<Block> e = events(run("G0 X1\nM6\nM2\n"));
   ASSERT_EQ(e.size(), 1u);
   EXPECT_EQ(e[0].event.kind, EventKind::kToolChange);
@@ -984,32 +980,32 @@ TEST(Rs274BlocksRs274Differences, DISABLED_M6WithoutATWord) {
 }
 
 // rs274 makes SET_SPINDLE_SPEED(0, 100) before NURBS_FEED for an S on a G5.2 control
-// point line; the interpreter drops the S (no spindle event, the curve at 1000 rpm).
-TEST(Rs274BlocksRs274Differences, DISABLED_SWordInsideAG52Curve) {
+// point line.
+TEST(Rs274BlocksRs274Differences, SWordInsideAG52Curve) {
   const std::vector<Block> p = run("F500\nS1000 M3\nG5.2 P1 L3\nX10 Y0 P1 S100\nX20 Y5 P1\nG5.3\nM2\n");
   const std::vector<Block> m = moves(p);
   ASSERT_EQ(m.size(), 1u);
   EXPECT_DOUBLE_EQ(m[0].spindle_rpm, 100);
 }
 
-// rs274 refuses a fractional order ("Non integer value for integer"); the interpreter
-// rounds L3.5 to 4 (and the Fanuc P3.5 alike).
-TEST(Rs274BlocksRs274Differences, DISABLED_FractionalOrder) {
+// rs274 refuses a fractional order ("Non integer value for integer").
+TEST(Rs274BlocksRs274Differences, FractionalOrder) {
   expect_error_at("F500\nG5.2 P1 L3.5\nX10 Y0 P1\nX20 Y5 P1\nX30 Y0 P1\nG5.3\nM2\n", 2, 9, "L");
   expect_error_at("G06.2 P3.5 K0 X0 Y0 Z0 F500\nM2\n", 1, 7, "P");
 }
 
-// rs274 takes G5.2's X and Y whatever the plane: in G18 it accepts X Y points and
-// refuses Z X ones ("You must specify both X and Y coordinates for Control Points");
-// the interpreter does the opposite.
-TEST(Rs274BlocksRs274Differences, DISABLED_G52TakesXAndYInEveryPlane) {
-  EXPECT_NO_THROW(run("F500\nG18\nG5.2 P1\nX10 Y0 P1\nX20 Y5 P1\nG5.3\nM2\n"));
-  expect_error_at("F500\nG18\nG5.2 P1\nZ10 X0 P1\nZ20 X5 P1\nG5.3\nM2\n", 4, 1, "X and Y");
+// A deliberate difference: LinuxCNC 2.9's rs274 takes G5.2's X and Y whatever the
+// plane (in G18 it refuses Z X points); newer LinuxCNC (its nc_files/nurbs/G5
+// *-zx and *-yz examples) and this interpreter take the active plane's two axes.
+TEST(Rs274BlocksRs274Differences, G52TakesThePlanesAxes) {
+  const std::vector<Block> m = moves(run("F500\nG18\nG5.2 P1\nZ10 X0 P1\nZ20 X5 P1\nG5.3\nM2\n"));
+  ASSERT_EQ(m.size(), 1u);
+  expect_points(m[0].nurbs.control_points, {{0, 0, 0}, {0, 0, 10}, {5, 0, 20}});
+  expect_error_at("F500\nG18\nG5.2 P1\nX10 Y0 P1\nX20 Y5 P1\nG5.3\nM2\n", 4, 1, "needs both Z and X");
 }
 
-// rs274 accepts comment and blank lines inside a G5.2 curve; the interpreter refuses
-// them ("inside a G5.2 curve: expected X Y P control points or G5.3").
-TEST(Rs274BlocksRs274Differences, DISABLED_CommentsInsideAG52Curve) {
+// rs274 accepts comment and blank lines inside a G5.2 curve.
+TEST(Rs274BlocksRs274Differences, CommentsInsideAG52Curve) {
   EXPECT_NO_THROW(run("F100\nG5.2 P1\n(remark)\nX1 Y0 P1\n\nX2 Y1 P1\nG5.3\nM2\n"));
 }
 

@@ -529,11 +529,14 @@ TEST(Rs274Eval, ToTextShowsTheExpression) {
 // ---- lexing errors ------------------------------------------------------------------
 
 TEST(Rs274LexError, EveryRefusalNamesItsColumn) {
-  // rs274 reads "X1e400" as X1 and an E word; E is no word here, and the message
-  // says why the number stopped.
+  // rs274 reads "X1e400" as X1 and an E word; right after a number E is refused here,
+  // and the message says why the number stopped. E is a word elsewhere (M66-M68).
   expect_lex_error("G1 X1e400", 6, "unknown word 'E'");
   expect_lex_error("G1 X1e400", 6, "no exponent");
-  expect_lex_error("G1 E5", 4, "unknown word 'E'");
+  Line e5;
+  lex_line("M67 E5 Q2", e5);
+  ASSERT_EQ(e5.words.size(), 3u);
+  EXPECT_EQ(e5.words[1].letter, 'E');
   expect_lex_error("G1 X1 $2", 7, "unexpected '$'");
   expect_lex_error("G1 N10", 4, "unknown word 'N'");                // rs274: Bad character 'n' used
   expect_lex_error("G1 X1.2.3", 8, "second decimal point");          // rs274: bad number format
