@@ -18,6 +18,21 @@ constexpr double kRateSlewPerTick = 0.002;
 // The jitter buffer: the playback trails the newest setpoint by two periods on
 // average, so a setpoint may come 1.5 periods late (plus one bridged) unnoticed.
 constexpr double kLeadCycles = 2.0;
+// The limiter's feedback, nested loops (position -> velocity -> acceleration ->
+// jerk). Small errors: linear gains, each loop four times slower than the one
+// inside it (poles near -20, -80 (double) 1/s at T_servo = 1 ms: no overshoot).
+// Large errors: the time-optimal curves of a limited approach, on a share of the
+// limits so that a loop never asks for more than the inner one can deliver:
+// velocity wanted sqrt(2·(a/4)·|e|), acceleration wanted sqrt(2·(j/2)·|Δv|).
+constexpr double kPosGain = 20.0;
+constexpr double kVelGain = 80.0;
+constexpr double kAccGain = 320.0;
+constexpr double kAccShare = 0.25;
+constexpr double kJerkShare = 0.5;
+// A stop has ended when velocity and acceleration are this small: snapping them to
+// zero then is a jerk far below any limit.
+constexpr double kStandstillVel = 1e-4;   // mm/s
+constexpr double kStandstillAcc = 1e-2;   // mm/s^2
 
 std::string fmt(const char* f, auto... args) {
   char buf[256];
@@ -29,18 +44,19 @@ std::string fmt(const char* f, auto... args) {
 BridgeCore::BridgeCore(const config::MachineConfig& cfg)
     : cfg_(cfg), n_(static_cast<int>(std::lround(cfg.ipo_period_s / cfg.servo_period_s))),
       servo_s_(cfg.servo_period_s), ipo_s_(cfg.ipo_period_s), naxes_(static_cast<int>(cfg.axes.size())),
-      lead_window_(std::min(n_, 128)) {}
+      lead_window_(std::min(n_, 128)), window_(std::clamp(n_, 1, kMaxWindow)) {}
 
 void BridgeCore::engage(const AxisArray& hold_mm) {
   mode_ = Mode::kFollowing;
   cmd_ = hold_mm;
   last_sp_ = hold_mm;
   vel_.fill(0.0);
+  acc_.fill(0.0);
   sp_vel_.fill(0.0);
   p_size_ = 0;
   rate_ = 1.0;
   braking_ = false;
-  blend_left_ = 0;
+  reset_smoothing(hold_mm);
   seg_cycle_ = -1;
   last_cycle_ = -1;
   last_gap_ = 1;
@@ -128,8 +144,8 @@ BridgeCore::Verdict BridgeCore::on_setpoint(int64_t cycle, const AxisArray& p) {
   push(Point{cycle, p, v});
   if (braking_) {
     // The stream is back before the timeout, after the brake had begun: rejoin it
-    // with the usual lead, blending the command from where the brake took it onto
-    // the stream over one period (longer if the velocity limit needs it).
+    // with the usual lead. The reference jumps back onto the stream; the limiter
+    // takes the command from where the brake left it onto it within the limits.
     braking_ = false;
     ++rejoins_;
     tau_ = static_cast<double>(cycle) - kLeadCycles;
@@ -137,13 +153,7 @@ BridgeCore::Verdict BridgeCore::on_setpoint(int64_t cycle, const AxisArray& p) {
     lead_sum_ = kLeadCycles * lead_window_;
     AxisArray on_path{};
     path_at(tau_, on_path);
-    int ticks = n_;
-    for (int a = 0; a < naxes_; ++a) {
-      blend_[a] = cmd_[a] - on_path[a];
-      const double need = std::fabs(blend_[a]) / (cfg_.axes[a].max_velocity_mm_s * 0.5 * servo_s_);
-      ticks = std::max(ticks, static_cast<int>(std::ceil(need)));
-    }
-    blend_ticks_ = blend_left_ = ticks;
+    reset_smoothing(on_path);
   }
   gaps_ += gap - 1;
   last_gap_ = gap;
@@ -153,20 +163,6 @@ BridgeCore::Verdict BridgeCore::on_setpoint(int64_t cycle, const AxisArray& p) {
   ticks_since_setpoint_ = 0;
   waiting_reason_.clear();
   return Verdict::kAccepted;
-}
-
-void BridgeCore::brake() {
-  double speed = 0;
-  for (int a = 0; a < naxes_; ++a) speed += vel_[a] * vel_[a];
-  speed = std::sqrt(speed);
-  if (speed <= 0) return;
-  const double k = std::max(0.0, speed - cfg_.stop_decel_mm_s2 * servo_s_) / speed;
-  for (int a = 0; a < naxes_; ++a) {
-    vel_[a] *= k;
-    const double next = std::clamp(cmd_[a] + vel_[a] * servo_s_, cfg_.axes[a].min_mm, cfg_.axes[a].max_mm);
-    if (next != cmd_[a] + vel_[a] * servo_s_) vel_[a] = 0;
-    cmd_[a] = next;
-  }
 }
 
 void BridgeCore::path_at(double tau, AxisArray& out) {
@@ -194,17 +190,109 @@ void BridgeCore::path_at(double tau, AxisArray& out) {
   }
 }
 
-void BridgeCore::play(double tau) {
-  AxisArray next{};
-  path_at(tau, next);
-  if (blend_left_ > 0) {
-    --blend_left_;
-    const double k = static_cast<double>(blend_left_) / blend_ticks_;
-    for (int i = 0; i < naxes_; ++i) next[i] += blend_[i] * k;
-  }
+void BridgeCore::reset_smoothing(const AxisArray& at) {
   for (int i = 0; i < naxes_; ++i) {
-    vel_[i] = (next[i] - cmd_[i]) / servo_s_;
-    cmd_[i] = next[i];
+    ma1_[static_cast<size_t>(i)].fill(at[i]);
+    ma2_[static_cast<size_t>(i)].fill(at[i]);
+  }
+  ma_i_ = 0;
+  ref_ = at;
+  ref_v_.fill(0.0);
+  ref_a_.fill(0.0);
+  ref_j_.fill(0.0);
+  ref_fresh_ = true;
+}
+
+void BridgeCore::smooth(const AxisArray& p) {
+  const auto slot = static_cast<size_t>(ma_i_);
+  ma_i_ = (ma_i_ + 1) % window_;
+  const double inv = 1.0 / window_;
+  for (int i = 0; i < naxes_; ++i) {
+    auto& m1 = ma1_[static_cast<size_t>(i)];
+    auto& m2 = ma2_[static_cast<size_t>(i)];
+    // Summed afresh every tick (at most 128 terms): no running sum to drift.
+    m1[slot] = p[i];
+    double s1 = 0;
+    for (int k = 0; k < window_; ++k) s1 += m1[static_cast<size_t>(k)];
+    m2[slot] = s1 * inv;
+    double s2 = 0;
+    for (int k = 0; k < window_; ++k) s2 += m2[static_cast<size_t>(k)];
+    const double x = s2 * inv;
+    const double v = (x - ref_[i]) / servo_s_;
+    const double acc = (v - ref_v_[i]) / servo_s_;
+    ref_j_[i] = ref_fresh_ ? 0.0 : (acc - ref_a_[i]) / servo_s_;
+    ref_a_[i] = ref_fresh_ ? 0.0 : acc;
+    ref_v_[i] = v;
+    ref_[i] = x;
+  }
+  ref_fresh_ = false;
+}
+
+void BridgeCore::limit_step(bool follow) {
+  const double t = servo_s_;
+  for (int i = 0; i < naxes_; ++i) {
+    const auto& ax = cfg_.axes[static_cast<size_t>(i)];
+    const double vmax = ax.max_velocity_mm_s;
+    const double amax = follow ? ax.max_accel_mm_s2 : std::min(ax.max_accel_mm_s2, cfg_.stop_decel_mm_s2);
+    const double jmax = ax.max_jerk_mm_s3 > 0 ? ax.max_jerk_mm_s3 : 1e300;
+    const double v = vel_[i];
+    const double a = acc_[i];
+    double a_want = 0;
+    double j_ff = 0;
+    // The approach to a wanted value over a distance: linear near it, the
+    // limited time-optimal curve further away (whichever asks less).
+    auto approach = [](double err, double gain, double limit) {
+      const double lin = gain * std::fabs(err);
+      const double curve = std::sqrt(2.0 * limit * std::fabs(err));
+      return std::copysign(std::min(lin, curve), err);
+    };
+    if (follow) {
+      // Feed-forward of the reference (clamped to the limits: a jump of the
+      // reference is no reason to command one), plus the feedback.
+      const double e = ref_[i] - cmd_[i];
+      const double v_ff = std::clamp(ref_v_[i], -vmax, vmax);
+      const double v_want = std::clamp(v_ff + approach(e, kPosGain, kAccShare * amax), -vmax, vmax);
+      const double a_ff = std::clamp(ref_a_[i], -amax, amax);
+      a_want = std::clamp(a_ff + approach(v_want - v, kVelGain, kJerkShare * jmax), -amax, amax);
+      j_ff = std::clamp(ref_j_[i], -jmax, jmax);
+    } else {
+      a_want = std::clamp(approach(0.0 - v, kVelGain, kJerkShare * jmax), -amax, amax);
+    }
+    double j = std::clamp(j_ff + kAccGain * (a_want - a), -jmax, jmax);
+    double a_new = std::clamp(a + j * t, -amax, amax);
+    // Velocity look-ahead: from the new state the acceleration can still be brought
+    // to zero at the jerk limit before the velocity passes its limit,
+    // v + a·T + a²/(2J) + a·T/2 <= vmax (and the mirror), kept unless the jerk
+    // limit forbids it (it cannot: the bound moves by less than J·T a tick).
+    const double room_up = std::max(0.0, vmax - v);
+    const double room_dn = std::max(0.0, vmax + v);
+    const double a_hi = jmax * (-1.5 * t + std::sqrt(2.25 * t * t + 2.0 * room_up / jmax));
+    const double a_lo = -jmax * (-1.5 * t + std::sqrt(2.25 * t * t + 2.0 * room_dn / jmax));
+    a_new = std::max(std::min(a_new, a_hi), a_lo);
+    // Jerk first, then acceleration (|a| <= amax already, so both hold together).
+    a_new = std::max(std::min(a_new, a + jmax * t), a - jmax * t);
+    a_new = std::max(std::min(a_new, amax), -amax);
+    double v_new = v + a_new * t;
+    double x_new = cmd_[i] + v_new * t;
+    if (!follow && std::fabs(v_new) < kStandstillVel && std::fabs(a_new) < kStandstillAcc) {
+      // Standing: the remaining creep is below a micrometre per second.
+      a_new = 0;
+      v_new = 0;
+      x_new = cmd_[i];
+    }
+    // Travel: the last line of defence (the reference never leaves it; a command
+    // that would is held at the end, at the cost of the limits in that tick).
+    if (x_new < ax.min_mm || x_new > ax.max_mm) {
+      x_new = std::clamp(x_new, ax.min_mm, ax.max_mm);
+      v_new = (x_new - cmd_[i]) / t;
+      a_new = (v_new - v) / t;
+    }
+    // The state is the command's own finite differences (no rounding drift
+    // between what is sent and what the limits were applied to).
+    const double v_fd = (x_new - cmd_[i]) / t;
+    acc_[i] = a_new == 0.0 && v_new == 0.0 ? 0.0 : (v_fd - v) / t;
+    vel_[i] = v_new == 0.0 ? 0.0 : v_fd;
+    cmd_[i] = x_new;
   }
 }
 
@@ -214,25 +302,31 @@ const AxisArray& BridgeCore::tick() {
     case Mode::kIdle:
     case Mode::kStopped:
       vel_.fill(0.0);
+      acc_.fill(0.0);
       return cmd_;
-    case Mode::kStopping:
-      brake();
-      if (std::all_of(vel_.begin(), vel_.begin() + naxes_, [](double v) { return v == 0.0; })) mode_ = Mode::kStopped;
+    case Mode::kStopping: {
+      limit_step(false);
+      bool still = true;
+      for (int a = 0; a < naxes_; ++a) still = still && vel_[a] == 0.0 && acc_[a] == 0.0;
+      if (still) mode_ = Mode::kStopped;
       return cmd_;
+    }
     case Mode::kFollowing: break;
   }
   if (last_cycle_ < 0) {  // engaged, no stream yet: hold
     vel_.fill(0.0);
+    acc_.fill(0.0);
     return cmd_;
   }
   if (static_cast<double>(ticks_since_setpoint_) * servo_s_ > cfg_.setpoint_timeout_s) {
     fault(fmt("no setpoint for %.0f ms after cycle %lld: controlled stop",
               static_cast<double>(ticks_since_setpoint_) * servo_s_ * 1e3, static_cast<long long>(last_cycle_)));
+    --ticks_since_setpoint_;
     return tick();
   }
   if (braking_) {
     ++starved_ticks_;
-    brake();
+    limit_step(false);
     return cmd_;
   }
   // Playback rate from the buffer: the newest setpoint should lead τ by
@@ -258,11 +352,14 @@ const AxisArray& BridgeCore::tick() {
     // unless the stream comes back before the timeout).
     braking_ = true;
     ++starved_ticks_;
-    brake();
+    limit_step(false);
     return cmd_;
   }
   tau_ = tau;
-  play(tau_);
+  AxisArray p{};
+  path_at(tau_, p);
+  smooth(p);
+  limit_step(true);
   return cmd_;
 }
 

@@ -5,15 +5,29 @@
 //
 // The fine interpolation plays the coarse stream back on a clock of its own,
 // τ (in coarse cycles), 1.5 to 2.5 periods behind the newest setpoint: the
-// command at τ is the straight line between the received setpoints around it, so
+// reference at τ is the straight line between the received setpoints around it, so
 // a missed setpoint (a gap in the cycle index) is bridged by the line between its
 // neighbours. The playback rate follows the buffer (0.90..1.05, slewed gently and
 // never above an axis's velocity limit): a late setpoint that used up the buffer
 // is made up again, and the clocks of two PCs may drift apart. Past the newest
-// setpoint the command goes on at the last velocity for one period; beyond that
-// it brakes at the stop deceleration; a stream back before the timeout is
-// rejoined (the command blends onto it over a period), one silent for longer than
-// the timeout makes the brake a controlled stop and a fault.
+// setpoint the reference goes on at the last velocity for one period; beyond that
+// the axes brake; a stream back before the timeout is rejoined, one silent for
+// longer than the timeout makes the brake a controlled stop and a fault.
+//
+// Honest tracking. The straight lines have a velocity step at every coarse point
+// (a·T_ipo in one servo tick: 4·a at T_ipo = 4·T_servo). So the reference goes
+// through two moving averages of one coarse period each (n ticks): velocity
+// becomes a ramp over the period (acceleration = the stream's second difference)
+// and acceleration a ramp too (jerk = the stream's third difference), at a delay of
+// n-1 ticks. A stream within an axis's v/a/j limits then gives fine setpoints
+// within them. Then every tick goes through a limiter that makes the command's
+// finite differences (v = Δx/T, a = Δv/T, j = Δa/T over T_servo) keep each axis's
+// velocity, acceleration and jerk limits whatever the reference does: it tracks
+// the smoothed reference exactly while that keeps the limits, and otherwise (a
+// late setpoint's extrapolation ending, a rejoin, a stream slightly over a limit)
+// steers back onto it by nested saturated feedback (position → velocity →
+// acceleration → jerk). Stops (watchdog, faults, starving) use the same limiter
+// with the velocity target 0 and the deceleration min(stop_decel, the axis's).
 //
 // A setpoint outside an axis's travel, or implying more than its velocity or
 // acceleration limit, is never followed: the bridge faults and stops. A stream
@@ -58,7 +72,9 @@ class BridgeCore {
   const std::string& fault_reason() const { return fault_reason_; }
   const std::string& waiting_reason() const { return waiting_reason_; }
   const AxisArray& commanded() const { return cmd_; }
+  // Finite differences of the commanded positions over the last servo tick.
   const AxisArray& velocity() const { return vel_; }
+  const AxisArray& acceleration() const { return acc_; }
   int64_t last_cycle() const { return last_cycle_; }
   // Cycle of the setpoint the current command heads for; -1 when none.
   int64_t segment_cycle() const { return seg_cycle_; }
@@ -80,16 +96,21 @@ class BridgeCore {
   static constexpr int kPoints = 64;
   const Point& point(int i) const { return points_[static_cast<size_t>((p_head_ + i) % kPoints)]; }
   void push(const Point& p);
-  void brake();
-  void path_at(double tau, AxisArray& out);  // the stream's position at τ
-  void play(double tau);
+  void path_at(double tau, AxisArray& out);  // the stream's position at τ (straight lines)
+  void smooth(const AxisArray& p);             // the two moving averages: ref_, ref_v_, ref_a_, ref_j_
+  void reset_smoothing(const AxisArray& at);   // both averages full of `at`, at rest
+  // One limited step: towards the smoothed reference (follow = true) or to a
+  // standstill at the stop deceleration (follow = false).
+  void limit_step(bool follow);
 
+  static constexpr int kMaxWindow = 128;  // ticks of one coarse period, at most
   config::MachineConfig cfg_;
   int n_;  // servo ticks per coarse period
   double servo_s_;
   double ipo_s_;
   int naxes_;
   int lead_window_;  // ticks the lead is averaged over: one coarse period (at most 128)
+  int window_;       // ticks of each moving average: one coarse period (at most 128)
   Mode mode_ = Mode::kIdle;
   std::array<Point, kPoints> points_{};
   int p_head_ = 0;
@@ -102,13 +123,20 @@ class BridgeCore {
   double lead_sum_ = 0;
   int lead_i_ = 0;
   bool braking_ = false; // starved past the bridging allowance
-  AxisArray blend_{};    // offset of the command from the stream when it was rejoined, fading out
-  int blend_ticks_ = 1;
-  int blend_left_ = 0;
+  // The two moving averages (ring buffers of the last window_ inputs per axis).
+  std::array<std::array<double, kMaxWindow>, program::kMaxAxes> ma1_{};
+  std::array<std::array<double, kMaxWindow>, program::kMaxAxes> ma2_{};
+  int ma_i_ = 0;
+  AxisArray ref_{};      // smoothed reference position
+  AxisArray ref_v_{};    // and its finite differences
+  AxisArray ref_a_{};
+  AxisArray ref_j_{};
+  bool ref_fresh_ = true;  // the reference's differences are not known yet (after a reset)
   int64_t rejoins_ = 0;
   int64_t seg_cycle_ = -1;
   AxisArray cmd_{};
   AxisArray vel_{};      // commanded velocity of the last tick, mm/s
+  AxisArray acc_{};      // commanded acceleration of the last tick, mm/s^2
   AxisArray last_sp_{};  // last accepted setpoint
   AxisArray sp_vel_{};   // velocity of the last accepted coarse step
   int64_t last_cycle_ = -1;
