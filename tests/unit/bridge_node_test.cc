@@ -131,14 +131,17 @@ TEST_P(EveryProfile, EnablesAtStartAndFollowsSetpoints) {
   EXPECT_TRUE(c.node.ready());
   EXPECT_TRUE(c.alarmed("drives_enabled"));
   const double x = c.move_x(10, 19.5);
-  c.hold_stream(x, 10, 10);
+  // The stream stops from 2.5 mm/s within one cycle (over the jerk limit): the
+  // bridge's limiter lands on it within the limits, asymptotically (time constant
+  // ~50 ms): 400 ms later within 0.1 µm.
+  c.hold_stream(x, 10, 100);
   EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
   EXPECT_NEAR(c.drive_mm(1), x, 2e-3);
   EXPECT_NEAR(c.drive_mm(2), 10, 2e-3);
   ASSERT_EQ(c.status.num_axes, 2);
   EXPECT_EQ(int{c.status.drive_state[0]}, kEnabled);
   EXPECT_NEAR(c.status.actual_mm[0], x, 2e-3);
-  EXPECT_NEAR(c.status.commanded_mm[0], x, 1e-9);
+  EXPECT_NEAR(c.status.commanded_mm[0], x, 1e-4);
   EXPECT_GT(c.status.transactions[0], 400);
   EXPECT_EQ(c.status.timeouts[0] + c.status.exceptions[0] + c.status.crc_errors[0] + c.status.reconnects[0], 0);
 }
@@ -170,7 +173,7 @@ TEST_P(EveryProfile, LostLinkFaultsReconnectsAndStaysDisabledUntilEnable) {
   EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
   EXPECT_TRUE(c.link().drive(1)->follows());
   const double x = c.move_x(10, 12);
-  c.hold_stream(x, 10, 5);
+  c.hold_stream(x, 10, 100);  // landing within the jerk limit (see above)
   EXPECT_NEAR(c.drive_mm(1), x, 2e-3);
 }
 
