@@ -1200,8 +1200,8 @@ void Interpreter::execute_block(Words& w) {
     const int t = static_cast<int>(std::lround(w['Q']));
     if (t < 0) fail(w.column('Q'), "negative tool number");
     tool_ = t;
-    params_.set(5400, t);
     canon_.change_tool_number(ref(w.mcol[6]), t);
+    set_tool_params();
   }
   // 9. Spindle.
   if (w.m[7] >= 0) {
@@ -1360,7 +1360,6 @@ void Interpreter::execute_block(Words& w) {
     Pose shown{};
     for (size_t i = 0; i < off.size(); ++i) shown[i] = i < 3 || i >= 6 ? to_program(off[i]) : off[i];
     canon_.use_tool_length_offset(r, shown);
-    for (int i = 0; i < kNumAxes; ++i) params_.set(5401 + i, shown[static_cast<size_t>(i)]);
   }
   // 19. Coordinate system.
   if (w.g[12] >= 0) {
@@ -1533,13 +1532,24 @@ void Interpreter::tool_change(Words& w) {
   spindle_ = 0;
   canon_.change_tool(r, selected_tool_);
   tool_ = selected_tool_;
-  params_.set(5400, tool_);
-  if (const Tool* t = tools_.find(tool_)) {
-    params_.set(5410, t->diameter);
-    params_.set(5411, t->front_angle);
-    params_.set(5412, t->back_angle);
-    params_.set(5413, t->orientation);
+  set_tool_params();
+}
+
+void Interpreter::set_tool_params() {
+  // LinuxCNC 2.9's set_tool_parameters / default_tool_parameters (M6, M61, G10 L1/L10/L11):
+  // #5400 the tool in the spindle, #5401-#5409 its table offsets and #5410 its diameter
+  // in machine units (not the offset G43 applies), #5411-#5413 angles and orientation;
+  // all 0 without a tool.
+  const Tool* t = tool_ > 0 ? tools_.find(tool_) : nullptr;
+  params_.set(5400, tool_ > 0 ? tool_ : 0);
+  for (int i = 0; i < kNumAxes; ++i) {
+    const double lin = i < 3 || i >= 6 ? mu_ : 1.0;
+    params_.set(5401 + i, t != nullptr ? t->offset[static_cast<size_t>(i)] / lin : 0.0);
   }
+  params_.set(5410, t != nullptr ? t->diameter / mu_ : 0.0);
+  params_.set(5411, t != nullptr ? t->front_angle : 0.0);
+  params_.set(5412, t != nullptr ? t->back_angle : 0.0);
+  params_.set(5413, t != nullptr ? t->orientation : 0.0);
 }
 
 void Interpreter::g10(Words& w) {
@@ -1617,6 +1627,7 @@ void Interpreter::g10(Words& w) {
     if (w.on('J')) t.back_angle = w['J'];
     if (w.on('Q')) t.orientation = static_cast<int>(std::lround(w['Q']));
     tools_.put(t);
+    set_tool_params();
     w.axes = 0;
     return;
   }

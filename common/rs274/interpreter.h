@@ -100,6 +100,7 @@ class Interpreter {
   void g28_g30(Words& w, bool g30);
   void g92(Words& w);
   void tool_change(Words& w);
+  void set_tool_params();
   struct SavedModes;
   void restore_modes(const SavedModes& s, int column);
   void cycle(Words& w);
