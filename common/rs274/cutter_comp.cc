@@ -97,6 +97,7 @@ struct CutterComp::Impl {
   bool arc_not_allowed = false;
   double pu = 0, pv = 0, pw = 0;  // programmed point
   double cu = 0, cv = 0, cw = 0;  // compensated (current) point
+  bool stopped_off_path = false;  // G40 left the tool at (cu, cv), off the programmed point
   std::vector<Held> held;
   double start_u = 0, start_v = 0;  // LinuxCNC's "endpoint": where the newest held move starts
   bool start_valid = false;
@@ -484,6 +485,7 @@ void CutterComp::start(int side, double radius, Plane plane, const Pose& program
   m.plane = plane;
   m.ax = axes_of(plane);
   m.first_move = true;
+  m.stopped_off_path = false;
   m.pu = m.cu = programmed[m.ax.u];
   m.pv = m.cv = programmed[m.ax.v];
   m.pw = m.cw = programmed[m.ax.w];
@@ -494,6 +496,7 @@ void CutterComp::stop() {
   if (m.compensating() && !m.first_move) {
     m.flush();
     m.arc_not_allowed = true;
+    m.stopped_off_path = true;
   }
   m.side = 0;
   m.radius = 0;
@@ -501,6 +504,15 @@ void CutterComp::stop() {
 }
 
 bool CutterComp::active() const { return impl_->side != 0; }
+
+bool CutterComp::tool_point(bool stopped, Plane& plane, double& u, double& v) const {
+  const Impl& m = *impl_;
+  if (stopped ? !m.stopped_off_path : !(m.compensating() && !m.first_move)) return false;
+  plane = m.plane;
+  u = m.cu;
+  v = m.cv;
+  return true;
+}
 
 void CutterComp::flush() {
   impl_->flush();
@@ -558,7 +570,13 @@ void CutterComp::set_process(const SourceRef& r, const ProcessSettings& p) {
 // ---- calls that go straight through (before a waiting move, as in LinuxCNC) -------
 
 void CutterComp::use_length_units(const SourceRef& r, Units u) {
-  impl_->units = u;
+  Impl& m = *impl_;
+  if (m.stopped_off_path && u != m.units) {
+    const double f = u == Units::kInch ? 1 / 25.4 : 25.4;
+    m.cu *= f;
+    m.cv *= f;
+  }
+  m.units = u;
   out_.use_length_units(r, u);
 }
 void CutterComp::select_plane(const SourceRef& r, Plane p) { out_.select_plane(r, p); }
@@ -635,6 +653,7 @@ void CutterComp::finish(const SourceRef& r) {
 void CutterComp::straight_traverse(const SourceRef& r, const Pose& end) {
   Impl& m = *impl_;
   m.arc_not_allowed = false;
+  m.stopped_off_path = false;
   if (!m.compensating()) {
     out_.straight_traverse(r, end);
     return;
@@ -645,6 +664,7 @@ void CutterComp::straight_traverse(const SourceRef& r, const Pose& end) {
 void CutterComp::straight_feed(const SourceRef& r, const Pose& end) {
   Impl& m = *impl_;
   m.arc_not_allowed = false;
+  m.stopped_off_path = false;
   if (!m.compensating()) {
     out_.straight_feed(r, end);
     return;
@@ -656,6 +676,7 @@ void CutterComp::arc_feed(const SourceRef& r, double first_end, double second_en
                           double second_axis, int rotation, double axis_end, const Pose& end) {
   Impl& m = *impl_;
   if (m.arc_not_allowed) refuse("The move just after exiting cutter compensation mode must be straight, not an arc");
+  m.stopped_off_path = false;
   if (!m.compensating()) {
     out_.arc_feed(r, first_end, second_end, first_axis, second_axis, rotation, axis_end, end);
     return;
@@ -666,6 +687,7 @@ void CutterComp::arc_feed(const SourceRef& r, double first_end, double second_en
 void CutterComp::nurbs_feed(const SourceRef& r, int order, const std::vector<NurbsPoint>& points,
                             const std::vector<double>& knots, const Pose& end) {
   if (impl_->side != 0) refuse("Cannot convert spline with cutter radius compensation");
+  impl_->stopped_off_path = false;
   out_.nurbs_feed(r, order, points, knots, end);
 }
 

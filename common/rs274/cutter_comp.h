@@ -29,6 +29,13 @@ class CutterComp : public Canon {
   // G40: the next move is the exit move; compensation is off after it.
   void stop();
   bool active() const;
+  // Where the tool stands in the compensation plane (program units; u, v: X, Y in G17,
+  // Z, X in G18) when that is not the programmed point. stopped = false: while
+  // compensating after the entry move (LinuxCNC's current point, which #5420-#5422
+  // show). stopped = true: after G40 until the next move (LinuxCNC's current point is
+  // the programmed one again, but the machine stays at the compensated point, and
+  // LinuxCNC re-reads that after a tool change). False otherwise.
+  bool tool_point(bool stopped, Plane& plane, double& u, double& v) const;
   // Emits everything held (end of program, and before anything that must not be
   // reordered: a tool change, a stop).
   void flush();

@@ -354,7 +354,30 @@ void Interpreter::open(const std::string& path) {
 }
 
 void Interpreter::update_position_params() {
-  for (int i = 0; i < kNumAxes; ++i) params_.set(5420 + i, to_program(position_[static_cast<size_t>(i)]));
+  const Pose p = current_point();
+  for (int i = 0; i < kNumAxes; ++i) params_.set(5420 + i, to_program(p[static_cast<size_t>(i)]));
+}
+
+Pose Interpreter::current_point(bool after_g40) const {
+  // LinuxCNC's current point is the compensated one while cutter compensation runs;
+  // position_ keeps the programmed point. after_g40: where the tool stands after G40
+  // (before the next move).
+  Pose p = position_;
+  Plane pl{};
+  double u = 0, v = 0;
+  if (comp_filter_->tool_point(after_g40, pl, u, v)) {
+    const size_t iu = pl == Plane::kXZ ? 2 : 0, iv = pl == Plane::kXZ ? 0 : 1;
+    p[iu] = u * length_scale();
+    p[iv] = v * length_scale();
+  }
+  return p;
+}
+
+void Interpreter::reread_position() {
+  // LinuxCNC re-reads its position from the machine at the block after a tool change
+  // (M6, M61): after G40 without a move since, the tool stands at the compensated point,
+  // which becomes the current point.
+  if (comp_ == 400) position_ = current_point(true);
 }
 
 // ---- parameters ---------------------------------------------------------------------
@@ -363,7 +386,8 @@ double Interpreter::named_value(const std::string& name, int column) const {
   double v = 0;
   if (!name.empty() && name[0] == '_') {
     const double s = length_scale();
-    const auto axis = [&](int i) { return position_[static_cast<size_t>(i)] / s; };
+    const Pose cur = current_point();
+    const auto axis = [&](int i) { return cur[static_cast<size_t>(i)] / s; };
     static const char* kPos[] = {"_x", "_y", "_z", "_a", "_b", "_c", "_u", "_v", "_w"};
     for (int i = 0; i < kNumAxes; ++i)
       if (name == kPos[i]) return axis(i);
@@ -371,7 +395,7 @@ double Interpreter::named_value(const std::string& name, int column) const {
     for (int i = 0; i < kNumAxes; ++i)
       if (name == kAbs[i]) {
         const size_t k = static_cast<size_t>(i);
-        return machine_of(position_, coord_)[k] / s;
+        return machine_of(cur, coord_)[k] / s;
       }
     if (name == "_line") return line_no_;
     if (name == "_motion_mode") return motion_ < 0 ? 800 : motion_;
@@ -1202,6 +1226,7 @@ void Interpreter::execute_block(Words& w) {
     tool_ = t;
     canon_.change_tool_number(ref(w.mcol[6]), t);
     set_tool_params();
+    reread_position();
   }
   // 9. Spindle.
   if (w.m[7] >= 0) {
@@ -1533,6 +1558,7 @@ void Interpreter::tool_change(Words& w) {
   canon_.change_tool(r, selected_tool_);
   tool_ = selected_tool_;
   set_tool_params();
+  reread_position();
 }
 
 void Interpreter::set_tool_params() {

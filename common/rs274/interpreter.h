@@ -101,6 +101,8 @@ class Interpreter {
   void g92(Words& w);
   void tool_change(Words& w);
   void set_tool_params();
+  Pose current_point(bool after_g40 = false) const;
+  void reread_position();
   struct SavedModes;
   void restore_modes(const SavedModes& s, int column);
   void cycle(Words& w);
