@@ -20,12 +20,21 @@ import argparse
 import math
 import os
 import random
+import re
 
 OPS_ARITH = ['+', '-', '*', '/', 'MOD', '**']
 OPS_CMP = ['EQ', 'NE', 'GT', 'GE', 'LT', 'LE']
 OPS_LOGIC = ['AND', 'OR', 'XOR']
 PREC = {'**': 6, '*': 5, '/': 5, 'MOD': 5, '+': 4, '-': 4,
         'EQ': 3, 'NE': 3, 'GT': 3, 'GE': 3, 'LT': 3, 'LE': 3, 'AND': 2, 'OR': 2, 'XOR': 2}
+
+
+# LinuxCNC version difference (expected-differences.md, "TOLERANCE_EQUAL"): EQ/NE
+# treat values closer than TOLERANCE_EQUAL as equal, 1e-4 in the rs274 oracle
+# (2.9.0~pre1), 1e-6 since 2.9.0 (commit 014777a816, which also made LE/GE
+# fuzzy), as cnc-rs274. Comparisons of values closer than this are not
+# generated with EQ/NE/LE/GE (GT/LT are exact in both).
+NEAR_TIE = 2e-4
 
 
 def fmt(v):
@@ -80,6 +89,8 @@ class Expr:
             a, va = self.safe(depth - 1)
             b, vb = self.safe(depth - 1)
             op = r.choice(OPS_CMP)
+            if op in ('EQ', 'NE', 'LE', 'GE') and 0 < abs(va - vb) < NEAR_TIE:
+                op = 'GT' if op in ('NE', 'GE') else 'LT'
             vv = {'EQ': va == vb, 'NE': va != vb, 'GT': va > vb, 'GE': va >= vb,
                   'LT': va < vb, 'LE': va <= vb}[op]
             return f"[{a} {op} {b}]", 1.0 if vv else 0.0
@@ -181,7 +192,10 @@ class Expr:
                 if a < 0 and b != int(b):
                     raise ValueError
                 return a ** b
-            if op == 'EQ': return 1.0 if a == b else 0.0
+            if op == 'EQ':
+                if 0 < abs(a - b) < NEAR_TIE:
+                    raise ValueError(op)
+                return 1.0 if a == b else 0.0
             if op == 'GT': return 1.0 if a > b else 0.0
             if op == 'AND': return 1.0 if (a != 0 and b != 0) else 0.0
             if op == 'OR': return 1.0 if (a != 0 or b != 0) else 0.0
@@ -213,16 +227,28 @@ class Gen:
         self.plane = 'G17'
         self.known = None         # known position (program frame, current units) or None
         self.tool = 0
+        self.tlo = False          # a G43 may be active (no G49 since)
+        self.sync_needed = False  # offsets changed since the last sync move (see sync_before_m6)
+        self.cs = 1               # active coordinate system (G54 = 1)
+        self.g92_on = False       # a G92 offset may be active
         self.spindle = False
         self.comp = False
         self.ext_sub = ext_sub_name
         self.subs = []            # (name, nargs, returns)
         self.gcount = 0
+        self.loop_words = set()   # (o-word, 'break' / 'continue') emitted in that loop
 
     # -- helpers
     def emit(self, text, numbered=True):
         n = len(self.lines) + 1
         self.lines.append(f"N{n} {text}" if numbered else text)
+
+    def insert(self, at, texts):
+        """Insert numbered lines before index at; renumber the N-fields after them."""
+        self.lines[at:at] = [f"N0 {t}" for t in texts]
+        for i in range(at, len(self.lines)):
+            if self.lines[i].startswith('N'):
+                self.lines[i] = re.sub(r'^N\d+ ', f"N{i + 1} ", self.lines[i])
 
     def next_o(self):
         self.oword += 1
@@ -356,22 +382,44 @@ class Gen:
         r = self.r
         k = r.random()
         s = self.scale()
+        self.sync_needed = True
         if k < 0.3:
             p = r.randint(1, 9)
             rot = f" R{fmt(self.num(-30, 30, 1))}" if r.random() < 0.15 else (" R0" if r.random() < 0.2 else '')
+            if p == self.cs and self.g92_on:
+                # LinuxCNC bug (expected-differences.md, "G10 L2 R with G92"):
+                # convert_setup re-expresses the current point with the G92
+                # offset left out of the rotation; the tool's position becomes
+                # wrong in the interpreter when the active system's rotation
+                # changes while a G92 offset is on.
+                rot = ''
             self.emit(f"G10 L2 P{p} X{fmt(self.num(-20, 20) * s)} Y{fmt(self.num(-20, 20) * s)} Z{fmt(self.num(-5, 5) * s)}{rot}")
         elif k < 0.45:
             self.emit(f"G10 L20 P{r.randint(0, 9)} X{fmt(self.num(-20, 20) * s)} Y{fmt(self.num(-20, 20) * s)}")
         elif k < 0.7:
-            self.emit(r.choice(['G54', 'G55', 'G56', 'G57', 'G58', 'G59', 'G59.1', 'G59.2', 'G59.3']))
+            g = r.choice(['G54', 'G55', 'G56', 'G57', 'G58', 'G59', 'G59.1', 'G59.2', 'G59.3'])
+            self.emit(g)
+            self.cs = ['G54', 'G55', 'G56', 'G57', 'G58', 'G59', 'G59.1', 'G59.2', 'G59.3'].index(g) + 1
         elif k < 0.85:
             self.emit(f"G92 X{fmt(self.num(-20, 20) * s)} Y{fmt(self.num(-20, 20) * s)} Z{fmt(self.num(-5, 5) * s)}")
+            self.g92_on = True
         else:
-            self.emit(r.choice(['G92.1', 'G92.2', 'G92.3']))
+            g = r.choice(['G92.1', 'G92.2', 'G92.3'])
+            self.emit(g)
+            self.g92_on = g == 'G92.3'
         self.known = None
 
     def blk_units(self):
         u = self.r.choice(['G20', 'G21'])
+        if self.tlo and (u == 'G20') != (self.units == 'inch'):
+            # rs274 artifact (expected-differences.md, "units change with G43"):
+            # on a change of units the interpreter re-reads the tool length
+            # offset from the canon (convert_length_units); rs274's canon
+            # returns it in the units it was given, unconverted, so the active
+            # offset becomes 25.4 times too large or small. No offset across it.
+            self.emit("G49")
+            self.tlo = False
+            self.sync_needed = True
         self.emit(u)
         self.units = 'inch' if u == 'G20' else 'mm'
         self.known = None
@@ -387,6 +435,7 @@ class Gen:
         k = r.random()
         if k < 0.5:
             t = r.randint(1, 20)
+            self.sync_before_m6()
             self.emit(f"T{t} M6" if r.random() < 0.5 else f"T{t}")
             if not self.lines[-1].endswith('M6'):
                 self.emit("M6")
@@ -394,11 +443,34 @@ class Gen:
             self.spindle = False
             if r.random() < 0.7:
                 self.emit("G43" if r.random() < 0.5 else f"G43 H{t}")
+                self.tlo = True
         elif k < 0.8:
             self.emit(f"G43 H{r.randint(0, 20)}")
+            self.tlo = True
         else:
             self.emit("G49")
+            self.tlo = False
+        self.sync_needed = True
         self.known = None
+
+    def sync_before_m6(self):
+        """A zero move before a tool change when an offset changed since the last move.
+
+        rs274 artifact (expected-differences.md, "tool change re-reads the
+        position"): at the block after M6 the interpreter re-reads its position
+        from the canon (Interp::read_inputs -> refresh_actual_position). The
+        standalone rs274's canon (saicanon.cc) returns the last programmed point,
+        corrected for later G5x/G92/unit changes but not for tool length offset
+        (G43/G49) or XY rotation changes, so such a change between the last move
+        and M6 is lost from rs274's position (real LinuxCNC's canon computes the
+        position from the machine's). A zero incremental traverse puts both in
+        step; the G43 after M6 always comes on a later line.
+        """
+        if self.sync_needed:
+            self.emit("G91 G0 X0 Y0 Z0")
+            if self.dist == 'G90':
+                self.emit("G90")
+            self.sync_needed = False
 
     def blk_spindle(self):
         r = self.r
@@ -433,6 +505,7 @@ class Gen:
         s = self.scale()
         t = r.randint(1, 5)                       # D 0.02..0.1 in: radius <= 1.27 mm
         if self.tool != t and r.random() < 0.5:
+            self.sync_before_m6()
             self.emit(f"T{t} M6"); self.tool = t; self.spindle = False
         w, h = self.num(15, 40) * s, self.num(15, 40) * s
         x0, y0 = self.num(-30, 10) * s, self.num(-30, 10) * s
@@ -542,16 +615,40 @@ class Gen:
             n = r.randint(1, 4)
             self.emit(f"{var} = 0")
             self.emit(f"o{o} while [{var} LT {n}]")
-            self.body(depth + 1, loop=(o, var))
+            self.body(depth + 1, loop=(o, var, 'while'))
             self.emit(f"{var} = [{var} + 1]")
             self.emit(f"o{o} endwhile")
+            if (o, 'break') in self.loop_words:
+                # LinuxCNC bug (interp_o_word.cc): 'break' sets doing_break, which
+                # only the end test of a do-while clears; left set by a while
+                # loop, it makes the next do-while, anywhere later, stop after
+                # one pass (expected-differences.md, "stale break"). A do-while
+                # that runs once anyway clears it and is a no-op for us.
+                rst = self.next_o()
+                self.emit(f"o{rst} do")
+                self.emit(f"o{rst} while [0]")
         elif k < 0.6:
             n = r.randint(1, 4)
             self.emit(f"{var} = 0")
             self.emit(f"o{o} do")
+            at = len(self.lines)
             self.emit(f"{var} = [{var} + 1]")
-            self.body(depth + 1, loop=(o, var))
+            self.body(depth + 1, loop=(o, var, 'do'))
             self.emit(f"o{o} while [{var} LT {n}]")
+            if (o, 'continue') in self.loop_words:
+                # LinuxCNC bug (interp_o_word.cc): 'continue' sets doing_continue,
+                # which only an endwhile/endrepeat reached by skipping clears; left
+                # set by a do-while, the next while/repeat that ends by skipping
+                # loops back once more (a repeat runs its count again, a while
+                # 'break' acts as 'continue') (expected-differences.md, "stale
+                # continue"). A while loop whose test is false clears it and is
+                # a no-op for us: one at the top of the body (the continue
+                # jumps to the test and may loop back) and one after the loop.
+                rst = self.next_o()
+                self.insert(at, [f"o{rst} while [0]", f"o{rst} endwhile"])
+                rst = self.next_o()
+                self.emit(f"o{rst} while [0]")
+                self.emit(f"o{rst} endwhile")
         elif k < 0.75:
             self.emit(f"o{o} repeat [{r.randint(1, 3)}]")
             self.body(depth + 1, loop=None)
@@ -581,9 +678,10 @@ class Gen:
         for _ in range(r.randint(1, 3)):
             k = r.random()
             if loop and k < 0.15:
-                o, var = loop
+                o, var, kind = loop
                 oi = self.next_o()
                 word = r.choice(['break', 'continue'])
+                self.loop_words.add((o, word))
                 if word == 'continue' and var is not None and self.lines and 'while [' in ''.join(self.lines[-50:]):
                     pass
                 self.emit(f"o{oi} if [{var} GE {r.randint(1, 3)}]")
