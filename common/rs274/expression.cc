@@ -17,7 +17,8 @@ constexpr double kToleranceEqual = 1e-6;
 constexpr long double kPiL = 3.141592653589793238462643383279502884L;
 
 double to_radians(double deg) { return static_cast<double>(static_cast<long double>(deg) * kPiL / 180.0L); }
-double to_degrees(double rad) { return static_cast<double>(static_cast<long double>(rad) * 180.0L / kPiL); }
+// ((x * 180.0) / M_PIl): the product is a double (rounded), the division long double.
+double to_degrees(double rad) { return static_cast<double>(static_cast<long double>(rad * 180.0) / kPiL); }
 
 class Evaluator {
  public:
