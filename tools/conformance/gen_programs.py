@@ -555,6 +555,11 @@ class Gen:
 
     def blk_cycle(self):
         r = self.r
+        # G88 ends at the bottom after PROGRAM_STOP (the operator retracts by
+        # hand) while the interpreter's point is the retract plane; the
+        # position re-read after a later M6 (rs274: the last programmed point)
+        # would differ: a sync move before the next tool change.
+        self.sync_needed = True
         if self.plane != 'G17':
             self.emit("G17"); self.plane = 'G17'
         s = self.scale()
