@@ -36,7 +36,7 @@ std::string apply_recorded_input(Interpolator& core, const cnc::lcmt_interp_inpu
     if (!to_core_command(in.command, &c)) return "unknown or malformed command " + std::to_string(in.command.command);
     if (c.kind == Command::Kind::kReset && in.command.num_axes != num_axes)
       return "reset with " + std::to_string(in.command.num_axes) + " axes, the machine has " + std::to_string(num_axes);
-    core.apply_command(c);
+    if (!core.apply_command(c)) return "the planner could not take the command";
     return "";
   }
   if (in.kind == cnc::lcmt_interp_input::BLOCK) {
@@ -44,6 +44,12 @@ std::string apply_recorded_input(Interpolator& core, const cnc::lcmt_interp_inpu
     const std::string why = program::from_msg(in.block, num_axes, &b);
     if (!why.empty()) return why;
     if (!core.apply_block(b)) return core.last_refusal();
+    return "";
+  }
+  if (in.kind == cnc::lcmt_interp_input::PLAN) {
+    if (in.plans <= 0) return "a PLAN input of " + std::to_string(in.plans) + " plans";
+    if (!core.apply_plans_exact(in.plans)) return "fewer than " + std::to_string(in.plans) + " plans are ready";
+    core.take_plan_failure();  // a plan that failed stops the program inside the core, as live
     return "";
   }
   return "unknown input kind " + std::to_string(in.kind);

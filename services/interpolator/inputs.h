@@ -15,7 +15,9 @@ namespace cnc::interp {
 bool to_core_command(const cnc::lcmt_program_command& m, Command* out);
 
 // Applies one recorded input to the core. Returns "" when applied, else why not
-// (a block the core refused, a malformed message).
+// (a block the core refused, a malformed message). A BLOCK goes to the core's
+// planner, a PLAN takes that many finished plans: replay runs the planner inline
+// (SyncPlanLink), so the plans are ready and are taken at the recorded cycle.
 std::string apply_recorded_input(Interpolator& core, const cnc::lcmt_interp_input& in, int num_axes);
 
 }  // namespace cnc::interp

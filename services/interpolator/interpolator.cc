@@ -13,14 +13,9 @@ namespace cnc::interp {
 
 namespace {
 constexpr double kInf = std::numeric_limits<double>::infinity();
-// Share of each axis's acceleration and jerk left to the centripetal terms on
-// curved blocks; the tangential planning gets the rest.
-constexpr double kCentripetalShare = 0.5;
-// Samples per knot span of a NURBS and per radian of an arc.
-constexpr int kSamplesPerSpan = 16;
-constexpr double kArcSamplesPerRad = 24.0;
 
 using motion::AxisVec;
+
 
 // One phase of constant jerk j for time t applied to (s, v, a).
 void integrate(double j, double t, double* s, double* v, double* a) {
@@ -75,66 +70,6 @@ double landing_accel(double gap, double A, double J, double T) {
   return gap >= 0 ? a : -a;
 }
 
-// Appends u0 and the points that refine (u0, u1) until the local speed limit v(u)
-// (chord error, roughness) changes by at most 0.5 % between neighbours, so that
-// interpolating it linearly between samples never overestimates it by more than
-// that. Limits above v_top cannot bind and are not refined. At most 8 levels.
-template <class Limit>
-void refine(double u0, double v0, double u1, double v1, const Limit& vlim, double v_top, int depth,
-            std::vector<double>* out) {
-  const double lo = std::min(v0, v1);
-  if (depth >= 8 || lo >= v_top) {
-    out->push_back(u0);
-    return;
-  }
-  const double um = 0.5 * (u0 + u1);
-  const double vm = vlim(um);
-  if (std::fabs(v1 - v0) <= 0.005 * lo && vm >= 0.995 * lo) {
-    out->push_back(u0);
-    return;
-  }
-  refine(u0, v0, um, vm, vlim, v_top, depth + 1, out);
-  refine(um, vm, u1, v1, vlim, v_top, depth + 1, out);
-}
-
-double norm(const AxisVec& v, int n) {
-  double s = 0;
-  for (int i = 0; i < n; ++i) s += v[i] * v[i];
-  return std::sqrt(s);
-}
-
-// The local frame of a curve from its first two derivatives in u: the unit tangent
-// t and the curvature vector k = d²P/ds² (|k| = κ, along the normal). Returns |P'|;
-// 0 at a singular point, where t and k are left untouched.
-double local_frame(const AxisVec& d1, const AxisVec& d2, int n, AxisVec* t, AxisVec* k) {
-  const double sp = norm(d1, n);
-  if (sp <= 0) return 0;
-  double d2t = 0;
-  for (int a = 0; a < n; ++a) {
-    (*t)[a] = d1[a] / sp;
-    d2t += d2[a] * (*t)[a];
-  }
-  for (int a = 0; a < n; ++a) (*k)[a] = (d2[a] - d2t * (*t)[a]) / (sp * sp);
-  return sp;
-}
-
-// The speed of a rapid: the fastest its straight line allows within every axis's
-// velocity limit (for a move of no length, the slowest axis's limit).
-double rapid_speed(const config::MachineConfig& cfg, const program::Block& b, int n) {
-  double len2 = 0;
-  for (int a = 0; a < n; ++a) len2 += (b.end[a] - b.start[a]) * (b.end[a] - b.start[a]);
-  const double len = std::sqrt(len2);
-  double v = cfg.axes[0].max_velocity_mm_s;
-  for (int a = 0; a < n; ++a) v = std::min(v, cfg.axes[a].max_velocity_mm_s);
-  if (!(len > 0)) return v;
-  v = std::numeric_limits<double>::max();
-  for (int a = 0; a < n; ++a) {
-    const double d = std::fabs(b.end[a] - b.start[a]);
-    if (d > 0) v = std::min(v, cfg.axes[a].max_velocity_mm_s * len / d);
-  }
-  return v;
-}
-
 }  // namespace
 
 const char* to_string(Limit limit) {
@@ -168,240 +103,140 @@ ParamUpdate param_update_from_string(const std::string& s) {
   throw std::invalid_argument("parameter update '" + s + "' is not one of first_order, taylor2, corrected");
 }
 
-bool Interpolator::Planned::stop_block() const {
-  return block.kind == program::BlockKind::kDwell || block.kind == program::BlockKind::kEnd ||
-         block.kind == program::BlockKind::kEvent;
-}
-
-bool Interpolator::Planned::stop_at_start() const { return stop_block() || v_entry == 0; }
 
 Interpolator::Interpolator(const config::MachineConfig& cfg)
     : cfg_(cfg), period_s_(cfg.ipo_period_s), naxes_(static_cast<int>(cfg.axes.size())),
-      param_update_(param_update_from_string(cfg.param_update)) {
+      param_update_(param_update_from_string(cfg.param_update)), own_link_(std::make_unique<SyncPlanLink>(cfg)),
+      link_(own_link_.get()), inline_(true),
+      blocks_(static_cast<size_t>(std::max(64, 2 * cfg.block_window + 4))) {
+  for (int a = 0; a < naxes_; ++a) pos_[a] = cfg_.axes[a].home_mm;
+}
+
+Interpolator::Interpolator(const config::MachineConfig& cfg, PlanLink& link)
+    : cfg_(cfg), period_s_(cfg.ipo_period_s), naxes_(static_cast<int>(cfg.axes.size())),
+      param_update_(param_update_from_string(cfg.param_update)), link_(&link),
+      blocks_(static_cast<size_t>(std::max(64, 2 * cfg.block_window + 4))) {
   for (int a = 0; a < naxes_; ++a) pos_[a] = cfg_.axes[a].home_mm;
 }
 
 Interpolator::~Interpolator() = default;
 
-// ---- planning ------------------------------------------------------------------
-
-void Interpolator::plan_block(Planned& p) {
-  const program::Block& b = p.block;
-  // A rapid has no programmed feed: it goes as fast as its axes allow, a finite
-  // speed set below from the same samples as its axis-velocity limit (so feed hold,
-  // override and look-ahead do arithmetic on finite numbers only: ∞ × 0 is NaN).
-  const bool rapid = b.kind == program::BlockKind::kRapid;
-  p.v_prog = rapid ? rapid_speed(cfg_, b, naxes_) : b.feed_mm_per_min / 60.0;
-  p.accel = cfg_.path_accel_mm_s2;
-  p.jerk = cfg_.path_jerk_mm_s3;
-  if (p.stop_block()) return;
-
-  const bool curved = p.path.curved();
-  const double share = curved ? 1.0 - kCentripetalShare : 1.0;
-  // 1 % below the tolerance: the circle formula is exact for constant curvature;
-  // where the curvature changes within a step the error runs up to ~0.5 % over it.
-  const double eps = 0.99 * cfg_.chord_tolerance_mm;
-  // The roughness law is for cutting moves; a rapid does not cut.
-  const bool rough = b.process.active() && b.spindle_rpm > 0 && b.kind != program::BlockKind::kRapid;
-  const process::RoughnessLaw law{b.process.ball_radius_mm, b.process.flutes, b.process.pick_feed_mm,
-                                  b.process.target_rmax_um * 1e-3};
-  if (rough) {
-    const std::string why = law.validate();
-    if (!why.empty()) throw std::invalid_argument("process parameters: " + why);
+void Interpolator::Ring::push_back(Planned* p) {
+  if (size_ == slots_.size()) {
+    // More blocks queued than the ring was sized for (a caller without the feed
+    // policy's window): grow, keeping the order.
+    std::vector<Planned*> bigger(2 * slots_.size());
+    for (size_t i = 0; i < size_; ++i) bigger[i] = slots_[(head_ + i) % slots_.size()];
+    slots_.swap(bigger);
+    head_ = 0;
   }
-
-  // Parameter values to sample: uniform per knot span (NURBS) or per angle (arcs),
-  // then refined where the chord or roughness limit changes quickly.
-  std::vector<double> us;
-  const double u0 = p.path.u_begin(), u1 = p.path.u_end();
-  if (!curved) {
-    us = {u0, u1};
-  } else {
-    std::vector<double> grid;
-    if (b.kind == program::BlockKind::kNurbs) {
-      const std::vector<double> bp = p.path.nurbs_breakpoints();
-      for (size_t k = 0; k + 1 < bp.size(); ++k)
-        for (int i = 0; i < kSamplesPerSpan; ++i) grid.push_back(bp[k] + (bp[k + 1] - bp[k]) * i / kSamplesPerSpan);
-    } else {
-      const int n = std::max(2, static_cast<int>(std::ceil(p.path.arc_sweep_rad() * kArcSamplesPerRad)));
-      for (int i = 0; i < n; ++i) grid.push_back(u0 + (u1 - u0) * i / n);
-    }
-    grid.push_back(u1);
-    auto vlim = [&](double u) {
-      AxisVec P{}, d1{}, d2{}, t{}, k{};
-      p.path.eval(u, &P, &d1, &d2);
-      if (local_frame(d1, d2, naxes_, &t, &k) <= 0) return kInf;
-      const double kappa = norm(k, naxes_);
-      double v = kappa > 1e-12 ? geometry::chord_step_length(1.0 / kappa, eps) / period_s_ : kInf;
-      if (rough && naxes_ >= 3)
-        v = std::min(v, law.feed_mm_per_min(b.spindle_rpm,
-                                            process::feed_inclination_angle(Eigen::Vector3d(t[0], t[1], t[2]))) /
-                            60.0);
-      return v;
-    };
-    // Nothing above the fastest the block can go (1.5 × override) needs refining.
-    double v_top = 1.5 * p.v_prog;
-    for (int a = 0; a < naxes_; ++a) v_top = std::min(v_top, std::sqrt(3.0) * cfg_.axes[a].max_velocity_mm_s);
-    double va = vlim(grid[0]);
-    for (size_t k = 0; k + 1 < grid.size(); ++k) {
-      const double vb = vlim(grid[k + 1]);
-      refine(grid[k], va, grid[k + 1], vb, vlim, v_top, 0, &us);
-      va = vb;
-    }
-    us.push_back(u1);
-  }
-
-  // Per sample: speed limits from the local geometry.
-  const size_t n = us.size();
-  p.samples.assign(n, Sample{0, 0, kInf, Limit::kNone});
-  planned_samples_ += static_cast<int64_t>(n);
-  std::vector<AxisVec> kvec(n);  // curvature vector d²P/ds²
-  std::vector<double> v_chord(n, kInf);
-  double v_rapid = p.v_prog;  // a rapid's speed: the least axis-velocity limit of its samples
-  for (size_t i = 0; i < n; ++i) {
-    AxisVec P{}, d1{}, d2{};
-    p.path.eval(us[i], &P, &d1, &d2);
-    AxisVec t{};
-    Sample& smp = p.samples[i];
-    smp.u = us[i];
-    if (local_frame(d1, d2, naxes_, &t, &kvec[i]) <= 0) continue;
-    const double kappa = norm(kvec[i], naxes_);
-    auto take = [&smp](double v, Limit why) {
-      if (v < smp.v_geo) {
-        smp.v_geo = v;
-        smp.limit = why;
-      }
-    };
-    for (int a = 0; a < naxes_; ++a) {
-      const double ta = std::fabs(t[a]);
-      if (ta > 0) {
-        const double v_axis = cfg_.axes[a].max_velocity_mm_s / ta;
-        take(v_axis, Limit::kAxisVelocity);
-        v_rapid = std::min(v_rapid, v_axis);
-        p.accel = std::min(p.accel, share * cfg_.axes[a].max_accel_mm_s2 / ta);
-        p.jerk = std::min(p.jerk, share * cfg_.axes[a].max_jerk_mm_s3 / ta);
-      }
-      if (std::fabs(kvec[i][a]) > 0)
-        take(std::sqrt(kCentripetalShare * cfg_.axes[a].max_accel_mm_s2 / std::fabs(kvec[i][a])),
-             Limit::kCurvatureAccel);
-    }
-    if (kappa > 1e-12) v_chord[i] = geometry::chord_step_length(1.0 / kappa, eps) / period_s_;
-    if (rough && naxes_ >= 3) {
-      const double alpha = process::feed_inclination_angle(Eigen::Vector3d(t[0], t[1], t[2]));
-      take(law.feed_mm_per_min(b.spindle_rpm, alpha) / 60.0, Limit::kRoughness);
-    }
-  }
-  if (rapid) p.v_prog = v_rapid;
-  // The chord limit holds over a whole step, and the curvature may peak between
-  // samples: each sample takes the least of its neighbours' chord limits.
-  for (size_t i = 0; i < n; ++i) {
-    double v = v_chord[i];
-    if (i > 0) v = std::min(v, v_chord[i - 1]);
-    if (i + 1 < n) v = std::min(v, v_chord[i + 1]);
-    if (v < p.samples[i].v_geo) {
-      p.samples[i].v_geo = v;
-      p.samples[i].limit = Limit::kChord;
-    }
-  }
-  // Arc length by 3-point Gauss–Legendre per sample interval (on top of dense samples).
-  double s = 0;
-  for (size_t i = 0; i + 1 < n; ++i) {
-    const double a = us[i], c = us[i + 1], h = 0.5 * (c - a), m = 0.5 * (a + c);
-    static constexpr double kX = 0.7745966692414834, kW0 = 8.0 / 9.0, kW1 = 5.0 / 9.0;
-    auto spd = [&](double u) {
-      AxisVec P{}, d1{}, d2{};
-      p.path.eval(u, &P, &d1, &d2);
-      return norm(d1, naxes_);
-    };
-    s += h * (kW0 * spd(m) + kW1 * (spd(m - h * kX) + spd(m + h * kX)));
-    p.samples[i + 1].s = s;
-  }
-  p.length = s;
-  // Jerk from the curvature changing along the path: v³·|dk/ds| per axis.
-  for (size_t i = 0; i + 1 < n && curved; ++i) {
-    const double ds = p.samples[i + 1].s - p.samples[i].s;
-    if (ds <= 0) continue;
-    for (int a = 0; a < naxes_; ++a) {
-      const double dk = std::fabs(kvec[i + 1][a] - kvec[i][a]) / ds;
-      if (dk <= 0) continue;
-      const double v = std::cbrt(kCentripetalShare * cfg_.axes[a].max_jerk_mm_s3 / dk);
-      for (size_t k : {i, i + 1}) {
-        if (v < p.samples[k].v_geo) {
-          p.samples[k].v_geo = v;
-          p.samples[k].limit = Limit::kCurvatureAccel;
-        }
-      }
-    }
-  }
+  slots_[(head_ + size_) % slots_.size()] = p;
+  ++size_;
 }
 
-void Interpolator::plan_junction(Planned& prev, Planned& next) const {
-  if (prev.stop_block() || next.stop_block() || prev.path.degenerate() || next.path.degenerate()) {
-    next.v_entry = 0;
+// ---- planner hand-over -------------------------------------------------------------
+
+bool Interpolator::flush_requests() {
+  size_t sent = 0;
+  while (sent < pending_n_ && link_->push(pending_[sent])) ++sent;
+  if (sent > 0) {
+    for (size_t i = sent; i < pending_n_; ++i) pending_[i - sent] = pending_[i];
+    pending_n_ -= sent;
+  }
+  return pending_n_ == 0;
+}
+
+bool Interpolator::push_request(const PlanRequest& r) {
+  // Requests reach the planner in the order they were made, whenever the link has
+  // room: the planner's output depends on that order only.
+  if (flush_requests() && link_->push(r)) return true;
+  if (pending_n_ == pending_.size()) return false;
+  pending_[pending_n_++] = r;
+  return true;
+}
+
+void Interpolator::clear_blocks() {
+  // The cyclic side lets go of every block; the planner frees them on the clear.
+  blocks_.clear();
+  ++epoch_;
+  failed_ = false;
+  have_tail_ = false;
+  PlanRequest r;
+  r.kind = PlanRequest::Kind::kClear;
+  r.epoch = epoch_;
+  if (!push_request(r)) throw std::runtime_error("planner request queue full: the planner thread is stuck");
+}
+
+void Interpolator::pop_block() {
+  retired_below_ = blocks_.front().serial + 1;
+  retire_pending_ = true;
+  blocks_.pop_front();
+}
+
+void Interpolator::take(PlanUpdate& u) {
+  if (u.epoch != epoch_ || failed_) return;  // of a program dropped since
+  if (!u.error.empty()) {
+    // The block could not be planned: the program stops here, as after a STOP.
+    failed_ = true;
+    failure_ = u.error;
+    refusal_ = u.error;
+    if (state_ != RunState::kIdle && state_ != RunState::kDone) stopping_ = true;
     return;
   }
-  AxisVec P{}, t0{}, t1{}, d2{};
-  prev.path.eval(prev.path.u_end(), &P, &t0, &d2);
-  next.path.eval(next.path.u_begin(), &P, &t1, &d2);
-  const double n0 = norm(t0, naxes_), n1 = norm(t1, naxes_);
-  const double T = period_s_;
-  const double a_path = std::min(prev.accel, next.accel);
-  double v = kInf;
-  double dt2 = 0;
-  for (int a = 0; a < naxes_; ++a) {
-    const double dt = std::fabs(t1[a] / n1 - t0[a] / n0);
-    dt2 += dt * dt;
-    if (dt < 1e-12) continue;
-    const auto& ax = cfg_.axes[a];
-    // The direction change happens within one cycle. It turns the path
-    // acceleration by the same angle: where that alone would step the axis's
-    // acceleration by more than half its jerk budget, the corner is a stop.
-    if (a_path * dt > 0.5 * ax.max_jerk_mm_s3 * T) {
-      next.v_entry = 0;
-      return;
-    }
-    // Otherwise its velocity step must stay within one cycle's acceleration and
-    // half a cycle's jerk (the tangential acceleration changes across it too).
-    v = std::min(v, std::min(ax.max_accel_mm_s2 * T, 0.5 * ax.max_jerk_mm_s3 * T * T) / dt);
+  if (u.block != nullptr) {
+    Planned* p = u.block;
+    // On an empty buffer the path starts from its current speed (at rest: a block
+    // arriving after the buffer ran out starts from a stop).
+    if (blocks_.empty()) p->live_entry = v_;
+    blocks_.push_back(p);
+    planned_samples_ += u.samples;
   }
-  if (dt2 > 0) v = std::min(v, std::min(cfg_.path_accel_mm_s2 * T, 0.5 * cfg_.path_jerk_mm_s3 * T * T) / std::sqrt(dt2));
-  next.v_entry = v;
+  if (blocks_.empty()) return;
+  const uint64_t first = blocks_.front().serial;
+  for (const PlanUpdate::Patch& pt : u.patches) {
+    if (pt.serial < first || pt.serial - first >= blocks_.size()) continue;  // done, or not yet taken
+    Planned& p = blocks_[static_cast<size_t>(pt.serial - first)];
+    std::copy(u.values.begin() + pt.offset, u.values.begin() + pt.offset + pt.count,
+              p.v_bw.begin() + pt.from);
+    if (pt.from == 0 && p.live_entry < p.v_entry && !p.v_bw.empty()) p.v_bw[0] = std::min(p.v_bw[0], p.live_entry);
+  }
 }
 
-void Interpolator::backward_pass(bool full) {
-  // From the end of the buffer (a stop unless more blocks come) backwards. After a
-  // block was appended only the tail changes: once a recomputed limit equals the
-  // stored one, everything before it is unchanged too.
-  double carry = 0;
-  bool last = true;
-  for (auto it = blocks_.rbegin(); it != blocks_.rend(); ++it) {
-    Planned& p = *it;
-    if (p.stop_block()) {
-      carry = 0;
-      last = false;
-      continue;
-    }
-    const size_t n = p.samples.size();
-    const bool fresh = p.v_bw.size() != n;
-    if (fresh) p.v_bw.assign(n, -1.0);
-    const double vp = programmed_speed(p);
-    const bool feed_binds = !rapid_at_full_speed(p);
-    for (size_t i = n; i-- > 0;) {
-      double cap = feed_binds ? std::min(p.samples[i].v_geo, vp) : p.samples[i].v_geo;
-      if (i == 0) cap = std::min(cap, p.v_entry);
-      const double ds = i + 1 < n ? p.samples[i + 1].s - p.samples[i].s : 0.0;
-      const double v = std::min(cap, std::sqrt(carry * carry + 2.0 * p.accel * ds));
-      if (!full && !fresh && !last && v == p.v_bw[i]) return;
-      p.v_bw[i] = v;
-      carry = v;
-    }
-    last = false;
+int Interpolator::apply_plans(int64_t budget, int64_t* budget_used) {
+  flush_requests();
+  int n = 0;
+  while (*budget_used < budget) {
+    PlanUpdate* u = link_->front();
+    if (u == nullptr) break;
+    *budget_used += u->epoch == epoch_ && !failed_ ? u->samples : 0;
+    if (u->block != nullptr || !u->error.empty()) ++taken_;
+    take(*u);
+    link_->pop();
+    ++n;
   }
+  return n;
+}
+
+bool Interpolator::apply_plans_exact(int n) {
+  for (int i = 0; i < n; ++i) {
+    PlanUpdate* u = link_->front();
+    if (u == nullptr) return false;
+    if (u->block != nullptr || !u->error.empty()) ++taken_;
+    take(*u);
+    link_->pop();
+  }
+  return true;
+}
+
+std::string Interpolator::take_plan_failure() {
+  std::string f;
+  f.swap(failure_);
+  return f;
 }
 
 // ---- inputs ----------------------------------------------------------------------
 
-bool Interpolator::apply_block(const program::Block& block) {
+bool Interpolator::check_block(const program::Block& block) {
   refusal_.clear();
   if (block.index != next_index_) {
     refusal_ = "block " + std::to_string(block.index) + " out of order (expected " + std::to_string(next_index_) + ")";
@@ -422,7 +257,7 @@ bool Interpolator::apply_block(const program::Block& block) {
   {
     double gap = 0;
     for (int a = 0; a < naxes_; ++a) {
-      const double expected = blocks_.empty() ? pos_[a] : blocks_.back().block.end[a];
+      const double expected = have_tail_ ? tail_[a] : pos_[a];
       gap = std::max(gap, std::fabs(block.start[a] - expected));
     }
     if (gap > 1e-6) {
@@ -437,26 +272,64 @@ bool Interpolator::apply_block(const program::Block& block) {
     refusal_ = "block " + std::to_string(block.index) + ": feed or dwell time out of range";
     return false;
   }
-  try {
-    Planned p(block, motion::PathSegment(block, naxes_));
-    plan_block(p);
-    if (!blocks_.empty()) plan_junction(blocks_.back(), p);
-    else p.v_entry = v_;  // the path starts from the current speed (0 when at rest)
-    blocks_.push_back(std::move(p));
-  } catch (const std::exception& e) {
-    refusal_ = std::string("block ") + std::to_string(block.index) + ": " + e.what();
-    return false;
-  }
-  ++next_index_;
-  backward_pass(false);
   return true;
 }
 
-void Interpolator::apply_command(const Command& cmd) {
+bool Interpolator::submit_block(std::unique_ptr<program::Block> block) {
+  if (!block || !check_block(*block)) return false;
+  if (!inline_ && pending_n_ > 0 && !flush_requests()) {
+    refusal_ = "the planner is busy";
+    return false;
+  }
+  const bool had_tail = have_tail_;
+  const bool was_stopping = stopping_;
+  const auto tail = tail_;
+  const int64_t index = block->index;
+  for (int a = 0; a < naxes_; ++a) tail_[a] = block->end[a];
+  have_tail_ = true;
+  PlanRequest r;
+  r.kind = PlanRequest::Kind::kBlock;
+  r.epoch = epoch_;
+  r.serial = next_serial_;
+  r.block = block.get();
+  if (!link_->push(r)) {  // full: not taken, nothing changed
+    have_tail_ = had_tail;
+    tail_ = tail;
+    refusal_ = "the planner is busy";
+    return false;
+  }
+  block.release();  // the planner's now
+  ++next_serial_;
+  ++next_index_;
+  ++submitted_;
+  if (inline_) {
+    int64_t used = 0;
+    apply_plans(std::numeric_limits<int64_t>::max(), &used);
+    if (!failure_.empty()) {
+      // Planned inline: refused as a whole, as if never submitted.
+      failure_.clear();
+      failed_ = false;
+      stopping_ = was_stopping;
+      --next_index_;
+      have_tail_ = had_tail;
+      tail_ = tail;
+      (void)index;
+      return false;
+    }
+  }
+  return true;
+}
+
+bool Interpolator::apply_block(const program::Block& block) {
+  if (!check_block(block)) return false;
+  return submit_block(std::make_unique<program::Block>(block));
+}
+
+bool Interpolator::apply_command(const Command& cmd) {
   switch (cmd.kind) {
     case Command::Kind::kLoad:
-      if (state_ == RunState::kRunning || state_ == RunState::kHeld || state_ == RunState::kStarved) return;
-      blocks_.clear();
+      if (state_ == RunState::kRunning || state_ == RunState::kHeld || state_ == RunState::kStarved) return true;
+      clear_blocks();
       next_index_ = 0;
       blocks_done_ = 0;
       program_cycles_ = 0;
@@ -479,7 +352,7 @@ void Interpolator::apply_command(const Command& cmd) {
       break;
     case Command::Kind::kReset:
       // After a fault: nothing of the program is left, the path rests where the drives are.
-      blocks_.clear();
+      clear_blocks();
       next_index_ = 0;
       blocks_done_ = 0;
       program_cycles_ = 0;
@@ -495,12 +368,24 @@ void Interpolator::apply_command(const Command& cmd) {
       break;
     case Command::Kind::kOverride:
       if (std::isfinite(cmd.feed_override)) {
-        override_ = std::clamp(cmd.feed_override, 0.0, 1.5);
-        backward_pass(true);
+        // The cap follows at once; the look-ahead over the buffer is re-planned by
+        // the planner and follows when that plan is taken.
+        PlanRequest r;
+        r.kind = PlanRequest::Kind::kOverride;
+        r.epoch = epoch_;
+        r.feed_override = std::clamp(cmd.feed_override, 0.0, 1.5);
+        if (!push_request(r)) return false;
+        override_ = r.feed_override;
+        if (inline_) {
+          int64_t used = 0;
+          apply_plans(std::numeric_limits<int64_t>::max(), &used);
+        }
       }
       break;
   }
+  return true;
 }
+
 
 // ---- motion ----------------------------------------------------------------------
 
@@ -544,11 +429,12 @@ bool Interpolator::safe(double v_n, double a_n, double s_n, double* v_target) co
   const double T = period_s_;
   double offset = 0;  // arc length of the front block's start relative to its start
   double horizon = -1;
-  for (const Planned& p : blocks_) {
+  for (size_t b = 0; b < blocks_.size(); ++b) {
+    const Planned& p = blocks_[b];
     A = std::min(A, p.accel);
     J = std::min(J, p.jerk);
     if (horizon < 0) horizon = brake_distance(v_n, a_n, 0.0, A, J) + v_n * period_s_ + 1e-9;
-    if (p.stop_block() || (p.v_entry == 0 && offset > 0)) {
+    if (p.stop_block() || (p.live_entry == 0 && offset > 0)) {
       if (v_target != nullptr) *v_target = 0;
       return brake_distance(v_n, a_n, 0.0, A, J) + 0.5 * v_n * T <= offset - s_n + 1e-9;
     }
@@ -585,7 +471,7 @@ double Interpolator::advance(double ds, bool* reached_stop) {
       out_.block_index = p.block.index;
       out_.source_line = p.block.source_line;
       out_.u = p.path.u_end();
-      blocks_.pop_front();
+      pop_block();
       ++blocks_done_;
       s_ = 0;
       u_ = blocks_.empty() ? 0 : blocks_.front().path.u_begin();
@@ -641,8 +527,9 @@ bool Interpolator::creep_to_stop() {
   double d = -s_;
   double J = kInf;
   bool first = true;
-  for (const Planned& p : blocks_) {
-    if (p.stop_block() || (!first && p.v_entry == 0)) break;
+  for (size_t b = 0; b < blocks_.size(); ++b) {
+    const Planned& p = blocks_[b];
+    if (p.stop_block() || (!first && p.live_entry == 0)) break;
     first = false;
     J = std::min(J, p.jerk);
     d += p.length;
@@ -659,6 +546,7 @@ bool Interpolator::creep_to_stop() {
 }
 
 const Setpoint& Interpolator::step() {
+  if (pending_n_ > 0) flush_requests();
   out_.cycle = cycle_;
   out_.num_axes = naxes_;
   out_.feed_mm_per_min = 0;
@@ -675,7 +563,7 @@ const Setpoint& Interpolator::step() {
       out_.block_index = p.block.index;
       out_.source_line = p.block.source_line;
       if (p.block.kind == program::BlockKind::kEnd) {
-        blocks_.pop_front();
+        pop_block();
         ++blocks_done_;
         state_ = RunState::kDone;
       } else if (!pausing && p.block.kind == program::BlockKind::kEvent && p.block.event.pauses() &&
@@ -689,7 +577,7 @@ const Setpoint& Interpolator::step() {
         if (dwell_left_ > 0) --dwell_left_;
         state_ = RunState::kRunning;
         if (dwell_left_ == 0) {
-          blocks_.pop_front();
+          pop_block();
           ++blocks_done_;
           dwell_left_ = -1;
           event_paused_ = false;
@@ -698,7 +586,7 @@ const Setpoint& Interpolator::step() {
       }
     } else if (blocks_.empty() || (stopping_ && v_ == 0 && a_ == 0)) {
       if (stopping_) {
-        blocks_.clear();
+        clear_blocks();
         stopping_ = false;
         state_ = RunState::kIdle;
         v_ = a_ = 0;
@@ -780,6 +668,11 @@ const Setpoint& Interpolator::step() {
   out_.position_mm = pos_;
   out_.state = state_;
   ++cycle_;
+  if (retire_pending_) {
+    // The planner may free what the path has left behind.
+    retire_pending_ = false;
+    link_->retire(retired_below_);
+  }
   return out_;
 }
 

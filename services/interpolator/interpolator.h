@@ -19,23 +19,27 @@
 // unless more blocks follow). The step along the curve uses seed 000's eq. 7
 // parameter update, then a Newton correction so the chord length of the step
 // equals the commanded step length.
+//
+// Planning (planner.h) is not done here but by a Planner behind a PlanLink: a block
+// is submitted (apply_block: checked, handed to the planner) and its plan is taken
+// later (apply_plans), at a cycle the caller records, so replay takes it at the same
+// cycle. The cyclic part (apply_plans + step) never allocates or frees memory.
+// Constructed without a link, the core plans inline and takes each plan at once
+// (apply_block and an override behave as one input, as the tests use it).
 #include <array>
 #include <cstdint>
-#include <deque>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "common/config/machine_config.h"
 #include "common/motion/path_segment.h"
 #include "common/program/block.h"
+#include "services/interpolator/planner.h"
 
 namespace cnc::interp {
 
 enum class RunState : int8_t { kIdle = 0, kRunning = 1, kHeld = 2, kDone = 3, kStarved = 4 };
-// Which constraint set the commanded feed (values match lcmt_setpoint's LIMIT_*).
-enum class Limit : int8_t {
-  kNone = 0, kProgram = 1, kChord = 2, kRoughness = 3, kAxisVelocity = 4, kCurvatureAccel = 5, kLookahead = 6
-};
 // How the curve parameter advances each cycle (for the feed-fluctuation comparison).
 enum class ParamUpdate : int8_t { kFirstOrder = 0, kTaylor2 = 1, kCorrected = 2 };
 
@@ -67,28 +71,54 @@ struct Setpoint {
 
 class Interpolator {
  public:
+  // Plans inline: apply_block and an override take their plans at once.
   explicit Interpolator(const config::MachineConfig& cfg);
+  // Plans through `link` (which outlives the core); plans are taken by apply_plans.
+  Interpolator(const config::MachineConfig& cfg, PlanLink& link);
   ~Interpolator();
+  Interpolator(const Interpolator&) = delete;
+  Interpolator& operator=(const Interpolator&) = delete;
 
   // Inputs, applied before the next step(). Blocks must come in index order
-  // (0, 1, 2, ... of the current program); anything else is refused (false).
+  // (0, 1, 2, ... of the current program), each starting where the one before
+  // ends; anything else is refused (false, last_refusal()). With a link the block
+  // goes to the planner and moves only once its plan is taken.
   bool apply_block(const program::Block& block);
+  // The same without a copy: the block is handed to the planner as it is (no
+  // allocation here). On refusal the block is dropped.
+  bool submit_block(std::unique_ptr<program::Block> block);
   // Program stops and tool changes (M0, M1, M6) hold the path until a RESUME; the dry
   // run resumes them at once, as an operator pressing resume without delay.
   void set_auto_resume_pauses(bool on) { auto_resume_pauses_ = on; }
-  void apply_command(const Command& cmd);
+  // False for an override the planner could not be told of now (its queue is full:
+  // not applied, try again).
+  bool apply_command(const Command& cmd);
+
+  // Takes finished plans in order while `*budget_used` (samples taken this cycle)
+  // is below `budget`, and adds to it. Returns the number taken; each one is an
+  // input to record with the cycle (replay: apply_plans_exact).
+  int apply_plans(int64_t budget, int64_t* budget_used);
+  // Replay: takes exactly n plans (false when fewer are ready).
+  bool apply_plans_exact(int n);
+  // A plan that failed (a block the planner could not plan) since the last call:
+  // its reason, and the program is stopping. "" when none.
+  std::string take_plan_failure();
 
   // Computes the setpoint of the current cycle and advances the cycle counter.
   const Setpoint& step();
 
   int64_t cycle() const { return cycle_; }
   RunState state() const { return state_; }
+  // The index of the next block to submit.
   int64_t next_block_index() const { return next_index_; }
+  // Blocks whose plans were taken and are not finished.
   size_t queued_blocks() const { return blocks_.size(); }
+  // Blocks submitted whose plans were not taken yet.
+  int64_t blocks_in_planning() const { return submitted_ - taken_; }
   int64_t blocks_done() const { return blocks_done_; }
   int64_t starved_cycles() const { return starved_cycles_; }
-  // Curve samples planned so far (all blocks): the measure of planning work by which
-  // the node bounds what it applies per cycle (see motion.plan_budget_samples).
+  // Curve samples of the plans taken so far: the measure of work by which the feed
+  // policy bounds what it takes per cycle (see motion.plan_budget_samples).
   int64_t planned_samples() const { return planned_samples_; }
   double feed_override() const { return override_; }
   double program_time_s() const { return static_cast<double>(program_cycles_) * period_s_; }
@@ -97,30 +127,35 @@ class Interpolator {
   // Why the last refused block was refused.
   const std::string& last_refusal() const { return refusal_; }
 
-  struct Sample {
-    double u;
-    double s;      // arc length from the block start, mm
-    double v_geo;  // geometric speed limit, mm/s
-    Limit limit;
-  };
-  struct Planned {
-    program::Block block;
-    motion::PathSegment path;
-    std::vector<Sample> samples;  // at least two for a moving block
-    double length = 0;
-    double v_prog = 0;            // programmed feed in mm/s (rapids: the axis-limited speed)
-    double accel = 0, jerk = 0;   // tangential limits over the block
-    double v_entry = 0;           // junction limit with the previous block
-    std::vector<double> v_bw;     // backward-pass limits per sample (acceleration-limited)
-    bool stop_block() const;      // dwell / end: the path stops here
-    bool stop_at_start() const;   // a stop block, or a corner the path must stop at
-    Planned(program::Block b, motion::PathSegment p) : block(std::move(b)), path(std::move(p)) {}
+ private:
+  // The cyclic side's blocks: a ring of pointers (storage grows only if more blocks
+  // are queued than it was sized for, which the feed policy's window prevents).
+  class Ring {
+   public:
+    explicit Ring(size_t capacity) : slots_(capacity) {}
+    bool empty() const { return size_ == 0; }
+    size_t size() const { return size_; }
+    Planned& front() const { return *slots_[head_]; }
+    Planned& back() const { return *slots_[(head_ + size_ - 1) % slots_.size()]; }
+    Planned& operator[](size_t i) const { return *slots_[(head_ + i) % slots_.size()]; }
+    void push_back(Planned* p);
+    void pop_front() {
+      head_ = (head_ + 1) % slots_.size();
+      --size_;
+    }
+    void clear() { head_ = size_ = 0; }
+
+   private:
+    std::vector<Planned*> slots_;
+    size_t head_ = 0, size_ = 0;
   };
 
- private:
-  void plan_block(Planned& p);
-  void plan_junction(Planned& prev, Planned& next) const;
-  void backward_pass(bool full);
+  bool push_request(const PlanRequest& r);
+  bool flush_requests();
+  void take(PlanUpdate& u);
+  void clear_blocks();
+  void pop_block();
+  bool check_block(const program::Block& block);
   // Speed limit at arc length s of block p: programmed feed × override and the
   // geometric limit (also returned alone in *v_geo when not null).
   double cap_at(const Planned& p, double s, Limit* why, double* v_geo = nullptr) const;
@@ -139,6 +174,9 @@ class Interpolator {
   double period_s_;
   int naxes_;
   ParamUpdate param_update_ = ParamUpdate::kCorrected;
+  std::unique_ptr<SyncPlanLink> own_link_;
+  PlanLink* link_;
+  bool inline_ = false;  // own link: plans taken at once
 
   RunState state_ = RunState::kIdle;
   bool hold_ = false;
@@ -147,8 +185,23 @@ class Interpolator {
   bool stopping_ = false;
   double override_ = 1.0;
 
-  std::deque<Planned> blocks_;  // front: the block being executed
+  Ring blocks_;  // front: the block being executed
   int64_t next_index_ = 0;
+  uint64_t epoch_ = 0;        // a LOAD, RESET or finished STOP starts a new one
+  uint64_t next_serial_ = 0;  // serial of the next block submitted
+  uint64_t retired_below_ = 0;
+  bool retire_pending_ = false;
+  int64_t submitted_ = 0, taken_ = 0;  // block requests, over the core's life
+  bool failed_ = false;                // a plan of this epoch failed: the rest of it is dropped
+  std::string failure_;
+  // Where the next submitted block must start (the end of the last one submitted in
+  // this epoch; the path's position when none was).
+  bool have_tail_ = false;
+  std::array<double, program::kMaxAxes> tail_{};
+  // Requests the link could not take yet, sent first next time (order is kept).
+  std::array<PlanRequest, 64> pending_{};
+  size_t pending_n_ = 0;
+
   double u_ = 0;     // parameter in the front block
   double s_ = 0;     // arc length in the front block
   double v_ = 0;     // path speed, mm/s

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 
 #include "cnc/lcmt_alarm.hpp"
 #include "cnc/lcmt_block_request.hpp"
@@ -40,7 +41,7 @@ bool active(RunState s) { return s == RunState::kRunning || s == RunState::kHeld
 }  // namespace
 
 InterpolatorNode::InterpolatorNode(const config::MachineConfig& cfg, bus::Bus& bus)
-    : cfg_(cfg), bus_(bus), core_(cfg),
+    : cfg_(cfg), bus_(bus), planner_(cfg), core_(cfg, planner_), feed_(cfg),
       ch_setpoints_(cfg.channel(ch::kSetpoints)), ch_request_(cfg.channel(ch::kBlockRequest)),
       ch_state_(cfg.channel(ch::kInterpState)), ch_input_(cfg.channel(ch::kInterpInput)),
       ch_config_(cfg.channel(ch::kInterpConfig)), ch_alarm_(cfg.channel(ch::kAlarm)),
@@ -87,7 +88,11 @@ void InterpolatorNode::on_block(const cnc::lcmt_program_block& m) {
 }
 
 void InterpolatorNode::apply_command(const Command& c, const cnc::lcmt_program_command& m) {
-  core_.apply_command(c);
+  if (!core_.apply_command(c)) {
+    // Only an override can be refused: the planner's request queue is full.
+    spdlog::warn("command {} not applied: the planner is busy; send it again", m.command);
+    return;
+  }
   cnc::lcmt_interp_input in{};
   in.cycle = core_.cycle();
   in.kind = cnc::lcmt_interp_input::COMMAND;
@@ -180,7 +185,7 @@ void InterpolatorNode::request_blocks() {
   const RunState s = core_.state();
   if (token_ == 0 || !(s == RunState::kRunning || s == RunState::kStarved || s == RunState::kHeld)) return;
   const int64_t first = core_.next_block_index();
-  const int64_t capacity = cfg_.block_window - static_cast<int64_t>(core_.queued_blocks());
+  const int64_t capacity = feed_.room(core_);
   const int64_t end = std::min(first + capacity, num_blocks_);
   int64_t missing = first;
   while (missing < end && reorder_.count(missing)) ++missing;
@@ -297,38 +302,63 @@ void InterpolatorNode::run_cycle() {
   }
   pending_commands_.clear();
 
-  // Hand the core the blocks that are next in order, within the cycle's planning budget.
-  const int64_t planned_before = core_.planned_samples();
-  for (auto it = reorder_.find(core_.next_block_index());
-       it != reorder_.end() && core_.planned_samples() - planned_before < cfg_.plan_budget_samples;
-       it = reorder_.find(core_.next_block_index())) {
-    program::Block b;
-    const std::string why = program::from_msg(it->second, static_cast<int>(cfg_.axes.size()), &b);
-    if (!why.empty() || !core_.apply_block(b)) {
-      // A block the core cannot take ends the program: the path stops where it is
-      // (a recorded STOP) and the operator is told why. Nothing more is requested.
-      const std::string text = "block " + std::to_string(it->first) + " (line " + std::to_string(it->second.source_line) +
-                               ") refused: " + (why.empty() ? core_.last_refusal() : why);
-      spdlog::error("{}", text);
-      cnc::lcmt_alarm al{};
-      al.source = "cnc-interpolator";
-      al.severity = cnc::lcmt_alarm::FAULT;
-      al.code = "block_refused";
-      al.text = text;
-      bus_.publish(ch_alarm_, al);
-      cnc::lcmt_program_command stop{};
-      stop.command = cnc::lcmt_program_command::STOP;
-      apply_command(Command{Command::Kind::kStop, 1.0, {}}, stop);
-      token_ = 0;
-      reorder_.clear();
-      break;
-    }
-    cnc::lcmt_interp_input in{};
-    in.cycle = cyc;
-    in.kind = cnc::lcmt_interp_input::BLOCK;
-    in.block = it->second;
-    publish_input(in);
-    reorder_.erase(it);
+  // Feed the planner and take its finished plans (the one feed policy of the core
+  // library, feed_policy.h). Each block handed over and each group of plans taken is
+  // an input recorded with this cycle: replay takes the plans at the same cycles.
+  std::string bad;
+  int64_t bad_index = -1;
+  const bool fed = feed_.cycle(
+      core_,
+      [&](int64_t index) -> std::unique_ptr<program::Block> {
+        const auto it = reorder_.find(index);
+        if (it == reorder_.end()) return nullptr;
+        auto b = std::make_unique<program::Block>();
+        bad = program::from_msg(it->second, static_cast<int>(cfg_.axes.size()), b.get());
+        if (!bad.empty()) {
+          bad_index = index;
+          return nullptr;
+        }
+        return b;
+      },
+      [&](int64_t index) {
+        const auto it = reorder_.find(index);
+        cnc::lcmt_interp_input in{};
+        in.cycle = cyc;
+        in.kind = cnc::lcmt_interp_input::BLOCK;
+        in.block = it->second;
+        publish_input(in);
+        reorder_.erase(it);
+      },
+      [&](int n) {
+        cnc::lcmt_interp_input in{};
+        in.cycle = cyc;
+        in.kind = cnc::lcmt_interp_input::PLAN;
+        in.plans = n;
+        in.block.num_axes = 0;
+        publish_input(in);
+      });
+  std::string failure = core_.take_plan_failure();
+  if (!fed || bad_index >= 0 || !failure.empty()) {
+    // A block the core cannot take ends the program: the path stops where it is
+    // (a recorded STOP) and the operator is told why. Nothing more is requested.
+    const int64_t index = bad_index >= 0 ? bad_index : core_.next_block_index();
+    const auto it = reorder_.find(index);
+    const std::string line = it != reorder_.end() ? " (line " + std::to_string(it->second.source_line) + ")" : "";
+    const std::string text = failure.empty() ? "block " + std::to_string(index) + line + " refused: " +
+                                                   (bad.empty() ? core_.last_refusal() : bad)
+                                             : "refused: " + failure;
+    spdlog::error("{}", text);
+    cnc::lcmt_alarm al{};
+    al.source = "cnc-interpolator";
+    al.severity = cnc::lcmt_alarm::FAULT;
+    al.code = "block_refused";
+    al.text = text;
+    bus_.publish(ch_alarm_, al);
+    cnc::lcmt_program_command stop{};
+    stop.command = cnc::lcmt_program_command::STOP;
+    apply_command(Command{Command::Kind::kStop, 1.0, {}}, stop);
+    token_ = 0;
+    reorder_.clear();
   }
   request_blocks();
 
@@ -362,7 +392,7 @@ void InterpolatorNode::publish_state(bool force) {
   m.state = fault_ ? cnc::lcmt_setpoint::FAULT : static_cast<int8_t>(s);
   m.program_token = token_;
   m.blocks_done = core_.blocks_done();
-  m.blocks_buffered = static_cast<int64_t>(core_.queued_blocks() + reorder_.size());
+  m.blocks_buffered = static_cast<int64_t>(core_.queued_blocks() + reorder_.size()) + core_.blocks_in_planning();
   m.setpoints_published = setpoints_published_;
   m.starved_cycles = core_.starved_cycles();
   m.feed_override = core_.feed_override();

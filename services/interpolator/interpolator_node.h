@@ -1,8 +1,9 @@
 #pragma once
 // LCM side of the interpolator: collects commands and blocks, requests blocks with
-// a bounded window (re-requesting what does not arrive), applies inputs to the core
-// at the start of a cycle, and publishes each applied input with its cycle index,
-// the setpoint and the run state.
+// a bounded window (re-requesting what does not arrive), hands blocks to the planner
+// thread and takes its finished plans (FeedPolicy), applies inputs to the core at the
+// start of a cycle, and publishes each applied input with its cycle index (blocks,
+// plans taken, commands), the setpoint and the run state.
 //
 // Faults: a failed publish, an exception in a cycle, or a drive that leaves the
 // enabled state while a program runs stop the program (a recorded STOP: the path
@@ -23,7 +24,9 @@
 #include "common/bus/bus.h"
 #include "common/config/machine_config.h"
 #include "common/service/bus_health.h"
+#include "services/interpolator/feed_policy.h"
 #include "services/interpolator/interpolator.h"
+#include "services/interpolator/planner_thread.h"
 
 namespace cnc::interp {
 
@@ -59,7 +62,10 @@ class InterpolatorNode {
 
   config::MachineConfig cfg_;
   bus::Bus& bus_;
+  // Block planning runs on the planner's thread; the cyclic thread takes its plans.
+  ThreadedPlanLink planner_;
   Interpolator core_;
+  FeedPolicy feed_;
   std::string ch_setpoints_, ch_request_, ch_state_, ch_input_, ch_config_, ch_alarm_;
   int64_t config_period_cycles_;
 

@@ -1,21 +1,32 @@
-// cnc-bench-interpolator: compute time of the interpolator core per coarse cycle on
-// a dense NURBS program at T = 1 ms (mean, p99, max), setpoints per second of a dry
-// run, and the feed fluctuation of the parameter updates — first order (seed 001
-// eq. 6), second order (seed 000 eq. 7) and eq. 7 with the chord-length correction
-// — all measured in the same run on the same program.
+// cnc-bench-interpolator: compute time of the interpolator's cyclic path per coarse
+// cycle on a dense NURBS program at T = 1 ms (mean, p99, max) with the planning on
+// the planner thread, as the node runs it (feed policy + plans taken + step), against
+// the same with the planner inline in the cycle (the former design); setpoints per
+// second of a dry run, and the feed fluctuation of the parameter updates — first
+// order (seed 001 eq. 6), second order (seed 000 eq. 7) and eq. 7 with the
+// chord-length correction — all measured in the same run on the same program.
 //
-//   cnc-bench-interpolator [--machine FILE] [--blocks N]
+//   cnc-bench-interpolator [--machine FILE] [--blocks N] [--paced]
+//
+// Unpaced, cycles run back to back and, only where the path would otherwise run out
+// of plans (fewer than two blocks queued while the planner works), the loop waits
+// for the planner outside the timed part; --paced runs every cycle on a 1 ms
+// absolute deadline instead (real time: use a small --blocks).
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
+#include <memory>
 #include <numbers>
 #include <random>
 #include <vector>
 
 #include "common/service/service.h"
 #include "common/util/signals.h"
+#include "services/interpolator/feed_policy.h"
 #include "services/interpolator/interpolator.h"
+#include "services/interpolator/planner_thread.h"
 
 namespace {
 
@@ -73,36 +84,74 @@ std::vector<Block> dense_program(int n_blocks) {
 
 struct Result {
   std::vector<double> cycle_ns;
+  double cpu_max_ns = 0;  // the longest cycle in this thread's CPU time (preemption left out)
   double wall_s = 0;
   double fluct_max = 0, fluct_rms = 0;
   int64_t cycles = 0;
+  int64_t waits = 0;  // cycles the loop waited for the planner (outside the timing)
 };
 
+enum class Planning { kInline, kThread };
+
 Result run(const cnc::config::MachineConfig& cfg, const std::vector<Block>& blocks, cnc::interp::ParamUpdate mode,
-           bool time_cycles) {
-  Interpolator ip(cfg);
+           bool time_cycles, Planning planning = Planning::kInline, bool paced = false) {
+  std::unique_ptr<cnc::interp::PlanLink> link;
+  cnc::interp::ThreadedPlanLink* thread = nullptr;
+  if (planning == Planning::kThread) {
+    auto t = std::make_unique<cnc::interp::ThreadedPlanLink>(cfg);
+    thread = t.get();
+    link = std::move(t);
+  } else {
+    link = std::make_unique<cnc::interp::SyncPlanLink>(cfg);
+  }
+  Interpolator ip(cfg, *link);
+  const cnc::interp::FeedPolicy feed(cfg);
   ip.set_param_update(mode);
   ip.apply_command({cnc::interp::Command::Kind::kStart, 1.0});
   Result r;
   r.cycle_ns.reserve(1 << 20);
-  size_t next = 0;
+  // The blocks as they would come out of the node's message decoding, made up front.
+  std::vector<std::unique_ptr<Block>> source;
+  source.reserve(blocks.size());
+  for (const Block& b : blocks) source.push_back(std::make_unique<Block>(b));
+  auto next = [&](int64_t index) -> std::unique_ptr<Block> {
+    return static_cast<size_t>(index) < source.size() ? std::move(source[static_cast<size_t>(index)]) : nullptr;
+  };
   std::array<double, cnc::program::kMaxAxes> prev = ip.last().position_mm;
   prev[0] = blocks[0].start[0];
   prev[1] = blocks[0].start[1];
   prev[2] = blocks[0].start[2];
   double sum2 = 0;
   int64_t n_fl = 0;
+  timespec deadline{};
+  clock_gettime(CLOCK_MONOTONIC, &deadline);
   const auto t_all = std::chrono::steady_clock::now();
   while (ip.state() != cnc::interp::RunState::kDone && r.cycles < 50'000'000) {
+    if (paced) {
+      deadline.tv_nsec += static_cast<long>(cfg.ipo_period_s * 1e9);
+      while (deadline.tv_nsec >= 1'000'000'000) {
+        deadline.tv_nsec -= 1'000'000'000;
+        ++deadline.tv_sec;
+      }
+      clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &deadline, nullptr);
+    } else if (thread != nullptr && ip.blocks_in_planning() > 0 && ip.queued_blocks() < 2) {
+      thread->wait_idle();  // a free-running loop outruns real time: do not starve it
+      ++r.waits;
+    }
+    timespec c0{}, c1{};
+    if (time_cycles) clock_gettime(CLOCK_THREAD_CPUTIME_ID, &c0);
     const auto t0 = std::chrono::steady_clock::now();
-    // The window refill is part of the cycle that applies the blocks, as in the node.
-    const int64_t planned_before = ip.planned_samples();
-    while (next < blocks.size() && ip.queued_blocks() < static_cast<size_t>(cfg.block_window) &&
-           ip.planned_samples() - planned_before < cfg.plan_budget_samples)
-      ip.apply_block(blocks[next++]);
+    // The cyclic path as in the node: the feed policy (plans taken, blocks handed
+    // over) and the step; with Planning::kInline the planning happens in here too.
+    feed.cycle(ip, next, [](int64_t) {}, [](int) {});
     const cnc::interp::Setpoint& sp = ip.step();
     const auto t1 = std::chrono::steady_clock::now();
-    if (time_cycles) r.cycle_ns.push_back(std::chrono::duration<double, std::nano>(t1 - t0).count());
+    if (time_cycles) {
+      clock_gettime(CLOCK_THREAD_CPUTIME_ID, &c1);
+      r.cycle_ns.push_back(std::chrono::duration<double, std::nano>(t1 - t0).count());
+      r.cpu_max_ns = std::max(r.cpu_max_ns, static_cast<double>(c1.tv_sec - c0.tv_sec) * 1e9 +
+                                                static_cast<double>(c1.tv_nsec - c0.tv_nsec));
+    }
     ++r.cycles;
     // Feed fluctuation: the realised step (chord) against the commanded one, in cruise.
     double d2 = 0;
@@ -121,6 +170,20 @@ Result run(const cnc::config::MachineConfig& cfg, const std::vector<Block>& bloc
   return r;
 }
 
+void report(const char* what, const Result& r, double period_s) {
+  std::vector<double> ns = r.cycle_ns;
+  std::sort(ns.begin(), ns.end());
+  double mean = 0;
+  for (double x : ns) mean += x;
+  mean /= static_cast<double>(ns.size());
+  const double p99 = ns[static_cast<size_t>(0.99 * static_cast<double>(ns.size() - 1))];
+  std::printf("%s: mean %.2f us, p50 %.2f us, p99 %.2f us, max %.2f us (max in thread CPU time %.2f us; %lld "
+              "cycles, %.1f s of machining, %lld waits for the planner)\n",
+              what, mean * 1e-3, ns[ns.size() / 2] * 1e-3, p99 * 1e-3, ns.back() * 1e-3, r.cpu_max_ns * 1e-3,
+              static_cast<long long>(r.cycles), static_cast<double>(r.cycles) * period_s,
+              static_cast<long long>(r.waits));
+}
+
 int bench(const cnc::config::MachineConfig& machine, const cnc::service::Args& args) {
   cnc::util::end_at_once_on_stop_signals();  // no loop here polls the stop flag
   cnc::config::MachineConfig cfg = machine;
@@ -130,18 +193,15 @@ int bench(const cnc::config::MachineConfig& machine, const cnc::service::Args& a
   std::printf("dense NURBS program: %d cubic blocks (7 control points each), F 3000 mm/min, T_ipo 1 ms, eps %.3g um\n",
               n_blocks, cfg.chord_tolerance_mm * 1e3);
 
+  const bool paced = args.flags.count("paced") > 0;
   run(cfg, blocks, cnc::interp::ParamUpdate::kCorrected, false);  // warm-up
-  Result r = run(cfg, blocks, cnc::interp::ParamUpdate::kCorrected, true);
-  std::vector<double> ns = r.cycle_ns;
-  std::sort(ns.begin(), ns.end());
-  double mean = 0;
-  for (double x : ns) mean += x;
-  mean /= static_cast<double>(ns.size());
-  const double p99 = ns[static_cast<size_t>(0.99 * static_cast<double>(ns.size() - 1))];
-  std::printf("compute time per coarse cycle: mean %.2f us, p50 %.2f us, p99 %.2f us, max %.2f us (%lld cycles, "
-              "%.1f s of machining)\n",
-              mean * 1e-3, ns[ns.size() / 2] * 1e-3, p99 * 1e-3, ns.back() * 1e-3, static_cast<long long>(r.cycles),
-              static_cast<double>(r.cycles) * cfg.ipo_period_s);
+  std::printf("compute time of the cyclic path per coarse cycle (feed policy + plans taken + step):\n");
+  report("  planning on the planner thread", run(cfg, blocks, cnc::interp::ParamUpdate::kCorrected, true,
+                                                 Planning::kThread, paced),
+         cfg.ipo_period_s);
+  report("  planning inline in the cycle  ", run(cfg, blocks, cnc::interp::ParamUpdate::kCorrected, true,
+                                                 Planning::kInline, paced),
+         cfg.ipo_period_s);
   const Result dry = run(cfg, blocks, cnc::interp::ParamUpdate::kCorrected, false);
   std::printf("dry run: %.0f setpoints/s (%.0fx real time at 1 ms)\n",
               static_cast<double>(dry.cycles) / dry.wall_s, static_cast<double>(dry.cycles) / dry.wall_s * 1e-3);
@@ -165,7 +225,8 @@ int bench(const cnc::config::MachineConfig& machine, const cnc::service::Args& a
 }  // namespace
 
 int main(int argc, char** argv) {
-  cnc::service::Spec spec{"cnc-bench-interpolator", "interpolator compute time and feed fluctuation", {"blocks"}, {}};
+  cnc::service::Spec spec{"cnc-bench-interpolator", "interpolator compute time and feed fluctuation", {"blocks"},
+                          {"paced"}};
   if (argc == 1) {
     static char a0[] = "cnc-bench-interpolator", a1[] = "--machine", a2[] = CNC_SOURCE_DIR "/config/machines/sim3.yaml";
     static char* def[] = {a0, a1, a2, nullptr};

@@ -11,9 +11,11 @@
 #include <cstdio>
 #include <cstdlib>
 #include <memory>
+#include <string>
 
 #include "common/service/service.h"
 #include "common/util/signals.h"
+#include "services/interpolator/feed_policy.h"
 #include "services/interpolator/interpolator.h"
 #include "services/part_program_server/program_server.h"
 
@@ -45,7 +47,11 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
     std::fprintf(stderr, "cnc-plan: program refused: %s\n", loaded.error.c_str());
     return 3;
   }
-  cnc::interp::Interpolator core(cfg);
+  // The planner inline: each plan is ready the cycle its block is submitted, as if
+  // the planner thread were never late.
+  cnc::interp::SyncPlanLink planner(cfg);
+  cnc::interp::Interpolator core(cfg, planner);
+  const cnc::interp::FeedPolicy feed(cfg);
   core.set_auto_resume_pauses(true);  // M0/M1/M6: a dry run does not wait for an operator
   if (!args.option("param-update").empty())
     core.set_param_update(cnc::interp::param_update_from_string(args.option("param-update")));
@@ -78,8 +84,6 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
     std::fputs("cycle,t_s,x_mm,y_mm,z_mm,line,u,feed_mm_min,limit\n", csv.get());
   }
   const int64_t num_blocks = server.num_blocks();
-  const size_t window = static_cast<size_t>(cfg.block_window);
-  int64_t next = 0;
   // At most a day of program time: a dry run that long is a mistake, not a plan.
   const int64_t max_cycles = static_cast<int64_t>(std::ceil(86400.0 / cfg.ipo_period_s));
   double max_feed = 0;
@@ -110,18 +114,26 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
                    cycles);
       return 128 + std::max(0, cnc::util::stop_signal());
     }
-    // Keep the look-ahead window full, as the live node does by requesting blocks,
-    // within the same planning budget per cycle.
-    const int64_t planned_before = core.planned_samples();
-    while (next < num_blocks && core.queued_blocks() < window &&
-           core.planned_samples() - planned_before < cfg.plan_budget_samples) {
-      const cnc::program::Block* b = server.block(next);
-      if (b == nullptr || !core.apply_block(*b)) {
-        std::fprintf(stderr, "cnc-plan: block %" PRId64 " refused by the interpolator: %s\n", next,
-                     core.last_refusal().c_str());
-        return 1;
-      }
-      ++next;
+    // Keep the look-ahead window full, as the live node does, with its feed policy.
+    int64_t missing = -1;
+    const bool fed = feed.cycle(
+        core,
+        [&](int64_t index) -> std::unique_ptr<cnc::program::Block> {
+          if (index >= num_blocks) return nullptr;
+          const cnc::program::Block* b = server.block(index);
+          if (b == nullptr) {
+            missing = index;
+            return nullptr;
+          }
+          return std::make_unique<cnc::program::Block>(*b);
+        },
+        [](int64_t) {}, [](int) {});
+    std::string failure = core.take_plan_failure();
+    if (!fed || missing >= 0 || !failure.empty()) {
+      if (failure.empty()) failure = missing >= 0 ? "not served" : core.last_refusal();
+      std::fprintf(stderr, "cnc-plan: block %" PRId64 " refused by the interpolator: %s\n",
+                   missing >= 0 ? missing : core.next_block_index(), failure.c_str());
+      return 1;
     }
     const cnc::interp::Setpoint& sp = core.step();
     ++cycles;

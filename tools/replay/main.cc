@@ -158,7 +158,10 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
   if (!args.option("program").empty()) other.emplace(cfg);
 
   const auto t0 = std::chrono::steady_clock::now();
-  cnc::interp::Interpolator core(cfg);
+  // The planner inline: every plan is ready when its block is submitted and is taken
+  // at the cycle the log recorded (PLAN inputs), as live.
+  cnc::interp::SyncPlanLink planner(cfg);
+  cnc::interp::Interpolator core(cfg, planner);
   const int64_t last_cycle = setpoints.rbegin()->first;
   const auto base_name = [](const std::string& path) { return path.substr(path.find_last_of('/') + 1); };
   const std::string other_name = other ? base_name(args.option("program")) : "";

@@ -1,0 +1,413 @@
+#include "services/interpolator/planner.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+#include "common/geometry/chord.h"
+#include "common/process/roughness.h"
+
+namespace cnc::interp {
+
+namespace {
+constexpr double kInf = std::numeric_limits<double>::infinity();
+// Share of each axis's acceleration and jerk left to the centripetal terms on
+// curved blocks; the tangential planning gets the rest.
+constexpr double kCentripetalShare = 0.5;
+// Samples per knot span of a NURBS and per radian of an arc.
+constexpr int kSamplesPerSpan = 16;
+constexpr double kArcSamplesPerRad = 24.0;
+
+using motion::AxisVec;
+
+// Appends u0 and the points that refine (u0, u1) until the local speed limit v(u)
+// (chord error, roughness) changes by at most 0.5 % between neighbours, so that
+// interpolating it linearly between samples never overestimates it by more than
+// that. Limits above v_top cannot bind and are not refined. At most 8 levels.
+template <class Limit>
+void refine(double u0, double v0, double u1, double v1, const Limit& vlim, double v_top, int depth,
+            std::vector<double>* out) {
+  const double lo = std::min(v0, v1);
+  if (depth >= 8 || lo >= v_top) {
+    out->push_back(u0);
+    return;
+  }
+  const double um = 0.5 * (u0 + u1);
+  const double vm = vlim(um);
+  if (std::fabs(v1 - v0) <= 0.005 * lo && vm >= 0.995 * lo) {
+    out->push_back(u0);
+    return;
+  }
+  refine(u0, v0, um, vm, vlim, v_top, depth + 1, out);
+  refine(um, vm, u1, v1, vlim, v_top, depth + 1, out);
+}
+
+double norm(const AxisVec& v, int n) {
+  double s = 0;
+  for (int i = 0; i < n; ++i) s += v[i] * v[i];
+  return std::sqrt(s);
+}
+
+// The local frame of a curve from its first two derivatives in u: the unit tangent
+// t and the curvature vector k = d²P/ds² (|k| = κ, along the normal). Returns |P'|;
+// 0 at a singular point, where t and k are left untouched.
+double local_frame(const AxisVec& d1, const AxisVec& d2, int n, AxisVec* t, AxisVec* k) {
+  const double sp = norm(d1, n);
+  if (sp <= 0) return 0;
+  double d2t = 0;
+  for (int a = 0; a < n; ++a) {
+    (*t)[a] = d1[a] / sp;
+    d2t += d2[a] * (*t)[a];
+  }
+  for (int a = 0; a < n; ++a) (*k)[a] = (d2[a] - d2t * (*t)[a]) / (sp * sp);
+  return sp;
+}
+
+// The speed of a rapid: the fastest its straight line allows within every axis's
+// velocity limit (for a move of no length, the slowest axis's limit).
+double rapid_speed(const config::MachineConfig& cfg, const program::Block& b, int n) {
+  double len2 = 0;
+  for (int a = 0; a < n; ++a) len2 += (b.end[a] - b.start[a]) * (b.end[a] - b.start[a]);
+  const double len = std::sqrt(len2);
+  double v = cfg.axes[0].max_velocity_mm_s;
+  for (int a = 0; a < n; ++a) v = std::min(v, cfg.axes[a].max_velocity_mm_s);
+  if (!(len > 0)) return v;
+  v = std::numeric_limits<double>::max();
+  for (int a = 0; a < n; ++a) {
+    const double d = std::fabs(b.end[a] - b.start[a]);
+    if (d > 0) v = std::min(v, cfg.axes[a].max_velocity_mm_s * len / d);
+  }
+  return v;
+}
+
+}  // namespace
+
+bool Planned::stop_block() const {
+  return block.kind == program::BlockKind::kDwell || block.kind == program::BlockKind::kEnd ||
+         block.kind == program::BlockKind::kEvent;
+}
+
+Planner::Planner(const config::MachineConfig& cfg)
+    : cfg_(cfg), period_s_(cfg.ipo_period_s), naxes_(static_cast<int>(cfg.axes.size())) {}
+
+Planner::~Planner() = default;
+
+void Planner::plan_block(Planned& p) const {
+  const program::Block& b = p.block;
+  // A rapid has no programmed feed: it goes as fast as its axes allow, a finite
+  // speed set below from the same samples as its axis-velocity limit (so feed hold,
+  // override and look-ahead do arithmetic on finite numbers only: ∞ × 0 is NaN).
+  const bool rapid = b.kind == program::BlockKind::kRapid;
+  p.v_prog = rapid ? rapid_speed(cfg_, b, naxes_) : b.feed_mm_per_min / 60.0;
+  p.accel = cfg_.path_accel_mm_s2;
+  p.jerk = cfg_.path_jerk_mm_s3;
+  if (p.stop_block()) return;
+
+  const bool curved = p.path.curved();
+  const double share = curved ? 1.0 - kCentripetalShare : 1.0;
+  // 1 % below the tolerance: the circle formula is exact for constant curvature;
+  // where the curvature changes within a step the error runs up to ~0.5 % over it.
+  const double eps = 0.99 * cfg_.chord_tolerance_mm;
+  // The roughness law is for cutting moves; a rapid does not cut.
+  const bool rough = b.process.active() && b.spindle_rpm > 0 && b.kind != program::BlockKind::kRapid;
+  const process::RoughnessLaw law{b.process.ball_radius_mm, b.process.flutes, b.process.pick_feed_mm,
+                                  b.process.target_rmax_um * 1e-3};
+  if (rough) {
+    const std::string why = law.validate();
+    if (!why.empty()) throw std::invalid_argument("process parameters: " + why);
+  }
+
+  // Parameter values to sample: uniform per knot span (NURBS) or per angle (arcs),
+  // then refined where the chord or roughness limit changes quickly.
+  std::vector<double> us;
+  const double u0 = p.path.u_begin(), u1 = p.path.u_end();
+  if (!curved) {
+    us = {u0, u1};
+  } else {
+    std::vector<double> grid;
+    if (b.kind == program::BlockKind::kNurbs) {
+      const std::vector<double> bp = p.path.nurbs_breakpoints();
+      for (size_t k = 0; k + 1 < bp.size(); ++k)
+        for (int i = 0; i < kSamplesPerSpan; ++i) grid.push_back(bp[k] + (bp[k + 1] - bp[k]) * i / kSamplesPerSpan);
+    } else {
+      const int n = std::max(2, static_cast<int>(std::ceil(p.path.arc_sweep_rad() * kArcSamplesPerRad)));
+      for (int i = 0; i < n; ++i) grid.push_back(u0 + (u1 - u0) * i / n);
+    }
+    grid.push_back(u1);
+    auto vlim = [&](double u) {
+      AxisVec P{}, d1{}, d2{}, t{}, k{};
+      p.path.eval(u, &P, &d1, &d2);
+      if (local_frame(d1, d2, naxes_, &t, &k) <= 0) return kInf;
+      const double kappa = norm(k, naxes_);
+      double v = kappa > 1e-12 ? geometry::chord_step_length(1.0 / kappa, eps) / period_s_ : kInf;
+      if (rough && naxes_ >= 3)
+        v = std::min(v, law.feed_mm_per_min(b.spindle_rpm,
+                                            process::feed_inclination_angle(Eigen::Vector3d(t[0], t[1], t[2]))) /
+                            60.0);
+      return v;
+    };
+    // Nothing above the fastest the block can go (1.5 × override) needs refining.
+    double v_top = 1.5 * p.v_prog;
+    for (int a = 0; a < naxes_; ++a) v_top = std::min(v_top, std::sqrt(3.0) * cfg_.axes[a].max_velocity_mm_s);
+    double va = vlim(grid[0]);
+    for (size_t k = 0; k + 1 < grid.size(); ++k) {
+      const double vb = vlim(grid[k + 1]);
+      refine(grid[k], va, grid[k + 1], vb, vlim, v_top, 0, &us);
+      va = vb;
+    }
+    us.push_back(u1);
+  }
+
+  // Per sample: speed limits from the local geometry.
+  const size_t n = us.size();
+  p.samples.assign(n, Sample{0, 0, kInf, Limit::kNone});
+  std::vector<AxisVec> kvec(n);  // curvature vector d²P/ds²
+  std::vector<double> v_chord(n, kInf);
+  double v_rapid = p.v_prog;  // a rapid's speed: the least axis-velocity limit of its samples
+  for (size_t i = 0; i < n; ++i) {
+    AxisVec P{}, d1{}, d2{};
+    p.path.eval(us[i], &P, &d1, &d2);
+    AxisVec t{};
+    Sample& smp = p.samples[i];
+    smp.u = us[i];
+    if (local_frame(d1, d2, naxes_, &t, &kvec[i]) <= 0) continue;
+    const double kappa = norm(kvec[i], naxes_);
+    auto take = [&smp](double v, Limit why) {
+      if (v < smp.v_geo) {
+        smp.v_geo = v;
+        smp.limit = why;
+      }
+    };
+    for (int a = 0; a < naxes_; ++a) {
+      const double ta = std::fabs(t[a]);
+      if (ta > 0) {
+        const double v_axis = cfg_.axes[a].max_velocity_mm_s / ta;
+        take(v_axis, Limit::kAxisVelocity);
+        v_rapid = std::min(v_rapid, v_axis);
+        p.accel = std::min(p.accel, share * cfg_.axes[a].max_accel_mm_s2 / ta);
+        p.jerk = std::min(p.jerk, share * cfg_.axes[a].max_jerk_mm_s3 / ta);
+      }
+      if (std::fabs(kvec[i][a]) > 0)
+        take(std::sqrt(kCentripetalShare * cfg_.axes[a].max_accel_mm_s2 / std::fabs(kvec[i][a])),
+             Limit::kCurvatureAccel);
+    }
+    if (kappa > 1e-12) v_chord[i] = geometry::chord_step_length(1.0 / kappa, eps) / period_s_;
+    if (rough && naxes_ >= 3) {
+      const double alpha = process::feed_inclination_angle(Eigen::Vector3d(t[0], t[1], t[2]));
+      take(law.feed_mm_per_min(b.spindle_rpm, alpha) / 60.0, Limit::kRoughness);
+    }
+  }
+  if (rapid) p.v_prog = v_rapid;
+  // The chord limit holds over a whole step, and the curvature may peak between
+  // samples: each sample takes the least of its neighbours' chord limits.
+  for (size_t i = 0; i < n; ++i) {
+    double v = v_chord[i];
+    if (i > 0) v = std::min(v, v_chord[i - 1]);
+    if (i + 1 < n) v = std::min(v, v_chord[i + 1]);
+    if (v < p.samples[i].v_geo) {
+      p.samples[i].v_geo = v;
+      p.samples[i].limit = Limit::kChord;
+    }
+  }
+  // Arc length by 3-point Gauss–Legendre per sample interval (on top of dense samples).
+  double s = 0;
+  for (size_t i = 0; i + 1 < n; ++i) {
+    const double a = us[i], c = us[i + 1], h = 0.5 * (c - a), m = 0.5 * (a + c);
+    static constexpr double kX = 0.7745966692414834, kW0 = 8.0 / 9.0, kW1 = 5.0 / 9.0;
+    auto spd = [&](double u) {
+      AxisVec P{}, d1{}, d2{};
+      p.path.eval(u, &P, &d1, &d2);
+      return norm(d1, naxes_);
+    };
+    s += h * (kW0 * spd(m) + kW1 * (spd(m - h * kX) + spd(m + h * kX)));
+    p.samples[i + 1].s = s;
+  }
+  p.length = s;
+  // Jerk from the curvature changing along the path: v³·|dk/ds| per axis.
+  for (size_t i = 0; i + 1 < n && curved; ++i) {
+    const double ds = p.samples[i + 1].s - p.samples[i].s;
+    if (ds <= 0) continue;
+    for (int a = 0; a < naxes_; ++a) {
+      const double dk = std::fabs(kvec[i + 1][a] - kvec[i][a]) / ds;
+      if (dk <= 0) continue;
+      const double v = std::cbrt(kCentripetalShare * cfg_.axes[a].max_jerk_mm_s3 / dk);
+      for (size_t k : {i, i + 1}) {
+        if (v < p.samples[k].v_geo) {
+          p.samples[k].v_geo = v;
+          p.samples[k].limit = Limit::kCurvatureAccel;
+        }
+      }
+    }
+  }
+}
+
+void Planner::plan_junction(const Planned& prev, Planned& next) const {
+  if (prev.stop_block() || next.stop_block() || prev.path.degenerate() || next.path.degenerate()) {
+    next.v_entry = 0;
+    return;
+  }
+  AxisVec P{}, t0{}, t1{}, d2{};
+  prev.path.eval(prev.path.u_end(), &P, &t0, &d2);
+  next.path.eval(next.path.u_begin(), &P, &t1, &d2);
+  const double n0 = norm(t0, naxes_), n1 = norm(t1, naxes_);
+  const double T = period_s_;
+  const double a_path = std::min(prev.accel, next.accel);
+  double v = kInf;
+  double dt2 = 0;
+  for (int a = 0; a < naxes_; ++a) {
+    const double dt = std::fabs(t1[a] / n1 - t0[a] / n0);
+    dt2 += dt * dt;
+    if (dt < 1e-12) continue;
+    const auto& ax = cfg_.axes[a];
+    // The direction change happens within one cycle. It turns the path
+    // acceleration by the same angle: where that alone would step the axis's
+    // acceleration by more than half its jerk budget, the corner is a stop.
+    if (a_path * dt > 0.5 * ax.max_jerk_mm_s3 * T) {
+      next.v_entry = 0;
+      return;
+    }
+    // Otherwise its velocity step must stay within one cycle's acceleration and
+    // half a cycle's jerk (the tangential acceleration changes across it too).
+    v = std::min(v, std::min(ax.max_accel_mm_s2 * T, 0.5 * ax.max_jerk_mm_s3 * T * T) / dt);
+  }
+  if (dt2 > 0) v = std::min(v, std::min(cfg_.path_accel_mm_s2 * T, 0.5 * cfg_.path_jerk_mm_s3 * T * T) / std::sqrt(dt2));
+  next.v_entry = v;
+}
+
+void Planner::backward_pass(bool full, PlanUpdate* u) {
+  // From the end of the buffer (a stop unless more blocks come) backwards. After a
+  // block was appended only the tail changes: once a recomputed limit equals the
+  // stored one, everything before it is unchanged too. What changed goes into the
+  // update as patches for the cyclic side's copies.
+  auto patch = [u](const Entry& e, size_t from) {
+    const size_t n = e.v_bw.size();
+    if (from >= n) return;
+    u->patches.push_back({e.p->serial, static_cast<uint32_t>(from), static_cast<uint32_t>(n - from),
+                          static_cast<uint32_t>(u->values.size())});
+    u->values.insert(u->values.end(), e.v_bw.begin() + static_cast<std::ptrdiff_t>(from), e.v_bw.end());
+  };
+  double carry = 0;
+  bool last = true;
+  for (auto it = list_.rbegin(); it != list_.rend(); ++it) {
+    Entry& e = *it;
+    const Planned& p = *e.p;
+    if (p.stop_block()) {
+      carry = 0;
+      last = false;
+      continue;
+    }
+    const size_t n = p.samples.size();
+    const bool fresh = e.v_bw.size() != n;
+    if (fresh) e.v_bw.assign(n, -1.0);
+    const double vp = programmed_speed(p);
+    const bool feed_binds = !rapid_at_full_speed(p);
+    for (size_t i = n; i-- > 0;) {
+      double cap = feed_binds ? std::min(p.samples[i].v_geo, vp) : p.samples[i].v_geo;
+      if (i == 0) cap = std::min(cap, p.v_entry);
+      const double ds = i + 1 < n ? p.samples[i + 1].s - p.samples[i].s : 0.0;
+      const double v = std::min(cap, std::sqrt(carry * carry + 2.0 * p.accel * ds));
+      if (!full && !fresh && !last && v == e.v_bw[i]) {
+        patch(e, i + 1);
+        return;
+      }
+      e.v_bw[i] = v;
+      carry = v;
+    }
+    patch(e, 0);
+    last = false;
+  }
+}
+
+bool Planner::rapid_at_full_speed(const Planned& p) const {
+  return p.block.kind == program::BlockKind::kRapid && override_ >= 1.0;
+}
+
+double Planner::programmed_speed(const Planned& p) const {
+  // Override above 1 speeds up feed moves only; a rapid already runs at its axes' limit.
+  return p.v_prog * (p.block.kind == program::BlockKind::kRapid ? std::min(override_, 1.0) : override_);
+}
+
+PlanUpdate* Planner::fresh_update() {
+  std::unique_ptr<PlanUpdate> u;
+  if (pool_.empty()) {
+    u = std::make_unique<PlanUpdate>();
+  } else {
+    u = std::move(pool_.back());
+    pool_.pop_back();
+  }
+  u->clear();
+  u->epoch = epoch_;
+  live_.push_back(std::move(u));
+  return live_.back().get();
+}
+
+void Planner::recycle(PlanUpdate* u) {
+  for (size_t i = 0; i < live_.size(); ++i) {
+    if (live_[i].get() != u) continue;
+    pool_.push_back(std::move(live_[i]));
+    live_.erase(live_.begin() + static_cast<std::ptrdiff_t>(i));
+    if (pool_.size() > 64) pool_.pop_back();
+    return;
+  }
+}
+
+void Planner::retire(uint64_t serial_below) {
+  retired_below_ = std::max(retired_below_, serial_below);
+  // The newest block stays: the next block's junction is planned against it.
+  while (list_.size() > 1 && list_.front().p->serial < retired_below_) list_.pop_front();
+}
+
+PlanUpdate* Planner::process(const PlanRequest& r) {
+  switch (r.kind) {
+    case PlanRequest::Kind::kClear:
+      list_.clear();
+      epoch_ = r.epoch;
+      return nullptr;
+    case PlanRequest::Kind::kOverride: {
+      override_ = r.feed_override;
+      PlanUpdate* u = fresh_update();
+      backward_pass(true, u);
+      return u;
+    }
+    case PlanRequest::Kind::kBlock: break;
+  }
+  std::unique_ptr<program::Block> block(r.block);
+  if (r.epoch != epoch_) {  // a block of a program already dropped (cannot happen in order; kept safe)
+    list_.clear();
+    epoch_ = r.epoch;
+  }
+  PlanUpdate* u = fresh_update();
+  try {
+    auto p = std::make_unique<Planned>(*block, motion::PathSegment(*block, naxes_));
+    p->serial = r.serial;
+    plan_block(*p);
+    // The path starts from rest after a clear; otherwise the junction with the block before.
+    if (!list_.empty()) plan_junction(*list_.back().p, *p);
+    else p->v_entry = 0;
+    p->live_entry = p->v_entry;
+    p->v_bw.assign(p->samples.size(), -1.0);
+    u->samples = static_cast<int64_t>(p->samples.size());
+    u->block = p.get();
+    list_.push_back(Entry{std::move(p), {}});
+  } catch (const std::exception& e) {
+    u->error = std::string("block ") + std::to_string(block->index) + ": " + e.what();
+    return u;
+  }
+  // Blocks the cyclic side is done with no longer need their look-ahead.
+  while (list_.size() > 1 && list_.front().p->serial < retired_below_) list_.pop_front();
+  backward_pass(false, u);
+  return u;
+}
+
+bool SyncPlanLink::push(const PlanRequest& r) {
+  if (PlanUpdate* u = planner_.process(r)) ready_.push_back(u);
+  return true;
+}
+
+void SyncPlanLink::pop() {
+  planner_.recycle(ready_.front());
+  ready_.pop_front();
+}
+
+}  // namespace cnc::interp

@@ -1,0 +1,156 @@
+#pragma once
+// Block planning of the interpolator, apart from its cyclic step: per block the
+// curve samples along the arc length with their geometric feed limits (chord error,
+// roughness, axis velocity, curvature), the junction with the block before, and the
+// look-ahead (the backward pass of acceleration-limited speed limits over the
+// buffered blocks, which end in a stop). A Planner is a pure function of the
+// ordered requests it processed: the same requests give the same updates, bit for
+// bit, whichever thread runs it and whenever. The cyclic core (interpolator.h)
+// applies the updates at cycles it records as inputs; see README.md "Timing".
+#include <array>
+#include <cstdint>
+#include <deque>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "common/config/machine_config.h"
+#include "common/motion/path_segment.h"
+#include "common/program/block.h"
+
+namespace cnc::interp {
+
+// Which constraint set the commanded feed (values match lcmt_setpoint's LIMIT_*).
+enum class Limit : int8_t {
+  kNone = 0, kProgram = 1, kChord = 2, kRoughness = 3, kAxisVelocity = 4, kCurvatureAccel = 5, kLookahead = 6
+};
+
+struct Sample {
+  double u;
+  double s;      // arc length from the block start, mm
+  double v_geo;  // geometric speed limit, mm/s
+  Limit limit;
+};
+
+// One planned block. Everything but the "cyclic side" fields is written by the
+// planner before the block is handed over and only read afterwards.
+struct Planned {
+  program::Block block;
+  motion::PathSegment path;
+  std::vector<Sample> samples;  // at least two for a moving block
+  double length = 0;
+  double v_prog = 0;            // programmed feed in mm/s (rapids: the axis-limited speed)
+  double accel = 0, jerk = 0;   // tangential limits over the block
+  double v_entry = 0;           // junction limit with the previous block (planner's)
+  uint64_t serial = 0;          // submission number (monotonic over the core's life)
+  bool stop_block() const;      // dwell / end / event: the path stops here
+
+  // Cyclic side, written only by the thread that steps the core after the handover.
+  std::vector<double> v_bw;     // look-ahead limits per sample (sized by the planner)
+  double live_entry = 0;        // the entry limit the cyclic side uses
+  bool stop_at_start() const { return stop_block() || live_entry == 0; }
+
+  Planned(program::Block b, motion::PathSegment p) : block(std::move(b)), path(std::move(p)) {}
+};
+
+// From the cyclic side to the planner, in the order the core emitted them.
+struct PlanRequest {
+  enum class Kind : uint8_t { kBlock = 1, kOverride = 2, kClear = 3 };
+  Kind kind = Kind::kBlock;
+  uint64_t epoch = 0;               // the core's program epoch (a LOAD, RESET or finished STOP starts one)
+  uint64_t serial = 0;              // kBlock: the block's submission number
+  program::Block* block = nullptr;  // kBlock: owned by the planner from the push on
+  double feed_override = 1.0;       // kOverride
+};
+
+// From the planner to the cyclic side: one per block or override request, in order.
+struct PlanUpdate {
+  uint64_t epoch = 0;
+  Planned* block = nullptr;  // kBlock: the new block, owned by the planner (freed after it is retired)
+  int64_t samples = 0;       // samples planned for it (the per-cycle budget counts these)
+  // New look-ahead values for blocks the cyclic side may hold: values[offset, offset+count)
+  // go to the block with `serial`, starting at sample `from`.
+  struct Patch {
+    uint64_t serial;
+    uint32_t from, count, offset;
+  };
+  std::vector<Patch> patches;
+  std::vector<double> values;
+  std::string error;  // kBlock: the block could not be planned (block is null)
+  void clear() {
+    epoch = 0;
+    block = nullptr;
+    samples = 0;
+    patches.clear();
+    values.clear();
+    error.clear();
+  }
+};
+
+class Planner {
+ public:
+  explicit Planner(const config::MachineConfig& cfg);
+  ~Planner();
+  Planner(const Planner&) = delete;
+  Planner& operator=(const Planner&) = delete;
+
+  // Processes one request; returns its update (kBlock, kOverride) or nullptr (kClear).
+  // The update stays the planner's; give it back with recycle() once applied.
+  PlanUpdate* process(const PlanRequest& r);
+  void recycle(PlanUpdate* u);
+  // The cyclic side holds no block with a serial below this any more.
+  void retire(uint64_t serial_below);
+  size_t held_blocks() const { return list_.size(); }
+
+ private:
+  struct Entry {
+    std::unique_ptr<Planned> p;
+    std::vector<double> v_bw;  // the planner's own look-ahead values
+  };
+  void plan_block(Planned& p) const;
+  void plan_junction(const Planned& prev, Planned& next) const;
+  void backward_pass(bool full, PlanUpdate* u);
+  double programmed_speed(const Planned& p) const;
+  bool rapid_at_full_speed(const Planned& p) const;
+  PlanUpdate* fresh_update();
+
+  config::MachineConfig cfg_;
+  double period_s_;
+  int naxes_;
+  double override_ = 1.0;
+  uint64_t epoch_ = 0;
+  uint64_t retired_below_ = 0;
+  std::deque<Entry> list_;  // this epoch's blocks not yet retired, and always the newest
+  std::vector<std::unique_ptr<PlanUpdate>> pool_;  // recycled updates
+  std::vector<std::unique_ptr<PlanUpdate>> live_;  // handed out (owned here until recycled)
+};
+
+// How the cyclic core reaches its planner: inline (SyncPlanLink: dry run, replay,
+// tests) or on a thread of its own (ThreadedPlanLink, planner_thread.h).
+class PlanLink {
+ public:
+  virtual ~PlanLink() = default;
+  // Cyclic side. push: false when the link is full (try again later; nothing is taken).
+  virtual bool push(const PlanRequest& r) = 0;
+  // The next finished update or nullptr; pop() hands it back after it was applied.
+  virtual PlanUpdate* front() = 0;
+  virtual void pop() = 0;
+  virtual void retire(uint64_t serial_below) = 0;
+};
+
+// The planner called inline: every request's update is ready at once.
+class SyncPlanLink final : public PlanLink {
+ public:
+  explicit SyncPlanLink(const config::MachineConfig& cfg) : planner_(cfg) {}
+  bool push(const PlanRequest& r) override;
+  PlanUpdate* front() override { return ready_.empty() ? nullptr : ready_.front(); }
+  void pop() override;
+  void retire(uint64_t serial_below) override { planner_.retire(serial_below); }
+  size_t ready() const { return ready_.size(); }
+
+ private:
+  Planner planner_;
+  std::deque<PlanUpdate*> ready_;
+};
+
+}  // namespace cnc::interp
