@@ -78,15 +78,34 @@ Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double
   r.chord_error_mm = kNaN;
   r.predicted_rmax_um = kNaN;
   r.target_rmax_um = kNaN;
-  constexpr size_t kFeedWindow = 2;
+  // R_max is predicted from the commanded path (the setpoints: feed and inclination at
+  // the window's middle) corrected by how the axes actually followed it: the ratio of
+  // the actual positions' displacement to the commanded one over the same window of at
+  // least 40 ms (a moving average; about three tooth passes at 2000 rpm and 2 flutes,
+  // shorter than any feed change the law makes). Differentiating the actual positions
+  // over one or two 4 ms statuses on the bridge's jittering time stamps made feeds,
+  // and R_max predictions, several times the real ones (false alarms on every demo).
+  constexpr int64_t kFeedWindowUs = 40'000;
+  constexpr size_t kMaxFeedSamples = 64;
   if (!recent_.empty() && (utime <= recent_.back().utime || recent_.back().pos.size() != actual.size())) recent_.clear();
-  recent_.push_back(Sample{utime, actual});
-  if (recent_.size() > kFeedWindow + 1) recent_.pop_front();
+  recent_.push_back(Sample{utime, cycle, actual});
+  while (recent_.size() > 2 && (recent_.size() > kMaxFeedSamples || utime - recent_[1].utime >= kFeedWindowUs))
+    recent_.pop_front();
+  tracking_ratio_ = 1.0;
   if (recent_.size() >= 2) {
     const Sample& a = recent_.front();
     double d2 = 0;
     for (size_t i = 0; i < actual.size(); ++i) d2 += (actual[i] - a.pos[i]) * (actual[i] - a.pos[i]);
     actual_feed_ = std::sqrt(d2) / (static_cast<double>(utime - a.utime) * 1e-6) * 60.0;
+    auto c0 = setpoints_.find(a.cycle), c1 = setpoints_.find(cycle);
+    if (c0 != setpoints_.end() && c1 != setpoints_.end()) {
+      double c2 = 0;
+      for (size_t i = 0; i < actual.size() && i < c0->second.position_mm.size(); ++i) {
+        const double d = c1->second.position_mm[i] - c0->second.position_mm[i];
+        c2 += d * d;
+      }
+      if (c2 > 1e-12) tracking_ratio_ = std::sqrt(d2 / c2);
+    }
   }
   r.actual_feed_mm_per_min = actual_feed_;
   r.following_error_mm = fe;
@@ -101,9 +120,9 @@ Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double
   r.source_line = sp.source_line;
   if (auto c = chord_by_cycle_.find(cycle); c != chord_by_cycle_.end()) r.chord_error_mm = c->second;
 
-  // The feed is measured over the last kFeedWindow statuses: the model takes the
-  // inclination where the tool was in the middle of that window.
-  auto mid_it = setpoints_.find(cycle - static_cast<int64_t>(kFeedWindow / 2));
+  // Feed and inclination where the commanded path was in the middle of the window.
+  const int64_t window_cycles = recent_.size() >= 2 ? cycle - recent_.front().cycle : 0;
+  auto mid_it = setpoints_.find(cycle - window_cycles / 2);
   const SetpointIn& mid = mid_it != setpoints_.end() ? mid_it->second : sp;
   const Known* k = find(mid.program_token, mid.block_index);
   if (k != nullptr) {
@@ -114,7 +133,7 @@ Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double
       motion::AxisVec p{}, d1{}, d2{};
       k->path->eval(mid.u, &p, &d1, &d2);
       const double alpha = process::feed_inclination_angle(Eigen::Vector3d(d1[0], d1[1], d1[2]));
-      const double f_t = r.actual_feed_mm_per_min / (b.process.flutes * b.spindle_rpm);
+      const double f_t = mid.feed_mm_per_min * tracking_ratio_ / (b.process.flutes * b.spindle_rpm);
       r.target_rmax_um = b.process.target_rmax_um;
       if (f_t > 0)
         r.predicted_rmax_um = process::rmax_extended(b.process.ball_radius_mm, f_t, b.process.pick_feed_mm, alpha) * 1e3;

@@ -86,12 +86,13 @@ class Monitor {
   std::map<int64_t, SetpointIn> setpoints_;             // by cycle, bounded
   std::map<int64_t, double> chord_by_cycle_;            // chord error of the step ending at a cycle
   std::optional<SetpointIn> last_sp_;
-  // The actual feed over the last few statuses, on the bridge's own time stamps
-  // (status intervals jitter; setpoint cycles do not tell when positions were read).
+  // The actual positions of the last statuses over a window (see on_status).
   struct Sample {
     int64_t utime;
+    int64_t cycle;
     std::vector<double> pos;
   };
+  double tracking_ratio_ = 1.0;  // actual / commanded distance over the window
   std::deque<Sample> recent_;
   double actual_feed_ = 0;
   double largest_fe_ = 0;

@@ -126,12 +126,15 @@ fitted, n = decel_fit(t, x, v, v[i], i, rest)
 # Single 50 ms windows: the samples' time stamps jitter by about a millisecond.
 worst = max((v[k] - v[k + 5]) / (t[k + 5] - t[k]) for k in range(i, max(i + 1, rest - 5)))
 dist = x[rest] - x[i]
-bound = v[i] ** 2 / (2 * decel) + v[i] * 0.05 + 0.1
+# The bridge's stop is jerk-limited (X: 60000 mm/s^3, config/machines/sim3.yaml): it
+# reaches the full deceleration after a/j and releases it over a/j, which adds v*a/j.
+jerk = 60000.0
+bound = v[i] ** 2 / (2 * decel) + v[i] * (0.05 + decel / jerk) + 0.1
 print(f"# publish failure at X = {x[i]:.3f} mm, {v[i]:.1f} mm/s; at rest {(t[rest] - cut) * 1e3:.0f} ms later at "
-      f"X = {x[rest]:.3f} mm: {dist:.3f} mm (bound v^2/2a + v*timeout + 0.1 = {bound:.3f} mm); deceleration "
-      f"{fitted:.0f} mm/s^2 fitted over {n} samples (configured {decel:g}: within -15/+10 %), largest over 50 ms "
+      f"X = {x[rest]:.3f} mm: {dist:.3f} mm (bound v^2/2a + v*(timeout + a/j) + 0.1 = {bound:.3f} mm); deceleration "
+      f"{fitted:.0f} mm/s^2 fitted over {n} samples (configured {decel:g}: within -25/+10 %), largest over 50 ms "
       f"{worst:.0f} mm/s^2 (within +25 %)", file=sys.stderr)
-ok = v[i] > 150 and 0 <= dist <= bound and 0.85 * decel <= fitted <= 1.10 * decel and worst <= 1.25 * decel
+ok = v[i] > 150 and 0 <= dist <= bound and 0.75 * decel <= fitted <= 1.10 * decel and worst <= 1.25 * decel
 sys.exit(0 if ok else 1)
 PY
 grep -q "fault: the bus failed" "$WORK/drive-bridge.log" || fail "the bridge did not fault on its failed publishes"
@@ -241,9 +244,13 @@ fitted, n = decel_fit(tt, xx, v, v[3])
 w = 13
 worst = max((v[k] - v[k + w]) / (tt[k + w] - tt[k]) for k in range(0, len(v) - w))
 print(f"# drive fault on Y: X at {v[3]:.1f} mm/s stopped within {(ts[rest] - ts[k0]) * 1e3:.0f} ms; deceleration "
-      f"{fitted:.0f} mm/s^2 fitted over {n} statuses (configured {decel:g}: within -15/+10 %), largest over 50 ms "
+      f"{fitted:.0f} mm/s^2 fitted over {n} statuses (configured {decel:g}: within -40/+10 %), largest over 50 ms "
       f"{worst:.0f} mm/s^2 (within +25 %)", file=sys.stderr)
-ok = ok and v[3] > 80 and 0.85 * decel <= fitted <= 1.10 * decel and worst <= 1.25 * decel
+# From 100 mm/s the bridge's jerk-limited stop (60000 mm/s^3: 33 ms to reach the full
+# deceleration, 33 ms to release it) spends most of its ~80 ms ramping, so the parabola
+# fitted between 90 % and 10 % of the speed reads well below the plateau (1275-1640
+# mm/s^2 seen); the stop time and the 50 ms maximum still bound it.
+ok = ok and v[3] > 80 and 0.6 * decel <= fitted <= 1.10 * decel and worst <= 1.25 * decel
 sys.exit(0 if ok else 1)
 PY
 "$BUILD/tools/cnc-replay" --log "$WORK/cell.lcmlog" >"$WORK/replay.out" 2>&1 || { cat "$WORK/replay.out" >&2; fail "the run does not replay"; }
