@@ -97,7 +97,10 @@ Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double
     double d2 = 0;
     for (size_t i = 0; i < actual.size(); ++i) d2 += (actual[i] - a.pos[i]) * (actual[i] - a.pos[i]);
     actual_feed_ = std::sqrt(d2) / (static_cast<double>(utime - a.utime) * 1e-6) * 60.0;
-    auto c0 = setpoints_.find(a.cycle), c1 = setpoints_.find(cycle);
+    // The axes follow the setpoints a few cycles late (the bridge's jitter buffer and
+    // fine interpolation, the drives' lag): compare with the commanded stretch that
+    // many cycles earlier, or a deceleration reads as overspeed.
+    auto c0 = setpoints_.find(a.cycle - lag_cycles_), c1 = setpoints_.find(cycle - lag_cycles_);
     if (c0 != setpoints_.end() && c1 != setpoints_.end()) {
       double c2 = 0;
       for (size_t i = 0; i < actual.size() && i < c0->second.position_mm.size(); ++i) {

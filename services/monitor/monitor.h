@@ -57,6 +57,10 @@ struct Alarm {
 class Monitor {
  public:
   explicit Monitor(const config::MachineConfig& cfg);
+  // The axes' lag behind the setpoints in coarse cycles (the bridge's jitter buffer of
+  // two periods and its fine interpolation): 3 on the cell; 0 where the actual
+  // positions are the setpoints themselves (tests).
+  void set_tracking_lag_cycles(int64_t n) { lag_cycles_ = n; }
 
   // A block the interpolator applied (INTERP_INPUT), of program `token`.
   void on_block(const program::Block& b, int64_t token);
@@ -93,6 +97,7 @@ class Monitor {
     std::vector<double> pos;
   };
   double tracking_ratio_ = 1.0;  // actual / commanded distance over the window
+  int64_t lag_cycles_ = 3;        // how many coarse cycles the axes follow the setpoints late
   std::deque<Sample> recent_;
   double actual_feed_ = 0;
   double largest_fe_ = 0;

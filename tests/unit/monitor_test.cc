@@ -32,6 +32,7 @@ Outcome run(const config::MachineConfig& cfg, const std::string& program, bool l
   EXPECT_TRUE(loaded.ok) << loaded.error;
   interp::Interpolator ip(cfg);
   Monitor mon(cfg);
+  mon.set_tracking_lag_cycles(0);  // the actual positions here are the setpoints
   ip.apply_command({interp::Command::Kind::kStart, 1.0});
   for (int64_t i = 0; i < server.num_blocks(); ++i) {
     program::Block b = *server.block(i);
