@@ -838,7 +838,10 @@ void Interpreter::collect_words(Words& w) {
       if (std::fabs(t - g) > 1e-3) fail(word.column, "unknown G code G" + num(v));
       const int grp = g_group(g);
       if (grp < 0) fail(word.column, "unknown or unsupported G code " + g_text(g));
-      if (w.g[static_cast<size_t>(grp)] >= 0)
+      // LinuxCNC's read_g: G80 with another code of its group in one block gives way to it
+      // ("G80 G0", "G0 G80" are G0).
+      if (g == 800 && w.g[static_cast<size_t>(grp)] >= 0) continue;
+      if (w.g[static_cast<size_t>(grp)] >= 0 && w.g[static_cast<size_t>(grp)] != 800)
         fail(word.column, "two G codes from the same modal group: " + g_text(w.g[static_cast<size_t>(grp)]) + " and " + g_text(g));
       w.g[static_cast<size_t>(grp)] = g;
       w.gcol[static_cast<size_t>(grp)] = word.column;
