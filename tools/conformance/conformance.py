@@ -9,6 +9,7 @@ Exit status: 0 pass, 1 fail (see --help for the criterion), 2 usage / setup
 error, 77 skip (--skip-if-missing and the interpreter under test is absent).
 """
 import argparse
+import hashlib
 import concurrent.futures as cf
 import json
 import math
@@ -212,7 +213,10 @@ def main():
 
         def job(item):
             kind, prog = item
-            key = re.sub(r'[^A-Za-z0-9_.-]', '_', os.path.relpath(prog, '/'))
+            # Short: rs274 silently truncates a long var-file path (then reads no
+            # parameters at all), and a program's path can be long.
+            key = (re.sub(r'[^A-Za-z0-9_.-]', '_', os.path.basename(prog))[:48] + '-' +
+                   hashlib.sha1(prog.encode()).hexdigest()[:10])
             wd = os.path.join(work, 'runs', key)
             th = run_one(a.theirs, tpl_theirs, prog, a.fixture, ini, subpath, os.path.join(wd, 'theirs'), a.timeout)
             if kind == 'generated' and not th['accepted']:
