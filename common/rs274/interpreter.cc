@@ -253,6 +253,13 @@ Interpreter::~Interpreter() = default;
 double Interpreter::length_scale() const { return units_ == Units::kInch ? kMmPerInch : 1.0; }
 double Interpreter::to_program(double mm) const { return mm / length_scale(); }
 
+// A pose in mm (degrees for A B C) in program units.
+Pose Interpreter::program_pose(const Pose& mm) const {
+  Pose p{};
+  for (size_t i = 0; i < p.size(); ++i) p[i] = i < 3 || i >= 6 ? to_program(mm[i]) : mm[i];
+  return p;
+}
+
 // Lengths in parameters and the tool table are in machine units (LinuxCNC's rule);
 // the interpreter works in mm. Axis i of a group that starts at `base`.
 double Interpreter::param_len(int base, int i) const {
@@ -1348,8 +1355,7 @@ void Interpreter::execute_block(Words& w) {
       comp_radius_ = radius;
       canon_.comment(ref(w.gcol[7]), side < 0 ? "interpreter: cutter radius compensation on right"
                                               : "interpreter: cutter radius compensation on left");
-      Pose programmed{};
-      for (size_t i = 0; i < programmed.size(); ++i) programmed[i] = i < 3 || i >= 6 ? to_program(position_[i]) : position_[i];
+      const Pose programmed = program_pose(position_);
       comp_filter_->start(side, to_program(radius), plane_, programmed);
     }
   }
@@ -1670,11 +1676,7 @@ void Interpreter::g28_g30(Words& w, bool g30) {
   Pose via = axis_target(w, false);
   const SourceRef r = ref(w.gcol[0]);
   if (w.axes != 0) {
-    canon_.straight_traverse(r, [&] {
-      Pose p{};
-      for (size_t i = 0; i < p.size(); ++i) p[i] = i < 3 || i >= 6 ? to_program(via[i]) : via[i];
-      return p;
-    }());
+    canon_.straight_traverse(r, program_pose(via));
     position_ = via;
   }
   Pose home_m = machine_of(position_, coord_);
@@ -1685,8 +1687,7 @@ void Interpreter::g28_g30(Words& w, bool g30) {
     home_m[k] = param_len(base, i);
   }
   const Pose home = program_of(home_m, coord_);
-  Pose shown{};
-  for (size_t i = 0; i < shown.size(); ++i) shown[i] = i < 3 || i >= 6 ? to_program(home[i]) : home[i];
+  const Pose shown = program_pose(home);
   canon_.straight_traverse(r, shown);
   position_ = home;
   w.axes = 0;
@@ -1730,8 +1731,7 @@ void Interpreter::g92(Words& w) {
     params_.set(5210, 1);
     g92_active_ = true;
   }
-  Pose p{};
-  for (size_t i = 0; i < p.size(); ++i) p[i] = i < 3 || i >= 6 ? to_program(g92_[i]) : g92_[i];
+  const Pose p = program_pose(g92_);
   canon_.set_g92_offset(r, p);
 }
 
@@ -1747,8 +1747,7 @@ void Interpreter::motion(Words& w) {
   if (m == 0 || m == 10) {
     if (w.axes == 0 && w.g[1] < 0) return;  // G0/G1 on its line moves even to where it is (LinuxCNC)
     const Pose end = axis_target(w, g53);
-    Pose shown{};
-    for (size_t i = 0; i < shown.size(); ++i) shown[i] = i < 3 || i >= 6 ? to_program(end[i]) : end[i];
+    const Pose shown = program_pose(end);
     if (m == 0) {
       canon_.straight_traverse(ref(col), shown);
     } else {
@@ -1877,8 +1876,7 @@ void Interpreter::arc(Words& w, bool cw, const Pose& end) {
     feed_ = length == 0 ? 0.1 : length * w['F'];
     canon_.set_feed_rate(ref(col), feed_);
   }
-  Pose shown{};
-  for (size_t i = 0; i < shown.size(); ++i) shown[i] = i < 3 || i >= 6 ? to_program(end[i]) : end[i];
+  const Pose shown = program_pose(end);
   const int rotation = cw ? -turns : turns;
   canon_.arc_feed(ref(col), e1, e2, cen1, cen2, rotation, shown[static_cast<size_t>(a3)], shown);
   position_ = end;
@@ -1903,7 +1901,7 @@ void Interpreter::cycle(Words& w) {
   in.plane = plane_;
   in.incremental = incremental_;
   in.retract_to_r = retract_r_;
-  for (size_t i = 0; i < in.start.size(); ++i) in.start[i] = i < 3 || i >= 6 ? to_program(position_[i]) : position_[i];
+  in.start = program_pose(position_);
   in.has_x = w.on(l1);
   in.has_y = w.on(l2);
   in.x = in.has_x ? w[l1] : (incremental_ ? 0 : in.start[static_cast<size_t>(a1)]);
@@ -2022,8 +2020,7 @@ void Interpreter::spline(Words& w, bool cubic, int col) {
   std::vector<double> knots;
   for (int k = 0; k < order; ++k) knots.push_back(0);
   for (int k = 0; k < order; ++k) knots.push_back(1);
-  Pose shown{};
-  for (size_t i = 0; i < shown.size(); ++i) shown[i] = i < 3 || i >= 6 ? to_program(end[i]) : end[i];
+  const Pose shown = program_pose(end);
   if (feed_mode_ == FeedMode::kInverseTime) {
     if (!w.on('F')) fail(col, "a spline in inverse time mode (G93) needs an F word");
     feed_ = w['F'] * std::hypot(to_program(x1 - x0), to_program(y1 - y0));
@@ -2108,8 +2105,7 @@ void Interpreter::nurbs_g5_close() {
   for (int i = 0; i < n.order; ++i) knots.push_back(0);
   for (int i = 1; i <= npts - n.order; ++i) knots.push_back(i);
   for (int i = 0; i < n.order; ++i) knots.push_back(npts - n.order + 1);
-  Pose shown{};
-  for (size_t i = 0; i < shown.size(); ++i) shown[i] = i < 3 || i >= 6 ? to_program(n.last[i]) : n.last[i];
+  const Pose shown = program_pose(n.last);
   canon_.nurbs_feed(ref(n.column), n.order, n.points, knots, shown);
   position_ = n.last;
   nurbs_.reset();
@@ -2182,8 +2178,7 @@ void Interpreter::nurbs_fanuc_close() {
     fail(0, "the G06.2 curve opened at line " + std::to_string(n.line) + " has " + std::to_string(n.knots.size()) +
                 " knots; " + std::to_string(np) + " control points of order " + std::to_string(n.order) + " need " +
                 std::to_string(np + static_cast<size_t>(n.order)));
-  Pose shown{};
-  for (size_t i = 0; i < shown.size(); ++i) shown[i] = i < 3 || i >= 6 ? to_program(n.last[i]) : n.last[i];
+  const Pose shown = program_pose(n.last);
   canon_.nurbs_feed(ref(n.column), n.order, n.points, n.knots, shown);
   position_ = n.last;
   nurbs_.reset();

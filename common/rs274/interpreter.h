@@ -113,6 +113,7 @@ class Interpreter {
 
   Pose axis_target(const Words& w, bool machine) const;  // G53: machine coordinates
   double to_program(double machine_units_value) const;
+  Pose program_pose(const Pose& mm) const;
   double length_scale() const;
   double param_len(int base, int i) const;
   Pose machine_of(const Pose& program_mm, int cs) const;
