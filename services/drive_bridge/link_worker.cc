@@ -1,6 +1,11 @@
 #include "services/drive_bridge/link_worker.h"
 
+#include <pthread.h>
+#include <sched.h>
+
+#include <cerrno>
 #include <cstring>
+#include <ctime>
 #include <stdexcept>
 
 #include "common/util/clock.h"
@@ -9,60 +14,64 @@ namespace cnc::bridge {
 
 LinkWorker::LinkWorker(drive::Link& link, const config::DriveBridgeConfig& cfg) : link_(link), cfg_(cfg) {
   link_.set_backoff(cfg.reconnect_min_s, cfg.reconnect_max_s);
+  sem_init(&wake_, 0, 0);
 }
 
-LinkWorker::~LinkWorker() { stop(); }
+LinkWorker::~LinkWorker() {
+  stop();
+  sem_destroy(&wake_);
+}
 
 void LinkWorker::add_axis(int axis_index, const drive::DriveProfile& profile, int unit) {
   if (slots_.size() >= kMaxSlots) throw std::runtime_error("too many drives on link " + link_.name());
-  Slot s;
-  s.io = std::make_unique<drive::DriveIo>(profile, unit, link_);
+  auto s = std::make_unique<Slot>();
+  s->io = std::make_unique<drive::DriveIo>(profile, unit, link_);
   slots_.push_back(std::move(s));
   axis_index_.push_back(axis_index);
 }
 
 void LinkWorker::start() {
-  stopping_ = false;
+  stopping_.store(false, std::memory_order_release);
   thread_ = std::thread([this] { run(); });
 }
 
 void LinkWorker::stop() {
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    stopping_ = true;
-  }
-  cv_.notify_all();
+  stopping_.store(true, std::memory_order_release);
+  sem_post(&wake_);
   if (thread_.joinable()) thread_.join();
 }
 
-void LinkWorker::post() {
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    ++posted_;
-  }
-  cv_.notify_one();
-}
+void LinkWorker::post() { sem_post(&wake_); }
 
-void LinkWorker::set_command(size_t slot, const AxisCommand& c) {
-  std::lock_guard<std::mutex> lock(mu_);
-  slots_[slot].cmd = c;
-}
+void LinkWorker::set_command(size_t slot, const AxisCommand& c) { slots_[slot]->cmd.write(c); }
 
-AxisReport LinkWorker::report(size_t slot) const {
-  std::lock_guard<std::mutex> lock(mu_);
-  return slots_[slot].rep;
-}
+const AxisReport& LinkWorker::report(size_t slot) { return slots_[slot]->rep.read(); }
 
 void LinkWorker::run() {
-  std::unique_lock<std::mutex> lock(mu_);
-  while (!stopping_) {
+  // One real-time priority below the servo thread that started it (nothing when
+  // the process runs with normal scheduling).
+  int policy = SCHED_OTHER;
+  sched_param sp{};
+  if (pthread_getschedparam(pthread_self(), &policy, &sp) == 0 && policy == SCHED_FIFO && sp.sched_priority > 1) {
+    sp.sched_priority -= 1;
+    pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
+  }
+  pthread_setname_np(pthread_self(), "cnc-link");
+  while (!stopping_.load(std::memory_order_acquire)) {
     // A closed link is retried on its back-off schedule even without new ticks.
-    cv_.wait_for(lock, std::chrono::milliseconds(20), [this] { return stopping_ || posted_ > taken_; });
-    if (stopping_) break;
-    taken_ = posted_;
-    lock.unlock();
+    timespec until{};
+    clock_gettime(CLOCK_MONOTONIC, &until);
+    until.tv_nsec += 20'000'000;
+    if (until.tv_nsec >= 1'000'000'000) {
+      until.tv_nsec -= 1'000'000'000;
+      ++until.tv_sec;
+    }
+    while (sem_clockwait(&wake_, CLOCK_MONOTONIC, &until) != 0 && errno == EINTR) {
+    }
+    while (sem_trywait(&wake_) == 0) {
+    }  // posts that piled up while a round ran: one round serves them all
+    if (stopping_.load(std::memory_order_acquire)) break;
     round(util::monotonic_s());
-    lock.lock();
   }
 }
 
@@ -82,23 +91,20 @@ void LinkWorker::mark_lost(Slot& s) {
 void LinkWorker::round(double now_s) {
   AxisCommand cmds[kMaxSlots];
   const size_t n = slots_.size();
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    for (size_t i = 0; i < n; ++i) cmds[i] = slots_[i].cmd;
-  }
+  for (size_t i = 0; i < n; ++i) cmds[i] = slots_[i]->cmd.read();
   if (!link_.is_open()) {
     if (link_.ensure_open(now_s)) {
-      for (size_t i = 0; i < n; ++i) slots_[i].io->forget();
+      for (size_t i = 0; i < n; ++i) slots_[i]->io->forget();
     } else {
       for (size_t i = 0; i < n; ++i) {
-        Slot& s = slots_[i];
+        Slot& s = *slots_[i];
         if (s.work.answering) mark_lost(s);
         std::snprintf(s.work.last_error.data(), s.work.last_error.size(), "%s", link_.last_error().c_str());
       }
     }
   }
   for (size_t i = 0; i < n && link_.is_open(); ++i) {
-    Slot& s = slots_[i];
+    Slot& s = *slots_[i];
     const AxisCommand& c = cmds[i];
     drive::DriveIo& io = *s.io;
     // The target: the command while following an enabled drive; else where the
@@ -145,7 +151,7 @@ void LinkWorker::round(double now_s) {
       s.work.actual_mm = io.actual_mm();
       const drive::TxResult rc = io.control(c.goal, s.work.counters);
       if (rc == drive::TxResult::kLinkLost) {
-        for (auto& other : slots_) mark_lost(other);
+        for (auto& other : slots_) mark_lost(*other);
       }
       continue;
     }
@@ -153,7 +159,7 @@ void LinkWorker::round(double now_s) {
                   link_.last_error().c_str());
     s.have_written = false;
     if (r == drive::TxResult::kLinkLost) {
-      for (auto& other : slots_) mark_lost(other);
+      for (auto& other : slots_) mark_lost(*other);
       break;
     }
     if (s.work.answering && now_s - s.last_answer_s > cfg_.link_loss_timeout_s) {
@@ -162,17 +168,14 @@ void LinkWorker::round(double now_s) {
       // When no drive on the link answers, reopen it, which drops stale replies.
       mark_lost(s);
       bool any = false;
-      for (const auto& other : slots_) any = any || other.work.answering;
+      for (const auto& other : slots_) any = any || other->work.answering;
       if (!any) {
         link_.close(now_s);
         break;
       }
     }
   }
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    for (size_t i = 0; i < n; ++i) slots_[i].rep = slots_[i].work;
-  }
+  for (size_t i = 0; i < n; ++i) slots_[i]->rep.write(slots_[i]->work);
   ++rounds_;
 }
 

@@ -11,13 +11,20 @@
 //
 // Over a slow serial line a round takes longer than a servo tick: the worker then
 // runs back to back and always writes the newest command.
+//
+// The servo thread and a worker share no lock: each axis's command and report
+// cross in a wait-free triple buffer (the newest value wins), and the servo thread
+// wakes the worker with a semaphore post. A worker runs one SCHED_FIFO priority
+// below the servo thread when the process has real-time scheduling, so it never
+// preempts the loop that feeds it and nothing the servo thread waits on can be
+// held by a thread that lower-priority work preempts.
+#include <semaphore.h>
+
 #include <array>
 #include <atomic>
-#include <condition_variable>
 #include <cstdint>
 #include <functional>
 #include <memory>
-#include <mutex>
 #include <string>
 #include <thread>
 #include <vector>
@@ -25,6 +32,7 @@
 #include "common/config/machine_config.h"
 #include "common/drive/drive_io.h"
 #include "common/drive/link.h"
+#include "common/util/triple_buffer.h"
 
 namespace cnc::bridge {
 
@@ -71,16 +79,17 @@ class LinkWorker {
   // Inline use (tests, shut-down): one round on the caller's thread.
   void round(double now_s);
 
+  // One thread sets commands and reads reports (the servo thread); wait-free.
   void set_command(size_t slot, const AxisCommand& c);
-  AxisReport report(size_t slot) const;
+  const AxisReport& report(size_t slot);
   int64_t rounds() const { return rounds_.load(); }
 
  private:
   static constexpr size_t kMaxSlots = 16;
   struct Slot {
     std::unique_ptr<drive::DriveIo> io;
-    AxisCommand cmd;       // under mu_
-    AxisReport rep;        // under mu_
+    util::TripleBuffer<AxisCommand> cmd;  // servo thread -> worker
+    util::TripleBuffer<AxisReport> rep;   // worker -> servo thread
     // Worker-only state.
     AxisReport work;
     double last_answer_s = -1;
@@ -94,14 +103,11 @@ class LinkWorker {
 
   drive::Link& link_;
   config::DriveBridgeConfig cfg_;
-  std::vector<Slot> slots_;
+  std::vector<std::unique_ptr<Slot>> slots_;
   std::vector<int> axis_index_;
   WriteProbe probe_;
-  mutable std::mutex mu_;
-  std::condition_variable cv_;
-  int64_t posted_ = 0;
-  int64_t taken_ = 0;
-  bool stopping_ = false;
+  sem_t wake_;
+  std::atomic<bool> stopping_{false};
   std::thread thread_;
   std::atomic<int64_t> rounds_{0};
 };

@@ -10,7 +10,7 @@
 #include <thread>
 
 #include "services/interpolator/planner.h"
-#include "services/interpolator/spsc_ring.h"
+#include "common/util/spsc_ring.h"
 
 namespace cnc::interp {
 
@@ -36,9 +36,9 @@ class ThreadedPlanLink final : public PlanLink {
   void run();
 
   Planner planner_;
-  SpscRing<PlanRequest> requests_;
-  SpscRing<PlanUpdate*> updates_;
-  SpscRing<PlanUpdate*> returned_;
+  util::SpscRing<PlanRequest> requests_;
+  util::SpscRing<PlanUpdate*> updates_;
+  util::SpscRing<PlanUpdate*> returned_;
   size_t outstanding_ = 0;  // planner thread: updates out, not yet returned
   std::atomic<uint64_t> retired_below_{0};
   std::atomic<int64_t> pushed_{0};

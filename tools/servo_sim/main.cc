@@ -14,6 +14,8 @@
 // Single-threaded: select() on the sockets, the serial line and the control FIFO,
 // with the dynamics stepped on a 1 ms grid between requests.
 #include <fcntl.h>
+#include <pthread.h>
+#include <sched.h>
 #include <modbus.h>
 #include <sys/select.h>
 #include <sys/socket.h>
@@ -23,7 +25,9 @@
 
 #include <spdlog/spdlog.h>
 
+#include <atomic>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <ctime>
@@ -32,6 +36,7 @@
 #include <map>
 #include <memory>
 #include <sstream>
+#include <thread>
 #include <vector>
 
 #include "common/config/yaml_reader.h"
@@ -40,6 +45,7 @@
 #include "common/util/clock.h"
 #include "common/util/realtime.h"
 #include "common/util/signals.h"
+#include "common/util/spsc_ring.h"
 #include "tools/servo_sim/fault_injector.h"
 #include "tools/servo_sim/rtu_frame.h"
 #include "tools/servo_sim/sim_drive.h"
@@ -132,16 +138,109 @@ std::map<std::string, double> read_positions(const std::string& file) {
   return out;
 }
 
-std::string positions_json(const std::vector<SimDrive*>& drives) {
+std::string positions_json(const std::vector<std::string>& names, const double* pos) {
   std::string report = "{";
-  for (size_t i = 0; i < drives.size(); ++i) {
+  for (size_t i = 0; i < names.size(); ++i) {
     char buf[96];
-    std::snprintf(buf, sizeof buf, "%s\"%s\": %.7f", i ? ", " : "", drives[i]->name().c_str(),
-                  drives[i]->position_mm());
+    std::snprintf(buf, sizeof buf, "%s\"%s\": %.7f", i ? ", " : "", names[i].c_str(), pos[i]);
     report += buf;
   }
   return report + "}";
 }
+
+std::string positions_json(const std::vector<SimDrive*>& drives) {
+  std::vector<std::string> names;
+  std::vector<double> pos;
+  for (const SimDrive* d : drives) {
+    names.push_back(d->name());
+    pos.push_back(d->position_mm());
+  }
+  return positions_json(names, pos.data());
+}
+
+// The trace and the persisted positions are files: written on a thread of normal
+// priority, never on the simulation loop (a file write that blocks for tens of ms
+// on a busy disk would stall every simulated drive, and the bridge would rightly
+// see a following error). The loop hands over fixed-size samples through a
+// lock-free ring; a full ring drops the sample (counted) instead of waiting.
+class SideWriter {
+ public:
+  static constexpr size_t kMaxAxes = 16;
+  struct Sample {
+    double wall_s = 0;
+    double pos[kMaxAxes]{};
+    double vel[kMaxAxes]{};
+    bool on[kMaxAxes]{};
+    bool trace = false;  // a trace row (else only the newest positions to persist)
+  };
+
+  SideWriter(std::vector<std::string> names, std::string trace_file, std::string persist_file)
+      : names_(std::move(names)), persist_(std::move(persist_file)), ring_(4096) {
+    if (!trace_file.empty()) {
+      trace_.open(trace_file);
+      trace_ << "wall_s";
+      for (const auto& n : names_) trace_ << "," << n << "_mm," << n << "_mm_s," << n << "_on";
+      trace_ << "\n" << std::flush;
+    }
+    thread_ = std::thread([this] { run(); });
+  }
+  ~SideWriter() {
+    stop_.store(true, std::memory_order_release);
+    thread_.join();
+  }
+  bool tracing() const { return trace_.is_open(); }
+  // Simulation loop: wait-free.
+  void push(const Sample& s) {
+    if (!ring_.push(s)) dropped_.fetch_add(1, std::memory_order_relaxed);
+  }
+  int64_t dropped() const { return dropped_.load(std::memory_order_relaxed); }
+
+ private:
+  void run() {
+    sched_param sp{};
+    pthread_setschedparam(pthread_self(), SCHED_OTHER, &sp);
+    pthread_setname_np(pthread_self(), "sim-writer");
+    Sample last;
+    bool have = false;
+    double next_persist = 0;
+    for (;;) {
+      const bool stopping = stop_.load(std::memory_order_acquire);
+      while (Sample* s = ring_.front()) {
+        if (s->trace && trace_.is_open()) {
+          // One write per row, so a reader never sees half a row.
+          char buf[64];
+          std::snprintf(buf, sizeof buf, "%.4f", s->wall_s);
+          std::string row = buf;
+          for (size_t i = 0; i < names_.size(); ++i) {
+            std::snprintf(buf, sizeof buf, ",%.6f,%.4f,%d", s->pos[i], s->vel[i], s->on[i] ? 1 : 0);
+            row += buf;
+          }
+          row += "\n";
+          trace_ << row << std::flush;
+        }
+        last = *s;
+        have = true;
+        ring_.pop();
+      }
+      const double now = cnc::util::monotonic_s();
+      if (have && !persist_.empty() && (now >= next_persist || stopping)) {
+        next_persist = now + 0.05;
+        std::ofstream(persist_ + ".tmp") << positions_json(names_, last.pos) << "\n";
+        std::filesystem::rename(persist_ + ".tmp", persist_);
+      }
+      if (stopping) break;
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+  }
+
+  std::vector<std::string> names_;
+  std::string persist_;
+  std::ofstream trace_;
+  cnc::util::SpscRing<Sample> ring_;
+  std::atomic<int64_t> dropped_{0};
+  std::atomic<bool> stop_{false};
+  std::thread thread_;
+};
 
 class Simulator {
  public:
@@ -189,7 +288,7 @@ class Simulator {
   int control_fd_ = -1;
   int control_keep_fd_ = -1;
   std::string control_buf_;
-  std::ofstream trace_;
+  std::unique_ptr<SideWriter> writer_;
   double next_trace_s_ = 0;
   double next_persist_s_ = 0;
   double dt_;
@@ -421,24 +520,19 @@ void Simulator::housekeeping(double now) {
     }
   }
   if (!rtu_.empty() && serial_fd_ < 0) serial_fd_ = open_serial(device_, baud_);
-  if (trace_.is_open() && now >= next_trace_s_) {
-    next_trace_s_ = now + 0.01;
-    // One write per row, so a reader never sees half a row.
-    char buf[64];
-    std::snprintf(buf, sizeof buf, "%.4f", wall_s());
-    std::string row = buf;
-    for (SimDrive* d : all_) {
-      std::snprintf(buf, sizeof buf, ",%.6f,%.4f,%d", d->position_mm(), d->velocity_mm_s(), d->follows() ? 1 : 0);
-      row += buf;
+  const bool trace_row = writer_->tracing() && now >= next_trace_s_;
+  if (trace_row || now >= next_persist_s_) {
+    if (trace_row) next_trace_s_ = now + 0.01;
+    if (now >= next_persist_s_) next_persist_s_ = now + 0.05;
+    SideWriter::Sample smp;
+    smp.wall_s = wall_s();
+    smp.trace = trace_row;
+    for (size_t i = 0; i < all_.size(); ++i) {
+      smp.pos[i] = all_[i]->position_mm();
+      smp.vel[i] = all_[i]->velocity_mm_s();
+      smp.on[i] = all_[i]->follows();
     }
-    row += "\n";
-    trace_ << row << std::flush;
-  }
-  if (!args_.option("persist").empty() && now >= next_persist_s_) {
-    next_persist_s_ = now + 0.05;
-    const std::string file = args_.option("persist");
-    std::ofstream(file + ".tmp") << positions_json(all_) << "\n";
-    std::filesystem::rename(file + ".tmp", file);
+    writer_->push(smp);
   }
 }
 
@@ -470,11 +564,11 @@ int Simulator::run() {
     control_keep_fd_ = ::open(path.c_str(), O_WRONLY | O_NONBLOCK);
     if (control_fd_ < 0) throw std::runtime_error("cannot open the control FIFO " + path);
   }
-  if (!args_.option("trace").empty()) {
-    trace_.open(args_.option("trace"));
-    trace_ << "wall_s";
-    for (SimDrive* d : all_) trace_ << "," << d->name() << "_mm," << d->name() << "_mm_s," << d->name() << "_on";
-    trace_ << "\n";
+  {
+    if (all_.size() > SideWriter::kMaxAxes) throw std::runtime_error("more simulated drives than the trace holds");
+    std::vector<std::string> names;
+    for (const SimDrive* d : all_) names.push_back(d->name());
+    writer_ = std::make_unique<SideWriter>(names, args_.option("trace"), args_.option("persist"));
   }
   if (const std::string why = cnc::util::make_realtime(cfg_.realtime_priority); !why.empty())
     spdlog::warn("real-time scheduling not available ({}): running with normal scheduling", why);
@@ -517,6 +611,15 @@ int Simulator::run() {
     if (serial_fd_ >= 0 && FD_ISSET(serial_fd_, &rd)) serve_rtu_input();
   }
 
+  // The last positions reach the persisted file before the writer ends.
+  {
+    SideWriter::Sample smp;
+    smp.wall_s = wall_s();
+    for (size_t i = 0; i < all_.size(); ++i) smp.pos[i] = all_[i]->position_mm();
+    writer_->push(smp);
+  }
+  if (writer_->dropped() > 0) spdlog::warn("cnc-servo-sim: {} trace samples dropped (the writer fell behind)", writer_->dropped());
+  writer_.reset();
   const std::string report = positions_json(all_);
   spdlog::info("cnc-servo-sim: final positions {}", report);
   if (!args_.option("final-state").empty()) std::ofstream(args_.option("final-state")) << report << "\n";
