@@ -79,6 +79,12 @@ class Canon {
   virtual void start_change(const SourceRef&) {}
   virtual void change_tool(const SourceRef&, int /*tool*/) {}
   virtual void change_tool_number(const SourceRef&, int /*tool*/) {}
+  // G10 L1/L10/L11 changed the tool table's entry `index` (LinuxCNC's index: the
+  // tool's line in the table from 1; 0 is the tool in the spindle). Offsets and
+  // diameter in machine units (degrees for A B C), as the table holds them.
+  virtual void set_tool_table_entry(const SourceRef&, int /*index*/, int /*tool*/, const Pose& /*offset*/,
+                                    double /*diameter*/, double /*front angle*/, double /*back angle*/,
+                                    int /*orientation*/) {}
 
   // Spindle and coolant.
   virtual void set_spindle_speed(const SourceRef&, double /*rpm*/) {}

@@ -91,6 +91,12 @@ void CanonPrinter::nurbs_feed(const SourceRef&, int, const std::vector<NurbsPoin
 }
 void CanonPrinter::dwell(const SourceRef&, double s) { line("DWELL(%.4f)", s); }
 void CanonPrinter::select_tool(const SourceRef&, int t) { line("SELECT_TOOL(%d)", t); }
+// saicanon prints no diameter.
+void CanonPrinter::set_tool_table_entry(const SourceRef&, int index, int tool, const Pose& o, double, double front,
+                                        double back, int orientation) {
+  line("SET_TOOL_TABLE_ENTRY(%d, %d, %.4f %.4f %.4f %.4f %.4f %.4f %.4f %.4f %.4f, %.4f, %.4f, %d)", index, tool, o[0],
+       o[1], o[2], o[3], o[4], o[5], o[6], o[7], o[8], front, back, orientation);
+}
 void CanonPrinter::start_change(const SourceRef&) { line("START_CHANGE()"); }
 void CanonPrinter::change_tool(const SourceRef&, int t) { line("CHANGE_TOOL(%d)", t); }
 void CanonPrinter::change_tool_number(const SourceRef&, int t) { line("CHANGE_TOOL_NUMBER(%d)", t); }

@@ -36,6 +36,7 @@ class CanonPrinter : public Canon {
                   const Pose& end) override;
   void dwell(const SourceRef&, double seconds) override;
   void select_tool(const SourceRef&, int) override;
+  void set_tool_table_entry(const SourceRef&, int, int, const Pose&, double, double, double, int) override;
   void start_change(const SourceRef&) override;
   void change_tool(const SourceRef&, int) override;
   void change_tool_number(const SourceRef&, int) override;

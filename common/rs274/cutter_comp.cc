@@ -590,6 +590,10 @@ void CutterComp::set_motion_control_mode(const SourceRef& r, PathMode m, double 
 void CutterComp::set_naivecam_tolerance(const SourceRef& r, double q) { out_.set_naivecam_tolerance(r, q); }
 void CutterComp::use_tool_length_offset(const SourceRef& r, const Pose& p) { out_.use_tool_length_offset(r, p); }
 void CutterComp::select_tool(const SourceRef& r, int t) { out_.select_tool(r, t); }
+void CutterComp::set_tool_table_entry(const SourceRef& r, int index, int tool, const Pose& offset, double diameter,
+                                      double front, double back, int orientation) {
+  out_.set_tool_table_entry(r, index, tool, offset, diameter, front, back, orientation);
+}
 void CutterComp::enable_feed_override(const SourceRef& r, bool b) { out_.enable_feed_override(r, b); }
 void CutterComp::enable_speed_override(const SourceRef& r, bool b) { out_.enable_speed_override(r, b); }
 void CutterComp::enable_adaptive_feed(const SourceRef& r, bool b) { out_.enable_adaptive_feed(r, b); }

@@ -68,7 +68,7 @@ int g_group(int g) {
 
 int m_group(int m) {
   switch (m) {
-    case 0: case 1: case 2: case 30: case 60: return 4;
+    case 0: case 1: case 2: case 30: case 60: case 99: return 4;
     case 62: case 63: case 64: case 65: case 66: case 67: case 68: return 5;
     case 6: case 61: return 6;
     case 3: case 4: case 5: case 19: return 7;
@@ -162,6 +162,9 @@ struct Interpreter::Frame {
   int32_t return_line = 0;
   int32_t call_column = 0;
   size_t loops = 0;  // loops_ size at the call
+  bool fanuc = false;        // an M98 call: ends with M99, shares #1..#30
+  int64_t repeats_left = 0;  // M98 L: further runs after this one
+  SubDef target{};           // where the M98 subprogram's body starts
 };
 
 struct Interpreter::Loop {
@@ -252,6 +255,8 @@ Interpreter::~Interpreter() = default;
 
 double Interpreter::length_scale() const { return units_ == Units::kInch ? kMmPerInch : 1.0; }
 double Interpreter::to_program(double mm) const { return mm / length_scale(); }
+// Axis i's value in program units: lengths scale, the angles of A B C do not.
+double Interpreter::to_program_axis(int i, double v) const { return i < 3 || i >= 6 ? to_program(v) : v; }
 
 // A pose in mm (degrees for A B C) in program units.
 Pose Interpreter::program_pose(const Pose& mm) const {
@@ -306,7 +311,7 @@ void Interpreter::fail(int column, const std::string& detail) const {
   std::vector<std::string> chain;
   for (auto it = frames_.rbegin(); it != frames_.rend(); ++it) {
     chain.push_back(file_names_[static_cast<size_t>(it->return_file)] + ":" + std::to_string(it->return_line) + ":" +
-                    std::to_string(it->call_column) + " (o<" + it->sub + "> call)");
+                    std::to_string(it->call_column) + (it->fanuc ? " (M98 P" + it->sub + ")" : " (o<" + it->sub + "> call)"));
   }
   throw Error(file_names_.empty() ? std::string() : file_names_[static_cast<size_t>(file_)], ref(column), detail,
               std::move(chain));
@@ -349,10 +354,10 @@ void Interpreter::open(const std::string& path) {
   const SourceRef r0{0, 0, 0};
   canon_.use_length_units(r0, units_);
   Pose g5x{};
-  for (int i = 0; i < kNumAxes; ++i) g5x[static_cast<size_t>(i)] = to_program(param_len(5201 + 20 * coord_, i));
+  for (int i = 0; i < kNumAxes; ++i) g5x[static_cast<size_t>(i)] = to_program_axis(i, param_len(5201 + 20 * coord_, i));
   canon_.set_g5x_offset(r0, coord_, g5x);
   Pose g92p{};
-  for (int i = 0; i < kNumAxes; ++i) g92p[static_cast<size_t>(i)] = to_program(g92_[static_cast<size_t>(i)]);
+  for (int i = 0; i < kNumAxes; ++i) g92p[static_cast<size_t>(i)] = to_program_axis(i, g92_[static_cast<size_t>(i)]);
   canon_.set_g92_offset(r0, g92p);
   canon_.set_xy_rotation(r0, rotation_deg_);
   canon_.set_feed_reference(r0);
@@ -362,7 +367,7 @@ void Interpreter::open(const std::string& path) {
 
 void Interpreter::update_position_params() {
   const Pose p = current_point();
-  for (int i = 0; i < kNumAxes; ++i) params_.set(5420 + i, to_program(p[static_cast<size_t>(i)]));
+  for (int i = 0; i < kNumAxes; ++i) params_.set(5420 + i, to_program_axis(i, p[static_cast<size_t>(i)]));
 }
 
 Pose Interpreter::current_point(bool after_g40) const {
@@ -392,9 +397,8 @@ void Interpreter::reread_position() {
 double Interpreter::named_value(const std::string& name, int column) const {
   double v = 0;
   if (!name.empty() && name[0] == '_') {
-    const double s = length_scale();
     const Pose cur = current_point();
-    const auto axis = [&](int i) { return cur[static_cast<size_t>(i)] / s; };
+    const auto axis = [&](int i) { return to_program_axis(i, cur[static_cast<size_t>(i)]); };
     static const char* kPos[] = {"_x", "_y", "_z", "_a", "_b", "_c", "_u", "_v", "_w"};
     for (int i = 0; i < kNumAxes; ++i)
       if (name == kPos[i]) return axis(i);
@@ -402,7 +406,7 @@ double Interpreter::named_value(const std::string& name, int column) const {
     for (int i = 0; i < kNumAxes; ++i)
       if (name == kAbs[i]) {
         const size_t k = static_cast<size_t>(i);
-        return machine_of(cur, coord_)[k] / s;
+        return to_program_axis(i, machine_of(cur, coord_)[k]);
       }
     if (name == "_line") return line_no_;
     if (name == "_motion_mode") return motion_ < 0 ? 800 : motion_;
@@ -519,6 +523,15 @@ void Interpreter::execute_line() {
   }
   started_ = true;
   if (line_.block_delete && setup_.block_delete) return;
+  // LinuxCNC reads M98, and M99 inside a call, as O-word statements when they are
+  // the line's first word: a Fanuc subprogram call / return.
+  if (const int m = fanuc_m_code(); m == 98) {
+    fanuc_call();
+    return;
+  } else if (m == 99 && !frames_.empty()) {
+    fanuc_return();
+    return;
+  }
   if (line_.o.kind != OKind::kNone) {
     if (!line_.words.empty()) fail(line_.words.front().column, "an O-word statement holds no other words");
     execute_o(line_.o);
@@ -572,7 +585,7 @@ void Interpreter::execute_o(const OStatement& o) {
       // A definition read in the program's flow: remember it and skip its body.
       if (nurbs_) fail(o.column, "a subroutine definition inside a NURBS curve");
       if (!frames_.empty()) fail(o.column, "o<" + name + "> sub: a subroutine may not be defined inside another");
-      subs_[name] = SubDef{file_, f.offset(), line_no_};
+      subs_[name] = SubDef{file_, f.offset(), line_no_, f.line_start, false};
       skip_to(name, kbit(OKind::kEndsub));
       return;
     }
@@ -580,6 +593,9 @@ void Interpreter::execute_o(const OStatement& o) {
     case OKind::kReturn: {
       // LinuxCNC lets a return carry any O-number (often its if's); endsub must match.
       if (frames_.empty()) fail(o.column, "o<" + name + (o.kind == OKind::kEndsub ? "> endsub" : "> return") + " outside a subroutine");
+      if (frames_.back().fanuc)
+        fail(o.column, "o<" + name + (o.kind == OKind::kEndsub ? "> endsub" : "> return") + " inside Fanuc subprogram O" +
+                           frames_.back().sub + ", which M98 called: it ends with M99");
       if (o.kind == OKind::kEndsub && frames_.back().sub != name)
         fail(o.column, "o<" + name + "> endsub inside o<" + frames_.back().sub + ">");
       double value = 0;
@@ -588,23 +604,18 @@ void Interpreter::execute_o(const OStatement& o) {
         value = evaluate(line_.arena, o.args.front(), *reader_);
         has_value = true;
       }
-      Frame fr = std::move(frames_.back());
-      frames_.pop_back();
-      loops_.resize(fr.loops);
-      params_.pop_call();
-      last_returned_ = value;
-      params_.set_named("_value", value);
-      params_.set_named("_value_returned", has_value ? 1.0 : 0.0);
-      // M73 states saved at this call level come back on return.
-      while (!saved_.empty() && saved_.back().call_level > static_cast<int32_t>(frames_.size()) &&
-             saved_.back().call_level < 1000000) {
-        const SavedModes sm = saved_.back();
-        saved_.pop_back();
-        if (sm.valid) restore_modes(sm, o.column);
-      }
-      file_ = fr.return_file;
-      files_[static_cast<size_t>(file_)]->seek(fr.return_offset);
-      line_no_ = fr.return_line;
+      return_from_call(value, has_value, o.column);
+      return;
+    }
+    case OKind::kProgram: {
+      // A bare O-word. In the main program's flow it is the program's number or name
+      // (LinuxCNC: nothing to do); running into one inside a Fanuc subprogram goes on
+      // into it (LinuxCNC 2.9 does); an O-word subroutine may not run into one.
+      if (!setup_.fanuc_subs)
+        fail(o.column, "bare O-word O" + name + ": Fanuc-style subprograms are disabled (DISABLE_FANUC_STYLE_SUB)");
+      if (!frames_.empty() && !frames_.back().fanuc)
+        fail(o.column, "Fanuc subprogram head O" + name + " inside o<" + frames_.back().sub +
+                           "> sub (a Fanuc subprogram is called with M98, an O-word subroutine ends with endsub)");
       return;
     }
     case OKind::kCall: {
@@ -631,8 +642,17 @@ void Interpreter::execute_o(const OStatement& o) {
           } catch (const Error&) {
             continue;
           }
-          if (probe.o.kind == OKind::kSub && probe.o.number_expr < 0 && probe.o.name == name) {
-            subs_[name] = SubDef{file_, f.offset(), line_no_};
+          if (probe.percent && line_no_ > 1) break;  // the program's closing '%': nothing after it counts
+          if (probe.o.number_expr >= 0 || probe.o.name != name) continue;
+          if (probe.o.kind == OKind::kSub) {
+            subs_[name] = SubDef{file_, f.offset(), line_no_, f.line_start, false};
+            found = true;
+            break;
+          }
+          // LinuxCNC looks for the definition further down and stops at a Fanuc
+          // subprogram head of that number first (to refuse the call there).
+          if (probe.o.kind == OKind::kProgram && line_no_ > here_line) {
+            subs_[name] = SubDef{file_, f.offset(), line_no_, f.line_start, true};
             found = true;
             break;
           }
@@ -642,10 +662,7 @@ void Interpreter::execute_o(const OStatement& o) {
         text_ = text_saved;
         if (!found) {
           // The subroutine path, then the main program's folder (LinuxCNC's program prefix).
-          std::vector<std::string> dirs = setup_.subroutine_path;
-          dirs.push_back(std::filesystem::path(file_names_.front()).parent_path().string());
-          if (dirs.back().empty()) dirs.back() = ".";
-          for (const std::string& dir : dirs) {
+          for (const std::string& dir : subroutine_dirs()) {
             const std::string p = dir + "/" + name + ".ngc";
             if (!std::filesystem::exists(p)) continue;
             auto sf = std::make_unique<SourceFile>();
@@ -661,8 +678,8 @@ void Interpreter::execute_o(const OStatement& o) {
               } catch (const Error&) {
                 continue;
               }
-              if (probe.o.kind == OKind::kSub && probe.o.name == name) {
-                subs_[name] = SubDef{idx, sf->offset(), ln};
+              if ((probe.o.kind == OKind::kSub || probe.o.kind == OKind::kProgram) && probe.o.name == name) {
+                subs_[name] = SubDef{idx, sf->offset(), ln, sf->line_start, probe.o.kind == OKind::kProgram};
                 found = true;
                 break;
               }
@@ -687,6 +704,8 @@ void Interpreter::execute_o(const OStatement& o) {
       for (size_t i = 0; i < 30; ++i)
         if (i < o.args.size()) params_.set(static_cast<int>(i) + 1, args[i]);
       frames_.push_back(std::move(fr));
+      if (it->second.fanuc)
+        fail_at_def(it->second, "Fanuc subprogram O" + name + " is called with M98 P" + name + ", not o<" + name + "> call");
       file_ = it->second.file;
       files_[static_cast<size_t>(file_)]->seek(it->second.offset);
       line_no_ = it->second.line;
@@ -827,6 +846,234 @@ void Interpreter::execute_o(const OStatement& o) {
   }
 }
 
+// Where subroutine files are looked for: the subroutine path, then the main
+// program's folder (LinuxCNC's program prefix).
+std::vector<std::string> Interpreter::subroutine_dirs() const {
+  std::vector<std::string> dirs = setup_.subroutine_path;
+  std::string folder = std::filesystem::path(file_names_.front()).parent_path().string();
+  dirs.push_back(folder.empty() ? std::string(".") : std::move(folder));
+  return dirs;
+}
+
+// Leaves the innermost call: endsub / return (value as given), M99 (value 0).
+void Interpreter::return_from_call(double value, bool has_value, int column) {
+  Frame fr = std::move(frames_.back());
+  frames_.pop_back();
+  loops_.resize(fr.loops);
+  params_.pop_call();
+  last_returned_ = value;
+  params_.set_named("_value", value);
+  params_.set_named("_value_returned", has_value ? 1.0 : 0.0);
+  // M73 states saved at this call level come back on return.
+  while (!saved_.empty() && saved_.back().call_level > static_cast<int32_t>(frames_.size()) &&
+         saved_.back().call_level < 1000000) {
+    const SavedModes sm = saved_.back();
+    saved_.pop_back();
+    if (sm.valid) restore_modes(sm, column);
+  }
+  file_ = fr.return_file;
+  files_[static_cast<size_t>(file_)]->seek(fr.return_offset);
+  line_no_ = fr.return_line;
+}
+
+// ---- Fanuc-style subprograms (M98 / M99) ------------------------------------------------
+
+// 98 or 99 when the line opens with that M code (after '/' and N): LinuxCNC's
+// read_items reads such a line as an O-word statement (M99 only inside a call).
+int Interpreter::fanuc_m_code() {
+  if (line_.o.kind != OKind::kNone || line_.words.empty()) return -1;
+  const Word& mw = line_.words.front();
+  if (mw.letter != 'M') return -1;
+  for (const ParamSetting& st : line_.settings)
+    if (st.column < mw.column) return -1;
+  for (const Comment& c : line_.comments)
+    if (c.column < mw.column) return -1;
+  double v = 0;
+  try {
+    v = evaluate(line_.arena, mw.expr, *reader_);
+  } catch (const Error& e) {
+    fail(e.column() > 0 ? e.column() : mw.column, e.detail());
+  }
+  if (std::fabs(v - 98) <= 1e-4) return 98;
+  if (std::fabs(v - 99) <= 1e-4) return 99;
+  return -1;
+}
+
+// Where subprogram O<name> starts, for M98 (LinuxCNC's control_back_to): one met
+// before, else a file <name>.ngc on the subroutine path or in the program's folder
+// (LinuxCNC looks for the file first), else further down the file being read, up to
+// its end or its closing '%'. The first head of that number found counts, `O<name>`
+// or `O<name> sub` (the caller refuses the latter).
+Interpreter::SubDef Interpreter::find_fanuc_sub(const std::string& name, int column) {
+  if (auto it = subs_.find(name); it != subs_.end()) return it->second;
+  std::string t;
+  Line probe;
+  const auto is_head = [&](const Line& l) {
+    return (l.o.kind == OKind::kProgram || l.o.kind == OKind::kSub) && l.o.number_expr < 0 && l.o.name == name;
+  };
+  for (const std::string& dir : subroutine_dirs()) {
+    const std::string p = dir + "/" + name + ".ngc";
+    if (!std::filesystem::exists(p)) continue;
+    auto sf = std::make_unique<SourceFile>();
+    sf->path = p;
+    sf->fd = ::open(p.c_str(), O_RDONLY | O_CLOEXEC);
+    if (sf->fd < 0) continue;
+    int32_t ln = 0;
+    while (sf->getline(t)) {
+      ++ln;
+      try {
+        lex_line(t, probe);
+      } catch (const Error&) {
+        continue;
+      }
+      if (!is_head(probe)) continue;
+      const int32_t idx = static_cast<int32_t>(files_.size());
+      const SubDef d{idx, sf->offset(), ln, sf->line_start, probe.o.kind == OKind::kProgram};
+      file_names_.push_back(p);
+      files_.push_back(std::move(sf));
+      subs_[name] = d;
+      return d;
+    }
+    fail(column, "M98 P" + name + ": " + p + " does not hold subprogram O" + name);
+  }
+  SourceFile& f = *files_[static_cast<size_t>(file_)];
+  const int64_t here = f.offset();
+  int32_t ln = line_no_;
+  while (f.getline(t)) {
+    ++ln;
+    try {
+      lex_line(t, probe);
+    } catch (const Error&) {
+      continue;
+    }
+    if (probe.percent) break;  // the program's end: LinuxCNC stops looking there
+    if (!is_head(probe)) continue;
+    const SubDef d{file_, f.offset(), ln, f.line_start, probe.o.kind == OKind::kProgram};
+    f.seek(here);
+    subs_[name] = d;
+    return d;
+  }
+  f.seek(here);
+  fail(column, "M98 P" + name + ": no subprogram O" + name + " further down " + file_names_[static_cast<size_t>(file_)] +
+                   " (before its end) nor a file " + name + ".ngc on the subroutine path");
+}
+
+// Refuses at a subroutine's head line (LinuxCNC refuses a call of the wrong style
+// when it reaches the definition), with the call in the chain.
+void Interpreter::fail_at_def(const SubDef& def, const std::string& detail) {
+  file_ = def.file;
+  files_[static_cast<size_t>(file_)]->seek(def.start);
+  line_no_ = def.line - 1;
+  int column = 1;
+  if (read_line()) {
+    try {
+      lex_line(text_, line_);
+      column = line_.o.column;
+    } catch (const Error&) {
+    }
+  }
+  fail(column, detail);
+}
+
+// M98 P<n> [L<k>]: calls Fanuc subprogram O<n> k times (default once; L0: not at all).
+// The subprogram shares #1..#30 with its caller; named locals get a scope per run.
+void Interpreter::fanuc_call() {
+  const Word& mw = line_.words.front();
+  if (!setup_.fanuc_subs) fail(mw.column, "M98: Fanuc-style subprograms are disabled (DISABLE_FANUC_STYLE_SUB)");
+  if (!line_.settings.empty())
+    fail(line_.settings.front().column, "a parameter setting on an M98 line (the line is a subprogram call only)");
+  double p = 0, l = 1;
+  int32_t pcol = 0, lcol = 0;
+  for (size_t i = 1; i < line_.words.size(); ++i) {
+    const Word& w = line_.words[i];
+    if (w.letter != 'P' && w.letter != 'L')
+      fail(w.column, std::string(1, w.letter) + " word on an M98 line (M98 takes P, the subprogram number, and L, the repeat count)");
+    if ((w.letter == 'P' && pcol != 0) || (w.letter == 'L' && lcol != 0))
+      fail(w.column, std::string("word '") + w.letter + "' given twice on one line");
+    double v = 0;
+    try {
+      v = evaluate(line_.arena, w.expr, *reader_);
+    } catch (const Error& e) {
+      fail(e.column() > 0 ? e.column() : w.column, e.detail());
+    }
+    if (w.letter == 'P') {
+      p = v;
+      pcol = w.column;
+    } else {
+      l = v;
+      lcol = w.column;
+    }
+  }
+  if (pcol == 0) fail(mw.column, "M98 without a P word (the number of the subprogram to call)");
+  // LinuxCNC's read_integer_value: within 1e-4 of a whole number.
+  double n = std::floor(p);
+  if (p - n > 0.9999) n = std::ceil(p);
+  else if (p - n > 0.0001) fail(pcol, "M98 P" + num(p) + ": a subprogram number is a whole number");
+  if (n < 0 || n > 2147483647.0) fail(pcol, "M98 P" + num(p) + ": a subprogram number is 0 or more");
+  const std::string name = std::to_string(static_cast<int64_t>(n));
+  const double runs = std::nearbyint(l);
+  if (std::fabs(l - runs) > 1e-4 || runs < 0)
+    fail(lcol, "M98 L" + num(l) + ": the repeat count is a whole number, 0 or more");
+  if (runs == 0) return;  // LinuxCNC: "M98 L0 instruction; skipping call"
+  if (static_cast<int64_t>(frames_.size()) >= setup_.max_call_depth)
+    fail(mw.column, "M98 P" + name + ": calls nested deeper than " + std::to_string(setup_.max_call_depth));
+  const SubDef def = find_fanuc_sub(name, mw.column);
+  Frame fr;
+  fr.sub = name;
+  fr.return_file = file_;
+  fr.return_offset = files_[static_cast<size_t>(file_)]->offset();
+  fr.return_line = line_no_;
+  fr.call_column = mw.column;
+  fr.loops = loops_.size();
+  fr.fanuc = true;
+  fr.repeats_left = static_cast<int64_t>(runs) - 1;
+  fr.target = def;
+  params_.push_call(false);
+  frames_.push_back(std::move(fr));
+  if (!def.fanuc)
+    fail_at_def(def, "o<" + name + "> sub is called with o<" + name + "> call, not M98 P" + name +
+                         " (M98 calls Fanuc subprograms headed by a bare O" + name + ")");
+  file_ = def.file;
+  files_[static_cast<size_t>(file_)]->seek(def.offset);
+  line_no_ = def.line;
+}
+
+// M99 opening a line inside a call: the end of a Fanuc subprogram's run.
+void Interpreter::fanuc_return() {
+  const Word& mw = line_.words.front();
+  Frame& fr = frames_.back();
+  if (!setup_.fanuc_subs) fail(mw.column, "M99: Fanuc-style subprograms are disabled (DISABLE_FANUC_STYLE_SUB)");
+  if (!fr.fanuc)
+    fail(mw.column, "M99 inside o<" + fr.sub + "> sub: an O-word subroutine ends with o<" + fr.sub +
+                        "> endsub or return (M99 ends subprograms that M98 called)");
+  if (line_.words.size() > 1)
+    fail(line_.words[1].column, "only comments may follow M99 ending a subprogram");
+  if (!line_.settings.empty())
+    fail(line_.settings.front().column, "only comments may follow M99 ending a subprogram");
+  if (fr.repeats_left <= 0) {
+    return_from_call(0, false, mw.column);
+    return;
+  }
+  // M98 L: the next run, with fresh named locals (LinuxCNC leaves the call and makes
+  // it again from the M98 line).
+  --fr.repeats_left;
+  loops_.resize(fr.loops);
+  params_.pop_call();
+  last_returned_ = 0;
+  params_.set_named("_value", 0);
+  params_.set_named("_value_returned", 0);
+  while (!saved_.empty() && saved_.back().call_level >= static_cast<int32_t>(frames_.size()) &&
+         saved_.back().call_level < 1000000) {
+    const SavedModes sm = saved_.back();
+    saved_.pop_back();
+    if (sm.valid) restore_modes(sm, mw.column);
+  }
+  params_.push_call(false);
+  file_ = fr.target.file;
+  files_[static_cast<size_t>(file_)]->seek(fr.target.offset);
+  line_no_ = fr.target.line;
+}
+
 // ---- blocks ---------------------------------------------------------------------------
 
 void Interpreter::collect_words(Words& w) {
@@ -857,6 +1104,7 @@ void Interpreter::collect_words(Words& w) {
     if (c == 'M') {
       const int m = static_cast<int>(std::lround(v));
       if (std::fabs(v - m) > 1e-4) fail(word.column, "unknown M code M" + num(v));
+      if (m == 98) fail(word.column, "M98 calls a subprogram only as the first word of its line (LinuxCNC: unknown M code)");
       const int grp = m_group(m);
       if (grp < 0) fail(word.column, "unknown M code M" + std::to_string(m));
       if (grp == 8 && (m == 7 || m == 8)) {
@@ -889,6 +1137,8 @@ void Interpreter::collect_words(Words& w) {
 }
 
 void Interpreter::check_words(const Words& w) {
+  if (w.m[4] == 99 && !frames_.empty())
+    fail(w.mcol[4], "M99 ends a subprogram only as the first word of its line");
   const int motion = w.g[1] >= 0 ? w.g[1] : motion_;
   const int g0 = w.g[0];
   const bool uses_axes = w.axes != 0;
@@ -961,8 +1211,38 @@ void Interpreter::apply_settings() {
 }
 
 void Interpreter::comments_of_line() {
-  for (const Comment& c : line_.comments) {
+  // LinuxCNC keeps one comment per block: each ( ) comment read replaces the one
+  // before, so only the line's last ( ) comment runs (';' comments never do), and
+  // an empty "()" makes no call. This controller's PROCESS directive, a plain
+  // comment to LinuxCNC, still applies wherever it stands on the line.
+  int last = -1;
+  for (size_t i = 0; i < line_.comments.size(); ++i) {
+    const size_t open = static_cast<size_t>(line_.comments[i].column - 1);
+    if (open < text_.size() && text_[open] == '(') last = static_cast<int>(i);
+  }
+  for (size_t ci = 0; ci < line_.comments.size(); ++ci) {
+    const Comment& c = line_.comments[ci];
     const SourceRef r = ref(c.column);
+    if (static_cast<int>(ci) != last) {
+      if (c.kind != CommentKind::kProcess) continue;
+      const size_t open = static_cast<size_t>(c.column - 1);
+      const size_t close = text_.find(')', open);
+      const std::string_view body(text_.data() + open + 1, (close == std::string::npos ? text_.size() : close) - open - 1);
+      ProcessSettings ps;
+      try {
+        if (!parse_process_directive(body, c.column + 1, &ps)) continue;
+      } catch (const Error& e) {
+        fail(e.column(), e.detail());
+      }
+      if (nurbs_)
+        fail(c.column + 1, "process parameters cannot change inside a NURBS curve (opened at line " +
+                               std::to_string(nurbs_->line) + ")");
+      canon_.set_process(r, ps);
+      continue;
+    }
+    if (c.kind != CommentKind::kProcess && static_cast<size_t>(c.column) < text_.size() &&
+        text_[static_cast<size_t>(c.column)] == ')')
+      continue;  // "()": LinuxCNC's block has no comment
     switch (c.kind) {
       case CommentKind::kMsg: canon_.message(r, c.text); break;
       case CommentKind::kPlain:
@@ -1127,10 +1407,10 @@ void Interpreter::set_coord_system(int index) {
   params_.set(5220, index);
   rotation_deg_ = params_.get(5210 + 20 * index);
   Pose g5x{};
-  for (int i = 0; i < kNumAxes; ++i) g5x[static_cast<size_t>(i)] = to_program(param_len(5201 + 20 * index, i));
+  for (int i = 0; i < kNumAxes; ++i) g5x[static_cast<size_t>(i)] = to_program_axis(i, param_len(5201 + 20 * index, i));
   canon_.set_g5x_offset(ref(), index, g5x);
   Pose g92p{};
-  for (int i = 0; i < kNumAxes; ++i) g92p[static_cast<size_t>(i)] = to_program(g92_[static_cast<size_t>(i)]);
+  for (int i = 0; i < kNumAxes; ++i) g92p[static_cast<size_t>(i)] = to_program_axis(i, g92_[static_cast<size_t>(i)]);
   canon_.set_g92_offset(ref(), g92p);
   canon_.set_xy_rotation(ref(), rotation_deg_);
 }
@@ -1387,8 +1667,18 @@ void Interpreter::execute_block(Words& w) {
         for (size_t i = 0; i < off.size(); ++i) off[i] += tool->offset[i];
       }
     }
-    // The program position moves by the change of offset; the machine stays.
-    for (size_t i = 0; i < off.size(); ++i) position_[i] += tool_offset_[i] - off[i];
+    // The program position moves by the change of offset; the machine stays. The
+    // offset acts in the machine's frame: X and Y turn into a rotated system's frame
+    // (LinuxCNC's convert_tool_length_offset).
+    Pose delta{};
+    for (size_t i = 0; i < off.size(); ++i) delta[i] = tool_offset_[i] - off[i];
+    if (rotation_deg_ != 0) {
+      const double a = -rotation_deg_ * M_PI / 180.0, co = std::cos(a), sn = std::sin(a);
+      const double dx = delta[0] * co - delta[1] * sn;
+      delta[1] = delta[0] * sn + delta[1] * co;
+      delta[0] = dx;
+    }
+    for (size_t i = 0; i < off.size(); ++i) position_[i] += delta[i];
     tool_offset_ = off;
     tool_length_ = g;
     Pose shown{};
@@ -1482,6 +1772,22 @@ void Interpreter::execute_block(Words& w) {
       case 60: canon_.pallet_shuttle(r); canon_.program_stop(r); break;
       case 2: end_program(false); break;
       case 30: end_program(true); break;
+      case 99:
+        // M99 in the main program (a call's M99 opens its line: fanuc_return).
+        if (!setup_.loop_on_main_m99) {
+          end_program(false);  // LinuxCNC's standalone rs274: as M2
+          break;
+        }
+        // LinuxCNC's task: back to the first line, forever.
+        comp_filter_->flush();
+        canon_.finish(r);
+        file_ = 0;
+        files_[0]->seek(0);
+        line_no_ = 0;
+        started_ = false;
+        percent_open_ = false;
+        loops_.clear();
+        break;
       default: break;
     }
   }
@@ -1628,7 +1934,7 @@ void Interpreter::g10(Words& w) {
     if (cs == coord_) {
       rotation_deg_ = params_.get(5210 + 20 * cs);
       Pose g5x{};
-      for (int i = 0; i < kNumAxes; ++i) g5x[static_cast<size_t>(i)] = to_program(param_len(5201 + 20 * cs, i));
+      for (int i = 0; i < kNumAxes; ++i) g5x[static_cast<size_t>(i)] = to_program_axis(i, param_len(5201 + 20 * cs, i));
       canon_.set_g5x_offset(ref(w.gcol[0]), cs, g5x);
       canon_.set_xy_rotation(ref(w.gcol[0]), rotation_deg_);
     } else {
@@ -1641,27 +1947,64 @@ void Interpreter::g10(Words& w) {
     if (const Tool* old = tools_.find(p)) t = *old;
     t.number = p;
     if (t.pocket == 0) t.pocket = p;
+    // L10/L11 (LinuxCNC's convert_setup_tool): the offset that makes the current point
+    // read as the values given in the current system (L10) or in G59.3 without G92
+    // (L11). `cur` is that point as the system shows it with no tool offset; X and Y
+    // are in the system's rotated frame, so the offset is rotated back, and an X (Y)
+    // alone keeps the part of the old offset along the rotated Y (X).
+    const int cs = l == 11 ? 9 : coord_;
+    const double rot = params_.get(5210 + 20 * cs);
+    const auto turn = [](double& x, double& y, double deg) {
+      if (deg == 0) return;
+      const double a = deg * M_PI / 180.0, co = std::cos(a), sn = std::sin(a);
+      const double x1 = x * co - y * sn;
+      y = x * sn + y * co;
+      x = x1;
+    };
+    Pose cur{};
+    if (l != 1) {
+      const Pose machine = machine_of(position_, coord_);
+      for (int i = 0; i < kNumAxes; ++i) cur[static_cast<size_t>(i)] = machine[static_cast<size_t>(i)] - param_len(5201 + 20 * cs, i);
+      turn(cur[0], cur[1], -rot);
+      if (l == 10)
+        for (size_t k = 0; k < cur.size(); ++k) cur[k] -= g92_[k];
+    }
+    const auto value = [&](char c) { return w[c] * (axis_of_letter(c) < 3 || axis_of_letter(c) >= 6 ? s : 1.0); };
     for (int i = 0; i < kNumAxes; ++i) {
       const char c = kAxisLetters[i];
       if (!w.on(c)) continue;
       const size_t k = static_cast<size_t>(i);
-      const double lin = i < 3 || i >= 6 ? s : 1.0;
-      if (l == 1) {
-        t.offset[k] = w[c] * lin;
-      } else {
-        // L10: the offset that makes the current position read as the value in the
-        // current system; L11: in G59.3.
-        const int cs = l == 11 ? 9 : coord_;
-        const double machine = machine_of(position_, coord_)[k];
-        const double g92 = l == 11 ? 0 : g92_[k];
-        t.offset[k] = machine - param_len(5201 + 20 * cs, i) - g92 - w[c] * lin;
-      }
+      if (l == 1) t.offset[k] = value(c);
+      else if (i >= 2) t.offset[k] = cur[k] - value(c);
+    }
+    if (l != 1 && (w.on('X') || w.on('Y'))) {
+      double ox = t.offset[0], oy = t.offset[1];  // the old offset, kept across the axis not given
+      turn(ox, oy, -rot);
+      if (w.on('X')) ox = 0;
+      if (w.on('Y')) oy = 0;
+      turn(ox, oy, rot);
+      double tx = w.on('X') ? cur[0] - value('X') : 0, ty = w.on('Y') ? cur[1] - value('Y') : 0;
+      turn(tx, ty, rot);
+      t.offset[0] = tx + ox;
+      t.offset[1] = ty + oy;
     }
     if (w.on('R')) t.diameter = 2 * w['R'] * s;
     if (w.on('I')) t.front_angle = w['I'];
     if (w.on('J')) t.back_angle = w['J'];
     if (w.on('Q')) t.orientation = static_cast<int>(std::lround(w['Q']));
     tools_.put(t);
+    // LinuxCNC hands the changed entry to the canon, and again as entry 0 when the
+    // tool is in the spindle (a non-random tool changer).
+    int index = 0;
+    for (size_t i = 0; i < tools_.tools().size(); ++i)
+      if (tools_.tools()[i].number == p) index = static_cast<int>(i) + 1;
+    Pose shown = t.offset;
+    for (int i = 0; i < kNumAxes; ++i)
+      if (i < 3 || i >= 6) shown[static_cast<size_t>(i)] /= mu_;
+    const SourceRef r = ref(w.gcol[0]);
+    canon_.set_tool_table_entry(r, index, p, shown, t.diameter / mu_, t.front_angle, t.back_angle, t.orientation);
+    if (tool_ == p && p > 0)
+      canon_.set_tool_table_entry(r, 0, p, shown, t.diameter / mu_, t.front_angle, t.back_angle, t.orientation);
     set_tool_params();
     w.axes = 0;
     return;
@@ -1671,14 +2014,13 @@ void Interpreter::g10(Words& w) {
 
 void Interpreter::g28_g30(Words& w, bool g30) {
   const int base = g30 ? 5181 : 5161;
-  // Optional intermediate point in program coordinates, then the stored home of the
-  // named axes (all axes when none are named).
+  // The intermediate point in program coordinates (the current point when no axis is
+  // named: LinuxCNC's convert_home makes that move all the same, of length zero),
+  // then the stored home of the named axes (all axes when none are named).
   Pose via = axis_target(w, false);
   const SourceRef r = ref(w.gcol[0]);
-  if (w.axes != 0) {
-    canon_.straight_traverse(r, program_pose(via));
-    position_ = via;
-  }
+  canon_.straight_traverse(r, program_pose(via));
+  position_ = via;
   Pose home_m = machine_of(position_, coord_);
   for (int i = 0; i < kNumAxes; ++i) {
     const size_t k = static_cast<size_t>(i);
@@ -2201,7 +2543,7 @@ void Interpreter::end_program(bool m30) {
   }
   rotation_deg_ = params_.get(5230);
   Pose g5x{};
-  for (int i = 0; i < kNumAxes; ++i) g5x[static_cast<size_t>(i)] = to_program(param_len(5221, i));
+  for (int i = 0; i < kNumAxes; ++i) g5x[static_cast<size_t>(i)] = to_program_axis(i, param_len(5221, i));
   canon_.set_g5x_offset(r, 1, g5x);
   canon_.set_xy_rotation(r, rotation_deg_);
   if (plane_ != Plane::kXY) {
@@ -2228,6 +2570,18 @@ void Interpreter::end_program(bool m30) {
   motion_ = 10;
   if (m30) canon_.pallet_shuttle(r);
   canon_.program_end(r);
+  // LinuxCNC (convert_stop): a program opened by '%' should close with a '%' line
+  // after its end; it reads on in the file being run and says so when there is none.
+  if (percent_open_) {
+    SourceFile& f = *files_[static_cast<size_t>(file_)];
+    std::string t;
+    bool closed = false;
+    while (!closed && f.getline(t)) {
+      const size_t b = t.find_first_not_of(" \t\r\f\v");
+      closed = b != std::string::npos && t[b] == '%' && t.find_first_not_of(" \t\r\f\v", b + 1) == std::string::npos;
+    }
+    if (!closed) canon_.comment(r, "interpreter: percent sign missing from end of file");
+  }
   ended_ = true;
   if (!setup_.var_file.empty() && setup_.write_var_file) params_.write_var_file(setup_.var_file);
 }

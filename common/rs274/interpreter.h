@@ -39,6 +39,14 @@ struct MachineSetup {
   bool optional_stop = true;               // M1 stops
   Pose start_position{};                   // machine coordinates where the program starts
   int64_t max_call_depth = 100;
+  // Fanuc-style subprograms (LinuxCNC 2.9): a bare O-word heads one, M98 P<n> L<k>
+  // calls it k times, M99 returns. LinuxCNC's [RS274NGC]DISABLE_FANUC_STYLE_SUB = 1
+  // is fanuc_subs = false (M98, M99 in a call and bare O-words are then refused).
+  bool fanuc_subs = true;
+  // M99 in the main program: false ends the program as M2 does (LinuxCNC's
+  // standalone rs274, and what lets a program be validated to its end); true loops
+  // back to its first line, as LinuxCNC's task does (the program then never ends).
+  bool loop_on_main_m99 = false;
 };
 
 class Interpreter {
@@ -73,6 +81,8 @@ class Interpreter {
     int32_t file = 0;
     int64_t offset = 0;  // the byte after the `sub` line
     int32_t line = 0;    // that `sub` line's number
+    int64_t start = 0;   // the byte where that line starts
+    bool fanuc = false;  // a bare `O<n>` head (M98 calls it) rather than `O<n> sub`
   };
 
   // Reading.
@@ -81,6 +91,13 @@ class Interpreter {
   void execute_o(const OStatement& o);
   void skip_to(const std::string& name, uint32_t kinds_mask);
   std::string o_name(const OStatement& o);
+  std::vector<std::string> subroutine_dirs() const;
+  int fanuc_m_code();
+  void fanuc_call();
+  void fanuc_return();
+  void return_from_call(double value, bool has_value, int column);
+  SubDef find_fanuc_sub(const std::string& name, int column);
+  [[noreturn]] void fail_at_def(const SubDef& def, const std::string& detail);
 
   // Blocks.
   void collect_words(Words& w);
@@ -113,6 +130,7 @@ class Interpreter {
 
   Pose axis_target(const Words& w, bool machine) const;  // G53: machine coordinates
   double to_program(double machine_units_value) const;
+  double to_program_axis(int axis, double mm_or_degrees) const;
   Pose program_pose(const Pose& mm) const;
   double length_scale() const;
   double param_len(int base, int i) const;

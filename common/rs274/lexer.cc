@@ -430,9 +430,10 @@ class Reader {
       }
     }
     if (o.kind == OKind::kNone) {
-      if (end() || peek() == '(' || peek() == ';')
-        fail(o.keyword_column, "O-word without a command (sub, call, if, while, ...); bare O-number programs are not supported");
-      fail(o.keyword_column, "unknown O-word command starting with " + found_here());
+      // A bare O-word (LinuxCNC 2.9): a program number / name, or the head of a Fanuc
+      // subprogram that M98 calls and M99 ends.
+      if (end() || peek() == '(' || peek() == ';') o.kind = OKind::kProgram;
+      else fail(o.keyword_column, "unknown O-word command starting with " + found_here());
     }
     switch (o.kind) {
       case OKind::kCall:

@@ -106,6 +106,7 @@ struct Comment {
 enum class OKind : uint8_t {
   kNone, kSub, kEndsub, kCall, kDo, kWhile, kEndwhile, kIf, kElseif, kElse, kEndif,
   kBreak, kContinue, kReturn, kRepeat, kEndrepeat,
+  kProgram,  // a bare O-word: a program title, or a Fanuc subprogram's head (M98 calls, M99 ends)
 };
 
 // O<number> or O<name> followed by its keyword. LinuxCNC allows an O-word's

@@ -126,11 +126,14 @@ void Parameters::set_named(const std::string& name, double value) {
 // LinuxCNC's O-word call: the caller's #1..#30 are saved and the callee's start at
 // zero (arguments not given stay zero); named locals are lexically scoped, so the
 // callee sees none of the caller's.
-void Parameters::push_call() {
+void Parameters::push_call(bool scoped_args) {
   Frame f;
-  for (int i = 0; i < kCallArgs; ++i) {
-    f.args[static_cast<size_t>(i)] = numbered_[static_cast<size_t>(i + 1)];
-    numbered_[static_cast<size_t>(i + 1)] = 0.0;
+  f.scoped_args = scoped_args;
+  if (scoped_args) {
+    for (int i = 0; i < kCallArgs; ++i) {
+      f.args[static_cast<size_t>(i)] = numbered_[static_cast<size_t>(i + 1)];
+      numbered_[static_cast<size_t>(i + 1)] = 0.0;
+    }
   }
   f.locals = std::move(locals_);
   locals_.clear();
@@ -140,7 +143,8 @@ void Parameters::push_call() {
 void Parameters::pop_call() {
   if (frames_.empty()) throw std::logic_error("Parameters::pop_call without a matching push_call");
   Frame& f = frames_.back();
-  for (int i = 0; i < kCallArgs; ++i) numbered_[static_cast<size_t>(i + 1)] = f.args[static_cast<size_t>(i)];
+  if (f.scoped_args)
+    for (int i = 0; i < kCallArgs; ++i) numbered_[static_cast<size_t>(i + 1)] = f.args[static_cast<size_t>(i)];
   locals_ = std::move(f.locals);
   frames_.pop_back();
 }

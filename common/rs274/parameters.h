@@ -35,8 +35,10 @@ class Parameters {
   void set_named(const std::string& name, double value);
 
   // Call levels: push_call saves #1..#30 and the named locals and clears them (the
-  // caller then sets the arguments); pop_call restores the caller's.
-  void push_call();
+  // caller then sets the arguments); pop_call restores the caller's. A Fanuc M98
+  // call (scoped_args false) shares #1..#30 with its caller: only the named locals
+  // get a new scope (LinuxCNC 2.9).
+  void push_call(bool scoped_args = true);
   void pop_call();
   int call_depth() const { return static_cast<int>(frames_.size()); }
 
@@ -56,6 +58,7 @@ class Parameters {
  private:
   struct Frame {
     std::array<double, 30> args{};
+    bool scoped_args = true;
     std::unordered_map<std::string, double> locals;
   };
   std::vector<double> numbered_;  // [0] unused

@@ -307,6 +307,8 @@ TEST(Rs274Lex, OStatementsOfEveryKind) {
       {"O100 continue", OKind::kContinue, 0}, {"O100 return", OKind::kReturn, 0},
       {"O100 return [2]", OKind::kReturn, 1}, {"O100 repeat [3]", OKind::kRepeat, 1},
       {"O100 endrepeat", OKind::kEndrepeat, 0}, {"o100 END SUB", OKind::kEndsub, 0},
+      // A bare O-word (LinuxCNC 2.9): a program title or a Fanuc subprogram's head.
+      {"O100 (head)", OKind::kProgram, 0},    {"O100 ; head", OKind::kProgram, 0},
   };
   for (const Case& c : cases) {
     const Line l = lex(c.line);
@@ -564,9 +566,17 @@ TEST(Rs274LexError, EveryRefusalNamesItsColumn) {
   expect_lex_error("G1 X#", 5, "'#' without a parameter number");
 }
 
+TEST(Rs274Lex, BareOWordIsAProgramStatement) {
+  const Line l = lex("O0042");
+  EXPECT_EQ(l.o.kind, OKind::kProgram);
+  EXPECT_EQ(l.o.name, "42");
+  EXPECT_EQ(l.o.column, 1);
+  const Line n = lex("o<My Program>");
+  EXPECT_EQ(n.o.kind, OKind::kProgram);
+  EXPECT_EQ(n.o.name, "myprogram");
+}
+
 TEST(Rs274LexError, OStatementRefusals) {
-  expect_lex_error("O100", 5, "without a command");
-  expect_lex_error("O100 (c)", 6, "without a command");
   expect_lex_error("O100 foo", 6, "unknown O-word command");
   expect_lex_error("O100 if 1", 9, "expected '['");                  // rs274: Left bracket missing after 'if'
   expect_lex_error("O100 while", 11, "expected '['");

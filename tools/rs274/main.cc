@@ -7,6 +7,7 @@
 // message on stderr as "file:line:column: what", then the offending line), 2 on bad
 // flags. Like rs274, lengths in the tool table and var file are read as inches unless
 // --table-units mm.
+#include <cctype>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
@@ -28,8 +29,9 @@ std::vector<std::string> split_path(const std::string& s) {
   return out;
 }
 
-// [RS274NGC] SUBROUTINE_PATH of a LinuxCNC INI file.
-std::string ini_subroutine_path(const std::string& ini) {
+// A key of the [RS274NGC] section of a LinuxCNC INI file (SUBROUTINE_PATH,
+// DISABLE_FANUC_STYLE_SUB); empty when absent.
+std::string ini_rs274ngc(const std::string& ini, const std::string& wanted) {
   std::ifstream in(ini);
   std::string line, section;
   while (std::getline(in, line)) {
@@ -43,7 +45,7 @@ std::string ini_subroutine_path(const std::string& ini) {
     if (section != "RS274NGC" || eq == std::string::npos) continue;
     std::string key = line.substr(b, eq - b);
     while (!key.empty() && (key.back() == ' ' || key.back() == '\t')) key.pop_back();
-    if (key != "SUBROUTINE_PATH") continue;
+    if (key != wanted) continue;
     std::string v = line.substr(eq + 1);
     v.erase(0, v.find_first_not_of(" \t"));
     while (!v.empty() && (v.back() == ' ' || v.back() == '\t' || v.back() == '\r')) v.pop_back();
@@ -77,7 +79,12 @@ int main(int argc, char** argv) {
       if (a == "-g") continue;
       if (a == "-b") setup.block_delete = !setup.block_delete;
       else if (a == "-i") {
-        sub_path = ini_subroutine_path(next());
+        const std::string ini = next();
+        sub_path = ini_rs274ngc(ini, "SUBROUTINE_PATH");
+        // LinuxCNC's findBoolV: 1/0, true/false, yes/no, on/off (any case).
+        std::string v = ini_rs274ngc(ini, "DISABLE_FANUC_STYLE_SUB");
+        for (char& c : v) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+        setup.fanuc_subs = !(v == "1" || v == "true" || v == "yes" || v == "on");
         have_ini = true;
       }
       else if (a == "-t") setup.tool_table = next();
