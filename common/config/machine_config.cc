@@ -1,5 +1,6 @@
 #include "common/config/machine_config.h"
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -77,6 +78,21 @@ MachineConfig read_machine(MapReader top) {
     c.stop_decel_mm_s2 = r.get_double("stop_decel_mm_s2", c.stop_decel_mm_s2, 1.0, 1e6);
     c.heartbeat_period_s = r.get_double("heartbeat_period_s", c.heartbeat_period_s, 0.05, 60.0);
     c.realtime_priority = static_cast<int>(r.get_int("realtime_priority", 0, 0, 98));
+    const YAML::Node cpus = r.sequence("realtime_cpus");
+    for (size_t i = 0; i < cpus.size(); ++i) {
+      const std::string path = r.item_path("realtime_cpus", i);
+      int64_t cpu = -1;
+      try {
+        if (cpus[i].IsScalar()) cpu = cpus[i].as<int64_t>();
+      } catch (const YAML::Exception&) {
+        cpu = -1;
+      }
+      if (cpu < 0 || cpu > 1023)
+        throw ConfigError(top.file(), path, "expected a CPU number 0..1023, got '" + YAML::Dump(cpus[i]) + "'");
+      if (std::find(c.realtime_cpus.begin(), c.realtime_cpus.end(), cpu) != c.realtime_cpus.end())
+        throw ConfigError(top.file(), path, "CPU " + std::to_string(cpu) + " is listed twice");
+      c.realtime_cpus.push_back(static_cast<int>(cpu));
+    }
     r.finish();
   }
   {

@@ -92,6 +92,9 @@ struct MachineConfig {
   double stop_decel_mm_s2 = 1000.0;
   double heartbeat_period_s = 1.0;
   int realtime_priority = 0;  // SCHED_FIFO priority of the cyclic services; 0 = normal scheduling
+  // CPUs the cyclic threads (interpolator, drive bridge servo loop, servo simulator)
+  // are pinned to, with the threads they start; empty = no pinning.
+  std::vector<int> realtime_cpus;
 
   std::vector<AxisConfig> axes;
 

@@ -34,10 +34,12 @@ PeriodicTimer::PeriodicTimer(double period_s)
 }
 
 bool PeriodicTimer::wait() {
-  int64_t next = to_ns(next_) + period_ns_;
   timespec now{};
   clock_gettime(CLOCK_MONOTONIC, &now);
   const int64_t now_ns = to_ns(now);
+  if (last_wake_ns_ >= 0) compute_.record_ns(now_ns - last_wake_ns_);
+  const int64_t deadline = to_ns(next_) + period_ns_;
+  int64_t next = deadline;
   if (now_ns - next >= period_ns_) {
     // Late by at least a whole period: skip the missed deadlines.
     const int64_t missed = (now_ns - next) / period_ns_;
@@ -47,7 +49,15 @@ bool PeriodicTimer::wait() {
   next_ = from_ns(next);
   ++cycles_;
   const int rc = clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &next_, nullptr);
-  return rc != EINTR;
+  if (rc == EINTR) {
+    last_wake_ns_ = -1;
+    return false;
+  }
+  timespec woke{};
+  clock_gettime(CLOCK_MONOTONIC, &woke);
+  last_wake_ns_ = to_ns(woke);
+  wake_.record_ns(last_wake_ns_ - deadline);
+  return true;
 }
 
 }  // namespace cnc::util

@@ -4,6 +4,8 @@
 #include <cstdint>
 #include <ctime>
 
+#include "common/util/latency_histogram.h"
+
 namespace cnc::util {
 
 // Wall-clock time in µs since the epoch: the `utime` of every message.
@@ -15,6 +17,12 @@ double monotonic_s();
 // not drift with the work done in each cycle. A cycle that starts after its
 // deadline has passed by a whole period counts as an overrun and the schedule is
 // moved on instead of bursting to catch up.
+//
+// Every cycle is timed, without allocation, lock or I/O: the wake-up latency (the
+// time read after the sleep minus the deadline the cycle was due at, before any
+// skipping) and the compute time (from that wake-up to the next call of wait(),
+// i.e. the whole work of the cycle). A sleep interrupted by a signal records
+// neither.
 class PeriodicTimer {
  public:
   explicit PeriodicTimer(double period_s);
@@ -24,6 +32,8 @@ class PeriodicTimer {
   int64_t overruns() const { return overruns_; }
   int64_t cycles() const { return cycles_; }
   double period_s() const { return period_s_; }
+  const LatencyHistogram& wake_latency() const { return wake_; }
+  const LatencyHistogram& compute_time() const { return compute_; }
 
  private:
   double period_s_;
@@ -31,6 +41,9 @@ class PeriodicTimer {
   timespec next_{};
   int64_t overruns_ = 0;
   int64_t cycles_ = 0;
+  int64_t last_wake_ns_ = -1;  // -1: no cycle running
+  LatencyHistogram wake_;
+  LatencyHistogram compute_;
 };
 
 }  // namespace cnc::util

@@ -1,20 +1,188 @@
 #include "common/util/realtime.h"
 
 #include <sched.h>
+#include <spdlog/spdlog.h>
 #include <sys/mman.h>
+#include <unistd.h>
 
+#include <atomic>
 #include <cerrno>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
 
 namespace cnc::util {
+namespace {
+
+std::atomic<bool> g_memory_locked{false};
+
+std::string json_string(const std::string& s) {
+  std::string out = "\"";
+  for (const char c : s) {
+    if (c == '"' || c == '\\') {
+      out += '\\';
+      out += c;
+    } else if (static_cast<unsigned char>(c) < 0x20) {
+      char buf[8];
+      std::snprintf(buf, sizeof buf, "\\u%04x", c);
+      out += buf;
+    } else {
+      out += c;
+    }
+  }
+  return out + "\"";
+}
+
+std::vector<int> current_cpus() {
+  std::vector<int> out;
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  if (sched_getaffinity(0, sizeof set, &set) != 0) return out;
+  for (int c = 0; c < CPU_SETSIZE; ++c)
+    if (CPU_ISSET(c, &set)) out.push_back(c);
+  return out;
+}
+
+}  // namespace
 
 std::string make_realtime(int priority) {
   if (priority <= 0) return "";
   sched_param sp{};
   sp.sched_priority = priority;
-  if (sched_setscheduler(0, SCHED_FIFO, &sp) != 0) return std::string("SCHED_FIFO: ") + std::strerror(errno);
-  if (mlockall(MCL_CURRENT | MCL_FUTURE) != 0) return std::string("mlockall: ") + std::strerror(errno);
+  if (sched_setscheduler(0, SCHED_FIFO, &sp) != 0) {
+    const int err = errno;
+    std::string why = "SCHED_FIFO priority " + std::to_string(priority) + ": " + std::strerror(err);
+    if (err == EPERM) why += " (needs root, CAP_SYS_NICE or an RLIMIT_RTPRIO of at least " + std::to_string(priority) + ")";
+    return why;
+  }
+  if (mlockall(MCL_CURRENT | MCL_FUTURE) != 0) {
+    const int err = errno;
+    return std::string("mlockall: ") + std::strerror(err) +
+           " (SCHED_FIFO set; memory not locked: needs CAP_IPC_LOCK or a larger RLIMIT_MEMLOCK)";
+  }
+  g_memory_locked = true;
   return "";
+}
+
+std::string cpu_list(const std::vector<int>& cpus) {
+  std::string out;
+  for (size_t i = 0; i < cpus.size();) {
+    size_t j = i;
+    while (j + 1 < cpus.size() && cpus[j + 1] == cpus[j] + 1) ++j;
+    if (!out.empty()) out += ',';
+    out += std::to_string(cpus[i]);
+    if (j > i) out += '-' + std::to_string(cpus[j]);
+    i = j + 1;
+  }
+  return out;
+}
+
+std::string pin_to_cpus(const std::vector<int>& cpus, std::vector<int>* applied) {
+  if (applied) applied->clear();
+  if (cpus.empty()) return "";
+  const long configured = sysconf(_SC_NPROCESSORS_CONF);
+  std::vector<int> missing, wanted;
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  for (const int c : cpus) {
+    if (c < 0 || c >= CPU_SETSIZE || c >= configured) {
+      missing.push_back(c);
+    } else {
+      CPU_SET(c, &set);
+      wanted.push_back(c);
+    }
+  }
+  std::string why;
+  if (!missing.empty())
+    why = "CPU " + cpu_list(missing) + " does not exist: this machine has CPUs 0-" + std::to_string(configured - 1);
+  if (wanted.empty()) return why;
+  const std::vector<int> before = current_cpus();
+  if (sched_setaffinity(0, sizeof set, &set) != 0) {
+    const int err = errno;
+    if (!why.empty()) why += "; ";
+    why += "sched_setaffinity(" + cpu_list(wanted) + "): " + std::strerror(err);
+    if (err == EINVAL) why += " (none of them is online and allowed to this process; allowed: " + cpu_list(before) + ")";
+    return why;
+  }
+  const std::vector<int> now = current_cpus();
+  if (applied) *applied = now;
+  if (now != wanted) {
+    if (!why.empty()) why += "; ";
+    why += "the kernel pinned to CPUs " + cpu_list(now) + " only (offline or outside this process's cpuset)";
+  }
+  return why;
+}
+
+void apply_realtime(const std::string& service, int priority, const std::vector<int>& cpus) {
+  if (const std::string why = make_realtime(priority); !why.empty()) {
+    spdlog::warn("{}: real-time scheduling not available ({}): running with {}", service, why,
+                 why.find("SCHED_FIFO set") != std::string::npos ? "SCHED_FIFO, memory not locked"
+                                                                  : "normal scheduling");
+  }
+  std::vector<int> applied;
+  if (const std::string why = pin_to_cpus(cpus, &applied); !why.empty()) {
+    spdlog::warn("{}: CPU affinity timing.realtime_cpus [{}] not applied as configured ({}): {}", service,
+                 cpu_list(cpus), why, applied.empty() ? "running on every CPU" : "pinned to CPUs " + cpu_list(applied));
+  }
+  spdlog::info("{}: {}", service, describe_scheduling());
+}
+
+std::string describe_scheduling() {
+  std::string out;
+  const int policy = sched_getscheduler(0);
+  sched_param sp{};
+  sched_getparam(0, &sp);
+  switch (policy) {
+    case SCHED_FIFO: out = "SCHED_FIFO " + std::to_string(sp.sched_priority); break;
+    case SCHED_RR: out = "SCHED_RR " + std::to_string(sp.sched_priority); break;
+    case SCHED_OTHER: out = "SCHED_OTHER"; break;
+    default: out = "policy " + std::to_string(policy); break;
+  }
+  out += g_memory_locked ? ", memory locked" : ", memory not locked";
+  out += ", CPUs " + cpu_list(current_cpus());
+  return out;
+}
+
+std::string latency_dir(const std::string& option) {
+  if (!option.empty()) return option;
+  const char* env = std::getenv("CNC_LATENCY_DIR");
+  return env ? std::string(env) : std::string();
+}
+
+void report_latency(const LatencyReport& r, const std::string& dir) {
+  static const LatencyHistogram kEmpty;
+  const LatencyHistogram& w = r.wake ? *r.wake : kEmpty;
+  const LatencyHistogram& c = r.compute ? *r.compute : kEmpty;
+  const std::string sched = describe_scheduling();
+  spdlog::info(
+      "{} latency [us]: wake-up min {:.1f} mean {:.1f} p99 {:.1f} p99.9 {:.1f} max {:.1f} | compute min {:.1f} mean "
+      "{:.1f} p99 {:.1f} p99.9 {:.1f} max {:.1f} | {} cycles, {} overruns | {}",
+      r.service, w.min_us(), w.mean_us(), w.percentile_us(0.99), w.percentile_us(0.999), w.max_us(), c.min_us(),
+      c.mean_us(), c.percentile_us(0.99), c.percentile_us(0.999), c.max_us(), r.cycles, r.overruns, sched);
+  if (dir.empty()) return;
+  try {
+    std::filesystem::create_directories(dir);
+    const std::string path = dir + "/" + r.service + ".json";
+    const std::string tmp = path + ".tmp";
+    {
+      std::ofstream f(tmp);
+      char period[32];
+      std::snprintf(period, sizeof period, "%.3f", r.period_s * 1e6);
+      f << "{\"service\": " << json_string(r.service) << ",\n \"loop\": " << json_string(r.loop)
+        << ",\n \"period_us\": " << period << ",\n \"cycles\": " << r.cycles << ",\n \"overruns\": " << r.overruns
+        << ",\n \"overruns_what\": " << json_string(r.overruns_what) << ",\n \"scheduling\": " << json_string(sched)
+        << ",\n \"pid\": " << getpid() << ",\n \"wake_what\": " << json_string(r.wake_what)
+        << ",\n \"compute_what\": " << json_string(r.compute_what) << ",\n \"wake\": " << w.to_json()
+        << ",\n \"compute\": " << c.to_json() << "}\n";
+      if (!f) throw std::runtime_error("write failed");
+    }
+    std::filesystem::rename(tmp, path);
+    spdlog::info("{}: cycle timing written to {}", r.service, path);
+  } catch (const std::exception& e) {
+    spdlog::warn("{}: cannot write the latency file into {}: {}", r.service, dir, e.what());
+  }
 }
 
 }  // namespace cnc::util

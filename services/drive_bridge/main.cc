@@ -12,15 +12,16 @@
 #include "services/drive_bridge/drive_bridge_node.h"
 
 int main(int argc, char** argv) {
-  cnc::service::Spec spec{"cnc-drive-bridge", "fine interpolation, safety and Modbus I/O to the servo drives", {}, {}};
-  return cnc::service::run(spec, argc, argv, [](const cnc::config::MachineConfig& cfg, const cnc::service::Args&) {
+  // --latency-dir DIR (or $CNC_LATENCY_DIR): where the servo loop's timing goes at the end (cnc-drive-bridge.json).
+  cnc::service::Spec spec{"cnc-drive-bridge", "fine interpolation, safety and Modbus I/O to the servo drives",
+                          {"latency-dir"}, {}};
+  return cnc::service::run(spec, argc, argv, [](const cnc::config::MachineConfig& cfg, const cnc::service::Args& args) {
     // First, so the threads LCM starts (its receive thread) inherit the scheduling,
     // and the Modbus I/O threads too. One priority above the other cyclic services:
     // neither the interpolator's planning nor the simulator may hold up the servo
     // loop or the delivery of setpoints to it.
     const int priority = cfg.realtime_priority > 0 ? std::min(cfg.realtime_priority + 1, 98) : 0;
-    if (const std::string why = cnc::util::make_realtime(priority); !why.empty())
-      spdlog::warn("real-time scheduling not available ({}): running with normal scheduling", why);
+    cnc::util::apply_realtime("cnc-drive-bridge", priority, cfg.realtime_cpus);
     cnc::bus::Bus bus(cfg.lcm_url);
     cnc::bridge::DriveBridgeNode node(cfg, bus);
     cnc::service::Heartbeat hb(bus, cfg, "cnc-drive-bridge");
@@ -36,6 +37,15 @@ int main(int argc, char** argv) {
     }
     node.shut_down();
     hb.tick(cnc::lcmt_heartbeat::STOPPING, timer.overruns(), node.detail(), true);
+    cnc::util::LatencyReport lat;
+    lat.service = "cnc-drive-bridge";
+    lat.loop = "servo cycle (T_servo)";
+    lat.period_s = timer.period_s();
+    lat.cycles = timer.cycles();
+    lat.overruns = timer.overruns();
+    lat.wake = &timer.wake_latency();
+    lat.compute = &timer.compute_time();
+    cnc::util::report_latency(lat, cnc::util::latency_dir(args.option("latency-dir")));
     return cnc::service::kExitOk;
   });
 }

@@ -11,11 +11,12 @@
 #include "services/interpolator/interpolator_node.h"
 
 int main(int argc, char** argv) {
-  cnc::service::Spec spec{"cnc-interpolator", "coarse interpolation of program blocks into axis setpoints", {}, {}};
-  return cnc::service::run(spec, argc, argv, [](const cnc::config::MachineConfig& cfg, const cnc::service::Args&) {
-    // First, so the threads LCM starts (its receive thread) inherit the scheduling.
-    if (const std::string why = cnc::util::make_realtime(cfg.realtime_priority); !why.empty())
-      spdlog::warn("real-time scheduling not available ({}): running with normal scheduling", why);
+  // --latency-dir DIR (or $CNC_LATENCY_DIR): where the cycle timing goes at the end (cnc-interpolator.json).
+  cnc::service::Spec spec{"cnc-interpolator", "coarse interpolation of program blocks into axis setpoints",
+                          {"latency-dir"}, {}};
+  return cnc::service::run(spec, argc, argv, [](const cnc::config::MachineConfig& cfg, const cnc::service::Args& args) {
+    // First, so the threads LCM starts (its receive thread) inherit the scheduling and the CPUs.
+    cnc::util::apply_realtime("cnc-interpolator", cfg.realtime_priority, cfg.realtime_cpus);
     cnc::bus::Bus bus(cfg.lcm_url);
     cnc::interp::InterpolatorNode node(cfg, bus);
     cnc::service::Heartbeat hb(bus, cfg, "cnc-interpolator");
@@ -28,6 +29,15 @@ int main(int argc, char** argv) {
     }
     node.publish_state(true);
     hb.tick(cnc::lcmt_heartbeat::STOPPING, timer.overruns(), "", true);
+    cnc::util::LatencyReport lat;
+    lat.service = "cnc-interpolator";
+    lat.loop = "interpolation cycle (T_ipo)";
+    lat.period_s = timer.period_s();
+    lat.cycles = timer.cycles();
+    lat.overruns = timer.overruns();
+    lat.wake = &timer.wake_latency();
+    lat.compute = &timer.compute_time();
+    cnc::util::report_latency(lat, cnc::util::latency_dir(args.option("latency-dir")));
     return cnc::service::kExitOk;
   });
 }

@@ -17,6 +17,7 @@
 #include "common/program/block_msg.h"
 #include "common/service/heartbeat.h"
 #include "common/service/service.h"
+#include "common/util/clock.h"
 #include "common/util/realtime.h"
 #include "common/util/signals.h"
 #include "services/monitor/monitor.h"
@@ -24,12 +25,18 @@
 namespace ch = cnc::config::channels;
 
 int main(int argc, char** argv) {
-  cnc::service::Spec spec{"cnc-monitor", "feed, chord error, predicted roughness and following error, with alarms", {},
-                          {}};
-  return cnc::service::run(spec, argc, argv, [](const cnc::config::MachineConfig& cfg, const cnc::service::Args&) {
+  // --latency-dir DIR (or $CNC_LATENCY_DIR): where the timing of its status handling goes at the end (cnc-monitor.json).
+  cnc::service::Spec spec{"cnc-monitor", "feed, chord error, predicted roughness and following error, with alarms",
+                          {"latency-dir"}, {}};
+  return cnc::service::run(spec, argc, argv, [](const cnc::config::MachineConfig& cfg, const cnc::service::Args& args) {
     // Below the cyclic services, above ordinary load: a starved monitor loses messages.
-    if (const std::string why = cnc::util::make_realtime(std::max(0, cfg.realtime_priority - 10)); !why.empty())
-      spdlog::warn("real-time scheduling not available ({}): running with normal scheduling", why);
+    // Not pinned: it is event-driven, and may use whatever CPU the cyclic services leave.
+    cnc::util::apply_realtime("cnc-monitor", std::max(0, cfg.realtime_priority - 10), {});
+    // The monitor has no timer: its cycle is one AXIS_STATUS (every T_ipo). "Wake-up" is
+    // that message's delivery latency (its utime, stamped by the bridge, to the handler's
+    // start, on the wall clock: exact on one host, offset by clock skew across hosts),
+    // compute the handler's time.
+    cnc::util::LatencyHistogram delivery, handling;
     cnc::bus::Bus bus(cfg.lcm_url);
     cnc::monitor::Monitor core(cfg);
     const std::string ch_report = cfg.channel(ch::kMonitor), ch_alarm = cfg.channel(ch::kAlarm);
@@ -63,6 +70,8 @@ int main(int argc, char** argv) {
       core.on_setpoint(sp);
     });
     bus.subscribe<cnc::lcmt_axis_status>(cfg.channel(ch::kAxisStatus), [&](const cnc::lcmt_axis_status& m) {
+      delivery.record_ns((cnc::util::wall_utime() - m.utime) * 1000);
+      const double t_in = cnc::util::monotonic_s();
       std::vector<cnc::monitor::Alarm> alarms;
       const auto s = core.on_status(m.utime, m.setpoint_cycle, m.actual_mm, m.following_error_mm, &alarms);
       cnc::lcmt_monitor_report r{};
@@ -81,6 +90,7 @@ int main(int argc, char** argv) {
       r.source_line = s.source_line;
       bus.publish(ch_report, r);
       for (const auto& a : alarms) raise(a.code, a.text, cnc::lcmt_alarm::WARNING);
+      handling.record_s(cnc::util::monotonic_s() - t_in);
     });
     cnc::service::Heartbeat hb(bus, cfg, "cnc-monitor");
     std::map<std::string, int64_t> gaps_reported;
@@ -101,6 +111,19 @@ int main(int argc, char** argv) {
     spdlog::info("cnc-monitor: largest chord error {:.4f} um, largest following error {:.4f} mm",
                  core.largest_chord_error_mm() * 1e3, core.largest_following_error_mm());
     hb.tick(cnc::lcmt_heartbeat::STOPPING, 0, "", true);
+    cnc::util::LatencyReport lat;
+    lat.service = "cnc-monitor";
+    lat.loop = "AXIS_STATUS handler (event-driven, one per T_ipo)";
+    lat.period_s = cfg.ipo_period_s;
+    lat.cycles = delivery.count();
+    const auto st = bus.stats().find(cfg.channel(ch::kAxisStatus));
+    lat.overruns = st == bus.stats().end() ? 0 : st->second.seq_gaps;
+    lat.overruns_what = "AXIS_STATUS messages lost (sequence gaps)";
+    lat.wake_what = "delivery latency: AXIS_STATUS utime (bridge, wall clock) to the handler's start";
+    lat.compute_what = "compute: the AXIS_STATUS handler (core update, report, alarms)";
+    lat.wake = &delivery;
+    lat.compute = &handling;
+    cnc::util::report_latency(lat, cnc::util::latency_dir(args.option("latency-dir")));
     return cnc::service::kExitOk;
   });
 }

@@ -6,6 +6,7 @@
 //                 [--device PTY] [--rtu-timing real|none]   RTU axes: the simulator's end of the line
 //                 [--control FIFO] [--inject "T:CMD; ..."]  fault injection (fault_injector.h)
 //                 [--trace CSV] [--persist FILE] [--final-state FILE]
+//                 [--latency-dir DIR]                       cycle timing at the end (or $CNC_LATENCY_DIR)
 //
 // --rtu-timing real (default) holds each RTU reply until a real line at the
 // configured baud would have carried request and reply (a pseudo-terminal moves
@@ -570,14 +571,24 @@ int Simulator::run() {
     for (const SimDrive* d : all_) names.push_back(d->name());
     writer_ = std::make_unique<SideWriter>(names, args_.option("trace"), args_.option("persist"));
   }
-  if (const std::string why = cnc::util::make_realtime(cfg_.realtime_priority); !why.empty())
-    spdlog::warn("real-time scheduling not available ({}): running with normal scheduling", why);
+  cnc::util::apply_realtime("cnc-servo-sim", cfg_.realtime_priority, cfg_.realtime_cpus);
 
+  // Cycle timing of the dynamics grid: how late a due step starts (wake-up latency)
+  // and how long the step with the housekeeping takes (compute).
+  cnc::util::LatencyHistogram lat_wake, lat_compute;
+  int64_t lat_overruns = 0;
   next_step_s_ = cnc::util::monotonic_s();
   while (!cnc::util::stop_requested()) {
+    const double woke = cnc::util::monotonic_s();
+    const bool due = woke >= next_step_s_;
+    if (due) {
+      lat_wake.record_s(woke - next_step_s_);
+      if (woke - next_step_s_ >= dt_) ++lat_overruns;
+    }
     step_dynamics();
     const double now = cnc::util::monotonic_s();
     housekeeping(now);
+    if (due) lat_compute.record_s(cnc::util::monotonic_s() - woke);
     fd_set rd;
     FD_ZERO(&rd);
     int maxfd = -1;
@@ -620,6 +631,20 @@ int Simulator::run() {
   }
   if (writer_->dropped() > 0) spdlog::warn("cnc-servo-sim: {} trace samples dropped (the writer fell behind)", writer_->dropped());
   writer_.reset();
+  {
+    cnc::util::LatencyReport lat;
+    lat.service = "cnc-servo-sim";
+    lat.loop = "dynamics step (T_servo grid, select() wake-ups)";
+    lat.period_s = dt_;
+    lat.cycles = lat_wake.count();
+    lat.overruns = lat_overruns;
+    lat.overruns_what = "steps started a whole period late or more";
+    lat.wake_what = "wake-up latency: loop start minus the due step's time";
+    lat.compute_what = "compute: the due steps and the housekeeping";
+    lat.wake = &lat_wake;
+    lat.compute = &lat_compute;
+    cnc::util::report_latency(lat, cnc::util::latency_dir(args_.option("latency-dir")));
+  }
   const std::string report = positions_json(all_);
   spdlog::info("cnc-servo-sim: final positions {}", report);
   if (!args_.option("final-state").empty()) std::ofstream(args_.option("final-state")) << report << "\n";
@@ -637,7 +662,7 @@ int main(int argc, char** argv) {
   cnc::service::Spec spec{"cnc-servo-sim",
                           "Modbus TCP / RTU servo drive simulator",
                           {"port", "bind", "device", "rtu-timing", "control", "inject", "trace", "persist",
-                           "final-state"},
+                           "final-state", "latency-dir"},
                           {}};
   return cnc::service::run(spec, argc, argv, run_sim);
 }
