@@ -70,6 +70,12 @@ void DriveEmulator::set_actual(double position_mm, double velocity_mm_s) {
   refresh_status();
 }
 
+void DriveEmulator::set_following_error(double fe_mm) {
+  if (!profile_.has(Role::kFollowingError)) return;
+  const Field& f = profile_.field(Role::kFollowingError);
+  f.encode(fe_mm, reg(f.address));
+}
+
 void DriveEmulator::inject_fault(uint16_t code) {
   logic_.drive_fault(drive_, code);
   refresh_status();

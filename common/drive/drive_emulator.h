@@ -35,6 +35,8 @@ class DriveEmulator {
   int64_t target_writes() const { return target_writes_; }
   // The axis state, into the registers; refreshes the status registers too.
   void set_actual(double position_mm, double velocity_mm_s);
+  // Where the profile maps it: the drive's position demand minus actual.
+  void set_following_error(double fe_mm);
   void inject_fault(uint16_t code);
   void power_up();  // back to the power-up state (the simulator restarted)
   const DriveProfile& profile() const { return profile_; }

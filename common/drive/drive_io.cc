@@ -14,10 +14,14 @@ DriveIo::DriveIo(const DriveProfile& profile, int unit, Link& link)
     bool required;
   };
   std::vector<Want> want;
-  for (Role r : {Role::kStatusword, Role::kActualPosition, Role::kActualVelocity, Role::kErrorCode}) {
+  for (Role r : {Role::kStatusword, Role::kActualPosition, Role::kActualVelocity, Role::kErrorCode,
+                 Role::kFollowingError}) {
     if (!profile.has(r)) continue;
     const Field& f = profile.field(r);
-    want.push_back({{f.address, f.words}, r == Role::kStatusword || r == Role::kActualPosition});
+    // The drive's following error, where the profile has it, is read every exchange:
+    // the bridge checks the limit on it.
+    want.push_back({{f.address, f.words},
+                    r == Role::kStatusword || r == Role::kActualPosition || r == Role::kFollowingError});
   }
   std::sort(want.begin(), want.end(), [](const Want& a, const Want& b) { return a.r.addr < b.r.addr; });
   std::vector<Want> merged;
@@ -84,6 +88,8 @@ TxResult DriveIo::exchange(const double* target_mm, LinkCounters& c) {
   }
   statusword_ = *value(Role::kStatusword);
   actual_mm_ = profile_.field(Role::kActualPosition).decode(value(Role::kActualPosition));
+  if (profile_.has(Role::kFollowingError))
+    drive_fe_mm_ = profile_.field(Role::kFollowingError).decode(value(Role::kFollowingError));
   have_status_ = true;
   // The drive's error code, for the fault report: once per fault when the cyclic reads do not carry it.
   const bool fault = logic_.decode(statusword_).fault;

@@ -29,6 +29,10 @@ class DriveIo {
   uint16_t statusword() const { return statusword_; }
   DriveStatus status() const { return logic_.decode(statusword_); }
   double actual_mm() const { return actual_mm_; }
+  // The drive's own following error (its position demand minus actual), where the
+  // profile maps it; read with every exchange.
+  bool reports_following_error() const { return profile_.has(Role::kFollowingError); }
+  double drive_following_error_mm() const { return drive_fe_mm_; }
   // The last target written, as the drive has it (rounded to its counts).
   double written_mm() const { return written_mm_; }
   uint16_t error_code() const;
@@ -61,6 +65,7 @@ class DriveIo {
   bool have_status_ = false;
   uint16_t statusword_ = 0;
   double actual_mm_ = 0;
+  double drive_fe_mm_ = 0;
   double written_mm_ = 0;
 };
 

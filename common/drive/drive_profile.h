@@ -30,8 +30,9 @@ enum class Role : int8_t {
   kActualVelocity,  // mm/s
   kErrorCode,       // drive's fault / alarm code (read)
   kFaultReset,      // a separate alarm-clear register (Leadshine-style)
+  kFollowingError,  // mm, the drive's own position demand minus actual (CiA-402 0x60F4; read)
 };
-inline constexpr int kRoleCount = 9;
+inline constexpr int kRoleCount = 10;
 const char* role_name(Role r);
 
 enum class WordOrder : int8_t { kLowFirst, kHighFirst };

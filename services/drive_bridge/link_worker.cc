@@ -131,7 +131,12 @@ void LinkWorker::round(double now_s) {
     const drive::TxResult r = io.exchange(write ? &target : nullptr, s.work.counters);
     if (r == drive::TxResult::kOk) {
       if (write && s.have_written) {
-        s.work.fe_mm = s.written_mm - io.actual_mm();
+        // The drive's own following error where its profile maps it (its position
+        // demand, which ramps to the targets we write, minus actual); otherwise the
+        // last target written minus actual, which also holds up to one write
+        // interval of the link's delay.
+        s.work.lag_mm = s.written_mm - io.actual_mm();
+        s.work.fe_mm = io.reports_following_error() ? io.drive_following_error_mm() : s.work.lag_mm;
         ++s.work.fe_samples;
       }
       s.have_written = write;

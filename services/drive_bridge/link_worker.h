@@ -54,7 +54,8 @@ struct AxisReport {
   double actual_mm = 0;
   double hold_mm = 0;       // the target the drive holds while not following
   bool holding = false;     // enabled, and its target is the command or the latched hold
-  double fe_mm = 0;         // last target written before this exchange, minus the actual position
+  double fe_mm = 0;         // following error: the drive's own (demand - actual) where its profile maps it, else lag_mm
+  double lag_mm = 0;        // last target written before this exchange, minus the actual position
   int64_t fe_samples = 0;
   drive::LinkCounters counters;
   std::array<char, 96> last_error{};  // fixed size: reports are copied every tick

@@ -402,7 +402,7 @@ void Simulator::step_dynamics() {
   const double now = cnc::util::monotonic_s();
   int steps = 0;
   while (now >= next_step_s_ && steps < 1000) {
-    for (SimDrive* d : all_) d->step(dt_, next_step_s_);
+    for (SimDrive* d : all_) d->step_to(next_step_s_);
     next_step_s_ += dt_;
     ++steps;
   }
@@ -429,6 +429,7 @@ void Simulator::serve_tcp_client(int fd, std::vector<int>& closed) {
     modbus_reply_exception(tcp_ctx_, query, static_cast<unsigned>(code));
     return;
   }
+  d->step_to(cnc::util::monotonic_s());  // the reply reads the registers as they are at this moment
   modbus_reply(tcp_ctx_, query, len, d->emulator().mapping());
   after_reply(*d, query + header);
 }
@@ -443,6 +444,7 @@ void Simulator::answer_rtu(const uint8_t* frame, int len, double rx_end_s) {
   if (const int code = injector_.take_exception()) {
     modbus_reply_exception(rtu_ctx_, frame, static_cast<unsigned>(code));
   } else {
+    d->step_to(cnc::util::monotonic_s());  // the reply reads the registers as they are at this moment
     modbus_reply(rtu_ctx_, frame, len, d->emulator().mapping());
     after_reply(*d, frame + 1);
   }

@@ -4,45 +4,114 @@
 
 namespace cnc::servo_sim {
 
+namespace {
+constexpr double kRestartInterval_s = 0.001;  // the ramp of a first write after a pause
+constexpr double kBufferDelay = 1.5;          // targets are scheduled this many intervals after arrival
+}  // namespace
+
 SimDrive::SimDrive(std::string name, int unit, const drive::DriveProfile& profile,
                    const config::ServoSimAxisConfig& sim, double max_velocity_mm_s, double start_mm)
-    : name_(std::move(name)), unit_(unit), emu_(profile, start_mm), model_(sim, max_velocity_mm_s, start_mm),
-      from_mm_(start_mm), to_mm_(start_mm), interval_s_(0.001), step_s_(0.001) {}
+    : name_(std::move(name)), unit_(unit), emu_(profile, start_mm), model_(sim, max_velocity_mm_s, start_mm) {
+  pts_[0] = {0.0, start_mm};
+  n_pts_ = 1;
+}
+
+void SimDrive::push_point(double t_s, double mm) {
+  if (n_pts_ == kPoints) {
+    std::copy(pts_ + 1, pts_ + kPoints, pts_);
+    --n_pts_;
+  }
+  pts_[n_pts_++] = {t_s, mm};
+}
+
+int SimDrive::segment_at(double t_s) const {
+  for (int i = n_pts_ - 2; i >= 0; --i)
+    if (t_s >= pts_[i].t_s) return t_s < pts_[i + 1].t_s ? i : -1;
+  return -1;
+}
+
+double SimDrive::demand_mm(double now_s) const {
+  if (now_s < pts_[0].t_s) return pts_[0].mm;
+  const int i = segment_at(now_s);
+  if (i < 0) return pts_[n_pts_ - 1].mm;  // past the last target: holds it
+  const double f = (now_s - pts_[i].t_s) / (pts_[i + 1].t_s - pts_[i].t_s);
+  return pts_[i].mm + (pts_[i + 1].mm - pts_[i].mm) * f;
+}
+
+void SimDrive::feed_forward(double t_s, double* v_ff, double* a_ff) const {
+  *v_ff = *a_ff = 0;
+  const int i = segment_at(t_s);
+  if (i < 0) return;
+  // The slopes belong to the segments' midpoints; between two midpoints the
+  // velocity ramps from one to the other (the acceleration is that ramp's slope).
+  const double mid = 0.5 * (pts_[i].t_s + pts_[i + 1].t_s);
+  const int j = t_s < mid ? i - 1 : i + 1;  // the neighbouring segment on t's side
+  if (j < 0 || j > n_pts_ - 2) {
+    *v_ff = slope(i);
+    return;
+  }
+  const double mid_j = 0.5 * (pts_[j].t_s + pts_[j + 1].t_s);
+  const double acc = (slope(j) - slope(i)) / (mid_j - mid);
+  *v_ff = slope(i) + acc * (t_s - mid);
+  *a_ff = acc;
+}
 
 void SimDrive::after_request(double now_s) {
   if (emu_.target_writes() == writes_seen_) return;
+  step_to(now_s);  // the dynamics up to the write, on the demand in force until now
   writes_seen_ = emu_.target_writes();
   const double since = now_s - last_write_s_;
-  // Where the interpolated target is now becomes the start of the next ramp.
-  const double f = std::clamp((now_s - last_write_s_) / interval_s_, 0.0, 1.0);
-  from_mm_ = last_write_s_ < 0 ? emu_.target_mm() : from_mm_ + (to_mm_ - from_mm_) * f;
-  to_mm_ = emu_.target_mm();
-  // A write after a pause is a new start: no ramp from a stale interval. A late
-  // write (a lost or delayed transaction) catches up over the usual interval, as a
-  // drive with a fixed interpolation period does, instead of crawling over the gap.
+  const double target = emu_.target_mm();
   if (last_write_s_ < 0 || since > 0.1) {
-    interval_s_ = step_s_;
+    // A write after a pause is a new start: from where the demand stands now, to
+    // the target over one short interval.
+    const double from = demand_mm(now_s);
+    n_pts_ = 0;
+    push_point(now_s, from);
+    push_point(now_s + kRestartInterval_s, target);
+    usual_s_ = 0;
+    stream_start_s_ = now_s;
+    stream_writes_ = 0;
   } else {
-    usual_s_ = usual_s_ <= 0 ? since : usual_s_ + 0.1 * (std::min(since, 2 * usual_s_) - usual_s_);
-    interval_s_ = std::clamp(since, 0.0002, 1.5 * usual_s_);
+    // The master's rate: the mean interval since the stream (re)started, then a
+    // slow running average (a rate estimate from one jittered interval would put
+    // the jitter into the schedule).
+    ++stream_writes_;
+    usual_s_ = stream_writes_ <= 500 ? (now_s - stream_start_s_) / static_cast<double>(stream_writes_)
+                                     : usual_s_ + 0.002 * (std::clamp(since, 0.5 * usual_s_, 2 * usual_s_) - usual_s_);
+    const Point& last = pts_[n_pts_ - 1];
+    // One usual interval after the last target, pulled gently toward the fixed
+    // delay after this arrival (the phase-locked clock), never before now.
+    double t = last.t_s + usual_s_;
+    t += 0.03 * ((now_s + kBufferDelay * usual_s_) - t);
+    t = std::max({t, now_s, last.t_s + 0.25 * usual_s_});
+    push_point(t, target);
   }
   last_write_s_ = now_s;
 }
 
-void SimDrive::step(double dt_s, double now_s) {
-  step_s_ = dt_s;
-  const bool follows = emu_.follows();
-  if (!follows) {
-    // Disabled: the target ramp restarts from wherever the axis comes to rest.
-    from_mm_ = to_mm_ = model_.position_mm();
-    model_.step(dt_s, to_mm_, 0.0, false);
-  } else {
-    const double f = last_write_s_ < 0 ? 1.0 : std::clamp((now_s - last_write_s_) / interval_s_, 0.0, 1.0);
-    const double target = from_mm_ + (to_mm_ - from_mm_) * f;
-    const double ff = f < 1.0 ? (to_mm_ - from_mm_) / interval_s_ : 0.0;
-    model_.step(dt_s, target, ff, true);
+void SimDrive::step_to(double now_s) {
+  if (t_s_ < 0) t_s_ = now_s;
+  if (now_s <= t_s_) return;
+  const double dt = now_s - t_s_;
+  const double mid_s = t_s_ + 0.5 * dt;
+  t_s_ = now_s;
+  if (!emu_.follows()) {
+    // Disabled: the demand restarts from wherever the axis comes to rest.
+    n_pts_ = 0;
+    push_point(now_s, model_.position_mm());
+    last_write_s_ = -1;
+    model_.step(dt, model_.position_mm(), 0.0, 0.0, false);
+    emu_.set_actual(model_.position_mm(), model_.velocity_mm_s());
+    emu_.set_following_error(0.0);
+    return;
   }
+  double v_ff = 0, a_ff = 0;
+  feed_forward(mid_s, &v_ff, &a_ff);
+  const double target = demand_mm(now_s);
+  model_.step(dt, target, v_ff, a_ff, true);
   emu_.set_actual(model_.position_mm(), model_.velocity_mm_s());
+  emu_.set_following_error(target - model_.position_mm());
 }
 
 }  // namespace cnc::servo_sim

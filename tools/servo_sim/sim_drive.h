@@ -1,9 +1,16 @@
 #pragma once
 // One simulated servo drive: the drive end of its profile (DriveEmulator) moving
-// a ServoModel. Like a drive in cyclic synchronous position mode it interpolates
-// linearly between the targets it is sent, over the interval it measured between
-// them, and feeds the slope forward as velocity; so a 1 kHz TCP stream and a
-// 70 Hz RTU stream both give smooth motion.
+// a ServoModel. Like a drive in cyclic synchronous position mode with an
+// interpolation buffer, it schedules the targets it is sent on its own clock, one
+// usual write interval apart and a fixed delay after their arrival (a phase-locked
+// clock follows the master's rate), and interpolates linearly between them; the
+// arrival jitter of a Modbus link (well under the delay) then does not reach the
+// demand. The slope of the demand is fed forward as velocity and its change as
+// acceleration, smoothly from one segment to the next. So a 1 kHz TCP stream and a
+// 70 Hz RTU stream both give smooth motion. Its position registers are current at
+// the moment of every reply (the dynamics are stepped to that moment), and where
+// the profile maps it the drive reports its own following error: the position
+// demand minus the actual position.
 #include <string>
 
 #include "common/drive/drive_emulator.h"
@@ -17,8 +24,9 @@ class SimDrive {
            double max_velocity_mm_s, double start_mm);
   // After a Modbus request that may have written registers.
   void after_request(double now_s);
-  // Advances the dynamics by dt to time now_s and refreshes the registers.
-  void step(double dt_s, double now_s);
+  // Advances the dynamics to time now_s (monotonic) and refreshes the registers;
+  // nothing when now_s is not later than the last step.
+  void step_to(double now_s);
 
   const std::string& name() const { return name_; }
   int unit() const { return unit_; }
@@ -26,6 +34,8 @@ class SimDrive {
   double position_mm() const { return model_.position_mm(); }
   double velocity_mm_s() const { return model_.velocity_mm_s(); }
   bool follows() const { return emu_.follows(); }
+  // Position demand at time now_s (the ramp between the last two targets).
+  double demand_mm(double now_s) const;
 
  private:
   std::string name_;
@@ -33,12 +43,24 @@ class SimDrive {
   drive::DriveEmulator emu_;
   ServoModel model_;
   int64_t writes_seen_ = 0;
+  double t_s_ = -1;          // time the dynamics have reached
   double last_write_s_ = -1;
-  double from_mm_;      // interpolation: from the target in force at the last write...
-  double to_mm_;        // ...to the target written then...
-  double interval_s_;   // ...over the interval measured between the last two writes
-  double usual_s_ = 0;  // running average of the write interval
-  double step_s_;
+  double usual_s_ = 0;       // the master's write interval (estimated)
+  double stream_start_s_ = 0;
+  int64_t stream_writes_ = 0;
+  // The interpolation buffer: targets at their scheduled times, oldest first.
+  struct Point {
+    double t_s;
+    double mm;
+  };
+  static constexpr int kPoints = 16;
+  Point pts_[kPoints];
+  int n_pts_ = 0;
+  void push_point(double t_s, double mm);
+  // Segment i runs from pts_[i] to pts_[i + 1]; its slope, and -1 when t is not in a segment.
+  int segment_at(double t_s) const;
+  double slope(int i) const { return (pts_[i + 1].mm - pts_[i].mm) / (pts_[i + 1].t_s - pts_[i].t_s); }
+  void feed_forward(double t_s, double* v_ff, double* a_ff) const;
 };
 
 }  // namespace cnc::servo_sim
