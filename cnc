@@ -10,6 +10,7 @@
 #   ./cnc plan PROGRAM [--machine FILE] --csv OUT [--plot PNG]  dry run: setpoints, time, feed plot
 #   ./cnc report LOG --out DIR [--tolerance-um U] [--target-rmax-um U]  run report to open in a browser
 #   ./cnc conformance [conformance.py options]     our interpreter against LinuxCNC's rs274
+#   ./cnc bench latency [--load N] [--out DIR]     cycle timing of the demo, idle and with N busy loops
 #   ./cnc build                                    set up and build only
 set -euo pipefail
 
@@ -162,7 +163,9 @@ cmd_demo() {
   local run_dir="$ROOT/runs/demo-$(date -u +%Y%m%d-%H%M%S)"
   mkdir -p "$run_dir"
   say "starting the cell ($machine), output in $run_dir"
-  "$ROOT/cnc" up --machine "$machine" --log-out "$run_dir/cell" --sim-final-state "$run_dir/final-positions.json" \
+  # Each cyclic service writes its cycle timing into $run_dir/latency at the end (./cnc report shows it).
+  CNC_LATENCY_DIR="$run_dir/latency" \
+    "$ROOT/cnc" up --machine "$machine" --log-out "$run_dir/cell" --sim-final-state "$run_dir/final-positions.json" \
     >"$run_dir/services.log" 2>&1 &
   local up_pid=$!
   # A signal to the demo stops the cell (up stops its services in reverse order).
@@ -179,6 +182,10 @@ cmd_demo() {
   echo "  services            $( [ $up_rc -eq 0 ] && echo 'all exited 0 on SIGTERM' || echo "a service failed, see $run_dir/services.log")"
   echo "  log                 $run_dir/cell.lcmlog"
   echo "  play it back with   lcm-logplayer $run_dir/cell.lcmlog"
+  if [ -d "$run_dir/latency" ]; then
+    echo "  cycle timing (µs)   $run_dir/latency"
+    /usr/bin/python3 "$ROOT/tools/bench/latency_plot.py" --run "demo=$run_dir/latency" 2>&1 | sed -n '/^service/,/^$/p' | sed 's/^/      /' || true
+  fi
   [ $ctl_rc -eq 0 ] && [ $up_rc -eq 0 ]
 }
 
@@ -217,6 +224,10 @@ cmd_report() {
   done
   [ -n "$out" ] || die "report: --out DIR is required"
   run_child "$BUILD/tools/cnc-logexport" --log "$log" --out "$out"
+  # The cycle timing the services wrote beside the log (./cnc demo: RUN_DIR/latency), when there is some.
+  local lat
+  lat="$(dirname "$log")/latency"
+  compgen -G "$lat/*.json" >/dev/null && rest+=(--latency-dir "$lat")
   run_child /usr/bin/python3 "$ROOT/tools/report/make_report.py" "$out" "${rest[@]}"
   say "open $out/index.html in a browser"
 }
@@ -234,6 +245,16 @@ cmd_conformance() {
       --corpus "$ROOT/tests/unit/rs274_comp" --expected-refusals "$conf/expected-refusals.txt"
   fi
   python3 "$conf/conformance.py" --ours "$ours" --theirs /usr/bin/rs274 "$@"
+}
+
+# bench latency [latency_bench.sh options]: see tools/bench/latency_bench.sh.
+cmd_bench() {
+  local what="${1:-}"
+  [ $# -gt 0 ] && shift
+  case "$what" in
+    latency) build; run_child "$ROOT/tools/bench/latency_bench.sh" "$@" ;;
+    *) die "bench: expected 'latency' (bench latency [--machine F] [--program P] [--out DIR] [--load N])" ;;
+  esac
 }
 
 cmd_test() {
@@ -258,6 +279,7 @@ main() {
     plan) [ -x "$BUILD/tools/cnc-plan" ] || build; cmd_plan "$@" ;;
     report) [ -x "$BUILD/tools/cnc-logexport" ] || build; cmd_report "$@" ;;
     conformance) [ -x "$BUILD/tools/rs274/cnc-rs274" ] || build; cmd_conformance "$@" ;;
+    bench) cmd_bench "$@" ;;
     *) awk 'NR > 1 && /^#/ {sub(/^# ?/, ""); print; next} NR > 1 {exit}' "$0"; [ -z "$cmd" ] || exit 2 ;;
   esac
 }

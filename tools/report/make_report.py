@@ -8,8 +8,11 @@ DIR and writes DIR/index.html with PNG plots (matplotlib) and a summary table:
   (d) following error per axis against time
   (e) the path, XY and XZ projections, coloured by feed
   (f) the alarms
+  (g) the cycle timing of the services (wake-up latency and compute histograms, and
+      their table), when the run has latency files: --latency-dir, else the folder
+      `latency` beside the log (./cnc demo writes it there)
 
-    make_report.py DIR [--tolerance-um UM] [--target-rmax-um UM] [--title T]
+    make_report.py DIR [--tolerance-um UM] [--target-rmax-um UM] [--title T] [--latency-dir D]
 
 The tolerance and the target come from the log when it has them (the recorded
 config, the monitor's reports, the program's process parameters); the options are
@@ -30,6 +33,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from plot_plan import COLOURS  # noqa: E402  (one colour per limit across the project's plots)
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "bench"))
+import latency_plot  # noqa: E402  (the latency files, their table and plot: tools/bench/latency_plot.py)
 
 RUNNING_STATES = {"running", "held", "starved"}
 DPI = 100
@@ -204,6 +210,8 @@ def main():
     ap.add_argument("--tolerance-um", type=float, default=None, help="chord tolerance when the log has none (1)")
     ap.add_argument("--target-rmax-um", type=float, default=None, help="R_max target when the log has none")
     ap.add_argument("--title", default="")
+    ap.add_argument("--latency-dir", default=None,
+                    help="the services' cycle timing files (default: the folder 'latency' beside the log)")
     a = ap.parse_args()
 
     d = a.dir
@@ -242,6 +250,22 @@ def main():
     plot_rmax(rep, mon, target_um, target_note)
     plot_following_error(rep, axis_rows, mon, axes)
     plot_path(rep, sp, axes)
+
+    latency_dir = a.latency_dir
+    if latency_dir is None and summary.get("log_files"):
+        latency_dir = os.path.join(os.path.dirname(summary["log_files"][0]), "latency")
+    latency_runs = latency_plot.read_runs([("this run", latency_dir)]) if latency_dir and os.path.isdir(
+        latency_dir) else []
+    if latency_runs and latency_plot.services_of(latency_runs):
+        latency_plot.plot(latency_runs, os.path.join(d, "latency.png"))
+        latency_html = ("<p>From %s: per cycle, the wake-up latency (wake time minus the deadline; for the "
+                        "monitor, the delivery latency of AXIS_STATUS) and the compute time, in µs.</p>\n%s\n"
+                        "<figure class='plot' data-empty='false'><img src='latency.png' alt='cycle timing'>"
+                        "<figcaption>(g) cycle timing: histograms per service (log-log; dotted p99, dashed max, "
+                        "solid the period)</figcaption></figure>" % (
+                            html.escape(latency_dir), latency_plot.html_table(latency_runs)))
+    else:
+        latency_html = "<p>no latency files%s</p>" % (" in " + html.escape(latency_dir) if latency_dir else "")
 
     title = a.title or "run report: %s" % os.path.basename(summary.get("program") or "(no program)")
     e = html.escape
@@ -318,6 +342,8 @@ def main():
 <table><tr><th>t [s]</th><th>source</th><th>severity</th><th>code</th><th>text</th></tr>
 {alarms}
 </table>
+<h2>(g) Cycle timing</h2>
+{latency}
 <h2>Channels</h2>
 <table><tr><th>channel</th><th>events in the log</th><th>senders</th><th>gaps in the log</th>
 <th>logger: received</th><th>logger: seq gaps</th><th>logger: dropped</th></tr>
@@ -326,7 +352,7 @@ def main():
 </body>
 </html>
 """.format(title=e(title), notes="".join("<p class='note'>%s</p>" % e(n) for n in notes), summary=summary_html,
-           figures=figures, alarms=alarm_rows, channels="\n".join(channel_rows))
+           figures=figures, alarms=alarm_rows, channels="\n".join(channel_rows), latency=latency_html)
     out = os.path.join(d, "index.html")
     with open(out, "w") as f:
         f.write(page)
