@@ -81,8 +81,9 @@ void Bus::subscribe_raw(const std::string& channel_regex, RawHandler handler) {
 
 void Bus::on_message(const lcm_recv_buf_t* rbuf, const char* channel, void* user) {
   auto* sub = static_cast<Subscription*>(user);
-  const std::string ch(channel);
   try {
+    std::string& ch = sub->bus->rx_channel_;
+    ch.assign(channel);  // no allocation once it has held a name this long
     if (sub->bus->last_accounted_ != rbuf) {
       sub->bus->last_accounted_ = rbuf;
       sub->bus->account(ch, rbuf->data, rbuf->data_size);
@@ -98,10 +99,11 @@ void Bus::account(const std::string& channel, const void* data, size_t size) {
   ++st.received;
   const auto hdr = peek_header(data, size);
   if (!hdr) return;
-  const auto key = std::make_pair(channel, hdr->sender);
-  auto it = last_seq_.find(key);
-  if (it == last_seq_.end()) {
-    last_seq_.emplace(key, hdr->seq);
+  auto ch_it = last_seq_.find(channel);
+  if (ch_it == last_seq_.end()) ch_it = last_seq_.emplace(channel, std::map<int32_t, int64_t>{}).first;
+  auto it = ch_it->second.find(hdr->sender);
+  if (it == ch_it->second.end()) {
+    ch_it->second.emplace(hdr->sender, hdr->seq);
     return;
   }
   const int64_t expected = it->second + 1;

@@ -129,7 +129,9 @@ class Bus {
   lcm_t* lcm_ = nullptr;
   std::vector<std::unique_ptr<Subscription>> subs_;
   std::map<std::string, ChannelStats> stats_;
-  std::map<std::pair<std::string, int32_t>, int64_t> last_seq_;
+  // Last sequence number per channel and sender (looked up without copying the name).
+  std::map<std::string, std::map<int32_t, int64_t>, std::less<>> last_seq_;
+  std::string rx_channel_;  // the channel of the message being delivered (its capacity is reused)
   // Several subscriptions may match one channel: count each message once.
   const lcm_recv_buf_t* last_accounted_ = nullptr;
   std::map<std::string, int64_t> out_seq_;
@@ -142,9 +144,11 @@ class Bus {
 template <class Msg>
 void Bus::subscribe(const std::string& channel, std::function<void(const Msg&)> handler) {
   add_subscription(exact_channel(channel),
-                   [this, handler = std::move(handler)](const std::string& ch, const void* data, size_t size,
-                                                        int64_t) {
-                     Msg msg;
+                   // One message object per subscription, decoded into again and again:
+                   // once its vectors and strings have grown to the sizes the stream
+                   // uses, delivering a message allocates nothing.
+                   [this, handler = std::move(handler), msg = Msg{}](const std::string& ch, const void* data,
+                                                                   size_t size, int64_t) mutable {
                      bool ok = false;
                      try {
                        ok = msg.decode(data, 0, static_cast<int>(size)) == static_cast<int>(size);

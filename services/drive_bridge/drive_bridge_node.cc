@@ -361,44 +361,64 @@ void DriveBridgeNode::servo_tick_inner(double now_s) {
 
 void DriveBridgeNode::publish_status_inner(int64_t overruns) {
   if (tick_ % ticks_per_ipo_ != 0) return;
-  lcmt_axis_status s{};
+  // One message, sized at the first publish and filled in place from then on: the
+  // vectors keep their size and the texts their capacity, so a status publish
+  // allocates nothing (texts longer than the reserve grow once).
+  lcmt_axis_status& s = status_msg_;
+  const size_t n = axes_.size();
+  if (s.axis_name.size() != n) {
+    s.num_axes = static_cast<int32_t>(n);
+    s.axis_name.resize(n);
+    s.commanded_mm.resize(n);
+    s.actual_mm.resize(n);
+    s.following_error_mm.resize(n);
+    s.drive_state.resize(n);
+    s.fault.resize(n);
+    s.transactions.resize(n);
+    s.timeouts.resize(n);
+    s.exceptions.resize(n);
+    s.crc_errors.resize(n);
+    s.reconnects.resize(n);
+    for (size_t i = 0; i < n; ++i) {
+      s.axis_name[i] = cfg_.axes[i].name;
+      s.fault[i].reserve(256);
+    }
+  }
   s.setpoint_cycle = core_.last_cycle();
-  s.num_axes = static_cast<int32_t>(axes_.size());
-  for (size_t i = 0; i < axes_.size(); ++i) {
+  for (size_t i = 0; i < n; ++i) {
     const Axis& a = axes_[i];
-    s.axis_name.push_back(cfg_.axes[i].name);
-    s.commanded_mm.push_back(core_.commanded()[i]);
-    s.actual_mm.push_back(a.rep.actual_mm);
-    s.following_error_mm.push_back(a.rep.fe_mm);
+    s.commanded_mm[i] = core_.commanded()[i];
+    s.actual_mm[i] = a.rep.actual_mm;
+    s.following_error_mm[i] = a.rep.fe_mm;
     int8_t st = lcmt_axis_status::DISABLED;
-    std::string text;
+    std::string& text = s.fault[i];
+    text.clear();
     switch (state_) {
       case State::kStarting:
       case State::kDisabled:
         st = a.rep.status.fault ? lcmt_axis_status::FAULT : lcmt_axis_status::DISABLED;
-        if (a.rep.status.fault) text = std::string("drive fault (") + a.rep.status.state + ")";
+        if (a.rep.status.fault) text.append("drive fault (").append(a.rep.status.state).append(")");
         break;
       case State::kEnabling: st = lcmt_axis_status::ENABLING; break;
       case State::kEnabled:
         st = lcmt_axis_status::ENABLED;
-        text = core_.waiting() ? core_.waiting_reason() : "";
+        if (core_.waiting()) text.append(core_.waiting_reason());
         break;
-      case State::kStopping: st = lcmt_axis_status::STOPPING; text = fault_text_; break;
-      case State::kFault: st = lcmt_axis_status::FAULT; text = fault_text_; break;
+      case State::kStopping: st = lcmt_axis_status::STOPPING; text.append(fault_text_); break;
+      case State::kFault: st = lcmt_axis_status::FAULT; text.append(fault_text_); break;
     }
     if (a.link_down || (!a.rep.answering && state_ != State::kStarting)) {
       st = lcmt_axis_status::FAULT;
-      if (text.empty()) text = std::string("no answer: ") + a.rep.last_error.data();
+      if (text.empty()) text.append("no answer: ").append(a.rep.last_error.data());
     } else if (!a.rep.answering) {
-      text = std::string("waiting for the drive: ") + a.rep.last_error.data();
+      text.assign("waiting for the drive: ").append(a.rep.last_error.data());
     }
-    s.drive_state.push_back(st);
-    s.fault.push_back(text);
-    s.transactions.push_back(a.rep.counters.transactions);
-    s.timeouts.push_back(a.rep.counters.timeouts);
-    s.exceptions.push_back(a.rep.counters.exceptions);
-    s.crc_errors.push_back(a.rep.counters.crc_errors);
-    s.reconnects.push_back(a.rep.counters.reconnects);
+    s.drive_state[i] = st;
+    s.transactions[i] = a.rep.counters.transactions;
+    s.timeouts[i] = a.rep.counters.timeouts;
+    s.exceptions[i] = a.rep.counters.exceptions;
+    s.crc_errors[i] = a.rep.counters.crc_errors;
+    s.reconnects[i] = a.rep.counters.reconnects;
   }
   s.setpoint_gaps = core_.setpoint_gaps();
   s.servo_overruns = overruns;

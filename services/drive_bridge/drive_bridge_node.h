@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "cnc/lcmt_axis_status.hpp"
 #include "cnc/lcmt_drive_command.hpp"
 #include "cnc/lcmt_setpoint.hpp"
 #include "common/bus/bus.h"
@@ -92,6 +93,7 @@ class DriveBridgeNode {
   std::vector<std::unique_ptr<LinkWorker>> workers_;
   std::vector<Axis> axes_;
   std::string ch_status_;
+  cnc::lcmt_axis_status status_msg_{};  // reused by every status publish
   std::string ch_alarm_;
   int ticks_per_ipo_;
   int64_t tick_ = 0;

@@ -69,12 +69,16 @@ int main(int argc, char** argv) {
       for (int a = 0; a < naxes; ++a) sp.position_mm[a] = m.position_mm[a];
       core.on_setpoint(sp);
     });
+    // Reused every cycle (the report's vector keeps its size, the alarm list its
+    // capacity): handling a status allocates nothing unless an alarm is raised.
+    cnc::lcmt_monitor_report r{};
+    std::vector<cnc::monitor::Alarm> alarms;
+    alarms.reserve(4);
     bus.subscribe<cnc::lcmt_axis_status>(cfg.channel(ch::kAxisStatus), [&](const cnc::lcmt_axis_status& m) {
       delivery.record_ns((cnc::util::wall_utime() - m.utime) * 1000);
       const double t_in = cnc::util::monotonic_s();
-      std::vector<cnc::monitor::Alarm> alarms;
+      alarms.clear();
       const auto s = core.on_status(m.utime, m.setpoint_cycle, m.actual_mm, m.following_error_mm, &alarms);
-      cnc::lcmt_monitor_report r{};
       r.setpoint_cycle = s.setpoint_cycle;
       r.commanded_feed_mm_per_min = s.commanded_feed_mm_per_min;
       r.actual_feed_mm_per_min = s.actual_feed_mm_per_min;
@@ -82,7 +86,8 @@ int main(int argc, char** argv) {
       r.predicted_rmax_um = s.predicted_rmax_um;
       r.spindle_rpm = s.spindle_rpm;
       r.num_axes = m.num_axes;
-      r.following_error_mm = s.following_error_mm;
+      r.following_error_mm.resize(m.following_error_mm.size());
+      std::copy(m.following_error_mm.begin(), m.following_error_mm.end(), r.following_error_mm.begin());
       r.max_following_error_mm = s.max_following_error_mm;
       r.target_rmax_um = s.target_rmax_um;
       r.chord_tolerance_mm = cfg.chord_tolerance_mm;

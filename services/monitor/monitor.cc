@@ -14,7 +14,17 @@ constexpr size_t kMaxBlocks = 512;
 constexpr size_t kMaxSetpoints = 2048;
 }  // namespace
 
-Monitor::Monitor(const config::MachineConfig& cfg) : cfg_(cfg), naxes_(static_cast<int>(cfg.axes.size())) {}
+Monitor::Monitor(const config::MachineConfig& cfg)
+    : cfg_(cfg), naxes_(static_cast<int>(cfg.axes.size())), cycles_(kMaxSetpoints) {}
+
+Monitor::CycleSlot* Monitor::slot(int64_t cycle) {
+  return &cycles_[static_cast<size_t>(cycle < 0 ? -cycle : cycle) % cycles_.size()];
+}
+
+const SetpointIn* Monitor::setpoint_at(int64_t cycle) const {
+  const CycleSlot& s = cycles_[static_cast<size_t>(cycle < 0 ? -cycle : cycle) % cycles_.size()];
+  return s.cycle == cycle ? &s.sp : nullptr;
+}
 
 void Monitor::on_block(const program::Block& b, int64_t token) {
   if (b.kind == program::BlockKind::kDwell || b.kind == program::BlockKind::kEnd || b.kind == program::BlockKind::kEvent)
@@ -57,18 +67,19 @@ double Monitor::step_chord_error(const SetpointIn& a, const SetpointIn& b) const
 }
 
 void Monitor::on_setpoint(const SetpointIn& sp) {
+  double e = kNaN;
   if (last_sp_ && sp.cycle > last_sp_->cycle) {
     // Only steps between consecutive cycles are steps of the machine.
     if (sp.cycle == last_sp_->cycle + 1) {
-      const double e = step_chord_error(*last_sp_, sp);
-      chord_by_cycle_[sp.cycle] = e;
+      e = step_chord_error(*last_sp_, sp);
       if (std::isfinite(e)) largest_chord_ = std::max(largest_chord_, e);
     }
   }
   last_sp_ = sp;
-  setpoints_[sp.cycle] = sp;
-  while (setpoints_.size() > kMaxSetpoints) setpoints_.erase(setpoints_.begin());
-  while (chord_by_cycle_.size() > kMaxSetpoints) chord_by_cycle_.erase(chord_by_cycle_.begin());
+  CycleSlot* s = slot(sp.cycle);
+  s->cycle = sp.cycle;
+  s->sp = sp;
+  s->chord_mm = e;
 }
 
 Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double>& actual,
@@ -87,46 +98,63 @@ Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double
   // and R_max predictions, several times the real ones (false alarms on every demo).
   constexpr int64_t kFeedWindowUs = 40'000;
   constexpr size_t kMaxFeedSamples = 64;
-  if (!recent_.empty() && (utime <= recent_.back().utime || recent_.back().pos.size() != actual.size())) recent_.clear();
-  recent_.push_back(Sample{utime, cycle, actual});
-  while (recent_.size() > 2 && (recent_.size() > kMaxFeedSamples || utime - recent_[1].utime >= kFeedWindowUs))
-    recent_.pop_front();
+  const int n_axes = static_cast<int>(std::min(actual.size(), static_cast<size_t>(program::kMaxAxes)));
+  if (recent_n_ > 0) {
+    const Sample& last = recent(recent_n_ - 1);
+    if (utime <= last.utime || last.naxes != n_axes) recent_n_ = 0;
+  }
+  if (recent_n_ == kRecent) {  // full: the oldest goes
+    recent_head_ = (recent_head_ + 1) % kRecent;
+    --recent_n_;
+  }
+  {
+    Sample& s = recent_[(recent_head_ + recent_n_) % kRecent];
+    s.utime = utime;
+    s.cycle = cycle;
+    s.naxes = n_axes;
+    for (int i = 0; i < n_axes; ++i) s.pos[i] = actual[static_cast<size_t>(i)];
+    ++recent_n_;
+  }
+  while (recent_n_ > 2 && (recent_n_ > kMaxFeedSamples || utime - recent(1).utime >= kFeedWindowUs)) {
+    recent_head_ = (recent_head_ + 1) % kRecent;
+    --recent_n_;
+  }
   tracking_ratio_ = 1.0;
-  if (recent_.size() >= 2) {
-    const Sample& a = recent_.front();
+  if (recent_n_ >= 2) {
+    const Sample& a = recent(0);
     double d2 = 0;
-    for (size_t i = 0; i < actual.size(); ++i) d2 += (actual[i] - a.pos[i]) * (actual[i] - a.pos[i]);
+    for (int i = 0; i < n_axes; ++i) d2 += (actual[static_cast<size_t>(i)] - a.pos[i]) * (actual[static_cast<size_t>(i)] - a.pos[i]);
     actual_feed_ = std::sqrt(d2) / (static_cast<double>(utime - a.utime) * 1e-6) * 60.0;
     // The axes follow the setpoints a few cycles late (the bridge's jitter buffer and
     // fine interpolation, the drives' lag): compare with the commanded stretch that
     // many cycles earlier, or a deceleration reads as overspeed.
-    auto c0 = setpoints_.find(a.cycle - lag_cycles_), c1 = setpoints_.find(cycle - lag_cycles_);
-    if (c0 != setpoints_.end() && c1 != setpoints_.end()) {
+    const SetpointIn* c0 = setpoint_at(a.cycle - lag_cycles_);
+    const SetpointIn* c1 = setpoint_at(cycle - lag_cycles_);
+    if (c0 != nullptr && c1 != nullptr) {
       double c2 = 0;
-      for (size_t i = 0; i < actual.size() && i < c0->second.position_mm.size(); ++i) {
-        const double d = c1->second.position_mm[i] - c0->second.position_mm[i];
+      for (int i = 0; i < n_axes; ++i) {
+        const double d = c1->position_mm[i] - c0->position_mm[i];
         c2 += d * d;
       }
       if (c2 > 1e-12) tracking_ratio_ = std::sqrt(d2 / c2);
     }
   }
   r.actual_feed_mm_per_min = actual_feed_;
-  r.following_error_mm = fe;
   for (double e : fe) r.max_following_error_mm = std::max(r.max_following_error_mm, std::fabs(e));
   largest_fe_ = std::max(largest_fe_, r.max_following_error_mm);
 
-  auto sp_it = setpoints_.find(cycle);
-  if (sp_it == setpoints_.end()) return r;
-  const SetpointIn& sp = sp_it->second;
+  const SetpointIn* sp_p = setpoint_at(cycle);
+  if (sp_p == nullptr) return r;
+  const SetpointIn& sp = *sp_p;
   r.commanded_feed_mm_per_min = sp.feed_mm_per_min;
   r.block_index = sp.block_index;
   r.source_line = sp.source_line;
-  if (auto c = chord_by_cycle_.find(cycle); c != chord_by_cycle_.end()) r.chord_error_mm = c->second;
+  r.chord_error_mm = slot(cycle)->chord_mm;
 
   // Feed and inclination where the commanded path was in the middle of the window.
-  const int64_t window_cycles = recent_.size() >= 2 ? cycle - recent_.front().cycle : 0;
-  auto mid_it = setpoints_.find(cycle - window_cycles / 2);
-  const SetpointIn& mid = mid_it != setpoints_.end() ? mid_it->second : sp;
+  const int64_t window_cycles = recent_n_ >= 2 ? cycle - recent(0).cycle : 0;
+  const SetpointIn* mid_p = setpoint_at(cycle - window_cycles / 2);
+  const SetpointIn& mid = mid_p != nullptr ? *mid_p : sp;
   const Known* k = find(mid.program_token, mid.block_index);
   if (k != nullptr) {
     const program::Block& b = k->block;

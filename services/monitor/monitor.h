@@ -1,4 +1,6 @@
 #pragma once
+#include <array>
+#include <limits>
 // Monitor core: from the blocks the interpolator applied, its setpoints and the
 // drive bridge's axis status, per status:
 //   * commanded feed (the setpoint of that cycle) and actual feed (from the actual
@@ -43,8 +45,7 @@ struct Report {
   double predicted_rmax_um = 0;   // NaN without process parameters
   double target_rmax_um = 0;      // NaN without process parameters
   double spindle_rpm = 0;
-  std::vector<double> following_error_mm;
-  double max_following_error_mm = 0;
+  double max_following_error_mm = 0;  // the largest |following error| of the status's axes
   int64_t block_index = -1;
   int32_t source_line = 0;
 };
@@ -87,18 +88,31 @@ class Monitor {
   config::MachineConfig cfg_;
   int naxes_;
   std::map<std::pair<int64_t, int64_t>, Known> blocks_;  // (token, index), bounded
-  std::map<int64_t, SetpointIn> setpoints_;             // by cycle, bounded
-  std::map<int64_t, double> chord_by_cycle_;            // chord error of the step ending at a cycle
-  std::optional<SetpointIn> last_sp_;
-  // The actual positions of the last statuses over a window (see on_status).
-  struct Sample {
-    int64_t utime;
-    int64_t cycle;
-    std::vector<double> pos;
+  // The last setpoints by cycle, in a ring (slot = cycle mod its size) allocated
+  // once: per cycle the monitor allocates nothing.
+  struct CycleSlot {
+    int64_t cycle = -1;  // -1: empty
+    SetpointIn sp;
+    double chord_mm = std::numeric_limits<double>::quiet_NaN();  // of the step ending at this cycle
   };
+  std::vector<CycleSlot> cycles_;
+  CycleSlot* slot(int64_t cycle);
+  const SetpointIn* setpoint_at(int64_t cycle) const;
+  std::optional<SetpointIn> last_sp_;
+  // The actual positions of the last statuses over a window (see on_status): a
+  // fixed ring, oldest at recent_head_.
+  struct Sample {
+    int64_t utime = 0;
+    int64_t cycle = 0;
+    int naxes = 0;
+    motion::AxisVec pos{};
+  };
+  static constexpr size_t kRecent = 64;
+  std::array<Sample, kRecent> recent_{};
+  size_t recent_head_ = 0, recent_n_ = 0;
+  const Sample& recent(size_t i) const { return recent_[(recent_head_ + i) % kRecent]; }
   double tracking_ratio_ = 1.0;  // actual / commanded distance over the window
   int64_t lag_cycles_ = 3;        // how many coarse cycles the axes follow the setpoints late
-  std::deque<Sample> recent_;
   double actual_feed_ = 0;
   double largest_fe_ = 0;
   double largest_chord_ = 0;

@@ -19,6 +19,7 @@
 #include "common/config/yaml_reader.h"
 #include "common/drive/loopback_link.h"
 #include "services/drive_bridge/drive_bridge_node.h"
+#include "tests/unit/alloc_guard.h"
 
 namespace cnc::bridge {
 namespace {
@@ -57,8 +58,17 @@ class Cell {
   // One servo tick at 1 ms; a setpoint every 4th tick when `sp` is given.
   void tick() {
     t += 0.001;
-    node.servo_tick(t);
-    node.publish_status(0);
+    if (count_allocations) {
+      // The servo tick and the status publish (the cyclic path, which here also
+      // runs the link's round on this thread and delivers the bus's messages).
+      test::AllocGuard g;
+      node.servo_tick(t);
+      node.publish_status(0);
+      cyclic_allocations += g.allocations() + g.frees();
+    } else {
+      node.servo_tick(t);
+      node.publish_status(0);
+    }
     bus.drain();
   }
   void ticks(int n) {
@@ -120,6 +130,8 @@ class Cell {
   std::vector<std::string> alarms;
   double t = 0;
   int64_t cycle = 0;
+  bool count_allocations = false;
+  long cyclic_allocations = 0;
 };
 
 class EveryProfile : public ::testing::TestWithParam<std::string> {};
@@ -192,6 +204,26 @@ TEST_P(EveryProfile, DriveFaultFaultsAndEnableResetsIt) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Shipped, EveryProfile, ::testing::Values("sim", "cia402_modbus", "leadshine_el"));
+
+TEST(BridgeNode, ServoTickAndStatusPublishAllocateNothing) {
+  Cell c("sim", true);
+  c.ticks(40);
+  ASSERT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  // A first move sizes what grows once (the bus's reused messages and buffers).
+  double x = c.move_x(10, 19.5);
+  c.hold_stream(x, 10, 20);
+  c.count_allocations = true;
+  // Accelerate, cruise, decelerate, stand: every tick counted (operator new and
+  // delete on this thread; LCM's C core is not C++ and not counted).
+  x = c.move_x(x, 12);
+  c.hold_stream(x, 10, 50);
+  x = c.move_x(x, 25);
+  c.hold_stream(x, 10, 100);
+  c.count_allocations = false;
+  EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  EXPECT_NEAR(c.drive_mm(1), x, 0.2);
+  EXPECT_EQ(c.cyclic_allocations, 0);
+}
 
 TEST(BridgeNode, WithoutEnableOnStartWaitsForEnable) {
   Cell c("cia402_modbus", false);

@@ -8,6 +8,7 @@
 #include "common/config/machine_config.h"
 #include "services/interpolator/interpolator.h"
 #include "services/monitor/monitor.h"
+#include "tests/unit/alloc_guard.h"
 #include "services/part_program_server/program_server.h"
 
 namespace cnc::monitor {
@@ -19,6 +20,8 @@ struct Outcome {
   double max_chord = 0;
   double max_rmax_ratio = 0;  // predicted / target where both are known
   int rmax_points = 0;
+  long cycle_allocations = 0;  // operator new/delete inside on_setpoint and on_status
+  int cycles = 0;
 };
 
 // Runs a program through the interpolator core and feeds the monitor what the live
@@ -52,11 +55,19 @@ Outcome run(const config::MachineConfig& cfg, const std::string& program, bool l
     in.u = sp.u;
     in.feed_mm_per_min = sp.feed_mm_per_min;
     in.position_mm = sp.position_mm;
-    mon.on_setpoint(in);
     std::vector<double> actual(sp.position_mm.begin(), sp.position_mm.begin() + n), fe(n, 0.0);
-    r.reports.push_back(mon.on_status(static_cast<int64_t>(std::llround(static_cast<double>(sp.cycle) * cfg.ipo_period_s * 1e6)), sp.cycle,
-                                   actual, fe, &r.alarms));
-    const Report& rep = r.reports.back();
+    const int64_t utime = std::llround(static_cast<double>(sp.cycle) * cfg.ipo_period_s * 1e6);
+    const size_t alarms_before = r.alarms.size();
+    Report rep;
+    {
+      // The monitor's cycle: one setpoint and one status (an alarm's text is an event).
+      test::AllocGuard g;
+      mon.on_setpoint(in);
+      rep = mon.on_status(utime, sp.cycle, actual, fe, &r.alarms);
+      if (r.alarms.size() == alarms_before) r.cycle_allocations += g.allocations() + g.frees();
+    }
+    ++r.cycles;
+    r.reports.push_back(rep);
     if (std::isfinite(rep.chord_error_mm)) r.max_chord = std::max(r.max_chord, rep.chord_error_mm);
     if (std::isfinite(rep.predicted_rmax_um) && rep.actual_feed_mm_per_min > 100) {
       r.max_rmax_ratio = std::max(r.max_rmax_ratio, rep.predicted_rmax_um / rep.target_rmax_um);
@@ -76,6 +87,16 @@ TEST(Monitor, ChordErrorOfTheCommandedStepsStaysWithinTolerance) {
   EXPECT_GT(r.max_chord, 0.1 * cfg.chord_tolerance_mm);  // arcs and the NURBS do bend
   EXPECT_LE(r.max_chord, cfg.chord_tolerance_mm * (1 + 1e-6));
   for (const auto& a : r.alarms) EXPECT_NE(a.code, "chord_error") << a.text;
+}
+
+TEST(Monitor, ACycleAllocatesNothing) {
+  // Setpoint and status handling over the whole demo (lines, arcs, the NURBS
+  // valley, dwells): per cycle the monitor allocates nothing (its blocks, one per
+  // program block, are built when they arrive).
+  const auto cfg = sim3();
+  const Outcome r = run(cfg, std::string(CNC_SOURCE_DIR) + "/config/programs/demo.ngc");
+  EXPECT_GT(r.cycles, 3000);
+  EXPECT_EQ(r.cycle_allocations, 0);
 }
 
 TEST(Monitor, PredictedRoughnessHoldsTheTargetUnderTheFeedLaw) {
