@@ -44,7 +44,7 @@ int axis_of_letter(char c) {
 // G-code modal groups (LinuxCNC's numbering), by G code in tenths.
 int g_group(int g) {
   switch (g) {
-    case 40: case 100: case 280: case 281: case 300: case 301: case 530: case 920: case 921: case 922: case 923:
+    case 40: case 100: case 280: case 281: case 300: case 301: case 520: case 530: case 920: case 921: case 922: case 923:
       return 0;
     case 0: case 10: case 20: case 30: case 50: case 51: case 52: case 53: case 62: case 330: case 331: case 382:
     case 383: case 384: case 385: case 730: case 740: case 760: case 800: case 810: case 820: case 830: case 840:
@@ -1145,13 +1145,13 @@ void Interpreter::check_words(const Words& w) {
   // The fanuc NURBS continuation lines carry K X Y Z R without a G code.
   if (nurbs_ && nurbs_->fanuc) return;
   if (nurbs_ && !nurbs_->fanuc && w.g[1] < 0) return;
-  if (uses_axes && (motion == 800 || motion < 0) && g0 != 100 && g0 != 280 && g0 != 300 && g0 != 920 &&
-      g0 != 530)
+  if (uses_axes && (motion == 800 || motion < 0) && g0 != 100 && g0 != 280 && g0 != 300 && g0 != 520 &&
+      g0 != 920 && g0 != 530)
     fail(w.column(kAxisLetters[std::countr_zero(w.axes)]), "axis words without a G code that uses them (motion mode is G80)");
   if (g0 == 530 && !(motion == 0 || motion == 10) ) fail(w.gcol[0], "G53 is only allowed with G0 or G1");
   if (g0 == 530 && incremental_) fail(w.gcol[0], "G53 with G91 (incremental) is not allowed");
   if (w.g[0] >= 0 && w.g[1] >= 0 && uses_axes && g0 != 530) {
-    if (g0 == 100 || g0 == 280 || g0 == 300 || g0 == 920)
+    if (g0 == 100 || g0 == 280 || g0 == 300 || g0 == 520 || g0 == 920)
       fail(w.gcol[1], g_text(g0) + " and " + g_text(w.g[1]) + " both use axis words: only one per line");
   }
   const auto not_with = [&](char c, const char* what) {
@@ -1743,7 +1743,7 @@ void Interpreter::execute_block(Words& w) {
     }
     if (w.axes != 0) fail(w.gcol[0], g_text(w.g[0]) + " takes no axis words");
   }
-  if (w.g[0] >= 920 && w.g[0] <= 923) g92(w);
+  if (w.g[0] == 520 || (w.g[0] >= 920 && w.g[0] <= 923)) g92(w);
   // 24. Motion.
   prev_motion_ = motion_;
   if (w.g[1] >= 0) {
@@ -1753,7 +1753,8 @@ void Interpreter::execute_block(Words& w) {
       canon_.comment(ref(w.gcol[1]), "interpreter: motion mode set to none");
     }
   }
-  const bool axis_g0 = w.g[0] == 100 || w.g[0] == 280 || w.g[0] == 300 || w.g[0] == 920 || w.g[0] == 431;
+  const bool axis_g0 = w.g[0] == 100 || w.g[0] == 280 || w.g[0] == 300 || w.g[0] == 520 || w.g[0] == 920 ||
+                       w.g[0] == 431;
   if (w.g[1] == 52) {
     nurbs_g5_open(w);
   } else if (w.g[1] == 62) {
@@ -2035,11 +2036,20 @@ void Interpreter::g28_g30(Words& w, bool g30) {
   w.axes = 0;
 }
 
+// G52 and G92 share one offset (LinuxCNC 2.9's convert_axis_offsets): G92 shifts it
+// so the current point gets the values given; G52 sets it to the values given for the
+// axes named, the current point moving with it. Both set #5210 to 1 and #5211-#5219
+// to the whole offset; G92.1 and G92.2 clear the offset and #5210 (G92.1 also
+// #5211-#5219); G92.3 takes the offset back from #5211-#5219 and sets #5210.
 void Interpreter::g92(Words& w) {
   const int g = w.g[0];
   const SourceRef r = ref(w.gcol[0]);
-  if (g == 920) {
-    if (w.axes == 0) fail(w.gcol[0], "G92 needs at least one axis word");
+  if (comp_ != 400)
+    fail(w.gcol[0], "cannot change axis offsets (" + g_text(g) + ") with cutter radius compensation on");
+  if (g == 920 || g == 520) {
+    if (w.on('@') || w.on('^'))
+      fail(w.column(w.on('@') ? '@' : '^'), "polar coordinates (@ ^) are for motion only, not with " + g_text(g));
+    if (w.axes == 0) fail(w.gcol[0], g_text(g) + " needs at least one axis word");
     const double s = length_scale();
     for (int i = 0; i < kNumAxes; ++i) {
       const char c = kAxisLetters[i];
@@ -2047,10 +2057,15 @@ void Interpreter::g92(Words& w) {
       const size_t k = static_cast<size_t>(i);
       const double lin = i < 3 || i >= 6 ? s : 1.0;
       const double v = w[c] * lin;
-      g92_[k] = position_[k] + g92_[k] - v;
-      position_[k] = v;
-      set_param_len(5211, i, g92_[k]);
+      if (g == 920) {
+        g92_[k] = position_[k] + g92_[k] - v;
+        position_[k] = v;
+      } else {
+        position_[k] += g92_[k] - v;
+        g92_[k] = v;
+      }
     }
+    for (int i = 0; i < kNumAxes; ++i) set_param_len(5211, i, g92_[static_cast<size_t>(i)]);
     params_.set(5210, 1);
     g92_active_ = true;
     w.axes = 0;
