@@ -162,9 +162,9 @@ struct Interpreter::Frame {
   int32_t return_line = 0;
   int32_t call_column = 0;
   size_t loops = 0;  // loops_ size at the call
-  bool fanuc = false;        // an M98 call: ends with M99, shares #1..#30
-  int64_t repeats_left = 0;  // M98 L: further runs after this one
-  SubDef target{};           // where the M98 subprogram's body starts
+  bool fanuc = false;      // an M98 call: ends with M99, shares #1..#30
+  bool again = false;      // M98 L: M99 goes back to the M98 line, which runs again
+  int64_t call_start = 0;  // the M98 line's start in return_file
 };
 
 struct Interpreter::Loop {
@@ -1014,9 +1014,23 @@ void Interpreter::fanuc_call() {
   const double runs = std::nearbyint(l);
   if (std::fabs(l - runs) > 1e-4 || runs < 0)
     fail(lcol, "M98 L" + num(l) + ": the repeat count is a whole number, 0 or more");
+  // LinuxCNC's execute_call: with L, a counter of the caller's level takes L when it
+  // is idle (-1) and counts down; while runs remain, M99 returns to the M98 line
+  // itself, which is read and evaluated again (so P#n can name another subprogram
+  // each run; L is read only at the first).
+  bool again = false;
+  if (lcol != 0) {
+    const size_t level = frames_.size();
+    if (m98_runs_left_.size() <= level) m98_runs_left_.resize(level + 1, -1);
+    int64_t& left = m98_runs_left_[level];
+    if (left == -1) left = static_cast<int64_t>(runs);
+    if (--left > 0) again = true;
+    else left = -1;
+  }
   if (runs == 0) return;  // LinuxCNC: "M98 L0 instruction; skipping call"
   if (static_cast<int64_t>(frames_.size()) >= setup_.max_call_depth)
     fail(mw.column, "M98 P" + name + ": calls nested deeper than " + std::to_string(setup_.max_call_depth));
+  const int64_t call_start = files_[static_cast<size_t>(file_)]->line_start;
   const SubDef def = find_fanuc_sub(name, mw.column);
   Frame fr;
   fr.sub = name;
@@ -1026,8 +1040,8 @@ void Interpreter::fanuc_call() {
   fr.call_column = mw.column;
   fr.loops = loops_.size();
   fr.fanuc = true;
-  fr.repeats_left = static_cast<int64_t>(runs) - 1;
-  fr.target = def;
+  fr.again = again;
+  fr.call_start = call_start;
   params_.push_call(false);
   frames_.push_back(std::move(fr));
   if (!def.fanuc)
@@ -1050,28 +1064,15 @@ void Interpreter::fanuc_return() {
     fail(line_.words[1].column, "only comments may follow M99 ending a subprogram");
   if (!line_.settings.empty())
     fail(line_.settings.front().column, "only comments may follow M99 ending a subprogram");
-  if (fr.repeats_left <= 0) {
-    return_from_call(0, false, mw.column);
-    return;
+  const bool again = fr.again;
+  const int64_t call_start = fr.call_start;
+  const int32_t call_line = fr.return_line;
+  return_from_call(0, false, mw.column);
+  if (again) {
+    // M98 L: back to the M98 line (LinuxCNC returns there and reads it again).
+    files_[static_cast<size_t>(file_)]->seek(call_start);
+    line_no_ = call_line - 1;
   }
-  // M98 L: the next run, with fresh named locals (LinuxCNC leaves the call and makes
-  // it again from the M98 line).
-  --fr.repeats_left;
-  loops_.resize(fr.loops);
-  params_.pop_call();
-  last_returned_ = 0;
-  params_.set_named("_value", 0);
-  params_.set_named("_value_returned", 0);
-  while (!saved_.empty() && saved_.back().call_level >= static_cast<int32_t>(frames_.size()) &&
-         saved_.back().call_level < 1000000) {
-    const SavedModes sm = saved_.back();
-    saved_.pop_back();
-    if (sm.valid) restore_modes(sm, mw.column);
-  }
-  params_.push_call(false);
-  file_ = fr.target.file;
-  files_[static_cast<size_t>(file_)]->seek(fr.target.offset);
-  line_no_ = fr.target.line;
 }
 
 // ---- blocks ---------------------------------------------------------------------------

@@ -161,6 +161,7 @@ class Interpreter {
   Line line_;                     // the current line, lexed
   std::string text_;              // its text
   std::vector<Frame> frames_;     // subroutine calls
+  std::vector<int64_t> m98_runs_left_;  // per caller level: M98 L runs still to make, -1 idle
   std::vector<Loop> loops_;       // open while/do/repeat/if statements
   std::unordered_map<std::string, SubDef> subs_;
   bool ended_ = false;
