@@ -560,6 +560,7 @@ std::string Interpreter::o_name(const OStatement& o) {
 // left in line_ (its line number in line_no_), not executed.
 void Interpreter::skip_to(const std::string& name, uint32_t kinds) {
   const int32_t from_line = line_no_;
+  const bool defining = kinds == kbit(OKind::kEndsub);
   for (;;) {
     if (!read_line()) fail(0, "o<" + name + "> opened at line " + std::to_string(from_line) + " has no matching end");
     try {
@@ -568,6 +569,12 @@ void Interpreter::skip_to(const std::string& name, uint32_t kinds) {
       continue;  // LinuxCNC reads skipped lines only for their O-word
     }
     if (line_.o.kind == OKind::kNone) continue;
+    // LinuxCNC's read_o refuses a sub head or a bare O-word while a definition is read.
+    if (defining && (line_.o.kind == OKind::kSub || line_.o.kind == OKind::kProgram))
+      fail(line_.o.column, "nested subroutine definition: " +
+                               std::string(line_.o.kind == OKind::kSub ? "a sub" : "a Fanuc subprogram head") +
+                               " inside the definition of o<" + name + "> sub (line " + std::to_string(from_line) +
+                               "), before its endsub");
     if (line_.o.number_expr >= 0) continue;  // computed O-numbers only act when executed
     if (line_.o.name == name && (kinds & kbit(line_.o.kind)) != 0) return;
   }
@@ -626,71 +633,7 @@ void Interpreter::execute_o(const OStatement& o) {
       for (size_t i = 0; i < o.args.size(); ++i) args[i] = evaluate(line_.arena, o.args[i], *reader_);
       auto it = subs_.find(name);
       if (it == subs_.end()) {
-        // Not seen yet: look further down this file, then in the subroutine path.
-        const int64_t here = f.offset();
-        const int32_t here_line = line_no_;
-        const std::string text_saved = text_;
-        f.seek(0);
-        line_no_ = 0;
-        bool found = false;
-        std::string t;
-        Line probe;
-        while (f.getline(t)) {
-          ++line_no_;
-          try {
-            lex_line(t, probe);
-          } catch (const Error&) {
-            continue;
-          }
-          if (probe.percent && line_no_ > 1) break;  // the program's closing '%': nothing after it counts
-          if (probe.o.number_expr >= 0 || probe.o.name != name) continue;
-          if (probe.o.kind == OKind::kSub) {
-            subs_[name] = SubDef{file_, f.offset(), line_no_, f.line_start, false};
-            found = true;
-            break;
-          }
-          // LinuxCNC looks for the definition further down and stops at a Fanuc
-          // subprogram head of that number first (to refuse the call there).
-          if (probe.o.kind == OKind::kProgram && line_no_ > here_line) {
-            subs_[name] = SubDef{file_, f.offset(), line_no_, f.line_start, true};
-            found = true;
-            break;
-          }
-        }
-        f.seek(here);
-        line_no_ = here_line;
-        text_ = text_saved;
-        if (!found) {
-          // The subroutine path, then the main program's folder (LinuxCNC's program prefix).
-          for (const std::string& dir : subroutine_dirs()) {
-            const std::string p = dir + "/" + name + ".ngc";
-            if (!std::filesystem::exists(p)) continue;
-            auto sf = std::make_unique<SourceFile>();
-            sf->path = p;
-            sf->fd = ::open(p.c_str(), O_RDONLY | O_CLOEXEC);
-            if (sf->fd < 0) continue;
-            const int32_t idx = static_cast<int32_t>(files_.size());
-            int32_t ln = 0;
-            while (sf->getline(t)) {
-              ++ln;
-              try {
-                lex_line(t, probe);
-              } catch (const Error&) {
-                continue;
-              }
-              if ((probe.o.kind == OKind::kSub || probe.o.kind == OKind::kProgram) && probe.o.name == name) {
-                subs_[name] = SubDef{idx, sf->offset(), ln, sf->line_start, probe.o.kind == OKind::kProgram};
-                found = true;
-                break;
-              }
-            }
-            if (!found) fail(o.column, p + " does not define o<" + name + "> sub");
-            file_names_.push_back(p);
-            files_.push_back(std::move(sf));
-            break;
-          }
-        }
-        if (!found) fail(o.column, "o<" + name + "> call: no such subroutine in this file or the subroutine path");
+        find_sub(name, o.column);
         it = subs_.find(name);
       }
       Frame fr;
@@ -848,11 +791,35 @@ void Interpreter::execute_o(const OStatement& o) {
 
 // Where subroutine files are looked for: the subroutine path, then the main
 // program's folder (LinuxCNC's program prefix).
+// LinuxCNC keeps the first 10 directories of SUBROUTINE_PATH that exist
+// (MAX_SUB_DIRS in rs274ngc_pre.cc) and ignores the rest.
+constexpr size_t kMaxSubDirs = 10;
+
 std::vector<std::string> Interpreter::subroutine_dirs() const {
-  std::vector<std::string> dirs = setup_.subroutine_path;
+  std::vector<std::string> dirs;
+  for (const std::string& d : setup_.subroutine_path) {
+    if (dirs.size() >= kMaxSubDirs) break;
+    std::error_code ec;
+    if (std::filesystem::is_directory(d, ec)) dirs.push_back(d);
+  }
   std::string folder = std::filesystem::path(file_names_.front()).parent_path().string();
   dirs.push_back(folder.empty() ? std::string(".") : std::move(folder));
   return dirs;
+}
+
+// When `file` is in a directory of the subroutine path past the 10 that count: says so.
+std::string Interpreter::beyond_sub_dirs(const std::string& file) const {
+  size_t n = 0;
+  for (const std::string& d : setup_.subroutine_path) {
+    std::error_code ec;
+    if (!std::filesystem::is_directory(d, ec)) continue;
+    if (++n <= kMaxSubDirs) continue;
+    if (std::filesystem::exists(d + "/" + file, ec))
+      return d + "/" + file + " is in directory " + std::to_string(n) +
+             " of the subroutine path, which LinuxCNC does not search (only the first " +
+             std::to_string(kMaxSubDirs) + " that exist count)";
+  }
+  return {};
 }
 
 // Leaves the innermost call: endsub / return (value as given), M99 (value 0).
@@ -897,6 +864,71 @@ int Interpreter::fanuc_m_code() {
   if (std::fabs(v - 98) <= 1e-4) return 98;
   if (std::fabs(v - 99) <= 1e-4) return 99;
   return -1;
+}
+
+// Where o<name> sub starts for a call not met before (LinuxCNC 2.9's control_back_to):
+// a file <name>.ngc on the subroutine path or in the program's folder (its first
+// `o<name> sub` or `O<name>` head), else the first such head further down the file
+// being read, from the call on, up to its end or its closing '%' (definitions before
+// the call that the flow did not pass are not seen, as in LinuxCNC). Fails when there
+// is none.
+void Interpreter::find_sub(const std::string& name, int column) {
+  std::string t;
+  Line probe;
+  for (const std::string& dir : subroutine_dirs()) {
+    const std::string p = dir + "/" + name + ".ngc";
+    if (!std::filesystem::exists(p)) continue;
+    auto sf = std::make_unique<SourceFile>();
+    sf->path = p;
+    sf->fd = ::open(p.c_str(), O_RDONLY | O_CLOEXEC);
+    if (sf->fd < 0) continue;
+    const int32_t idx = static_cast<int32_t>(files_.size());
+    int32_t ln = 0;
+    bool found = false;
+    while (sf->getline(t)) {
+      ++ln;
+      try {
+        lex_line(t, probe);
+      } catch (const Error&) {
+        continue;
+      }
+      if ((probe.o.kind == OKind::kSub || probe.o.kind == OKind::kProgram) && probe.o.number_expr < 0 &&
+          probe.o.name == name) {
+        subs_[name] = SubDef{idx, sf->offset(), ln, sf->line_start, probe.o.kind == OKind::kProgram};
+        found = true;
+        break;
+      }
+    }
+    if (!found) fail(column, p + " does not define o<" + name + "> sub");
+    file_names_.push_back(p);
+    files_.push_back(std::move(sf));
+    return;
+  }
+  SourceFile& f = *files_[static_cast<size_t>(file_)];
+  const int64_t here = f.offset();
+  int32_t ln = line_no_;
+  while (f.getline(t)) {
+    ++ln;
+    try {
+      lex_line(t, probe);
+    } catch (const Error&) {
+      continue;
+    }
+    if (probe.percent) break;  // the program's closing '%': nothing after it counts
+    if (probe.o.number_expr >= 0 || probe.o.name != name) continue;
+    if (probe.o.kind == OKind::kSub || probe.o.kind == OKind::kProgram) {
+      subs_[name] = SubDef{file_, f.offset(), ln, f.line_start, probe.o.kind == OKind::kProgram};
+      f.seek(here);
+      return;
+    }
+  }
+  f.seek(here);
+  std::string why = "o<" + name + "> call: no file " + name + ".ngc on the subroutine path nor o<" + name +
+                    "> sub further down " + file_names_[static_cast<size_t>(file_)] +
+                    " (a definition before the call counts only once the program has run through it)";
+  if (const std::string far = beyond_sub_dirs(name + ".ngc"); !far.empty())
+    why += "; " + far;
+  fail(column, why);
 }
 
 // Where subprogram O<name> starts, for M98 (LinuxCNC's control_back_to): one met
@@ -954,8 +986,10 @@ Interpreter::SubDef Interpreter::find_fanuc_sub(const std::string& name, int col
     return d;
   }
   f.seek(here);
+  std::string far = beyond_sub_dirs(name + ".ngc");
   fail(column, "M98 P" + name + ": no subprogram O" + name + " further down " + file_names_[static_cast<size_t>(file_)] +
-                   " (before its end) nor a file " + name + ".ngc on the subroutine path");
+                   " (before its end) nor a file " + name + ".ngc on the subroutine path" +
+                   (far.empty() ? "" : "; " + far));
 }
 
 // Refuses at a subroutine's head line (LinuxCNC refuses a call of the wrong style

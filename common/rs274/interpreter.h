@@ -26,7 +26,7 @@ namespace cnc::rs274 {
 struct MachineSetup {
   std::string axes = "XYZ";                // axis letters the machine has (of XYZABCUVW)
   Units machine_units = Units::kMm;        // of the tool table and the var file's offsets
-  std::vector<std::string> subroutine_path;  // folders searched for o<name> call files
+  std::vector<std::string> subroutine_path;  // folders searched for o<name> call files (the first 10 that exist)
   std::string tool_table;                  // LinuxCNC tool table; empty: no tools
   std::string var_file;                    // LinuxCNC var file; empty: parameters are not kept
   bool write_var_file = true;              // at program end (M2/M30/%), atomically
@@ -97,6 +97,8 @@ class Interpreter {
   void fanuc_return();
   void return_from_call(double value, bool has_value, int column);
   SubDef find_fanuc_sub(const std::string& name, int column);
+  void find_sub(const std::string& name, int column);
+  std::string beyond_sub_dirs(const std::string& file) const;
   [[noreturn]] void fail_at_def(const SubDef& def, const std::string& detail);
 
   // Blocks.

@@ -30,26 +30,33 @@ std::vector<std::string> split_path(const std::string& s) {
 }
 
 // A key of the [RS274NGC] section of a LinuxCNC INI file (SUBROUTINE_PATH,
-// DISABLE_FANUC_STYLE_SUB); empty when absent.
-std::string ini_rs274ngc(const std::string& ini, const std::string& wanted) {
+// DISABLE_FANUC_STYLE_SUB); empty when absent. As LinuxCNC's IniFile, which reads
+// with fgets(line, LINELEN + 1): a line longer than 255 characters is cut there and
+// its rest read as a line of its own (so a long SUBROUTINE_PATH loses its tail).
+std::string ini_rs274ngc(const std::string& ini, const std::string& wanted, bool* cut = nullptr) {
+  constexpr size_t kLineLen = 255;
   std::ifstream in(ini);
-  std::string line, section;
-  while (std::getline(in, line)) {
-    const size_t b = line.find_first_not_of(" \t");
-    if (b == std::string::npos || line[b] == '#' || line[b] == ';') continue;
-    if (line[b] == '[') {
-      section = line.substr(b + 1, line.find(']') - b - 1);
-      continue;
+  std::string physical, section;
+  while (std::getline(in, physical)) {
+    for (size_t at = 0; at == 0 || at < physical.size(); at += kLineLen) {
+      const std::string line = physical.substr(at, kLineLen);
+      const size_t b = line.find_first_not_of(" \t");
+      if (b == std::string::npos || line[b] == '#' || line[b] == ';') continue;
+      if (line[b] == '[') {
+        section = line.substr(b + 1, line.find(']') - b - 1);
+        continue;
+      }
+      const size_t eq = line.find('=');
+      if (section != "RS274NGC" || eq == std::string::npos) continue;
+      std::string key = line.substr(b, eq - b);
+      while (!key.empty() && (key.back() == ' ' || key.back() == '\t')) key.pop_back();
+      if (key != wanted) continue;
+      std::string v = line.substr(eq + 1);
+      v.erase(0, v.find_first_not_of(" \t"));
+      while (!v.empty() && (v.back() == ' ' || v.back() == '\t' || v.back() == '\r')) v.pop_back();
+      if (cut != nullptr) *cut = physical.size() > kLineLen;
+      return v;
     }
-    const size_t eq = line.find('=');
-    if (section != "RS274NGC" || eq == std::string::npos) continue;
-    std::string key = line.substr(b, eq - b);
-    while (!key.empty() && (key.back() == ' ' || key.back() == '\t')) key.pop_back();
-    if (key != wanted) continue;
-    std::string v = line.substr(eq + 1);
-    v.erase(0, v.find_first_not_of(" \t"));
-    while (!v.empty() && (v.back() == ' ' || v.back() == '\t' || v.back() == '\r')) v.pop_back();
-    return v;
   }
   return {};
 }
@@ -80,7 +87,11 @@ int main(int argc, char** argv) {
       if (a == "-b") setup.block_delete = !setup.block_delete;
       else if (a == "-i") {
         const std::string ini = next();
-        sub_path = ini_rs274ngc(ini, "SUBROUTINE_PATH");
+        bool cut = false;
+        sub_path = ini_rs274ngc(ini, "SUBROUTINE_PATH", &cut);
+        if (cut)
+          std::fprintf(stderr, "cnc-rs274: %s: the SUBROUTINE_PATH line is longer than 255 characters; "
+                       "as LinuxCNC, only \"%s\" is read\n", ini.c_str(), sub_path.c_str());
         // LinuxCNC's findBoolV: 1/0, true/false, yes/no, on/off (any case).
         std::string v = ini_rs274ngc(ini, "DISABLE_FANUC_STYLE_SUB");
         for (char& c : v) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
