@@ -46,9 +46,15 @@ struct StreamRun {
   double max_reported_fe = 0;   // the drive's register
   double max_true_error = 0;    // commanded stream (at the write's time) minus actual, one period late
   double max_register_mismatch = 0;
+  double max_overshoot = 0;     // past the commanded stream (in the direction of motion)
 };
 
-StreamRun run_stream(double jitter_s, double dist, double T, unsigned seed) {
+// stall_k > 0: the master writes nothing for stall_n periods from write stall_k on
+// (its commands move on meanwhile), as when its servo thread is stalled.
+// resume_where_stopped: the master's stream itself paused during the stall (a
+// tick-counted master such as the drive bridge picks up where it stopped).
+StreamRun run_stream(double jitter_s, double dist, double T, unsigned seed, int stall_k = 0, int stall_n = 0,
+                     bool resume_where_stopped = false) {
   const drive::DriveProfile profile = sim_profile();
   config::ServoSimAxisConfig sim;
   sim.bandwidth_hz = 40;
@@ -67,8 +73,13 @@ StreamRun run_stream(double jitter_s, double dist, double T, unsigned seed) {
   double grid = now;
   StreamRun r;
   for (int k = 1; k <= static_cast<int>((T + 0.3) / period); ++k) {
-    const double nominal = now + k * period;
-    const double arrive = nominal + jit(rng);
+    const double wall = now + k * period;
+    if (stall_k > 0 && k >= stall_k && k < stall_k + stall_n) continue;
+    // The stream's own time: behind the wall clock by the stall once it resumed,
+    // when the master picks up where it stopped.
+    const double nominal = resume_where_stopped && stall_k > 0 && k >= stall_k + stall_n ? wall - stall_n * period : wall;
+    const double arrive = wall + jit(rng);
+    const double shift = wall - nominal;  // the stream runs this much behind the wall clock
     // The simulator's own 1 ms grid up to the arrival, then the reply instant.
     while (grid + period <= arrive) {
       grid += period;
@@ -83,7 +94,8 @@ StreamRun run_stream(double jitter_s, double dist, double T, unsigned seed) {
     // The stream as the master commanded it 1.5 periods before (the drive's
     // interpolation buffer delays every target by that much): where the axis
     // should be at the moment of the reply.
-    r.max_true_error = std::max(r.max_true_error, std::fabs(s_curve(arrive - 1.5 * period, t0, T, dist) - actual));
+    r.max_true_error = std::max(r.max_true_error, std::fabs(s_curve(arrive - shift - 1.5 * period, t0, T, dist) - actual));
+    r.max_overshoot = std::max(r.max_overshoot, actual - s_curve(arrive - shift, t0, T, dist));
     write_field(d, drive::Role::kTargetPosition, s_curve(nominal, t0, T, dist));
     d.after_request(arrive);
   }
@@ -110,6 +122,29 @@ TEST(SimDrive, ArrivalJitterDoesNotBecomeTrackingError) {
   // buffer) the axis stays within 15 um (the clock's phase wanders by a few
   // hundredths of a millisecond).
   EXPECT_LT(r.max_true_error, 0.015);
+}
+
+TEST(SimDrive, AStalledMasterIsCaughtUpWithoutOvershoot) {
+  // The master stalls 12 ms at about 150 mm/s (write 500 of the move, 0.45 s in):
+  // its next target is 1.8 mm further on. The drive takes the jump with its
+  // position loop (no feed-forward of an impossible speed): its following error
+  // peaks at about the jump and it never passes the commanded stream.
+  const StreamRun r = run_stream(0.0, 100.0, 1.2, 3, 500, 12);
+  RecordProperty("max_reported_fe_um", std::to_string(r.max_reported_fe * 1e3));
+  EXPECT_GT(r.max_reported_fe, 0.5);   // the stall shows
+  EXPECT_LT(r.max_reported_fe, 2.2);   // about the jump (1.8 mm at 150 mm/s), not a multiple of it
+  EXPECT_LT(r.max_overshoot, 0.05);    // never past the commanded position
+}
+
+TEST(SimDrive, AfterAStallOfAMasterThatPicksUpWhereItStoppedTheDemandResumes) {
+  // The master (tick-counted, like the drive bridge) stalls 30 ms at about
+  // 150 mm/s and then goes on from where it stopped. The drive's buffer runs out
+  // and holds; on the next write it re-seats its buffer, so the demand resumes
+  // with feed-forward instead of a staircase that would lag 2*zeta*v/omega (1.2 mm).
+  const StreamRun r = run_stream(0.0, 100.0, 1.2, 5, 500, 30, true);
+  RecordProperty("max_reported_fe_um", std::to_string(r.max_reported_fe * 1e3));
+  EXPECT_LT(r.max_reported_fe, 0.5);  // the hold's overshoot and the restart, not a lag of 1.2 mm
+  EXPECT_LT(r.max_overshoot, 0.5);
 }
 
 }  // namespace

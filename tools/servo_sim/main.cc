@@ -293,6 +293,8 @@ class Simulator {
   double next_trace_s_ = 0;
   double next_persist_s_ = 0;
   double dt_;
+  int64_t stalls_ = 0;     // process stalls the simulated world paused for
+  double stalled_s_ = 0;
   double next_step_s_;
 };
 
@@ -326,7 +328,8 @@ Simulator::Simulator(const cnc::config::MachineConfig& cfg, const cnc::service::
       by_file[file] = profiles_.back().get();
     }
     const double at = start.count(a.name) ? std::clamp(start[a.name], a.min_mm, a.max_mm) : a.home_mm;
-    drives_.push_back(std::make_unique<SimDrive>(a.name, d.unit_id, *by_file[file], a.sim, a.max_velocity_mm_s, at));
+    drives_.push_back(std::make_unique<SimDrive>(a.name, d.unit_id, *by_file[file], a.sim, a.max_velocity_mm_s, at,
+                                                 a.max_accel_mm_s2));
     all_.push_back(drives_.back().get());
     if (d.transport == "modbus_tcp") {
       if (port_ < 0) port_ = d.port;
@@ -400,6 +403,20 @@ void Simulator::close_tcp() {
 
 void Simulator::step_dynamics() {
   const double now = cnc::util::monotonic_s();
+  // The simulated drives stand in for drives on hardware of their own, which a
+  // stall of this process (the VM paused, the scheduler starved it) does not stop.
+  // A grid step more than kStall late is such a stall: the simulated world pauses
+  // with it (every drive's clock is shifted by the lost time), instead of the
+  // drives running out of targets and losing their stream. Counted and logged.
+  constexpr double kStall = 0.005;
+  const double late = now - next_step_s_;
+  if (late > kStall) {
+    const double lost = late - dt_;
+    for (SimDrive* d : all_) d->shift_time(lost);
+    next_step_s_ += lost;
+    ++stalls_;
+    stalled_s_ += lost;
+  }
   int steps = 0;
   while (now >= next_step_s_ && steps < 1000) {
     for (SimDrive* d : all_) d->step_to(next_step_s_);
@@ -648,6 +665,9 @@ int Simulator::run() {
     cnc::util::report_latency(lat, cnc::util::latency_dir(args_.option("latency-dir")));
   }
   const std::string report = positions_json(all_);
+  if (stalls_ > 0)
+    spdlog::warn("cnc-servo-sim: the process stalled {} time(s) over {} ms; the simulated drives paused with it", stalls_,
+                 static_cast<int64_t>(stalled_s_ * 1e3));
   spdlog::info("cnc-servo-sim: final positions {}", report);
   if (!args_.option("final-state").empty()) std::ofstream(args_.option("final-state")) << report << "\n";
   return cnc::service::kExitOk;

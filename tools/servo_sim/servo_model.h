@@ -17,6 +17,7 @@ class ServoModel {
   void step(double dt_s, double target_mm, double feedforward_mm_s, double accel_ff_mm_s2, bool enabled);
   double position_mm() const { return pos_; }
   double velocity_mm_s() const { return vel_; }
+  double max_velocity_mm_s() const { return vmax_; }
 
  private:
   double omega_;

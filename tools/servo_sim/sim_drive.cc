@@ -1,6 +1,7 @@
 #include "tools/servo_sim/sim_drive.h"
 
 #include <algorithm>
+#include <cmath>
 
 namespace cnc::servo_sim {
 
@@ -10,8 +11,10 @@ constexpr double kBufferDelay = 1.5;          // targets are scheduled this many
 }  // namespace
 
 SimDrive::SimDrive(std::string name, int unit, const drive::DriveProfile& profile,
-                   const config::ServoSimAxisConfig& sim, double max_velocity_mm_s, double start_mm)
-    : name_(std::move(name)), unit_(unit), emu_(profile, start_mm), model_(sim, max_velocity_mm_s, start_mm) {
+                   const config::ServoSimAxisConfig& sim, double max_velocity_mm_s, double start_mm,
+                   double max_accel_mm_s2)
+    : name_(std::move(name)), unit_(unit), emu_(profile, start_mm), model_(sim, max_velocity_mm_s, start_mm),
+      vmax_ff_(model_.max_velocity_mm_s()), amax_ff_(2.0 * max_accel_mm_s2) {
   pts_[0] = {0.0, start_mm};
   n_pts_ = 1;
 }
@@ -46,14 +49,27 @@ void SimDrive::feed_forward(double t_s, double* v_ff, double* a_ff) const {
   // velocity ramps from one to the other (the acceleration is that ramp's slope).
   const double mid = 0.5 * (pts_[i].t_s + pts_[i + 1].t_s);
   const int j = t_s < mid ? i - 1 : i + 1;  // the neighbouring segment on t's side
+  // A segment faster than the drive can move is a jump in the stream (the master
+  // stalled and its commands moved on): the position loop takes it, without
+  // feed-forward, as a drive would; fed forward it would throw the axis past it.
+  const bool jump = std::fabs(slope(i)) > vmax_ff_ || (j >= 0 && j <= n_pts_ - 2 && std::fabs(slope(j)) > vmax_ff_);
+  if (jump) return;
   if (j < 0 || j > n_pts_ - 2) {
     *v_ff = slope(i);
     return;
   }
   const double mid_j = 0.5 * (pts_[j].t_s + pts_[j + 1].t_s);
-  const double acc = (slope(j) - slope(i)) / (mid_j - mid);
+  double acc = (slope(j) - slope(i)) / (mid_j - mid);
+  if (amax_ff_ > 0) acc = std::clamp(acc, -amax_ff_, amax_ff_);
   *v_ff = slope(i) + acc * (t_s - mid);
   *a_ff = acc;
+}
+
+void SimDrive::shift_time(double dt_s) {
+  for (int i = 0; i < n_pts_; ++i) pts_[i].t_s += dt_s;
+  if (t_s_ >= 0) t_s_ += dt_s;
+  if (last_write_s_ >= 0) last_write_s_ += dt_s;
+  stream_start_s_ += dt_s;
 }
 
 void SimDrive::after_request(double now_s) {
@@ -84,7 +100,13 @@ void SimDrive::after_request(double now_s) {
     // delay after this arrival (the phase-locked clock), never before now.
     double t = last.t_s + usual_s_;
     t += 0.03 * ((now_s + kBufferDelay * usual_s_) - t);
-    t = std::max({t, now_s, last.t_s + 0.25 * usual_s_});
+    // After an underflow (the writes stopped for longer than the buffer: the demand
+    // ran out and held), the target would be due at once and the buffer would
+    // refill only at the clock's slow pull: the demand would go on as a staircase
+    // without feed-forward, and lag the stream by about 2*zeta*v/omega (1.8 mm at
+    // 220 mm/s). Re-seat the buffer instead: the demand resumes from where it held.
+    if (t < now_s + 0.5 * usual_s_) t = now_s + kBufferDelay * usual_s_;
+    t = std::max(t, last.t_s + 0.25 * usual_s_);
     push_point(t, target);
   }
   last_write_s_ = now_s;

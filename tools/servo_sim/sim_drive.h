@@ -21,7 +21,7 @@ namespace cnc::servo_sim {
 class SimDrive {
  public:
   SimDrive(std::string name, int unit, const drive::DriveProfile& profile, const config::ServoSimAxisConfig& sim,
-           double max_velocity_mm_s, double start_mm);
+           double max_velocity_mm_s, double start_mm, double max_accel_mm_s2 = 0);
   // After a Modbus request that may have written registers.
   void after_request(double now_s);
   // Advances the dynamics to time now_s (monotonic) and refreshes the registers;
@@ -34,6 +34,9 @@ class SimDrive {
   double position_mm() const { return model_.position_mm(); }
   double velocity_mm_s() const { return model_.velocity_mm_s(); }
   bool follows() const { return emu_.follows(); }
+  // This process stalled for dt_s: the drive's clock skips it (see the simulator's
+  // step_dynamics), as if the world had paused.
+  void shift_time(double dt_s);
   // Position demand at time now_s (the ramp between the last two targets).
   double demand_mm(double now_s) const;
 
@@ -47,6 +50,8 @@ class SimDrive {
   double last_write_s_ = -1;
   double usual_s_ = 0;       // the master's write interval (estimated)
   double stream_start_s_ = 0;
+  double vmax_ff_;  // feed-forward bounds: a drive's velocity limit...
+  double amax_ff_;  // ...and twice the axis's acceleration (0: unbounded)
   int64_t stream_writes_ = 0;
   // The interpolation buffer: targets at their scheduled times, oldest first.
   struct Point {
