@@ -185,4 +185,17 @@ void report_latency(const LatencyReport& r, const std::string& dir) {
   }
 }
 
+void report_timer_latency(const std::string& service, const std::string& loop, const PeriodicTimer& timer,
+                          const std::string& dir) {
+  LatencyReport lat;
+  lat.service = service;
+  lat.loop = loop;
+  lat.period_s = timer.period_s();
+  lat.cycles = timer.cycles();
+  lat.overruns = timer.overruns();
+  lat.wake = &timer.wake_latency();
+  lat.compute = &timer.compute_time();
+  report_latency(lat, dir);
+}
+
 }  // namespace cnc::util

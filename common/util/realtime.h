@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "common/util/clock.h"
 #include "common/util/latency_histogram.h"
 
 namespace cnc::util {
@@ -58,5 +59,10 @@ std::string latency_dir(const std::string& option);
 // scheduling) and, when dir is not empty, writes DIR/<service>.json (creating DIR).
 // Call it from the cyclic thread (the scheduling it reports is the caller's).
 void report_latency(const LatencyReport& r, const std::string& dir);
+
+// The same for a loop paced by a PeriodicTimer: its period, cycles, overruns and
+// both histograms.
+void report_timer_latency(const std::string& service, const std::string& loop, const PeriodicTimer& timer,
+                          const std::string& dir);
 
 }  // namespace cnc::util

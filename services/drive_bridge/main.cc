@@ -37,15 +37,7 @@ int main(int argc, char** argv) {
     }
     node.shut_down();
     hb.tick(cnc::lcmt_heartbeat::STOPPING, timer.overruns(), node.detail(), true);
-    cnc::util::LatencyReport lat;
-    lat.service = "cnc-drive-bridge";
-    lat.loop = "servo cycle (T_servo)";
-    lat.period_s = timer.period_s();
-    lat.cycles = timer.cycles();
-    lat.overruns = timer.overruns();
-    lat.wake = &timer.wake_latency();
-    lat.compute = &timer.compute_time();
-    cnc::util::report_latency(lat, cnc::util::latency_dir(args.option("latency-dir")));
+    cnc::util::report_timer_latency("cnc-drive-bridge", "servo cycle (T_servo)", timer, cnc::util::latency_dir(args.option("latency-dir")));
     return cnc::service::kExitOk;
   });
 }

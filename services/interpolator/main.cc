@@ -29,15 +29,7 @@ int main(int argc, char** argv) {
     }
     node.publish_state(true);
     hb.tick(cnc::lcmt_heartbeat::STOPPING, timer.overruns(), "", true);
-    cnc::util::LatencyReport lat;
-    lat.service = "cnc-interpolator";
-    lat.loop = "interpolation cycle (T_ipo)";
-    lat.period_s = timer.period_s();
-    lat.cycles = timer.cycles();
-    lat.overruns = timer.overruns();
-    lat.wake = &timer.wake_latency();
-    lat.compute = &timer.compute_time();
-    cnc::util::report_latency(lat, cnc::util::latency_dir(args.option("latency-dir")));
+    cnc::util::report_timer_latency("cnc-interpolator", "interpolation cycle (T_ipo)", timer, cnc::util::latency_dir(args.option("latency-dir")));
     return cnc::service::kExitOk;
   });
 }
