@@ -438,10 +438,14 @@ bool Interpolator::safe(double v_n, double a_n, double s_n, double* v_target) co
       if (v_target != nullptr) *v_target = 0;
       return brake_distance(v_n, a_n, 0.0, A, J) + 0.5 * v_n * T <= offset - s_n + 1e-9;
     }
+    // The samples behind s_n do not count: skip them by bisection (the same test as
+    // the scan's, so the result is the same bit for bit), not one by one (the scan
+    // from the block's start made every cycle linear in how far into the block it was).
     const size_t n = p.samples.size();
-    for (size_t i = 0; i < n; ++i) {
+    const auto first = std::partition_point(p.samples.begin(), p.samples.end(),
+                                            [&](const Sample& x) { return offset + x.s - s_n < 0; });
+    for (size_t i = static_cast<size_t>(first - p.samples.begin()); i < n; ++i) {
       const double d = offset + p.samples[i].s - s_n;
-      if (d < 0) continue;
       if (d > horizon) return true;
       const double vt = p.v_bw[i];
       if (vt < v_n + a_n * a_n / (2 * J) &&
