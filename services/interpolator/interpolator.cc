@@ -498,6 +498,11 @@ double Interpolator::advance(double ds, bool* reached_stop) {
     const double sp = std::sqrt(sp2);
     double u = u_ + step / sp;
     if (param_update_ != ParamUpdate::kFirstOrder) u -= step * step * dd / (2 * sp2 * sp2);
+    // Where the curve's tangent vanishes (a first control point equal to the start
+    // point, a cusp) eq. 7 divides by zero: start from the planner's arc-length
+    // table instead (the Newton step below, or the table alone, then lands on it).
+    const double u_span = p.path.u_end() - p.path.u_begin();
+    if (!std::isfinite(u) || !(sp * u_span > 1e-6 * p.length)) u = u_on_table(p, s_ + step);
     u = std::min(u, p.path.u_end());
     if (param_update_ == ParamUpdate::kCorrected) {
       // Newton on |P(u) − P(u_k)| = Δs: the chord of the step has the commanded length.
@@ -524,6 +529,20 @@ double Interpolator::advance(double ds, bool* reached_stop) {
     return ds;
   }
   return moved;
+}
+
+double Interpolator::u_on_table(const Planned& p, double s) {
+  // The planner's samples are in increasing arc length: linear between the two
+  // around s.
+  const auto& sm = p.samples;
+  if (sm.empty()) return p.path.u_end();
+  const auto hi = std::partition_point(sm.begin(), sm.end(), [&](const Sample& x) { return x.s < s; });
+  if (hi == sm.begin()) return sm.front().u;
+  if (hi == sm.end()) return sm.back().u;
+  const Sample& b = *hi;
+  const Sample& a = *(hi - 1);
+  const double f = b.s > a.s ? (s - a.s) / (b.s - a.s) : 1.0;
+  return a.u + (b.u - a.u) * f;
 }
 
 bool Interpolator::creep_to_stop() {

@@ -147,6 +147,41 @@ TEST(NurbsInterpolation, ChordErrorBoundedAndReachedOnReferenceCurves) {
 }
 
 // The chord limit has to govern somewhere on the butterfly at the tight tolerance.
+TEST(NurbsInterpolation, ZeroTangentAtTheStartIsInterpolatedWithoutNaN) {
+  // A first control point equal to the start point (LinuxCNC's trident and Curva_*
+  // examples; the G5.2 P1 program): the tangent vanishes at u = 0, where
+  // the parameter update divided by |P'| and wrote NaN setpoints. The steps must
+  // be finite, land on the curve's end, and keep the commanded feed once moving.
+  Block b;
+  b.index = 0;
+  b.source_line = 1;
+  b.kind = BlockKind::kNurbs;
+  b.start = {10, 0, 0};
+  b.end = {30, 0, 0};
+  b.feed_mm_per_min = 100;
+  b.nurbs.order = 3;
+  b.nurbs.control_points = {{10, 0, 0}, {10, 0, 0}, {20, 10, 0}, {30, 0, 0}};
+  b.nurbs.weights = {1, 1, 1, 1};
+  b.nurbs.knots = {0, 0, 0, 0.5, 1, 1, 1};
+  const config::MachineConfig cfg = machine(0.004, 0.001);
+  const RunResult r = run(cfg, b);
+  ASSERT_GT(r.sps.size(), 100u);
+  double longest = 0;
+  for (size_t i = 0; i < r.sps.size(); ++i) {
+    for (int a = 0; a < 3; ++a) ASSERT_TRUE(std::isfinite(r.sps[i].position_mm[a])) << "setpoint " << i;
+    ASSERT_TRUE(std::isfinite(r.sps[i].u)) << "setpoint " << i;
+    if (i > 0) {
+      double d2 = 0;
+      for (int a = 0; a < 3; ++a) d2 += std::pow(r.sps[i].position_mm[a] - r.sps[i - 1].position_mm[a], 2);
+      longest = std::max(longest, std::sqrt(d2));
+    }
+  }
+  // No step longer than the feed allows (100 mm/min for 4 ms: 6.67 um), +1 %.
+  EXPECT_LE(longest, 100.0 / 60.0 * 0.004 * 1.01);
+  EXPECT_NEAR(r.sps.back().position_mm[0], 30.0, 1e-9);
+  EXPECT_NEAR(r.sps.back().position_mm[1], 0.0, 1e-9);
+}
+
 TEST(NurbsInterpolation, ChordLimitGovernsAtTightTolerance) {
   const auto cfg = machine(0.008, 0.05e-3);
   const RunResult r = run(cfg, nurbs_block(geometry::butterfly(), 2000));
