@@ -1,7 +1,11 @@
 #include "services/part_program_server/program_server.h"
 
 #include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <cstring>
+
+#include "common/motion/path_segment.h"
 
 namespace cnc::pps {
 
@@ -43,6 +47,58 @@ uint64_t block_hash(const program::Block& b, uint64_t h) {
   d(b.event.value);
   mix(b.event.text.data(), b.event.text.size());
   return h;
+}
+
+// The travel check of the validation run: every point of the block's path within
+// the axes' travel. Lines and rapids by their end points (the start is the last
+// block's end); arcs, helices and NURBS sampled finely enough that their bulge
+// between samples stays under 1 um (a runtime check in the drive bridge remains).
+// Returns "" or the refusal.
+std::string travel_error(const program::Block& b, const std::vector<std::pair<double, double>>& travel,
+                         const std::vector<std::string>& names) {
+  if (travel.empty()) return "";
+  const bool arc = b.kind == program::BlockKind::kArcCw || b.kind == program::BlockKind::kArcCcw;
+  const bool moves = b.kind == program::BlockKind::kRapid || b.kind == program::BlockKind::kLine || arc ||
+                     b.kind == program::BlockKind::kNurbs;
+  if (!moves) return "";
+  const int n = static_cast<int>(
+      std::min({travel.size(), b.end.size(), b.start.size(), names.size(), static_cast<size_t>(program::kMaxAxes)}));
+  auto check = [&](const double* p, const char* where) -> std::string {
+    for (int a = 0; a < n; ++a) {
+      const auto [lo, hi] = travel[static_cast<size_t>(a)];
+      if (!(p[a] >= lo - 1e-9 && p[a] <= hi + 1e-9)) {
+        char buf[200];
+        std::snprintf(buf, sizeof buf, "%s %.4f mm (machine coordinates, %s) is outside the axis's travel [%g, %g]",
+                      names[static_cast<size_t>(a)].c_str(), p[a], where, lo, hi);
+        return buf;
+      }
+    }
+    return "";
+  };
+  if (std::string e = check(b.end.data(), "the block's end"); !e.empty()) return e;
+  if (b.kind == program::BlockKind::kRapid || b.kind == program::BlockKind::kLine) return "";
+  motion::PathSegment path(b, n);
+  if (path.degenerate()) return "";
+  int samples = 64;
+  if (arc) {
+    // Sagitta r(1 - cos(h/2)) <= 1 um for an angle step h.
+    const int i0 = b.arc.plane == 18 ? 2 : b.arc.plane == 19 ? 1 : 0;
+    const int i1 = b.arc.plane == 18 ? 0 : b.arc.plane == 19 ? 2 : 1;
+    double r = 0;
+    if (i0 < n && i1 < n && b.arc.center.size() > static_cast<size_t>(std::max(i0, i1)))
+      r = std::hypot(b.start[static_cast<size_t>(i0)] - b.arc.center[static_cast<size_t>(i0)],
+                     b.start[static_cast<size_t>(i1)] - b.arc.center[static_cast<size_t>(i1)]);
+    const double h = r > 0 ? 2.0 * std::acos(std::max(-1.0, 1.0 - 1e-3 / r)) : 1.0;
+    samples = static_cast<int>(std::clamp(std::ceil(path.arc_sweep_rad() / std::max(h, 1e-6)), 16.0, 20000.0));
+  } else {
+    samples = static_cast<int>(std::clamp(64.0 * static_cast<double>(path.nurbs_breakpoints().size()), 64.0, 20000.0));
+  }
+  for (int i = 1; i < samples; ++i) {
+    const double u = path.u_begin() + (path.u_end() - path.u_begin()) * i / samples;
+    const motion::AxisVec p = path.point(u);
+    if (std::string e = check(p.data(), "on the way"); !e.empty()) return e;
+  }
+  return "";
 }
 
 // One pass of the interpreter through the program, block by block.
@@ -116,6 +172,7 @@ ProgramSetup program_setup(const config::MachineConfig& cfg) {
   s.builder.process = program::ProcessParams{cfg.process.ball_radius_mm, cfg.process.flutes, cfg.process.pick_feed_mm,
                                              cfg.process.target_rmax_um};
   s.max_validation_lines = cfg.program.max_validation_lines;
+  for (const auto& a : cfg.axes) s.travel_mm.emplace_back(a.min_mm, a.max_mm);
   return s;
 }
 
@@ -153,6 +210,14 @@ LoadResult ProgramServer::load(const std::string& path, int64_t token, const std
     uint64_t h = 14695981039346656037ull;
     int64_t n = 0;
     while (run->next(&b)) {
+      if (std::string e = travel_error(b, setup_.travel_mm, setup_.builder.axis_names); !e.empty()) {
+        r.error = (b.source_file.empty() ? path : b.source_file) + ":" + std::to_string(b.source_line) + ":" +
+                  std::to_string(b.source_column) + ": " + e;
+        r.file = b.source_file.empty() ? path : b.source_file;
+        r.line = b.source_line;
+        r.column = b.source_column;
+        return r;
+      }
       h = block_hash(b, h);
       ++n;
       if (n % limits_.blocks_per_chunk == 0) {

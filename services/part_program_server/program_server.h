@@ -42,6 +42,9 @@ struct ProgramSetup {
   rs274::MachineSetup machine;
   rs274::BuilderSetup builder;
   int64_t max_validation_lines = 200'000'000;
+  // Travel per axis (machine coordinates, mm), in the builder's axis order: the
+  // validation run refuses a program whose path leaves it. Empty: not checked.
+  std::vector<std::pair<double, double>> travel_mm;
 };
 
 ProgramSetup program_setup(const config::MachineConfig& cfg);

@@ -192,6 +192,39 @@ TEST(ProgramServer, AProgramThatNeverEndsIsRefused) {
   EXPECT_FALSE(server.loaded());
 }
 
+TEST(ProgramServer, APathOutsideTheTravelIsRefusedWhereItIsWritten) {
+  // Travel X [-5, 400], Y [-5, 300], Z [-150, 5]: a rapid to X1000, an arc that
+  // bulges past X400 between two points inside, a G53 move under Z-150; and the
+  // same arc inside the travel is accepted.
+  TempDir dir;
+  ProgramSetup s = test::xyz_setup();
+  s.travel_mm = {{-5, 400}, {-5, 300}, {-150, 5}};
+  ProgramServer server(s, ServerLimits{});
+  struct Case {
+    const char* text;
+    int line;
+    const char* what;
+  };
+  const Case cases[] = {
+      {"G21 G90\nG0 X1000\nM2\n", 2, "X 1000.0000 mm"},
+      {"G21 G90 G17\nG0 X395 Y100 Z0\nG3 X395 Y120 J10 F1000\nM2\n", 3, "on the way"},
+      {"G21 G90\nG0 X10\n  G53 G0 Z-151\nM2\n", 3, "Z -151.0000 mm"},
+  };
+  int k = 0;
+  for (const Case& c : cases) {
+    const fs::path file = dir / ("out" + std::to_string(k++) + ".ngc");
+    write(file, c.text);
+    const LoadResult r = server.load(file.string(), 1);
+    EXPECT_FALSE(r.ok) << c.text;
+    EXPECT_EQ(r.line, c.line) << r.error;
+    EXPECT_NE(r.error.find(c.what), std::string::npos) << r.error;
+    EXPECT_NE(r.error.find("outside the axis's travel"), std::string::npos) << r.error;
+  }
+  write(dir / "in.ngc", "G21 G90 G17\nG0 X385 Y100 Z0\nG3 X385 Y120 J10 F1000\nM2\n");
+  const LoadResult ok = server.load((dir / "in.ngc").string(), 1);
+  EXPECT_TRUE(ok.ok) << ok.error;
+}
+
 TEST(ProgramServer, ARefusedProgramKeepsThePreviousOne) {
   TempDir dir;
   write(dir / "good.ngc", "G0 X1\nG1 X2 F100\nM30\n");
