@@ -50,6 +50,10 @@ PathSegment::PathSegment(const program::Block& b, int num_axes) : kind_(b.kind),
       while (sweep <= 1e-12) sweep += 2 * std::numbers::pi;  // start == end: a full circle
       sweep += 2 * std::numbers::pi * b.arc.turns;
       sweep_ = ccw ? sweep : -sweep;
+      // An end point off the start radius (within the interpreter's tolerance, as
+      // LinuxCNC accepts it) is reached on a spiral: the radius changes linearly
+      // with the angle, as LinuxCNC draws it, instead of a radial jump at the end.
+      dradius_ = std::hypot(ex, ey) - radius_;
       break;
     }
     case program::BlockKind::kNurbs: {
@@ -76,12 +80,15 @@ void PathSegment::eval(double u, AxisVec* p, AxisVec* d1, AxisVec* d2) const {
         (*d1)[a] = end_[a] - start_[a];
         (*d2)[a] = 0;
       }
-      (*p)[ax1_] = cx_ + radius_ * c;
-      (*p)[ax2_] = cy_ + radius_ * s;
-      (*d1)[ax1_] = -radius_ * s * sweep_;
-      (*d1)[ax2_] = radius_ * c * sweep_;
-      (*d2)[ax1_] = -radius_ * c * sweep_ * sweep_;
-      (*d2)[ax2_] = -radius_ * s * sweep_ * sweep_;
+      // r(u) = r0 + dr·u: P = C + r(cos, sin); P' = dr(cos, sin) + r·sweep(−sin, cos);
+      // P'' = 2·dr·sweep(−sin, cos) − r·sweep²(cos, sin). (dr = 0: the circle.)
+      const double r = radius_ + dradius_ * u;
+      (*p)[ax1_] = cx_ + r * c;
+      (*p)[ax2_] = cy_ + r * s;
+      (*d1)[ax1_] = dradius_ * c - r * s * sweep_;
+      (*d1)[ax2_] = dradius_ * s + r * c * sweep_;
+      (*d2)[ax1_] = -2 * dradius_ * s * sweep_ - r * c * sweep_ * sweep_;
+      (*d2)[ax2_] = 2 * dradius_ * c * sweep_ - r * s * sweep_ * sweep_;
       if (u >= 1.0) {  // land exactly on the programmed end point
         (*p)[ax1_] = end_[ax1_];
         (*p)[ax2_] = end_[ax2_];

@@ -52,6 +52,7 @@ class PathSegment {
   // and the linear axes (everything else moves linearly with u in [0, 1]).
   int ax1_ = 0, ax2_ = 1;
   double cx_ = 0, cy_ = 0, radius_ = 0, theta0_ = 0, sweep_ = 0;
+  double dradius_ = 0;  // end radius minus start radius: a spiral when not 0
   // NURBS: X Y Z from the curve (the first three axes), other axes held.
   std::unique_ptr<geometry::NurbsCurve> nurbs_;
 };

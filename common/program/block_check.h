@@ -16,9 +16,16 @@ namespace cnc::program {
 // Fanuc allows 2..4, LinuxCNC any order its knot builder accepts.
 constexpr int kMinNurbsOrder = 2;
 constexpr int kMaxNurbsOrder = 8;
-// Start and end of an arc may lie at radii this far apart (RS274 practice):
-// 0.002 mm or 0.1 % of the radius, the larger.
-inline double arc_radius_tolerance_mm(double radius_mm) { return std::max(0.002, 0.001 * radius_mm); }
+// Start and end of an arc may lie at different radii as far as LinuxCNC accepts it
+// (its spiral tolerance in inch programs, the looser of its two units, in mm): up
+// to 0.0718 mm, or up to 7.18 mm within 0.1 % of the radius. The path is then a
+// spiral between the two radii (motion::PathSegment), as LinuxCNC draws it.
+inline bool arc_radii_acceptable(double r0_mm, double r1_mm) {
+  constexpr double kSpiralAbsMm = 2 * 0.001 * 1.4142135623730951 * 25.4;
+  const double abs_err = std::fabs(r1_mm - r0_mm);
+  const double rel_err = abs_err / std::max(r0_mm, r1_mm);
+  return !(abs_err > 100 * kSpiralAbsMm || (rel_err > 0.001 && abs_err > kSpiralAbsMm));
+}
 // The first control point of a NURBS must be where the tool is, and the block's end
 // its last control point, to this distance per axis.
 constexpr double kNurbsContinuityMm = 1e-6;
@@ -153,7 +160,7 @@ inline std::string check_arc_block(const Block& b) {
   const double r0 = std::hypot(b.start[p.first] - b.arc.center[p.first], b.start[p.second] - b.arc.center[p.second]);
   const double r1 = std::hypot(b.end[p.first] - b.arc.center[p.first], b.end[p.second] - b.arc.center[p.second]);
   if (!(r0 > 0)) return "arc centre is at the start point";
-  if (std::fabs(r1 - r0) > arc_radius_tolerance_mm(r0))
+  if (!arc_radii_acceptable(r0, r1))
     return "arc start and end radii differ: " + fmt_number(r0) + " and " + fmt_number(r1) + " mm";
   return {};
 }
