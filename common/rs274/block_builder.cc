@@ -158,6 +158,72 @@ void BlockBuilder::arc_feed(const SourceRef& ref, double, double, double first_a
   position_ = std::move(e);
 }
 
+namespace {
+
+// A NURBS with a sharp corner inside (a knot of multiplicity >= its degree where
+// the control polygon turns: the curve passes through that control point with the
+// tangent of the leg before it, and leaves along the leg after it) in pieces at
+// those corners, so each corner is a junction between blocks, with the junction's
+// corner speed or stop, as the planner treats a G1 corner. (A single block crossed
+// it at full feed: the curvature samples cannot see a kink.) Each piece is the
+// same curve on its own parameter range; a smooth knot (the legs in line) stays.
+std::vector<program::NurbsGeometry> split_at_corners(const program::NurbsGeometry& g) {
+  std::vector<program::NurbsGeometry> parts;
+  program::NurbsGeometry rest = g;
+  for (;;) {
+    const int order = rest.order, p = order - 1;
+    const int n = static_cast<int>(rest.control_points.size());
+    const auto& U = rest.knots;
+    int cut_i = -1, cut_m = 0;
+    for (int i = order; i < n;) {
+      int m = 1;
+      while (i + m < n && U[static_cast<size_t>(i + m)] == U[static_cast<size_t>(i)]) ++m;
+      if (m >= p && p >= 1) {
+        const int j = i - 1;  // the curve passes through P_j at this knot
+        if (j >= 1 && j + 1 < n) {
+          const auto& a = rest.control_points[static_cast<size_t>(j - 1)];
+          const auto& c = rest.control_points[static_cast<size_t>(j)];
+          const auto& d = rest.control_points[static_cast<size_t>(j + 1)];
+          double l0 = 0, l1 = 0, dot = 0;
+          for (int k = 0; k < 3; ++k) {
+            const double e0 = c[static_cast<size_t>(k)] - a[static_cast<size_t>(k)];
+            const double e1 = d[static_cast<size_t>(k)] - c[static_cast<size_t>(k)];
+            l0 += e0 * e0;
+            l1 += e1 * e1;
+            dot += e0 * e1;
+          }
+          // Turns by more than 1e-9 rad (both legs of non-zero length).
+          if (l0 > 0 && l1 > 0 && dot < std::sqrt(l0 * l1) * (1.0 - 5e-19)) {
+            cut_i = i;
+            cut_m = m;
+            break;
+          }
+        }
+      }
+      i += m;
+    }
+    if (cut_i < 0 || cut_m != p) break;  // no corner (a multiplicity of `order` is a gap: refused before)
+    const int j = cut_i - 1;
+    const double ub = U[static_cast<size_t>(cut_i)];
+    program::NurbsGeometry left, right;
+    left.order = right.order = order;
+    left.knots.assign(U.begin(), U.begin() + cut_i + p);
+    left.knots.push_back(ub);
+    left.control_points.assign(rest.control_points.begin(), rest.control_points.begin() + j + 1);
+    left.weights.assign(rest.weights.begin(), rest.weights.begin() + j + 1);
+    right.knots.push_back(ub);
+    right.knots.insert(right.knots.end(), U.begin() + cut_i, U.end());
+    right.control_points.assign(rest.control_points.begin() + j, rest.control_points.end());
+    right.weights.assign(rest.weights.begin() + j, rest.weights.end());
+    parts.push_back(std::move(left));
+    rest = std::move(right);
+  }
+  parts.push_back(std::move(rest));
+  return parts;
+}
+
+}  // namespace
+
 void BlockBuilder::nurbs_feed(const SourceRef& ref, int order, const std::vector<NurbsPoint>& points,
                               const std::vector<double>& knots, const Pose& end) {
   if (axis_of_pose_[0] != 0 || axis_of_pose_[1] != 1 || axis_of_pose_[2] != 2)
@@ -197,6 +263,21 @@ void BlockBuilder::nurbs_feed(const SourceRef& ref, int order, const std::vector
     out_.pop_back();
     --next_index_;
     throw Error(ref.column, "NURBS: " + why);
+  }
+  std::vector<program::NurbsGeometry> parts = split_at_corners(b.nurbs);
+  if (parts.size() > 1) {
+    out_.pop_back();
+    --next_index_;
+    for (program::NurbsGeometry& g : parts) {
+      program::Block& piece = begin(ref, program::BlockKind::kNurbs);
+      piece.feed_mm_per_min = f;
+      piece.end = e;  // the axes besides X Y Z stay where the curve ends
+      for (size_t k = 0; k < 3; ++k) piece.end[k] = g.control_points.back()[k];
+      piece.nurbs = std::move(g);
+      if (const std::string w = program::check_nurbs_block(piece); !w.empty())
+        throw Error(ref.column, "NURBS (a piece between its corners): " + w);
+      position_ = piece.end;
+    }
   }
   position_ = std::move(e);
 }

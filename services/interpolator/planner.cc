@@ -199,6 +199,31 @@ void Planner::plan_block(Planned& p) const {
     }
   }
   if (rapid) p.v_prog = v_rapid;
+  // Corners inside a NURBS: at a knot of multiplicity >= degree the tangent may
+  // jump (a sharp corner the curvature samples cannot see). The sample on that
+  // knot takes the corner speed of a junction between blocks with the same
+  // tangents (its velocity step within one cycle's acceleration and half a cycle's
+  // jerk per axis), never zero inside a block: a crawl, where a junction would stop.
+  if (b.kind == program::BlockKind::kNurbs) {
+    const std::vector<double> bp = p.path.nurbs_breakpoints();
+    for (size_t k = 1; k + 1 < bp.size(); ++k) {
+      const double h = 1e-7 * std::min(bp[k] - bp[k - 1], bp[k + 1] - bp[k]);
+      AxisVec P{}, tl{}, tr{}, d2{};
+      p.path.eval(bp[k] - h, &P, &tl, &d2);
+      p.path.eval(bp[k] + h, &P, &tr, &d2);
+      if (!(norm(tl, naxes_) > 0 && norm(tr, naxes_) > 0)) continue;
+      bool stop = false;
+      const double v = std::max(corner_speed(tl, tr, p.accel, &stop), 1e-3);
+      if (!std::isfinite(v)) continue;
+      const auto it = std::lower_bound(us.begin(), us.end(), bp[k]);
+      if (it == us.end() || *it != bp[k]) continue;  // the grid holds every knot
+      Sample& smp = p.samples[static_cast<size_t>(it - us.begin())];
+      if (v < smp.v_geo) {
+        smp.v_geo = v;
+        smp.limit = Limit::kCurvatureAccel;
+      }
+    }
+  }
   // The chord limit holds over a whole step, and the curvature may peak between
   // samples: each sample takes the least of its neighbours' chord limits.
   for (size_t i = 0; i < n; ++i) {
@@ -250,11 +275,17 @@ void Planner::plan_junction(const Planned& prev, Planned& next) const {
   AxisVec P{}, t0{}, t1{}, d2{};
   prev.path.eval(prev.path.u_end(), &P, &t0, &d2);
   next.path.eval(next.path.u_begin(), &P, &t1, &d2);
+  bool stop = false;
+  const double v = corner_speed(t0, t1, std::min(prev.accel, next.accel), &stop);
+  next.v_entry = stop ? 0 : v;
+}
+
+double Planner::corner_speed(const AxisVec& t0, const AxisVec& t1, double a_path, bool* stop) const {
   const double n0 = norm(t0, naxes_), n1 = norm(t1, naxes_);
   const double T = period_s_;
-  const double a_path = std::min(prev.accel, next.accel);
   double v = kInf;
   double dt2 = 0;
+  *stop = false;
   for (int a = 0; a < naxes_; ++a) {
     const double dt = std::fabs(t1[a] / n1 - t0[a] / n0);
     dt2 += dt * dt;
@@ -263,16 +294,13 @@ void Planner::plan_junction(const Planned& prev, Planned& next) const {
     // The direction change happens within one cycle. It turns the path
     // acceleration by the same angle: where that alone would step the axis's
     // acceleration by more than half its jerk budget, the corner is a stop.
-    if (a_path * dt > 0.5 * ax.max_jerk_mm_s3 * T) {
-      next.v_entry = 0;
-      return;
-    }
+    if (a_path * dt > 0.5 * ax.max_jerk_mm_s3 * T) *stop = true;
     // Otherwise its velocity step must stay within one cycle's acceleration and
     // half a cycle's jerk (the tangential acceleration changes across it too).
     v = std::min(v, std::min(ax.max_accel_mm_s2 * T, 0.5 * ax.max_jerk_mm_s3 * T * T) / dt);
   }
   if (dt2 > 0) v = std::min(v, std::min(cfg_.path_accel_mm_s2 * T, 0.5 * cfg_.path_jerk_mm_s3 * T * T) / std::sqrt(dt2));
-  next.v_entry = v;
+  return v;
 }
 
 void Planner::backward_pass(bool full, PlanUpdate* u) {

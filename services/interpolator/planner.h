@@ -109,6 +109,9 @@ class Planner {
   };
   void plan_block(Planned& p) const;
   void plan_junction(const Planned& prev, Planned& next) const;
+  // The speed at which the path may turn from tangent t0 to t1 within one cycle;
+  // *stop when turning the path acceleration a_path alone would break the jerk limit.
+  double corner_speed(const motion::AxisVec& t0, const motion::AxisVec& t1, double a_path, bool* stop) const;
   void backward_pass(bool full, PlanUpdate* u);
   double programmed_speed(const Planned& p) const;
   bool rapid_at_full_speed(const Planned& p) const;

@@ -13,6 +13,7 @@
 
 #include "common/program/block.h"
 #include "common/program/block_msg.h"
+#include "common/motion/path_segment.h"
 #include "services/part_program_server/program_server.h"
 #include "tests/unit/program_test_util.h"
 
@@ -552,19 +553,28 @@ TEST(Rs274BlocksNurbs, FanucFig11) {
 
 TEST(Rs274BlocksNurbs, FanucWeightsDefaultToOneAndOmittedAxesKeepTheirValue) {
   const std::vector<Block> m = moves(run("G0 X1 Y2 Z3\nG06.2 P2 K0 X1 Y2 Z3 F100\nK0 X5 R0.5\nK0.5 Y7 R2\nK1\nK1\nM2\n"));
+  // Degree 1: a polyline, whose inner vertex is a corner: two blocks meeting there.
+  ASSERT_EQ(m.size(), 3u);
   const Block& n = m[1];
   ASSERT_EQ(n.kind, BlockKind::kNurbs);
-  expect_points(n.nurbs.control_points, {{1, 2, 3}, {5, 2, 3}, {5, 7, 3}});
-  expect_values(n.nurbs.weights, {1, 0.5, 2});
-  expect_values(n.nurbs.knots, {0, 0, 0.5, 1, 1});
+  expect_points(n.nurbs.control_points, {{1, 2, 3}, {5, 2, 3}});
+  expect_values(n.nurbs.weights, {1, 0.5});
+  expect_values(n.nurbs.knots, {0, 0, 0.5, 0.5});
+  expect_points(m[2].nurbs.control_points, {{5, 2, 3}, {5, 7, 3}});
+  expect_values(m[2].nurbs.weights, {0.5, 2});
+  expect_values(m[2].nurbs.knots, {0.5, 0.5, 1, 1});
 }
 
 TEST(Rs274BlocksNurbs, FanucIncrementalControlPoints) {
   // Under G91 each control point is relative to the one before; the first is X0 Y0 Z0.
   const std::vector<Block> m =
       moves(run("G0 X10 Y10\nG91 G06.2 P2 K0 X0 Y0 Z0 F100\nK0 X5\nK0.5 X5 Y-2\nK1\nK1\nM2\n"));
-  expect_points(m[1].nurbs.control_points, {{10, 10, 0}, {15, 10, 0}, {20, 8, 0}});
-  expect_point(m[1].end, 20, 8, 0);
+  // Degree 1 with a corner at (15, 10): two blocks.
+  ASSERT_EQ(m.size(), 3u);
+  expect_points(m[1].nurbs.control_points, {{10, 10, 0}, {15, 10, 0}});
+  expect_points(m[2].nurbs.control_points, {{15, 10, 0}, {20, 8, 0}});
+  expect_point(m[1].end, 15, 10, 0);
+  expect_point(m[2].end, 20, 8, 0);
 }
 
 TEST(Rs274BlocksNurbs, InchesScaleControlPointsNotKnotsOrWeights) {
@@ -1006,6 +1016,45 @@ TEST(Rs274BlocksRs274Differences, G52TakesThePlanesAxes) {
 // rs274 accepts comment and blank lines inside a G5.2 curve.
 TEST(Rs274BlocksRs274Differences, CommentsInsideAG52Curve) {
   EXPECT_NO_THROW(run("F100\nG5.2 P1\n(remark)\nX1 Y0 P1\n\nX2 Y1 P1\nG5.3\nM2\n"));
+}
+
+TEST(Rs274BlocksNurbs, ACornerInsideANurbsSplitsItIntoBlocksOfTheSameCurve) {
+  // The paths issue's program: degree 2, the knot 0.5 twice (= the degree), the
+  // control polygon turning at (15, 5): the curve has a sharp corner there. It
+  // becomes two blocks (a junction the planner slows or stops for) that trace the
+  // same curve: every point of the pieces lies on the unsplit curve.
+  const std::string text =
+      "G0 X5 Y5 Z0\nG06.2 P3 K0 X5 Y5 Z0 R1 F3000\nK0 X10 Y6 Z0 R1\nK0 X15 Y5 Z0 R1\nK0.5 X16 Y10 Z0 R1\n"
+      "K0.5 X15 Y15 Z0 R1\nK1\nK1\nK1\nM30\n";
+  const std::vector<Block> m = moves(run(text));
+  ASSERT_EQ(m.size(), 3u);  // the rapid and two pieces
+  ASSERT_EQ(m[1].kind, BlockKind::kNurbs);
+  ASSERT_EQ(m[2].kind, BlockKind::kNurbs);
+  EXPECT_EQ(m[1].end, m[2].start);
+  EXPECT_NEAR(m[1].end[0], 15.0, 1e-12);
+  EXPECT_NEAR(m[1].end[1], 5.0, 1e-12);
+  EXPECT_NEAR(m[2].end[0], 15.0, 1e-12);
+  EXPECT_NEAR(m[2].end[1], 15.0, 1e-12);
+  // The unsplit curve, as the program wrote it.
+  Block whole = m[1];
+  whole.end = m[2].end;
+  whole.nurbs.knots = {0, 0, 0, 0.5, 0.5, 1, 1, 1};
+  whole.nurbs.control_points = {{5, 5, 0}, {10, 6, 0}, {15, 5, 0}, {16, 10, 0}, {15, 15, 0}};
+  whole.nurbs.weights = {1, 1, 1, 1, 1};
+  const motion::PathSegment w(whole, 3), a(m[1], 3), c(m[2], 3);
+  EXPECT_DOUBLE_EQ(a.u_end(), 0.5);
+  EXPECT_DOUBLE_EQ(c.u_begin(), 0.5);
+  for (int i = 0; i <= 40; ++i) {
+    const double u = i / 40.0;
+    const motion::AxisVec q = w.point(u);
+    const motion::AxisVec r = u <= 0.5 ? a.point(u) : c.point(u);
+    for (int k = 0; k < 3; ++k) EXPECT_NEAR(r[k], q[k], 1e-12) << "u " << u;
+  }
+  // A smooth knot of the same multiplicity (the polygon in line there) stays one block.
+  const std::vector<Block> smooth = moves(run(
+      "G0 X5 Y5 Z0\nG06.2 P3 K0 X5 Y5 Z0 R1 F3000\nK0 X10 Y5 Z0 R1\nK0 X15 Y5 Z0 R1\nK0.5 X20 Y5 Z0 R1\n"
+      "K0.5 X25 Y10 Z0 R1\nK1\nK1\nK1\nM30\n"));
+  EXPECT_EQ(smooth.size(), 2u);
 }
 
 }  // namespace
