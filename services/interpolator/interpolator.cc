@@ -498,12 +498,15 @@ double Interpolator::advance(double ds, bool* reached_stop) {
     const double sp = std::sqrt(sp2);
     double u = u_ + step / sp;
     if (param_update_ != ParamUpdate::kFirstOrder) u -= step * step * dd / (2 * sp2 * sp2);
-    // Where the curve's tangent vanishes (a first control point equal to the start
-    // point, a cusp) eq. 7 divides by zero: start from the planner's arc-length
-    // table instead (the Newton step below, or the table alone, then lands on it).
-    const double u_span = p.path.u_end() - p.path.u_begin();
-    if (!std::isfinite(u) || !(sp * u_span > 1e-6 * p.length)) u = u_on_table(p, s_ + step);
-    u = std::min(u, p.path.u_end());
+    // Where the curve's tangent vanishes (a first or last control point doubled, a
+    // cusp) eq. 7 divides by (nearly) zero and its u runs off: start from the
+    // planner's arc-length table instead (the Newton step below, or the table
+    // alone, then lands on it). Elsewhere eq. 7 is far closer than the table's
+    // sample spacing and is kept as it is.
+    double du_table = 0;
+    const double u_tab = u_on_table(p, s_ + step, &du_table);
+    if (!std::isfinite(u) || !(std::fabs(u - u_tab) <= 0.5 * du_table)) u = u_tab;
+    u = std::clamp(u, u_, p.path.u_end());  // forward only (eq. 7 can step back where |P'| is tiny)
     if (param_update_ == ParamUpdate::kCorrected) {
       // Newton on |P(u) − P(u_k)| = Δs: the chord of the step has the commanded length.
       for (int it = 0; it < 4; ++it) {
@@ -519,6 +522,28 @@ double Interpolator::advance(double ds, bool* reached_stop) {
         if (std::fabs(err) <= 1e-12 * std::max(1.0, step) || dLdu <= 0) break;
         u = std::clamp(u + err / dLdu, u_, p.path.u_end());
       }
+      // Where Newton could not reach the commanded chord (near a point where the
+      // tangent vanishes), the path position is what counts: the arc length moves
+      // by the chord actually made, so it never runs ahead of the curve (it did by
+      // 44 um at the end of LinuxCNC's trident, closed by a jump in the last cycle).
+      const motion::AxisVec Q = p.path.point(u);
+      double L2 = 0;
+      for (int a = 0; a < naxes_; ++a) L2 += (Q[a] - P[a]) * (Q[a] - P[a]);
+      const double L = std::sqrt(L2);
+      if (std::fabs(L - step) > 1e-9 * std::max(1.0, step)) {
+        u_ = u;
+        pos_ = Q;
+        out_.block_index = p.block.index;
+        out_.source_line = p.block.source_line;
+        out_.u = u_;
+        moved += L;
+        if (u >= p.path.u_end()) {
+          s_ = p.length;  // on the end point: the block ends (the loop moves on)
+          continue;
+        }
+        s_ += L;
+        return moved;
+      }
     }
     u_ = u;
     s_ += step;
@@ -531,16 +556,18 @@ double Interpolator::advance(double ds, bool* reached_stop) {
   return moved;
 }
 
-double Interpolator::u_on_table(const Planned& p, double s) {
+double Interpolator::u_on_table(const Planned& p, double s, double* du) {
   // The planner's samples are in increasing arc length: linear between the two
-  // around s.
+  // around s. *du: the u spacing of those two samples.
   const auto& sm = p.samples;
+  *du = 0;
   if (sm.empty()) return p.path.u_end();
   const auto hi = std::partition_point(sm.begin(), sm.end(), [&](const Sample& x) { return x.s < s; });
   if (hi == sm.begin()) return sm.front().u;
   if (hi == sm.end()) return sm.back().u;
   const Sample& b = *hi;
   const Sample& a = *(hi - 1);
+  *du = b.u - a.u;
   const double f = b.s > a.s ? (s - a.s) / (b.s - a.s) : 1.0;
   return a.u + (b.u - a.u) * f;
 }

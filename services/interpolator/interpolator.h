@@ -168,7 +168,8 @@ class Interpolator {
   // limit ahead; when not, *v_target (if given) is the speed limit it misses.
   bool safe(double v_next, double a_next, double s_next, double* v_target = nullptr) const;
   double advance(double ds, bool* reached_stop);
-  static double u_on_table(const Planned& p, double s);  // u at arc length s, from the planner's samples
+  // u at arc length s from the planner's samples; *du: the u spacing of the two around s.
+  static double u_on_table(const Planned& p, double s, double* du);
   bool creep_to_stop();
 
   config::MachineConfig cfg_;

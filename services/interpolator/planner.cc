@@ -275,6 +275,23 @@ void Planner::plan_junction(const Planned& prev, Planned& next) const {
   AxisVec P{}, t0{}, t1{}, d2{};
   prev.path.eval(prev.path.u_end(), &P, &t0, &d2);
   next.path.eval(next.path.u_begin(), &P, &t1, &d2);
+  // Where a curve's tangent vanishes at its end (a doubled first or last control
+  // point), its direction there is that of the curve just inside: a short chord.
+  auto direction = [&](const motion::PathSegment& path, bool at_start, AxisVec* t) {
+    const double span = path.u_end() - path.u_begin();
+    AxisVec q{}, e{}, f{};
+    path.eval(at_start ? path.u_begin() : path.u_end(), &q, &e, &f);
+    const double speed = norm(e, naxes_);
+    AxisVec far{};
+    far = path.point(at_start ? path.u_begin() + 0.5 * span : path.u_end() - 0.5 * span);
+    double chord = 0;
+    for (int a = 0; a < naxes_; ++a) chord += (far[a] - q[a]) * (far[a] - q[a]);
+    if (speed * 0.5 * span > 1e-6 * std::sqrt(chord)) return;  // a proper tangent
+    const AxisVec in = path.point(at_start ? path.u_begin() + 1e-6 * span : path.u_end() - 1e-6 * span);
+    for (int a = 0; a < naxes_; ++a) (*t)[a] = at_start ? in[a] - q[a] : q[a] - in[a];
+  };
+  direction(prev.path, false, &t0);
+  direction(next.path, true, &t1);
   bool stop = false;
   const double v = corner_speed(t0, t1, std::min(prev.accel, next.accel), &stop);
   next.v_entry = stop ? 0 : v;
