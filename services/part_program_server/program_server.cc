@@ -101,6 +101,9 @@ std::string travel_error(const program::Block& b, const std::vector<std::pair<do
   return "";
 }
 
+// A dwell longer than this is accepted with a warning (a P in ms, or a typo).
+constexpr double kLongDwell_s = 600.0;
+
 // One pass of the interpreter through the program, block by block.
 class ProgramServer::Run {
  public:
@@ -217,6 +220,17 @@ LoadResult ProgramServer::load(const std::string& path, int64_t token, const std
         r.line = b.source_line;
         r.column = b.source_column;
         return r;
+      }
+      if (b.kind == program::BlockKind::kDwell && b.dwell_s > kLongDwell_s) {
+        if (r.warnings.size() < 20) {
+          char buf[160];
+          std::snprintf(buf, sizeof buf, "a dwell of %.0f s (%.1f hours): the machine waits that long", b.dwell_s,
+                        b.dwell_s / 3600.0);
+          r.warnings.push_back((b.source_file.empty() ? path : b.source_file) + ":" + std::to_string(b.source_line) +
+                               ":" + std::to_string(b.source_column) + ": " + buf);
+        } else if (r.warnings.size() == 20) {
+          r.warnings.push_back("(more warnings left out)");
+        }
       }
       h = block_hash(b, h);
       ++n;

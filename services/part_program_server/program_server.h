@@ -29,6 +29,9 @@ struct LoadResult {
   std::string file;   // the file of the fault (a subroutine file possibly)
   int line = 0;
   int column = 0;
+  // Accepted, but worth a look: "file:line:column: what" (a dwell over 10 minutes;
+  // at most 20, then a count).
+  std::vector<std::string> warnings;
 };
 
 struct ServerLimits {

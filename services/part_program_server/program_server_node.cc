@@ -135,6 +135,7 @@ void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {
       const LoadResult r = core_.load(m.program_path, token, machine_position_);
       if (r.ok) {
         spdlog::info("loaded {}: {} blocks (token {})", m.program_path, core_.num_blocks(), token);
+        for (const std::string& w : r.warnings) spdlog::warn("{}", w);
         state_ = S::LOADED;
         program_ready_ = true;
         last_refusal_ = LoadResult{};

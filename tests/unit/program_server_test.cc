@@ -225,6 +225,17 @@ TEST(ProgramServer, APathOutsideTheTravelIsRefusedWhereItIsWritten) {
   EXPECT_TRUE(ok.ok) << ok.error;
 }
 
+TEST(ProgramServer, ALongDwellIsAcceptedWithAWarningNamingItsLine) {
+  // G4 P100000: 27.8 hours (a P meant in ms?): loaded, with a warning at its line.
+  TempDir dir;
+  write(dir / "dwell.ngc", "G21 G90\nG4 P5\nG4 P100000\nM2\n");
+  ProgramServer server(test::xyz_setup(), ServerLimits{});
+  const LoadResult r = server.load((dir / "dwell.ngc").string(), 1);
+  ASSERT_TRUE(r.ok) << r.error;
+  ASSERT_EQ(r.warnings.size(), 1u);
+  EXPECT_NE(r.warnings[0].find("dwell.ngc:3:1: a dwell of 100000 s (27.8 hours)"), std::string::npos) << r.warnings[0];
+}
+
 TEST(ProgramServer, ARefusedProgramKeepsThePreviousOne) {
   TempDir dir;
   write(dir / "good.ngc", "G0 X1\nG1 X2 F100\nM30\n");

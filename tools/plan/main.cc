@@ -47,6 +47,7 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
     std::fprintf(stderr, "cnc-plan: program refused: %s\n", loaded.error.c_str());
     return 3;
   }
+  for (const std::string& w : loaded.warnings) std::fprintf(stderr, "cnc-plan: warning: %s\n", w.c_str());
   // The planner inline: each plan is ready the cycle its block is submitted, as if
   // the planner thread were never late.
   cnc::interp::SyncPlanLink planner(cfg);
