@@ -523,26 +523,43 @@ double Interpolator::advance(double ds, bool* reached_stop) {
         u = std::clamp(u + err / dLdu, u_, p.path.u_end());
       }
       // Where Newton could not reach the commanded chord (near a point where the
-      // tangent vanishes), the path position is what counts: the arc length moves
-      // by the chord actually made, so it never runs ahead of the curve (it did by
-      // 44 um at the end of LinuxCNC's trident, closed by a jump in the last cycle).
-      const motion::AxisVec Q = p.path.point(u);
-      double L2 = 0;
-      for (int a = 0; a < naxes_; ++a) L2 += (Q[a] - P[a]) * (Q[a] - P[a]);
-      const double L = std::sqrt(L2);
-      if (std::fabs(L - step) > 1e-9 * std::max(1.0, step)) {
-        u_ = u;
-        pos_ = Q;
-        out_.block_index = p.block.index;
-        out_.source_line = p.block.source_line;
-        out_.u = u_;
-        moved += L;
-        if (u >= p.path.u_end()) {
-          s_ = p.length;  // on the end point: the block ends (the loop moves on)
-          continue;
+      // tangent vanishes, at clustered knots), find it by bracketing and bisection:
+      // the chord from the current point grows from 0 at u_, so the first u
+      // forward where it reaches the step is bracketed by doubling and then
+      // halved down to it. The arc length then never runs ahead of the curve (it
+      // did by 44 um at the end of LinuxCNC's trident, closed by a jump in the
+      // block's last cycle); and the path always moves on.
+      auto chord = [&](double uu) {
+        const motion::AxisVec Q = p.path.point(uu);
+        double L2 = 0;
+        for (int a = 0; a < naxes_; ++a) L2 += (Q[a] - P[a]) * (Q[a] - P[a]);
+        return std::sqrt(L2);
+      };
+      const double tol = 1e-9 * std::max(1.0, step);
+      if (!(std::fabs(chord(u) - step) <= tol)) {
+        const double u_end = p.path.u_end();
+        double lo = u_, h = std::max(du_table, 1e-12 * (u_end - p.path.u_begin()));
+        double hi = std::min(u_ + h, u_end);
+        for (int it = 0; it < 200 && hi < u_end && chord(hi) < step; ++it) {
+          lo = hi;
+          h *= 2;
+          hi = std::min(u_ + h, u_end);
         }
-        s_ += L;
-        return moved;
+        if (chord(hi) >= step) {
+          for (int it = 0; it < 200; ++it) {
+            const double mid = 0.5 * (lo + hi);
+            if (mid <= lo || mid >= hi) break;
+            const double L = chord(mid);
+            if (std::fabs(L - step) <= tol) {
+              lo = hi = mid;
+              break;
+            }
+            (L < step ? lo : hi) = mid;
+          }
+          u = hi;
+        }
+        // Else nothing is a step away before the block's end (its last step, or a
+        // curve closing on itself): Newton's u stands, as everywhere else.
       }
     }
     u_ = u;

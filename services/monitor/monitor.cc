@@ -21,6 +21,18 @@ Monitor::CycleSlot* Monitor::slot(int64_t cycle) {
   return &cycles_[static_cast<size_t>(cycle < 0 ? -cycle : cycle) % cycles_.size()];
 }
 
+bool Monitor::commanded_at(double cycle, int n_axes, motion::AxisVec* out) const {
+  const double f0 = std::floor(cycle);
+  const auto c0 = static_cast<int64_t>(f0);
+  const SetpointIn* a = setpoint_at(c0);
+  if (a == nullptr) return false;
+  const double f = cycle - f0;
+  const SetpointIn* b = f > 0 ? setpoint_at(c0 + 1) : a;
+  if (b == nullptr) return false;
+  for (int i = 0; i < n_axes; ++i) (*out)[i] = a->position_mm[i] + (b->position_mm[i] - a->position_mm[i]) * f;
+  return true;
+}
+
 const SetpointIn* Monitor::setpoint_at(int64_t cycle) const {
   const CycleSlot& s = cycles_[static_cast<size_t>(cycle < 0 ? -cycle : cycle) % cycles_.size()];
   return s.cycle == cycle ? &s.sp : nullptr;
@@ -128,12 +140,14 @@ Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double
     // The axes follow the setpoints a few cycles late (the bridge's jitter buffer and
     // fine interpolation, the drives' lag): compare with the commanded stretch that
     // many cycles earlier, or a deceleration reads as overspeed.
-    const SetpointIn* c0 = setpoint_at(a.cycle - lag_cycles_);
-    const SetpointIn* c1 = setpoint_at(cycle - lag_cycles_);
-    if (c0 != nullptr && c1 != nullptr) {
+    // The lag may be a fraction of a cycle: the commanded position between two
+    // setpoints, linearly.
+    motion::AxisVec q0{}, q1{};
+    if (commanded_at(static_cast<double>(a.cycle) - lag_cycles_, n_axes, &q0) &&
+        commanded_at(static_cast<double>(cycle) - lag_cycles_, n_axes, &q1)) {
       double c2 = 0;
       for (int i = 0; i < n_axes; ++i) {
-        const double d = c1->position_mm[i] - c0->position_mm[i];
+        const double d = q1[i] - q0[i];
         c2 += d * d;
       }
       if (c2 > 1e-12) tracking_ratio_ = std::sqrt(d2 / c2);

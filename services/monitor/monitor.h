@@ -58,10 +58,11 @@ struct Alarm {
 class Monitor {
  public:
   explicit Monitor(const config::MachineConfig& cfg);
-  // The axes' lag behind the setpoints in coarse cycles (the bridge's jitter buffer of
-  // two periods and its fine interpolation): 3 on the cell; 0 where the actual
-  // positions are the setpoints themselves (tests).
-  void set_tracking_lag_cycles(int64_t n) { lag_cycles_ = n; }
+  // The axes' lag behind the setpoints in coarse cycles, a fraction allowed (the
+  // bridge's jitter buffer of two periods and its fine interpolation, about 3, and
+  // the drives' interpolation buffer, 4 ms on the simulated drives): 3.6 on the
+  // cell; 0 where the actual positions are the setpoints themselves (tests).
+  void set_tracking_lag_cycles(double n) { lag_cycles_ = n; }
 
   // A block the interpolator applied (INTERP_INPUT), of program `token`.
   void on_block(const program::Block& b, int64_t token);
@@ -98,6 +99,7 @@ class Monitor {
   std::vector<CycleSlot> cycles_;
   CycleSlot* slot(int64_t cycle);
   const SetpointIn* setpoint_at(int64_t cycle) const;
+  bool commanded_at(double cycle, int n_axes, motion::AxisVec* out) const;
   std::optional<SetpointIn> last_sp_;
   // The actual positions of the last statuses over a window (see on_status): a
   // fixed ring, oldest at recent_head_.
@@ -112,7 +114,7 @@ class Monitor {
   size_t recent_head_ = 0, recent_n_ = 0;
   const Sample& recent(size_t i) const { return recent_[(recent_head_ + i) % kRecent]; }
   double tracking_ratio_ = 1.0;  // actual / commanded distance over the window
-  int64_t lag_cycles_ = 3;        // how many coarse cycles the axes follow the setpoints late
+  double lag_cycles_ = 3.6;       // how many coarse cycles the axes follow the setpoints late
   double actual_feed_ = 0;
   double largest_fe_ = 0;
   double largest_chord_ = 0;

@@ -91,10 +91,10 @@ StreamRun run_stream(double jitter_s, double dist, double T, unsigned seed, int 
     EXPECT_NEAR(reported, d.demand_mm(arrive) - d.position_mm(), 2e-4);  // register counts: 0.1 um
     r.max_register_mismatch = std::max(r.max_register_mismatch, std::fabs(actual - d.position_mm()));
     r.max_reported_fe = std::max(r.max_reported_fe, std::fabs(reported));
-    // The stream as the master commanded it 1.5 periods before (the drive's
-    // interpolation buffer delays every target by that much): where the axis
-    // should be at the moment of the reply.
-    r.max_true_error = std::max(r.max_true_error, std::fabs(s_curve(arrive - shift - 1.5 * period, t0, T, dist) - actual));
+    // The stream as the master commanded it buffer_delay_s() before (the
+    // drive's interpolation buffer delays every target by that much): where the
+    // axis should be at the moment of the reply.
+    r.max_true_error = std::max(r.max_true_error, std::fabs(s_curve(arrive - shift - SimDrive::buffer_delay_s(period), t0, T, dist) - actual));
     r.max_overshoot = std::max(r.max_overshoot, actual - s_curve(arrive - shift, t0, T, dist));
     write_field(d, drive::Role::kTargetPosition, s_curve(nominal, t0, T, dist));
     d.after_request(arrive);

@@ -7,7 +7,6 @@ namespace cnc::servo_sim {
 
 namespace {
 constexpr double kRestartInterval_s = 0.001;  // the ramp of a first write after a pause
-constexpr double kBufferDelay = 1.5;          // targets are scheduled this many intervals after arrival
 }  // namespace
 
 SimDrive::SimDrive(std::string name, int unit, const drive::DriveProfile& profile,
@@ -99,13 +98,13 @@ void SimDrive::after_request(double now_s) {
     // One usual interval after the last target, pulled gently toward the fixed
     // delay after this arrival (the phase-locked clock), never before now.
     double t = last.t_s + usual_s_;
-    t += 0.03 * ((now_s + kBufferDelay * usual_s_) - t);
+    t += 0.03 * ((now_s + buffer_delay_s(usual_s_)) - t);
     // After an underflow (the writes stopped for longer than the buffer: the demand
     // ran out and held), the target would be due at once and the buffer would
     // refill only at the clock's slow pull: the demand would go on as a staircase
     // without feed-forward, and lag the stream by about 2*zeta*v/omega (1.8 mm at
     // 220 mm/s). Re-seat the buffer instead: the demand resumes from where it held.
-    if (t < now_s + 0.5 * usual_s_) t = now_s + kBufferDelay * usual_s_;
+    if (t < now_s + 0.5 * usual_s_) t = now_s + buffer_delay_s(usual_s_);
     t = std::max(t, last.t_s + 0.25 * usual_s_);
     push_point(t, target);
   }
