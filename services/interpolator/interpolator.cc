@@ -509,6 +509,7 @@ double Interpolator::advance(double ds, bool* reached_stop) {
     u = std::clamp(u, u_, p.path.u_end());  // forward only (eq. 7 can step back where |P'| is tiny)
     if (param_update_ == ParamUpdate::kCorrected) {
       // Newton on |P(u) − P(u_k)| = Δs: the chord of the step has the commanded length.
+      bool converged = false;  // |P(u) − P(u_k)| = Δs at the u that stands
       for (int it = 0; it < 4; ++it) {
         AxisVec Q{}, q1{}, q2{};
         p.path.eval(u, &Q, &q1, &q2);
@@ -519,7 +520,11 @@ double Interpolator::advance(double ds, bool* reached_stop) {
         for (int a = 0; a < naxes_; ++a) dLdu += (Q[a] - P[a]) * q1[a];
         dLdu /= L;
         const double err = step - L;
-        if (std::fabs(err) <= 1e-12 * std::max(1.0, step) || dLdu <= 0) break;
+        if (std::fabs(err) <= 1e-12 * std::max(1.0, step)) {
+          converged = true;
+          break;
+        }
+        if (dLdu <= 0) break;
         u = std::clamp(u + err / dLdu, u_, p.path.u_end());
       }
       // Where Newton could not reach the commanded chord (near a point where the
@@ -536,7 +541,7 @@ double Interpolator::advance(double ds, bool* reached_stop) {
         return std::sqrt(L2);
       };
       const double tol = 1e-9 * std::max(1.0, step);
-      if (!(std::fabs(chord(u) - step) <= tol)) {
+      if (!converged && !(std::fabs(chord(u) - step) <= tol)) {
         const double u_end = p.path.u_end();
         double lo = u_, h = std::max(du_table, 1e-12 * (u_end - p.path.u_begin()));
         double hi = std::min(u_ + h, u_end);

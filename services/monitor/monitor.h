@@ -59,9 +59,9 @@ class Monitor {
  public:
   explicit Monitor(const config::MachineConfig& cfg);
   // The axes' lag behind the setpoints in coarse cycles, a fraction allowed (the
-  // bridge's jitter buffer of two periods and its fine interpolation, about 3, and
-  // the drives' interpolation buffer, 4 ms on the simulated drives): 3.6 on the
-  // cell; 0 where the actual positions are the setpoints themselves (tests).
+  // bridge's jitter buffer of two periods, its fine interpolation and the drives'
+  // 1.5 ms interpolation buffer): 3 on the cell; 0 where the actual positions are
+  // the setpoints themselves (tests).
   void set_tracking_lag_cycles(double n) { lag_cycles_ = n; }
 
   // A block the interpolator applied (INTERP_INPUT), of program `token`.
@@ -114,7 +114,7 @@ class Monitor {
   size_t recent_head_ = 0, recent_n_ = 0;
   const Sample& recent(size_t i) const { return recent_[(recent_head_ + i) % kRecent]; }
   double tracking_ratio_ = 1.0;  // actual / commanded distance over the window
-  double lag_cycles_ = 3.6;       // how many coarse cycles the axes follow the setpoints late
+  double lag_cycles_ = 3.0;       // how many coarse cycles the axes follow the setpoints late
   double actual_feed_ = 0;
   double largest_fe_ = 0;
   double largest_chord_ = 0;

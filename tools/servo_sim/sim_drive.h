@@ -21,13 +21,13 @@ namespace cnc::servo_sim {
 
 class SimDrive {
  public:
-  // Targets are scheduled this long after their arrival: 1.5 write intervals, and
-  // at least 4 ms, so a stall of the master (or its link) shorter than that does
-  // not reach the demand: at 1 ms it rides through the 1-4 ms stalls of a shared
-  // VM (the demo's largest following error 0.018-0.034 mm; 0.16-0.62 mm with
-  // 1.5 ms), as drives with an interpolation buffer do on a fieldbus without
-  // distributed clocks; a 10 ms RTU stream keeps its 15 ms.
-  static double buffer_delay_s(double interval_s) { return std::max(1.5 * interval_s, 0.004); }
+  // Targets are scheduled this long after their arrival: 1.5 write intervals, so
+  // the arrival jitter of the link does not reach the demand. (A buffer of at least
+  // 4 ms rode through the 1-4 ms stalls of a shared VM, the demo's largest
+  // following error 0.018-0.07 mm against 0.16-0.62 mm; but with it the fault-reset
+  // test's measured stop decelerations broke their +25 % bound in 3 of 4 loaded
+  // suite runs, and it is not kept until that is understood.)
+  static double buffer_delay_s(double interval_s) { return 1.5 * interval_s; }
   SimDrive(std::string name, int unit, const drive::DriveProfile& profile, const config::ServoSimAxisConfig& sim,
            double max_velocity_mm_s, double start_mm, double max_accel_mm_s2 = 0);
   // After a Modbus request that may have written registers.
