@@ -250,7 +250,10 @@ print(f"# drive fault on Y: X at {v[3]:.1f} mm/s stopped within {(ts[rest] - ts[
 # deceleration, 33 ms to release it) spends most of its ~80 ms ramping, so the parabola
 # fitted between 90 % and 10 % of the speed reads well below the plateau (1275-1640
 # mm/s^2 seen); the stop time and the 50 ms maximum still bound it.
-ok = ok and v[3] > 80 and 0.6 * decel <= fitted <= 1.10 * decel and worst <= 1.25 * decel
+# The fault lands where the FIFO write happens to meet the path: X cruising at 100 mm/s
+# or already slowing for diag.ngc's corner (74 mm/s seen once in ten loaded suite
+# runs). From 50 mm/s on the stop is long enough to fit.
+ok = ok and v[3] > 50 and 0.6 * decel <= fitted <= 1.10 * decel and worst <= 1.25 * decel
 sys.exit(0 if ok else 1)
 PY
 "$BUILD/tools/cnc-replay" --log "$WORK/cell.lcmlog" >"$WORK/replay.out" 2>&1 || { cat "$WORK/replay.out" >&2; fail "the run does not replay"; }
