@@ -13,29 +13,9 @@
 #include "common/rs274/block_builder.h"
 #include "common/rs274/interpreter.h"
 #include "services/part_program_server/program_server.h"
+#include "tests/unit/temp_dir.h"
 
 namespace cnc::test {
-
-class TempDir {
- public:
-  TempDir() {
-    std::string tmpl = (std::filesystem::temp_directory_path() / "cnc-program-test.XXXXXX").string();
-    path_ = ::mkdtemp(tmpl.data());
-  }
-  ~TempDir() { std::filesystem::remove_all(path_); }
-  TempDir(const TempDir&) = delete;
-  TempDir& operator=(const TempDir&) = delete;
-  std::filesystem::path operator/(const std::string& name) const { return path_ / name; }
-  const std::filesystem::path& path() const { return path_; }
-
- private:
-  std::filesystem::path path_;
-};
-
-inline void write_file(const std::filesystem::path& p, const std::string& text) {
-  std::ofstream out(p, std::ios::binary | std::ios::trunc);
-  out << text;
-}
 
 // X Y Z, mm, at the origin, no tool table, no var file, spindle at 0 rpm and the
 // roughness law off until the program says otherwise.

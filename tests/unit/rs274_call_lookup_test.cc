@@ -18,6 +18,7 @@
 
 #include "common/rs274/canon.h"
 #include "common/rs274/interpreter.h"
+#include "tests/unit/temp_dir.h"
 
 namespace cnc::rs274 {
 namespace {
@@ -40,34 +41,7 @@ class Recorder : public Canon {
   }
 };
 
-class TempDir {
- public:
-  TempDir() {
-    char tmpl[] = "/tmp/rs274_call_lookup_test.XXXXXX";
-    const char* d = ::mkdtemp(tmpl);
-    if (d == nullptr) throw std::runtime_error("mkdtemp failed");
-    path_ = d;
-  }
-  ~TempDir() {
-    std::error_code ec;
-    std::filesystem::remove_all(path_, ec);
-  }
-  std::string write(const std::string& name, const std::string& text) const {
-    const std::string p = path_ + "/" + name;
-    std::filesystem::create_directories(std::filesystem::path(p).parent_path());
-    std::ofstream(p) << text;
-    return p;
-  }
-  std::string dir(const std::string& name) const {
-    const std::string p = path_ + "/" + name;
-    std::filesystem::create_directories(p);
-    return p;
-  }
-  const std::string& path() const { return path_; }
-
- private:
-  std::string path_;
-};
+using test::TempDir;
 
 // Runs main.ngc of `dir` to its end; the Error propagates.
 std::vector<std::string> run(const TempDir& dir, const std::string& text, MachineSetup setup = {}) {
@@ -195,7 +169,7 @@ TEST(Rs274CallLookup, AHelperAfterTheSubInItsFileIsFound) {
 TEST(Rs274CallLookup, OnlyTheFirstTenDirectoriesOfThePathCount) {
   TempDir d;
   MachineSetup setup;
-  setup.subroutine_path.push_back(d.path() + "/missing");  // not there: does not count
+  setup.subroutine_path.push_back((d.path() / "missing").string());  // not there: does not count
   for (const char* name : {"p1", "p2", "p3", "p4", "p5", "p6", "p7", "p8", "p9", "p10", "p11"})
     setup.subroutine_path.push_back(d.dir(name));
   d.write("p10/tenth.ngc", "o<tenth> sub\nG1 X10\no<tenth> endsub\nM2\n");

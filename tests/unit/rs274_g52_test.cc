@@ -19,6 +19,7 @@
 
 #include "common/rs274/canon.h"
 #include "common/rs274/interpreter.h"
+#include "tests/unit/temp_dir.h"
 
 namespace cnc::rs274 {
 namespace {
@@ -46,27 +47,7 @@ class Recorder : public Canon {
   }
 };
 
-class TempDir {
- public:
-  TempDir() {
-    char tmpl[] = "/tmp/rs274_g52_test.XXXXXX";
-    const char* d = ::mkdtemp(tmpl);
-    if (d == nullptr) throw std::runtime_error("mkdtemp failed");
-    path_ = d;
-  }
-  ~TempDir() {
-    std::error_code ec;
-    std::filesystem::remove_all(path_, ec);
-  }
-  std::string write(const std::string& name, const std::string& text) const {
-    const std::string p = path_ + "/" + name;
-    std::ofstream(p) << text;
-    return p;
-  }
-
- private:
-  std::string path_;
-};
+using test::TempDir;
 
 // #5210..#5219 after each line that holds "(snap)": the offsets as the program sees them.
 using Snap = std::array<double, 10>;

@@ -16,6 +16,7 @@
 
 #include "common/rs274/canon.h"
 #include "common/rs274/interpreter.h"
+#include "tests/unit/temp_dir.h"
 
 namespace cnc::rs274 {
 namespace {
@@ -66,28 +67,7 @@ class Recorder : public Canon {
   }
 };
 
-class TempDir {
- public:
-  TempDir() {
-    char tmpl[] = "/tmp/rs274_subprogram_test.XXXXXX";
-    const char* d = ::mkdtemp(tmpl);
-    if (d == nullptr) throw std::runtime_error("mkdtemp failed");
-    path_ = d;
-  }
-  ~TempDir() {
-    std::error_code ec;
-    std::filesystem::remove_all(path_, ec);
-  }
-  std::string write(const std::string& name, const std::string& text) const {
-    const std::string p = path_ + "/" + name;
-    std::ofstream(p) << text;
-    return p;
-  }
-  const std::string& path() const { return path_; }
-
- private:
-  std::string path_;
-};
+using test::TempDir;
 
 struct Outcome {
   Recorder canon;
@@ -240,10 +220,10 @@ TEST(Rs274Subprogram, ExpressionsNameTheSubprogram) {
 
 TEST(Rs274Subprogram, SubprogramFromAFileOnTheSubroutinePath) {
   TempDir dir;
-  std::filesystem::create_directory(dir.path() + "/subs");
+  std::filesystem::create_directory((dir.path() / "subs").string());
   dir.write("subs/1234.ngc", "O1234 (a subprogram file)\n#5 = [#5 + 2]\nM99\n");
   MachineSetup s;
-  s.subroutine_path = {dir.path() + "/subs"};
+  s.subroutine_path = {(dir.path() / "subs").string()};
   Outcome r;
   run(r, "#5 = 1\nM98 P1234 L2\nM2\n", s, 100000, &dir);
   EXPECT_TRUE(r.ended);
