@@ -9,6 +9,7 @@
 #   ./cnc replay LOG [--machine F] [--program P]   re-run the interpolator from a log, bit for bit
 #   ./cnc plan PROGRAM [--machine FILE] --csv OUT [--plot PNG]  dry run: setpoints, time, feed plot
 #   ./cnc report LOG --out DIR [--tolerance-um U] [--target-rmax-um U]  run report to open in a browser
+#   ./cnc predict slot|wall|zmap|calibrate ...      cutting force, deflection, Z-map (cnc-predict --help)
 #   ./cnc conformance [conformance.py options]     our interpreter against LinuxCNC's rs274
 #   ./cnc bench latency [--load N] [--out DIR]     cycle timing of the demo, idle and with N busy loops
 #   ./cnc build                                    set up and build only
@@ -278,6 +279,7 @@ main() {
     replay) [ $# -gt 0 ] || die "replay: LOG is required"; log="$1"; shift; exec "$BUILD/tools/cnc-replay" --log "$log" "$@" ;;
     plan) [ -x "$BUILD/tools/cnc-plan" ] || build; cmd_plan "$@" ;;
     report) [ -x "$BUILD/tools/cnc-logexport" ] || build; cmd_report "$@" ;;
+    predict) [ -x "$BUILD/tools/cnc-predict" ] || build; exec "$BUILD/tools/cnc-predict" "$@" ;;
     conformance) [ -x "$BUILD/tools/rs274/cnc-rs274" ] || build; cmd_conformance "$@" ;;
     bench) cmd_bench "$@" ;;
     *) awk 'NR > 1 && /^#/ {sub(/^# ?/, ""); print; next} NR > 1 {exit}' "$0"; [ -z "$cmd" ] || exit 2 ;;
