@@ -1,6 +1,9 @@
 // cnc-predict-bench: figures of the force model (seed 004) and the Z-map (seed 000).
 //   cnc-predict-bench force   relative error of the disc simulation's slot means
 //                             against the closed form, by disc count
+//   cnc-predict-bench zmap    Z-map speed: seed 000's case (r 5, f_p = f_t = 0.5 mm,
+//                             α 10°, 2 flutes) on a 5×5 mm window at 2 µm, 1 and 2 threads
+//                             [--window MM] [--pitch MM] [--alpha DEG]
 #include <cmath>
 #include <cstdio>
 #include <exception>
@@ -8,6 +11,7 @@
 
 #include "common/process/cutting_config.h"
 #include "common/process/cutting_force.h"
+#include "common/process/zmap.h"
 #include "tools/predict/args.h"
 
 namespace {
@@ -36,6 +40,26 @@ int bench_force(const cnc::predict::Args& args) {
   }
   return 0;
 }
+int bench_zmap(const cnc::predict::Args& args) {
+  InclinedPlaneCase c;
+  c.window_x_mm = c.window_y_mm = args.num("window", 5.0);
+  c.pitch_mm = args.num("pitch", 0.002);
+  c.alpha_rad = args.num("alpha", 10.0) * 3.14159265358979323846 / 180.0;
+  std::printf("zmap: ball r=%g, %d flutes, f_p=%g f_t=%g mm, alpha=%g deg, window %gx%g mm at %g um, step %.2f deg\n",
+              c.radius_mm, c.flutes, c.pick_feed_mm, c.feed_per_tooth_mm, args.num("alpha", 10.0), c.window_x_mm,
+              c.window_y_mm, c.pitch_mm * 1e3, c.max_step_rad * 180 / 3.14159265358979323846);
+  double t1 = 0;
+  for (int threads : {1, 2}) {
+    c.threads = threads;
+    const InclinedPlaneResult r = simulate_inclined_plane(c);
+    if (threads == 1) t1 = r.seconds;
+    std::printf("zmap: threads=%d cells=%lld time_s=%.3f cells_per_s=%.3g edge_tests=%lld edge_tests_per_s=%.3g "
+                "rmax_um=%.3f speedup=%.2f\n",
+                threads, r.cells, r.seconds, static_cast<double>(r.cells) / r.seconds, r.stats.cells_visited,
+                static_cast<double>(r.stats.cells_visited) / r.seconds, r.rmax_mm * 1e3, t1 / r.seconds);
+  }
+  return 0;
+}
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -43,6 +67,7 @@ int main(int argc, char** argv) {
   try {
     const cnc::predict::Args args(argc, argv, 2);
     if (what == "force" || what == "all") bench_force(args);
+    if (what == "zmap" || what == "all") bench_zmap(args);
     return 0;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "cnc-predict-bench: %s\n", e.what());

@@ -7,6 +7,13 @@
 //   cnc-predict wall --tool FILE --material FILE --radial-depth AE --axial-depth A
 //                    --feed-per-tooth C [--mode up|down] [--points N] [--discs M] [--model …]
 //       the wall's surface error (tool deflection at each height when it is generated)
+//   cnc-predict zmap --alpha DEG --feed-per-tooth C [--pick-feed P] [--radius R] [--flutes N]
+//                    [--window MM] [--pitch MM] [--threads N] [--out DIR]
+//       seed 000's inclined-plane case on a Z-map of the rotating edges: R_max against
+//       the extended model; --out writes the surface (deviation from the plane) and its R_max map
+//   cnc-predict zmap-check --out DIR [--pitch MM] [--threads N]
+//       the digest's cases and an (α, f_t) grid: rmax_cases.csv, rmax_grid.csv, two surfaces;
+//       tools/predict/plot_zmap.py DIR plots them
 //   cnc-predict calibrate --tool FILE --csv HISTORY --radial-depth AE --axial-depth A
 //                    --feed-per-tooth C [--mode up|down] --steps-per-rev N [--min-sin S]
 //       identifies K_T(h), K_R(h) and the linear edge coefficients from a measured
@@ -23,6 +30,8 @@
 #include "common/process/cutting_force.h"
 #include "common/process/deflection.h"
 #include "common/process/force_calibration.h"
+#include "common/process/roughness.h"
+#include "common/process/zmap.h"
 #include "tools/predict/args.h"
 
 namespace {
@@ -34,6 +43,9 @@ constexpr const char* kUsage =
     "--feed-per-tooth C [--discs M] [--model linear_edge|chip_thickness_law]\n"
     "       cnc-predict wall --tool FILE --material FILE --radial-depth AE --axial-depth A --feed-per-tooth C "
     "[--mode up|down] [--points N]\n"
+    "       cnc-predict zmap --alpha DEG --feed-per-tooth C [--pick-feed P] [--radius R] [--flutes N] [--window MM] "
+    "[--pitch MM] [--threads N] [--out DIR]\n"
+    "       cnc-predict zmap-check --out DIR [--pitch MM] [--threads N]\n"
     "       cnc-predict calibrate --tool FILE --csv HISTORY --radial-depth AE --axial-depth A "
     "--feed-per-tooth C --steps-per-rev N [--mode up|down] [--min-sin S]\n";
 
@@ -84,6 +96,116 @@ int cmd_wall(const Args& a) {
   return 0;
 }
 
+constexpr double kDeg = 3.14159265358979323846 / 180.0;
+
+InclinedPlaneCase zmap_case(const Args& a) {
+  InclinedPlaneCase c;
+  c.radius_mm = a.num("radius", 5.0);
+  c.flutes = a.integer("flutes", 2);
+  c.pick_feed_mm = a.num("pick-feed", 0.5);
+  c.feed_per_tooth_mm = a.num("feed-per-tooth", 0.5);
+  c.alpha_rad = a.num("alpha", 0.0) * kDeg;
+  c.window_x_mm = c.window_y_mm = a.num("window", 1.0);
+  c.pitch_mm = a.num("pitch", 0.0025);
+  c.max_step_rad = a.num("step-deg", 0.5) * kDeg;
+  c.threads = a.integer("threads", 2);
+  if (!(c.radius_mm > 0) || c.flutes < 1 || !(c.pick_feed_mm > 0) || !(c.feed_per_tooth_mm > 0) || !(c.pitch_mm > 0) ||
+      !(c.window_x_mm > 0))
+    throw std::invalid_argument("radius, flutes, pick-feed, feed-per-tooth, pitch and window must be positive");
+  return c;
+}
+
+// The surface's deviation from the nominal plane (µm), every `every`-th cell, as CSV rows.
+void write_surface(const std::string& file, const ZMap& m, double alpha, int every) {
+  std::FILE* f = std::fopen(file.c_str(), "w");
+  if (!f) throw std::invalid_argument("cannot write " + file);
+  const double sa = std::sin(alpha), ca = std::cos(alpha);
+  std::fprintf(f, "# deviation from the nominal plane, um; rows y, columns x; pitch_mm=%g\n", m.pitch() * every);
+  for (int j = 0; j < m.ny(); j += every) {
+    for (int i = 0; i < m.nx(); i += every) {
+      std::fprintf(f, i ? ",%.4f" : "%.4f", (-m.x(i) * sa + m.z(i, j) * ca) * 1e3);
+    }
+    std::fputc('\n', f);
+  }
+  std::fclose(f);
+}
+
+int cmd_zmap(const Args& a) {
+  const InclinedPlaneCase c = zmap_case(a);
+  ZMap m(0, 0, 1, 1, 1, 0);
+  const InclinedPlaneResult r = simulate_inclined_plane(c, &m);
+  const double model = rmax_extended(c.radius_mm, c.feed_per_tooth_mm, c.pick_feed_mm, c.alpha_rad);
+  std::printf("rmax_um=%.3f model_um=%.3f diff_um=%.3f alpha_c_deg=%.3f cells=%lld time_s=%.3f cells_per_s=%.3g\n",
+              r.rmax_mm * 1e3, model * 1e3, (r.rmax_mm - model) * 1e3,
+              critical_angle(c.radius_mm, c.feed_per_tooth_mm, c.pick_feed_mm) / kDeg, r.cells, r.seconds,
+              static_cast<double>(r.cells) / r.seconds);
+  if (a.has("out")) {
+    const std::string dir = a.str("out");
+    write_surface(dir + "/zmap_surface.csv", m, c.alpha_rad, std::max(1, m.nx() / 400));
+    const double sa = std::sin(c.alpha_rad), ca = std::cos(c.alpha_rad);
+    const int block = std::max(1, static_cast<int>(std::lround(a.num("block", 0.25) / c.pitch_mm)));
+    const RmaxMap map = zmap_rmax_map(m, [&](double x, double, double z) { return -x * sa + z * ca; }, block, block);
+    std::FILE* f = std::fopen((dir + "/rmax_map.csv").c_str(), "w");
+    if (!f) throw std::invalid_argument("cannot write " + dir + "/rmax_map.csv");
+    std::fprintf(f, "# R_max per %g mm block, um; rows y, columns x\n", block * c.pitch_mm);
+    for (int b = 0; b < map.nby; ++b) {
+      for (int i = 0; i < map.nbx; ++i) std::fprintf(f, i ? ",%.4f" : "%.4f", map.rmax[static_cast<size_t>(b * map.nbx + i)] * 1e3);
+      std::fputc('\n', f);
+    }
+    std::fclose(f);
+  }
+  return 0;
+}
+
+int cmd_zmap_check(const Args& a) {
+  const std::string dir = a.require("out");
+  InclinedPlaneCase base = zmap_case(a);
+  const double r = base.radius_mm, fp = base.pick_feed_mm;
+  std::FILE* cases = std::fopen((dir + "/rmax_cases.csv").c_str(), "w");
+  std::FILE* grid = std::fopen((dir + "/rmax_grid.csv").c_str(), "w");
+  if (!cases || !grid) throw std::invalid_argument("cannot write into " + dir);
+  std::fprintf(cases, "case,alpha_deg,ft_mm,zmap_um,model_um,diff_um\n");
+  std::fprintf(grid, "alpha_deg,ft_mm,zmap_um,model_um,diff_um\n");
+  double worst_case = 0, worst_grid = 0;
+  auto run = [&](double alpha_deg, double ft, ZMap* keep) {
+    InclinedPlaneCase c = base;
+    c.alpha_rad = alpha_deg * kDeg;
+    c.feed_per_tooth_mm = ft;
+    const InclinedPlaneResult res = simulate_inclined_plane(c, keep);
+    return std::pair<double, double>(res.rmax_mm * 1e3, rmax_extended(r, ft, fp, c.alpha_rad) * 1e3);
+  };
+  struct Case { const char* name; double alpha; double ft; };
+  const double ac = critical_angle(r, fp, fp) / kDeg;
+  const Case list[] = {{"fig4_alpha10_ft=fp", 10.0, fp},
+                       {"fig5_alpha0_ft=fp", 0.0, fp},
+                       {"alpha_c_ft=fp", ac, fp},
+                       {"alpha0_ft=0.653fp", 0.0, 0.653 * fp},
+                       {"alpha0_ft=0.319", 0.0, 0.319 * fp / 0.5}};
+  for (const Case& k : list) {
+    ZMap m(0, 0, 1, 1, 1, 0);
+    const auto [z, model] = run(k.alpha, k.ft, &m);
+    std::fprintf(cases, "%s,%.3f,%.4f,%.3f,%.3f,%.3f\n", k.name, k.alpha, k.ft, z, model, z - model);
+    std::printf("case %-20s alpha=%6.3f ft=%.4f zmap_um=%7.3f model_um=%7.3f diff_um=%6.3f\n", k.name, k.alpha, k.ft, z,
+                model, z - model);
+    if (std::abs(z - model) > std::abs(worst_case)) worst_case = z - model;
+    if (k.alpha == 0.0 && k.ft == fp) write_surface(dir + "/surface_alpha0.csv", m, 0.0, std::max(1, m.nx() / 400));
+    if (k.alpha == 10.0) write_surface(dir + "/surface_alpha10.csv", m, k.alpha * kDeg, std::max(1, m.nx() / 400));
+  }
+  const double amax = a.num("grid-alpha-max", 20.0), astep = a.num("grid-alpha-step", 1.0);
+  for (double al = 0.0; al <= amax + 1e-9; al += astep) {
+    for (double ratio = 0.55; ratio <= 1.0001; ratio += 0.05) {
+      const auto [z, model] = run(al, ratio * fp, nullptr);
+      std::fprintf(grid, "%.3f,%.4f,%.3f,%.3f,%.3f\n", al, ratio * fp, z, model, z - model);
+      if (std::abs(z - model) > std::abs(worst_grid)) worst_grid = z - model;
+    }
+    std::fprintf(stderr, "zmap-check: alpha %.1f done\n", al);
+  }
+  std::fclose(cases);
+  std::fclose(grid);
+  std::printf("max_diff_cases_um=%.3f max_diff_grid_um=%.3f\n", worst_case, worst_grid);
+  return 0;
+}
+
 int cmd_calibrate(const Args& a) {
   const EndMill tool = load_tool(a.require("tool"));
   const double ae = a.require_num("radial-depth");
@@ -126,6 +248,8 @@ int main(int argc, char** argv) {
     if (cmd == "slot") return cmd_slot(a);
     if (cmd == "calibrate") return cmd_calibrate(a);
     if (cmd == "wall") return cmd_wall(a);
+    if (cmd == "zmap") return cmd_zmap(a);
+    if (cmd == "zmap-check") return cmd_zmap_check(a);
     if (cmd == "--help" || cmd == "-h") {
       std::fputs(kUsage, stdout);
       return 0;
