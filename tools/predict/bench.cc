@@ -3,14 +3,22 @@
 //                             against the closed form, by disc count
 //   cnc-predict-bench zmap    Z-map speed: seed 000's case (r 5, f_p = f_t = 0.5 mm,
 //                             α 10°, 2 flutes) on a 5×5 mm window at 2 µm, 1 and 2 threads
-//                             [--window MM] [--pitch MM] [--alpha DEG]
+//                             [--window MM] [--pitch MM] [--alpha DEG]; wall and process CPU
+//                             time, and the load average (other work on the machine)
+//   cnc-predict-bench calibration  coefficients recovered from synthetic noisy histories
+//                             (the unit test's set-up: 6 cuts, 1 % noise, 20 revolutions)
 #include <cmath>
+#include <ctime>
+#include <fstream>
+#include <numbers>
+#include <vector>
 #include <cstdio>
 #include <exception>
 #include <string>
 
 #include "common/process/cutting_config.h"
 #include "common/process/cutting_force.h"
+#include "common/process/force_calibration.h"
 #include "common/process/zmap.h"
 #include "tools/predict/args.h"
 
@@ -49,14 +57,62 @@ int bench_zmap(const cnc::predict::Args& args) {
               c.radius_mm, c.flutes, c.pick_feed_mm, c.feed_per_tooth_mm, args.num("alpha", 10.0), c.window_x_mm,
               c.window_y_mm, c.pitch_mm * 1e3, c.max_step_rad * 180 / 3.14159265358979323846);
   double t1 = 0;
+  std::string load;
+  std::getline(std::ifstream("/proc/loadavg"), load);
+  std::printf("zmap: load average before: %s\n", load.c_str());
   for (int threads : {1, 2}) {
     c.threads = threads;
+    const std::clock_t cpu0 = std::clock();
     const InclinedPlaneResult r = simulate_inclined_plane(c);
+    const double cpu = static_cast<double>(std::clock() - cpu0) / CLOCKS_PER_SEC;
     if (threads == 1) t1 = r.seconds;
     std::printf("zmap: threads=%d cells=%lld time_s=%.3f cells_per_s=%.3g edge_tests=%lld edge_tests_per_s=%.3g "
-                "rmax_um=%.3f speedup=%.2f\n",
+                "rmax_um=%.3f speedup=%.2f cpu_s=%.3f\n",
                 threads, r.cells, r.seconds, static_cast<double>(r.cells) / r.seconds, r.stats.cells_visited,
-                static_cast<double>(r.stats.cells_visited) / r.seconds, r.rmax_mm * 1e3, t1 / r.seconds);
+                static_cast<double>(r.stats.cells_visited) / r.seconds, r.rmax_mm * 1e3, t1 / r.seconds, cpu);
+  }
+  return 0;
+}
+int bench_calibration() {
+  constexpr double kPi = std::numbers::pi;
+  EndMill tool;
+  const int steps = 180;
+  const double dz = tool.radius() * (2 * kPi / steps) / std::tan(kPi / 6);
+  const double a = 11 * dz;
+  const std::string dir = std::string(CNC_SOURCE_DIR) + "/config/materials/";
+  for (const char* file : {"al_paper004.yaml", "al7075_t6.yaml"}) {
+    const Material mat = load_material(dir + file);
+    std::vector<CalibrationCut> cuts;
+    unsigned seed = 16;
+    for (double c : {0.01, 0.02, 0.03}) {
+      for (bool up : {true, false}) {
+        const Engagement e = up ? Engagement::up_milling(6.0, 1.0, a, c) : Engagement::down_milling(6.0, 1.0, a, c);
+        const CuttingForceModel m(tool, mat, mat.model, calibration_discs(tool, e, steps));
+        double peak = 0;
+        for (const Eigen::Vector3d& f : m.simulate_revolution(e, steps).force) peak = std::max(peak, f.head<2>().norm());
+        cuts.push_back(synthetic_cut(tool, mat, mat.model, e, steps, 20, 0.01 * peak, seed++));
+      }
+    }
+    const CalibrationResult r = calibrate(tool, cuts);
+    std::printf("calibration: %s (%s), 6 cuts (up/down, ae 1 mm, a %.3f mm, c 0.01-0.03), noise 1 %% of peak, 20 revs, "
+                "%d discs: %s\n",
+                mat.name.c_str(), to_string(mat.model), a, calibration_discs(tool, cuts[0].engagement, steps),
+                r.error.empty() ? "ok" : r.error.c_str());
+    auto line = [](const char* name, double truth, double got) {
+      std::printf("calibration:   %-12s true %10.5g recovered %10.5g rel_err %.2e\n", name, truth, got,
+                  std::abs(got / truth - 1));
+    };
+    if (mat.model == ForceModel::kChipThicknessLaw) {
+      line("K_T c", mat.chip_law.kt.c, r.chip_law.kt.c);
+      line("K_T exp", mat.chip_law.kt.exponent, r.chip_law.kt.exponent);
+      line("K_R c", mat.chip_law.kr.c, r.chip_law.kr.c);
+      line("K_R exp", mat.chip_law.kr.exponent, r.chip_law.kr.exponent);
+    } else {
+      line("K_tc", mat.linear.ktc, r.linear.ktc);
+      line("K_te", mat.linear.kte, r.linear.kte);
+      line("K_rc", mat.linear.krc, r.linear.krc);
+      line("K_re", mat.linear.kre, r.linear.kre);
+    }
   }
   return 0;
 }
@@ -67,6 +123,7 @@ int main(int argc, char** argv) {
   try {
     const cnc::predict::Args args(argc, argv, 2);
     if (what == "force" || what == "all") bench_force(args);
+    if (what == "calibration" || what == "all") bench_calibration();
     if (what == "zmap" || what == "all") bench_zmap(args);
     return 0;
   } catch (const std::exception& e) {
