@@ -12,6 +12,7 @@
 #   ./cnc predict slot|wall|zmap|calibrate ...      cutting force, deflection, Z-map (cnc-predict --help)
 #   ./cnc conformance [conformance.py options]     our interpreter against LinuxCNC's rs274
 #   ./cnc bench latency [--load N] [--out DIR]     cycle timing of the demo, idle and with N busy loops
+#   ./cnc key gen|rotate|show [--machine FILE] [--grace S] [--activate-in S]  the cell's signing key
 #   ./cnc build                                    set up and build only
 set -euo pipefail
 
@@ -25,6 +26,7 @@ PACKAGES=(
   g++ make cmake pkg-config
   liblcm-dev liblcm-bin libglib2.0-dev   # LCM 1.3.1; its lcm.pc needs glib
   libyaml-cpp-dev libmodbus-dev libspdlog-dev libeigen3-dev libgtest-dev
+  libsodium-dev                          # crypto_auth (HMAC-SHA-512-256): the cell's signed channels
   python3 python3-matplotlib             # plots of feed profiles and run reports
   chromium                               # renders the run report headless in its test
   iproute2 util-linux procps             # ip, unshare: private network namespaces in tests
@@ -108,6 +110,11 @@ cmd_up() {
   done
   [ -n "$machine" ] || die "up: --machine FILE is required"
   [ -f "$machine" ] || die "up: no machine config at '$machine'"
+  # The whole cell on this PC: its signing key is made on the first run. A part of
+  # a cell (--only) needs the key of the PC that made it: copied, never made anew.
+  if [ -z "$only" ]; then
+    "$BUILD/tools/cnc-key" gen --machine "$machine" --if-missing || die "up: cannot make the cell's key"
+  fi
   local chosen=()
   if [ -n "$only" ]; then
     IFS=',' read -r -a wanted <<<"$only"
@@ -161,6 +168,8 @@ cmd_demo() {
     esac
   done
   build
+  # The cell's signing key, made on the first run (before cnc-ctl, which signs too).
+  "$BUILD/tools/cnc-key" gen --machine "$machine" --if-missing || die "demo: cannot make the cell's key"
   local run_dir="$ROOT/runs/demo-$(date -u +%Y%m%d-%H%M%S)"
   mkdir -p "$run_dir"
   say "starting the cell ($machine), output in $run_dir"
@@ -258,6 +267,15 @@ cmd_bench() {
   esac
 }
 
+# key gen|rotate|show [--machine FILE | --file KEYFILE] [...]: see tools/key/main.cc.
+cmd_key() {
+  [ -x "$BUILD/tools/cnc-key" ] || build
+  local args=("$@") has_target=0
+  for a in "$@"; do case "$a" in --machine|--file) has_target=1 ;; esac; done
+  [ "$has_target" -eq 1 ] || args+=(--machine "$DEFAULT_MACHINE")
+  exec "$BUILD/tools/cnc-key" "${args[@]}"
+}
+
 cmd_test() {
   build
   cd "$BUILD"
@@ -282,6 +300,7 @@ main() {
     predict) [ -x "$BUILD/tools/cnc-predict" ] || build; exec "$BUILD/tools/cnc-predict" "$@" ;;
     conformance) [ -x "$BUILD/tools/rs274/cnc-rs274" ] || build; cmd_conformance "$@" ;;
     bench) cmd_bench "$@" ;;
+    key) cmd_key "$@" ;;
     *) awk 'NR > 1 && /^#/ {sub(/^# ?/, ""); print; next} NR > 1 {exit}' "$0"; [ -z "$cmd" ] || exit 2 ;;
   esac
 }

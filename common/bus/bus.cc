@@ -1,6 +1,9 @@
 #include "common/bus/bus.h"
 
+#include <sys/stat.h>
 #include <unistd.h>
+
+#include <spdlog/spdlog.h>
 
 #include <cerrno>
 #include <cstdio>
@@ -36,7 +39,106 @@ std::string exact_channel(const std::string& channel) {
   return out;
 }
 
-Bus::Bus(const std::string& url, int32_t sender, int queue_capacity) : url_(url), queue_capacity_(queue_capacity) {
+const char* reject_name(Reject r) {
+  switch (r) {
+    case Reject::kUnsigned: return "unsigned";
+    case Reject::kUnknownKey: return "unknown_key";
+    case Reject::kForged: return "forged";
+    case Reject::kStale: return "stale";
+    case Reject::kReplayed: return "replayed";
+  }
+  return "?";
+}
+
+int64_t rejected_count(const ChannelStats& st, Reject r) {
+  switch (r) {
+    case Reject::kUnsigned: return st.rejected_unsigned;
+    case Reject::kUnknownKey: return st.rejected_unknown_key;
+    case Reject::kForged: return st.rejected_forged;
+    case Reject::kStale: return st.rejected_stale;
+    case Reject::kReplayed: return st.rejected_replayed;
+  }
+  return 0;
+}
+
+int64_t LogVerifier::Counts::bad_total() const {
+  int64_t n = 0;
+  for (int64_t b : bad) n += b;
+  return n;
+}
+
+int64_t LogVerifier::verified() const {
+  int64_t n = 0;
+  for (const auto& [ch, c] : counts_) n += c.verified;
+  return n;
+}
+
+int64_t LogVerifier::bad() const {
+  int64_t n = 0;
+  for (const auto& [ch, c] : counts_) n += c.bad_total();
+  return n;
+}
+
+bool LogVerifier::check(const std::string& channel, const void* data, size_t size) {
+  Counts& c = counts_[channel];
+  const auto bad = [&](Reject r) {
+    ++c.bad[static_cast<size_t>(r)];
+    return false;
+  };
+  if (!has_trailer(data, size)) return bad(Reject::kUnsigned);
+  const auto hdr = peek_header(data, size);
+  const Key* key = keys_.find(trailer_key_id(data, size));
+  if (key == nullptr || !hdr) return bad(Reject::kUnknownKey);
+  if (!verify(*key, channel, data, size)) return bad(Reject::kForged);
+  if (key->accept_until_utime != 0 && hdr->utime > key->accept_until_utime) return bad(Reject::kUnknownKey);
+  auto [it, fresh] = seq_.try_emplace({channel, hdr->sender}, hdr->seq, uint64_t{1});
+  if (!fresh) {
+    auto& [last, seen] = it->second;
+    if (hdr->seq > last) {
+      const int64_t ahead = hdr->seq - last;
+      seen = ahead >= 64 ? 1 : (seen << ahead) | 1;
+      last = hdr->seq;
+    } else {
+      const int64_t behind = last - hdr->seq;
+      if (behind >= 64 || ((seen >> behind) & 1u)) return bad(Reject::kReplayed);
+      seen |= uint64_t{1} << behind;
+    }
+  }
+  ++c.verified;
+  return true;
+}
+
+namespace {
+// Channels a stranger may invent (the logger subscribes to a prefix): rejected
+// messages on new channel names beyond this count are counted under one name.
+constexpr size_t kMaxChannelStats = 256;
+constexpr const char* kOtherChannels = "(other channels)";
+
+struct FileStamp {
+  bool ok = false;
+  ino_t ino = 0;
+  off_t size = 0;
+  int64_t mtime_ns = 0;
+  bool operator==(const FileStamp&) const = default;
+};
+FileStamp stamp_of(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) return {};
+  return {true, st.st_ino, st.st_size, static_cast<int64_t>(st.st_mtim.tv_sec) * 1'000'000'000 + st.st_mtim.tv_nsec};
+}
+}  // namespace
+
+Bus::Bus(const std::string& url, int32_t sender, int queue_capacity, Security security)
+    : url_(url), queue_capacity_(queue_capacity), security_(std::move(security)) {
+  if (security_.enabled) {
+    if (sodium_init() < 0) throw BusError("libsodium could not be initialised");
+    if (security_.keys.count == 0) {
+      if (security_.key_file.empty()) throw BusError("signing is on but there is no key");
+      security_.keys = read_key_file(security_.key_file);  // KeyFileError names the file and its mode
+    }
+    max_age_us_ = static_cast<int64_t>(security_.max_age_s * 1e6);
+    keybuf_.write(security_.keys);
+  }
   lcm_ = lcm_create(url.empty() ? nullptr : url.c_str());
   if (lcm_ == nullptr) throw BusError("cannot open LCM at '" + url + "'");
   if (sender == 0) {
@@ -47,6 +149,140 @@ Bus::Bus(const std::string& url, int32_t sender, int queue_capacity) : url_(url)
     if (sender == 0) sender = 1;
   }
   sender_ = sender;
+  if (security_.enabled && !security_.key_file.empty() && security_.watch) {
+    watcher_ = std::jthread([this](std::stop_token stop) { watch_keys(stop); });
+  }
+}
+
+void Bus::watch_keys(std::stop_token stop) {
+  FileStamp seen = stamp_of(security_.key_file);
+  std::mutex m;
+  std::condition_variable_any cv;
+  std::unique_lock lock(m);
+  while (!stop.stop_requested()) {
+    cv.wait_for(lock, stop, std::chrono::seconds(1), [] { return false; });
+    if (stop.stop_requested()) break;
+    const FileStamp now = stamp_of(security_.key_file);
+    if (now == seen) continue;
+    seen = now;
+    load_keys_from_file();
+  }
+}
+
+bool Bus::load_keys_from_file() {
+  std::lock_guard guard(key_write_mutex_);
+  try {
+    const KeySet keys = read_key_file(security_.key_file);
+    keybuf_.write(keys);
+    ++key_reloads_;
+    key_error_.clear();
+    spdlog::info("bus: key file {} read again: {} key(s)", security_.key_file, keys.count);
+    return true;
+  } catch (const std::exception& e) {
+    ++key_reload_failures_;
+    key_error_ = e.what();
+    spdlog::error("bus: key file changed but cannot be used, the keys in use stay: {}", e.what());
+    return false;
+  }
+}
+
+bool Bus::reload_keys() {
+  if (!security_.enabled || security_.key_file.empty()) return false;
+  return load_keys_from_file();
+}
+
+void Bus::set_keys(const KeySet& keys) {
+  std::lock_guard guard(key_write_mutex_);
+  keybuf_.write(keys);
+}
+
+std::string Bus::key_error() const {
+  std::lock_guard guard(key_write_mutex_);
+  return key_error_;
+}
+
+size_t Bus::sign_into(const std::string& channel, uint8_t* buf, size_t size) {
+  if (!security_.enabled) return size;
+  const Key* k = keybuf_.read().signing_key(util::wall_utime());
+  if (k == nullptr) return 0;
+  sign(*k, channel, buf, size, buf + size);
+  return size + kTrailerBytes;
+}
+
+void Bus::reject(const std::string& channel, Reject why, const void* data, size_t size) {
+  auto it = stats_.find(channel);
+  if (it == stats_.end()) {
+    it = stats_.size() < kMaxChannelStats ? stats_.emplace(channel, ChannelStats{}).first
+                                          : stats_.emplace(kOtherChannels, ChannelStats{}).first;
+  }
+  ChannelStats& st = it->second;
+  switch (why) {
+    case Reject::kUnsigned: ++st.rejected_unsigned; break;
+    case Reject::kUnknownKey: ++st.rejected_unknown_key; break;
+    case Reject::kForged: ++st.rejected_forged; break;
+    case Reject::kStale: ++st.rejected_stale; break;
+    case Reject::kReplayed: ++st.rejected_replayed; break;
+  }
+  ++rejects_[static_cast<int>(why)];
+  const auto hdr = peek_header(data, size);
+  std::snprintf(last_reject_.data(), last_reject_.size(), "%s from sender %d: %s", it->first.c_str(),
+                hdr ? hdr->sender : 0, reject_name(why));
+}
+
+bool Bus::admit(const std::string& channel, const void* data, size_t size, int64_t recv_utime) {
+  const KeySet& keys = keybuf_.read();
+  if (!has_trailer(data, size)) {
+    reject(channel, Reject::kUnsigned, data, size);
+    return false;
+  }
+  const Key* key = keys.accepting_key(trailer_key_id(data, size), recv_utime);
+  if (key == nullptr) {
+    reject(channel, Reject::kUnknownKey, data, size);
+    return false;
+  }
+  if (!verify(*key, channel, data, size)) {
+    reject(channel, Reject::kForged, data, size);
+    return false;
+  }
+  const auto hdr = peek_header(data, size);  // present: has_trailer checked the length
+  if (!hdr || hdr->utime < recv_utime - max_age_us_ || hdr->utime > recv_utime + max_age_us_) {
+    reject(channel, Reject::kStale, data, size);
+    return false;
+  }
+  auto ch_it = last_seq_.find(channel);
+  if (ch_it != last_seq_.end()) {
+    auto it = ch_it->second.find(hdr->sender);
+    if (it != ch_it->second.end()) {
+      SenderSeq& s = it->second;
+      if (hdr->seq > s.last) {
+        const int64_t ahead = hdr->seq - s.last;
+        ChannelStats& st = stats_[channel];
+        st.seq_gaps += ahead - 1;
+        s.seen = ahead >= 64 ? 1 : (s.seen << ahead) | 1;
+        s.last = hdr->seq;
+        ++st.received;
+        return true;
+      }
+      const int64_t behind = s.last - hdr->seq;
+      if (behind >= 64 || (s.seen >> behind) & 1u) {
+        reject(channel, Reject::kReplayed, data, size);
+        return false;
+      }
+      // Late but new: it was counted as missing when a later one came.
+      s.seen |= uint64_t{1} << behind;
+      ChannelStats& st = stats_[channel];
+      if (st.seq_gaps > 0) --st.seq_gaps;
+      ++st.reordered;
+      ++st.received;
+      return true;
+    }
+  } else {
+    ch_it = last_seq_.emplace(channel, std::map<int32_t, SenderSeq>{}).first;
+  }
+  // A sender not seen before: fresh (checked above), so no older capture of it can pass.
+  ch_it->second.emplace(hdr->sender, SenderSeq{hdr->seq, 1});
+  ++stats_[channel].received;
+  return true;
 }
 
 Bus::~Bus() {
@@ -84,10 +320,17 @@ void Bus::on_message(const lcm_recv_buf_t* rbuf, const char* channel, void* user
   try {
     std::string& ch = sub->bus->rx_channel_;
     ch.assign(channel);  // no allocation once it has held a name this long
-    if (sub->bus->last_accounted_ != rbuf) {
-      sub->bus->last_accounted_ = rbuf;
-      sub->bus->account(ch, rbuf->data, rbuf->data_size);
+    Bus& bus = *sub->bus;
+    if (bus.last_accounted_ != rbuf) {
+      bus.last_accounted_ = rbuf;
+      if (bus.security_.enabled) {
+        bus.last_admitted_ = bus.admit(ch, rbuf->data, rbuf->data_size, rbuf->recv_utime);
+      } else {
+        bus.last_admitted_ = true;
+        bus.account(ch, rbuf->data, rbuf->data_size);
+      }
     }
+    if (!bus.last_admitted_) return;
     sub->dispatch(ch, rbuf->data, rbuf->data_size, rbuf->recv_utime);
   } catch (...) {
     // Nothing may unwind into LCM's C code.
@@ -100,19 +343,19 @@ void Bus::account(const std::string& channel, const void* data, size_t size) {
   const auto hdr = peek_header(data, size);
   if (!hdr) return;
   auto ch_it = last_seq_.find(channel);
-  if (ch_it == last_seq_.end()) ch_it = last_seq_.emplace(channel, std::map<int32_t, int64_t>{}).first;
+  if (ch_it == last_seq_.end()) ch_it = last_seq_.emplace(channel, std::map<int32_t, SenderSeq>{}).first;
   auto it = ch_it->second.find(hdr->sender);
   if (it == ch_it->second.end()) {
-    ch_it->second.emplace(hdr->sender, hdr->seq);
+    ch_it->second.emplace(hdr->sender, SenderSeq{hdr->seq, 0});
     return;
   }
-  const int64_t expected = it->second + 1;
+  const int64_t expected = it->second.last + 1;
   if (hdr->seq > expected) {
     st.seq_gaps += hdr->seq - expected;
   } else if (hdr->seq < expected) {
     ++st.seq_restarts;
   }
-  it->second = hdr->seq;
+  it->second.last = hdr->seq;
 }
 
 int64_t Bus::next_seq(const std::string& channel) { return out_seq_[channel]++; }
@@ -141,7 +384,9 @@ void Bus::publish_failed(const std::string& channel, int err, bool stamped) {
   ++stats_[channel].publish_failures;
   ++publish_failures_;
   std::snprintf(last_publish_error_.data(), last_publish_error_.size(), "publish on %s failed: %s", channel.c_str(),
-                err < 0 ? "the message does not encode" : std::strerror(err));
+                err == -2  ? "no key of the key file signs now"
+                : err < 0 ? "the message does not encode"
+                          : std::strerror(err));
 }
 
 bool Bus::publish_raw(const std::string& channel, const void* data, size_t size) {

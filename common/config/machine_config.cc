@@ -192,6 +192,21 @@ MachineConfig read_machine(MapReader top) {
     r.finish();
   }
   {
+    MapReader r = top.map("security");
+    SecurityConfig& sec = c.security;
+    sec.signing = r.get_bool("signing", sec.signing);
+    const std::string key = r.get_string("key_file", "");
+    if (!key.empty() && key[0] != '/') {
+      const std::string base = std::filesystem::path(top.file()).parent_path().string();
+      sec.key_file = (std::filesystem::path(base) / key).lexically_normal().string();
+    } else {
+      sec.key_file = key;
+    }
+    if (sec.signing && sec.key_file.empty()) r.fail("key_file", "is required when security.signing is true");
+    sec.max_age_s = r.get_double("max_age_s", sec.max_age_s, 0.01, 3600.0);
+    r.finish();
+  }
+  {
     MapReader r = top.map("monitor");
     c.monitor_rmax_margin = r.get_double("rmax_margin", c.monitor_rmax_margin, 0.0, 10.0);
     r.finish();

@@ -76,6 +76,13 @@ struct ProgramConfig {
   int64_t max_validation_lines = 200'000'000;  // lines interpreted to validate a program at load
 };
 
+// Signed channels (section `security:`): see common/bus/auth.h.
+struct SecurityConfig {
+  bool signing = false;         // the shipped configs say true; a config without the section runs unsigned (warned)
+  std::string key_file;         // relative to the config file's folder; required when signing
+  double max_age_s = 2.0;       // freshness window of a message's time stamp at its receiver
+};
+
 struct MachineConfig {
   std::string source_file;
   std::string source_text;  // the YAML as loaded: the interpolator records it in the log for replay
@@ -124,6 +131,8 @@ struct MachineConfig {
   std::string log_directory = "runs";
   double log_rotate_mb = 512.0;
   double log_flush_period_s = 0.5;
+
+  SecurityConfig security;
 
   // monitor
   double monitor_rmax_margin = 0.1;  // alarm when R_max > target·(1 + margin)

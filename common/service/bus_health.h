@@ -13,6 +13,7 @@
 #include <array>
 #include <cstdio>
 #include <cstring>
+#include <map>
 #include <string>
 
 #include "cnc/lcmt_alarm.hpp"
@@ -85,6 +86,63 @@ class BusHealth {
   double last_failure_s_ = 0;
   double last_try_s_ = -1e9;
   std::array<char, 160> cause_{};
+};
+
+// Signed channels: raises an ALARM when the bus dropped messages (bus::Reject), at
+// most one per cause and second, naming the count since the last alarm of that
+// cause, the channels and the last sender, so an attacker's flood makes one alarm a
+// second and cause, never a flood of alarms. Call it as often as you like (every
+// cycle): when nothing was dropped it compares five counters and returns.
+class RejectAlarms {
+ public:
+  static constexpr double kMinPeriodS = 1.0;
+
+  RejectAlarms(bus::Bus& bus, std::string alarm_channel, std::string source)
+      : bus_(bus), channel_(std::move(alarm_channel)), source_(std::move(source)) {}
+
+  // Returns the number of alarms sent.
+  int report(double now_s) {
+    int sent = 0;
+    for (int c = 0; c < bus::kRejectCauses; ++c) {
+      const auto cause = static_cast<bus::Reject>(c);
+      const int64_t n = bus_.rejected_total(cause);
+      if (n == reported_[c] || now_s - last_s_[c] < kMinPeriodS) continue;
+      // Per channel: the drops since this cause's last alarm.
+      std::string where;
+      for (const auto& [ch, st] : bus_.stats()) {
+        const int64_t now_n = bus::rejected_count(st, cause);
+        int64_t& seen = seen_[ch][c];
+        if (now_n > seen) {
+          if (!where.empty()) where += ", ";
+          where += ch + " " + std::to_string(now_n - seen);
+          seen = now_n;
+        }
+      }
+      cnc::lcmt_alarm al{};
+      al.source = source_;
+      al.severity = cnc::lcmt_alarm::WARNING;
+      al.code = std::string("bus_") + bus::reject_name(cause);
+      char head[96];
+      std::snprintf(head, sizeof head, "%lld %s message(s) dropped (total %lld): ",
+                    static_cast<long long>(n - reported_[c]), bus::reject_name(cause), static_cast<long long>(n));
+      al.text = head + where + "; last: " + bus_.last_reject();
+      reported_[c] = n;
+      last_s_[c] = now_s;
+      ++alarms_;
+      if (bus_.publish(channel_, al)) ++sent;
+    }
+    return sent;
+  }
+  int64_t alarms() const { return alarms_; }
+
+ private:
+  bus::Bus& bus_;
+  std::string channel_;
+  std::string source_;
+  std::array<int64_t, bus::kRejectCauses> reported_{};
+  std::array<double, bus::kRejectCauses> last_s_{-1e9, -1e9, -1e9, -1e9, -1e9};
+  std::map<std::string, std::array<int64_t, bus::kRejectCauses>> seen_;
+  int64_t alarms_ = 0;
 };
 
 }  // namespace cnc::service

@@ -4,6 +4,7 @@
 
 #include "common/bus/bus.h"
 #include "common/config/machine_config.h"
+#include "common/service/bus_health.h"
 
 namespace cnc::service {
 
@@ -11,6 +12,8 @@ class Heartbeat {
  public:
   Heartbeat(bus::Bus& bus, const config::MachineConfig& cfg, std::string service_name);
   // Publishes when a heartbeat period has passed since the last one (or `force`).
+  // Every call also raises the rate-limited ALARMs of messages the bus dropped
+  // (signed channels; see RejectAlarms): every service ticks its heartbeat.
   void tick(int8_t state, int64_t loop_overruns, const std::string& detail = "", bool force = false);
 
  private:
@@ -19,6 +22,7 @@ class Heartbeat {
   std::string name_;
   double period_s_;
   double last_s_ = -1e9;
+  RejectAlarms rejects_;
 };
 
 }  // namespace cnc::service

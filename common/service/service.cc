@@ -15,6 +15,21 @@ std::string Args::option(const std::string& key, const std::string& fallback) co
   return it == options.end() ? fallback : it->second;
 }
 
+bus::Security bus_security(const config::MachineConfig& cfg, const std::string& who) {
+  bus::Security sec;
+  if (!cfg.security.signing) {
+    spdlog::warn("{}: security.signing is off in {}: messages are neither signed nor checked, anyone on the "
+                 "network can move this machine",
+                 who, cfg.source_file);
+    return sec;
+  }
+  sec.enabled = true;
+  sec.key_file = cfg.security.key_file;
+  sec.keys = bus::read_key_file(sec.key_file);
+  sec.max_age_s = cfg.security.max_age_s;
+  return sec;
+}
+
 namespace {
 void usage(const Spec& spec) {
   std::fprintf(stderr, "%s: %s\nusage: %s%s", spec.name.c_str(), spec.summary.c_str(), spec.name.c_str(),
@@ -75,6 +90,9 @@ int run(const Spec& spec, int argc, char** argv,
     return body(cfg, args);
   } catch (const config::ConfigError& e) {
     std::fprintf(stderr, "%s: config error: %s\n", spec.name.c_str(), e.what());
+    return kExitBadInput;
+  } catch (const bus::KeyFileError& e) {
+    std::fprintf(stderr, "%s: refusing to start: %s\n", spec.name.c_str(), e.what());
     return kExitBadInput;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "%s: fatal: %s\n", spec.name.c_str(), e.what());

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "common/bus/bus.h"
 #include "common/config/machine_config.h"
 
 namespace cnc::service {
@@ -31,8 +32,14 @@ inline constexpr int kExitOk = 0;
 inline constexpr int kExitFailure = 1;
 inline constexpr int kExitBadInput = 2;  // bad flags or config
 
+// The bus security of a service from the config's `security:` section: signing and
+// verification with the key file (read here; KeyFileError when it is missing, not
+// the user's or readable by group/others: run() exits 2 naming the file and its
+// mode), the file watched for rotations. Signing off: a warning, nothing checked.
+bus::Security bus_security(const config::MachineConfig& cfg, const std::string& who);
+
 // Parses flags, loads the machine config, installs the stop handlers and runs
-// `body`. A ConfigError or a bad flag exits 2 with the message on stderr; any other
+// `body`. A ConfigError, an unusable key file or a bad flag exits 2 with the message on stderr; any other
 // exception exits 1.
 int run(const Spec& spec, int argc, char** argv,
         const std::function<int(const config::MachineConfig&, const Args&)>& body);

@@ -22,7 +22,7 @@ int main(int argc, char** argv) {
     // loop or the delivery of setpoints to it.
     const int priority = cfg.realtime_priority > 0 ? std::min(cfg.realtime_priority + 1, 98) : 0;
     cnc::util::apply_realtime("cnc-drive-bridge", priority, cfg.realtime_cpus);
-    cnc::bus::Bus bus(cfg.lcm_url);
+    cnc::bus::Bus bus(cfg.lcm_url, 0, 1000, cnc::service::bus_security(cfg, "cnc-drive-bridge"));
     cnc::bridge::DriveBridgeNode node(cfg, bus);
     cnc::service::Heartbeat hb(bus, cfg, "cnc-drive-bridge");
     node.start();

@@ -17,7 +17,7 @@ int main(int argc, char** argv) {
   return cnc::service::run(spec, argc, argv, [](const cnc::config::MachineConfig& cfg, const cnc::service::Args& args) {
     // First, so the threads LCM starts (its receive thread) inherit the scheduling and the CPUs.
     cnc::util::apply_realtime("cnc-interpolator", cfg.realtime_priority, cfg.realtime_cpus);
-    cnc::bus::Bus bus(cfg.lcm_url);
+    cnc::bus::Bus bus(cfg.lcm_url, 0, 1000, cnc::service::bus_security(cfg, "cnc-interpolator"));
     cnc::interp::InterpolatorNode node(cfg, bus);
     cnc::service::Heartbeat hb(bus, cfg, "cnc-interpolator");
     cnc::util::PeriodicTimer timer(cfg.ipo_period_s);

@@ -130,11 +130,14 @@ void LoggerNode::write_stats(bool closing) {
   m.seq = stats_seq_++;
   m.sender = bus_.sender();
   const int size = m.getEncodedSize();
-  encode_buf_.resize(static_cast<size_t>(size));
+  encode_buf_.resize(static_cast<size_t>(size) + bus::kTrailerBytes);
   if (m.encode(encode_buf_.data(), 0, size) != size) return;
-  writer_.write(stats_channel_, encode_buf_.data(), encode_buf_.size(), m.utime);
+  // Signed like every message of the cell (signing on), in the file and on the bus.
+  size_t n = bus_.sign_into(stats_channel_, encode_buf_.data(), static_cast<size_t>(size));
+  if (n == 0) n = static_cast<size_t>(size);  // no key signs now: recorded unsigned, the receivers drop it
+  writer_.write(stats_channel_, encode_buf_.data(), n, m.utime);
   try {
-    bus_.publish_raw(stats_channel_, encode_buf_.data(), encode_buf_.size());
+    bus_.publish_raw(stats_channel_, encode_buf_.data(), n);
   } catch (const bus::BusError&) {
     // The copy in the file is the one that counts.
   }

@@ -39,7 +39,8 @@ int main(int argc, char** argv) {
     if (const std::string why = cnc::util::make_realtime(std::max(0, cfg.realtime_priority - 5)); !why.empty())
       spdlog::warn("real-time scheduling not available ({}): running with normal scheduling", why);
     // A deep queue: the logger must ride out a stalled write without dropping (~10 s at 2 kHz).
-    cnc::bus::Bus bus(cnc::logger::receive_url(cfg.lcm_url, kReceiveBufferBytes), 0, 20000);
+    cnc::bus::Bus bus(cnc::logger::receive_url(cfg.lcm_url, kReceiveBufferBytes), 0, 20000,
+                      cnc::service::bus_security(cfg, "cnc-logger"));
     cnc::logger::LogWriter writer(base, cfg.log_rotate_mb * 1024 * 1024);
     cnc::logger::LoggerNode node(cfg, bus, writer);
     spdlog::info("cnc-logger: writing {}", writer.current_path());

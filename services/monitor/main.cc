@@ -37,7 +37,7 @@ int main(int argc, char** argv) {
     // start, on the wall clock: exact on one host, offset by clock skew across hosts),
     // compute the handler's time.
     cnc::util::LatencyHistogram delivery, handling;
-    cnc::bus::Bus bus(cfg.lcm_url);
+    cnc::bus::Bus bus(cfg.lcm_url, 0, 1000, cnc::service::bus_security(cfg, "cnc-monitor"));
     cnc::monitor::Monitor core(cfg);
     const std::string ch_report = cfg.channel(ch::kMonitor), ch_alarm = cfg.channel(ch::kAlarm);
     const int naxes = static_cast<int>(cfg.axes.size());

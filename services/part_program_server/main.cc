@@ -9,7 +9,7 @@
 int main(int argc, char** argv) {
   cnc::service::Spec spec{"cnc-program-server", "parses part programs and serves their blocks", {}, {}};
   return cnc::service::run(spec, argc, argv, [](const cnc::config::MachineConfig& cfg, const cnc::service::Args&) {
-    cnc::bus::Bus bus(cfg.lcm_url);
+    cnc::bus::Bus bus(cfg.lcm_url, 0, 1000, cnc::service::bus_security(cfg, "cnc-program-server"));
     cnc::pps::ProgramServerNode node(cfg, bus);
     cnc::service::Heartbeat hb(bus, cfg, "cnc-program-server");
     while (!cnc::util::stop_requested()) {

@@ -85,13 +85,21 @@ blocks=$(awk -v c="${TEST_PREFIX}PROGRAM_BLOCKS" '/ events in /{exit} $1 == c {p
 [ "${blocks:-0}" -ge 8 ] || fail "log holds ${blocks:-0} program blocks, expected at least 8"
 
 # lcm-logplayer (Debian's liblcm-bin) plays the log back onto the bus; a fresh
-# logger records it again: the same setpoint stream, still without a gap.
-start logger2 "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/replayed"
+# logger records it again: the same setpoint stream, still without a gap. The
+# playback is a replay of signed messages: the fresh logger is an unsigned analysis
+# cell's; a logger of the signing cell beside it records none of the setpoints.
+unsigned_machine "$M" "$WORK/unsigned.yaml"
+start logger2 "$BUILD/services/cnc-logger" --machine "$WORK/unsigned.yaml" --out "$WORK/replayed"
+start logger3 "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/replayed-signed"
 sleep 0.3
 timeout 60 lcm-logplayer --speed 4 --lcm-url "udpm://239.255.76.67:${TEST_LCM_PORT}?ttl=0" "$WORK/run.lcmlog" \
   || fail "lcm-logplayer could not play the log"
 sleep 0.3
 stop logger2 TERM
+stop logger3 TERM
+"$BUILD/tools/cnc-logstat" --log "$WORK/replayed-signed.lcmlog" >"$WORK/replayed-signed.out" 2>&1 || true
+sp3=$(awk -v c="${TEST_PREFIX}SETPOINTS" '/ events in /{exit} $1 == c {print $2}' "$WORK/replayed-signed.out")
+[ "${sp3:-0}" -eq 0 ] || { cat "$WORK/replayed-signed.out" >&2; fail "the signing cell's logger recorded ${sp3} played-back setpoints"; }
 "$BUILD/tools/cnc-logstat" --log "$WORK/replayed.lcmlog" --require-no-gaps "${TEST_PREFIX}SETPOINTS" >"$WORK/replayed.out" \
   || { cat "$WORK/replayed.out" >&2; fail "the played-back setpoint stream has gaps"; }
 sp2=$(awk -v c="${TEST_PREFIX}SETPOINTS" '/ events in /{exit} $1 == c {print $2}' "$WORK/replayed.out")

@@ -26,6 +26,22 @@ make_machine() {
       -e "s#port: 1502#port: ${TEST_MODBUS_PORT}#g" \
       -e "s#channel_prefix: \"SIM3.\"#channel_prefix: \"T${base}.\"#" "$src" >"$dst"
   export TEST_PREFIX="T${base}."
+  # Signing on (security.key_file, relative to the config): the test's own key beside the copy.
+  local key
+  key="$(sed -n 's/^ *key_file: *\([^ #]*\).*/\1/p' "$dst")"
+  if [ -n "$key" ]; then
+    case "$key" in /*) ;; *) key="$(dirname "$dst")/$key" ;; esac
+    "$BUILD/tools/cnc-key" gen --file "$key" --if-missing >/dev/null || fail "cannot make the key $key"
+    export TEST_KEY="$key"
+  fi
+}
+
+# unsigned_machine SRC DST: SRC with signing off. lcm-logplayer playing a log back
+# is a replay: a signing cell drops every message of it (too old, sequence not
+# newer); an analysis cell that is fed a recorded log runs unsigned.
+unsigned_machine() {
+  sed -e 's#^\( *signing:\) *true#\1 false#' "$1" >"$2"
+  grep -qE '^ *signing: false' "$2" || fail "unsigned_machine: no 'signing: true' in $1"
 }
 
 declare -A TEST_PIDS=()

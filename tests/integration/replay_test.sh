@@ -57,8 +57,10 @@ same=$(sed -nE 's/^([0-9]+) setpoints identical before it/\1/p' "$WORK/p.out")
 note "changed program: $(head -1 "$WORK/p.out")"
 
 # lcm-logplayer drives a fresh monitor; its reports equal the live monitor's.
-start logger2 "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/played"
-start monitor2 "$BUILD/services/cnc-monitor" --machine "$M"
+# (An unsigned analysis cell: the signing cell drops a played-back log as a replay.)
+unsigned_machine "$M" "$WORK/unsigned.yaml"
+start logger2 "$BUILD/services/cnc-logger" --machine "$WORK/unsigned.yaml" --out "$WORK/played"
+start monitor2 "$BUILD/services/cnc-monitor" --machine "$WORK/unsigned.yaml"
 sleep 0.5
 timeout 120 lcm-logplayer --speed 2 --regexp "^${TEST_PREFIX//./\\.}(SETPOINTS|AXIS_STATUS|INTERP_INPUT)\$" \
   --lcm-url "udpm://239.255.76.67:${TEST_LCM_PORT}?ttl=0" "$WORK/run.lcmlog" || fail "lcm-logplayer failed"

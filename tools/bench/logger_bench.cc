@@ -116,6 +116,11 @@ int run_bench(const cnc::config::MachineConfig&, const cnc::service::Args& args)
   const std::string machine = work + "/machine.yaml";
   std::ofstream(machine) << yaml;
   const cnc::config::MachineConfig cfg = cnc::config::load_machine_config(machine);
+  if (cfg.security.signing && !fs::exists(cfg.security.key_file)) {
+    cnc::bus::KeySet keys;  // signing as in the cell: the bench's own key beside its config
+    keys.add(cnc::bus::generate_key());
+    cnc::bus::write_key_file(cfg.security.key_file, keys);
+  }
   const std::string base = work + "/bench";
 
   const pid_t logger = fork();
@@ -136,7 +141,7 @@ int run_bench(const cnc::config::MachineConfig&, const cnc::service::Args& args)
 
   // The logger is up when its first heartbeat arrives (it subscribes before it sends one).
   {
-    cnc::bus::Bus probe(cfg.lcm_url);
+    cnc::bus::Bus probe(cfg.lcm_url, 0, 1000, cnc::service::bus_security(cfg, "cnc-bench-logger"));
     bool up = false;
     probe.subscribe<cnc::lcmt_heartbeat>(cfg.channel("HEARTBEAT"), [&](const cnc::lcmt_heartbeat& hb) {
       if (hb.service == "cnc-logger" && hb.pid == logger) up = true;
@@ -147,7 +152,7 @@ int run_bench(const cnc::config::MachineConfig&, const cnc::service::Args& args)
   }
 
   // Messages as the cell sends them: 3 axes.
-  cnc::bus::Bus pub(cfg.lcm_url);
+  cnc::bus::Bus pub(cfg.lcm_url, 0, 1000, cnc::service::bus_security(cfg, "cnc-bench-logger"));
   const std::string ch_sp = cfg.channel("SETPOINTS"), ch_as = cfg.channel("AXIS_STATUS");
   cnc::lcmt_setpoint sp{};
   sp.period_s = 1.0 / rate_hz;
@@ -243,7 +248,8 @@ int run_bench(const cnc::config::MachineConfig&, const cnc::service::Args& args)
       }
       if (ch == ch_stats) {
         cnc::lcmt_logger_stats m;
-        if (m.decode(data, 0, static_cast<int>(size)) == static_cast<int>(size)) {
+        const size_t n = cnc::bus::payload_size(data, size);  // without a signature trailer
+        if (m.decode(data, 0, static_cast<int>(n)) == static_cast<int>(n)) {
           last_stats = m;
           have_stats = true;
         }

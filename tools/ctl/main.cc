@@ -68,7 +68,7 @@ bool wait_for(cnc::bus::Bus& bus, double timeout_s, Pred done) {
 int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& args) {
   const std::string what = args.option("do", "run");
   const double timeout_s = std::stod(args.option("timeout", "600"));
-  cnc::bus::Bus bus(cfg.lcm_url);
+  cnc::bus::Bus bus(cfg.lcm_url, 0, 1000, cnc::service::bus_security(cfg, "cnc-ctl"));
   CellView view;
   bus.subscribe<cnc::lcmt_heartbeat>(cfg.channel(ch::kHeartbeat),
                                      [&](const auto& m) { view.heartbeats[m.service] = m; });

@@ -23,7 +23,8 @@ namespace {
 template <class Msg>
 bool decode(const void* data, size_t size, Msg* out) {
   try {
-    return out->decode(data, 0, static_cast<int>(size)) == static_cast<int>(size);
+    const size_t n = cnc::bus::payload_size(data, size);  // a signed cell's trailer follows the message
+    return out->decode(data, 0, static_cast<int>(n)) == static_cast<int>(n);
   } catch (...) {
     return false;
   }

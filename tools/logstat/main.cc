@@ -3,18 +3,24 @@
 // summary (program time, blocks, setpoints published/received, gaps per channel
 // and receiver, largest following error).
 //
-//   cnc-logstat --log FILE [--summary] [--require-no-gaps CHANNEL]
+//   cnc-logstat --log FILE [--summary] [--require-no-gaps CHANNEL] [--key KEYFILE | --machine FILE]
 //   cnc-logstat --log FILE --compare-monitor OTHER_LOG
+//
+// --key (or the key file of --machine's config, when it signs) verifies the MAC of
+// every logged message (the logger keeps them) and prints, per channel, how many
+// verify and how many are unsigned, under an unknown key, forged or repeated. The
+// summary also lists the messages each service dropped unverified (heartbeats).
 //
 // --compare-monitor checks that the monitor reports of OTHER_LOG (e.g. a monitor
 // driven by lcm-logplayer playing FILE) equal FILE's, field by field, cycle by
 // cycle (see compare_monitor for which cycles).
 //
-// Exit codes: 0 fine; 1 a required channel is empty or has gaps, or the monitor
-// reports differ; 2 bad flags.
+// Exit codes: 0 fine; 1 a required channel is empty or has gaps, the monitor
+// reports differ, or a message fails verification; 2 bad flags or key file.
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <optional>
 #include <set>
 #include <vector>
 
@@ -29,6 +35,17 @@
 
 namespace {
 
+// A message of the log, with or without a signature trailer (signed cells).
+template <class Msg>
+bool decodes(Msg& m, const void* data, size_t size) {
+  const size_t n = cnc::bus::payload_size(data, size);
+  try {
+    return m.decode(data, 0, static_cast<int>(n)) == static_cast<int>(n);
+  } catch (...) {
+    return false;
+  }
+}
+
 struct Senders {
   std::set<int32_t> ids;
 };
@@ -38,7 +55,7 @@ std::vector<cnc::lcmt_monitor_report> monitor_reports(const std::string& log) {
   cnc::bus::Bus bus("file://" + log + "?speed=0");
   bus.subscribe_raw(".*MONITOR", [&](const std::string&, const void* data, size_t size, int64_t) {
     cnc::lcmt_monitor_report m;
-    if (m.decode(data, 0, static_cast<int>(size)) == static_cast<int>(size)) out.push_back(std::move(m));
+    if (decodes(m, data, size)) out.push_back(std::move(m));
   });
   while (bus.handle(1000) > 0) {
   }
@@ -99,7 +116,7 @@ int compare_monitor(const std::string& log, const std::string& other) {
   return compared > 0 && compared >= unique * 9 / 10 ? 0 : 1;
 }
 
-int run_logstat(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
+int run_logstat(const cnc::config::MachineConfig& cfg, const cnc::service::Args& args) {
   cnc::util::end_at_once_on_stop_signals();  // no loop here polls the stop flag
   const std::string log = args.option("log");
   if (log.empty()) {
@@ -107,10 +124,17 @@ int run_logstat(const cnc::config::MachineConfig&, const cnc::service::Args& arg
     return cnc::service::kExitBadInput;
   }
   if (!args.option("compare-monitor").empty()) return compare_monitor(log, args.option("compare-monitor"));
+  std::string key_file = args.option("key");
+  if (key_file.empty() && cfg.security.signing) key_file = cfg.security.key_file;
+  std::optional<cnc::bus::LogVerifier> verifier;
+  if (!key_file.empty()) verifier.emplace(cnc::bus::read_key_file(key_file));
   cnc::bus::Bus bus("file://" + log + "?speed=0");
   std::map<std::string, Senders> senders;
+  int64_t signed_events = 0;
   bus.subscribe_raw(".*", [&](const std::string& ch, const void* data, size_t size, int64_t) {
     if (auto h = cnc::bus::peek_header(data, size)) senders[ch].ids.insert(h->sender);
+    if (cnc::bus::has_trailer(data, size)) ++signed_events;
+    if (verifier) verifier->check(ch, data, size);
   });
   // The last heartbeat of each service (its final one when it stopped cleanly).
   std::map<std::string, cnc::lcmt_heartbeat> last_hb;
@@ -122,22 +146,22 @@ int run_logstat(const cnc::config::MachineConfig&, const cnc::service::Args& arg
   std::string prefix;
   bus.subscribe_raw(".*HEARTBEAT", [&](const std::string& ch, const void* data, size_t size, int64_t) {
     cnc::lcmt_heartbeat hb;
-    if (hb.decode(data, 0, static_cast<int>(size)) == static_cast<int>(size)) {
+    if (decodes(hb, data, size)) {
       last_hb[hb.service] = hb;
       prefix = ch.substr(0, ch.size() - std::string("HEARTBEAT").size());
     }
   });
   bus.subscribe_raw(".*INTERP_STATE", [&](const std::string&, const void* data, size_t size, int64_t) {
     cnc::lcmt_interp_state m;
-    if (m.decode(data, 0, static_cast<int>(size)) == static_cast<int>(size)) interp = m;
+    if (decodes(m, data, size)) interp = m;
   });
   bus.subscribe_raw(".*PROGRAM_STATE", [&](const std::string&, const void* data, size_t size, int64_t) {
     cnc::lcmt_program_state m;
-    if (m.decode(data, 0, static_cast<int>(size)) == static_cast<int>(size)) program = m;
+    if (decodes(m, data, size)) program = m;
   });
   bus.subscribe_raw(".*AXIS_STATUS", [&](const std::string&, const void* data, size_t size, int64_t) {
     cnc::lcmt_axis_status m;
-    if (m.decode(data, 0, static_cast<int>(size)) != static_cast<int>(size)) return;
+    if (!decodes(m, data, size)) return;
     for (int i = 0; i < m.num_axes; ++i) {
       if (std::fabs(m.following_error_mm[i]) > largest_fe) {
         largest_fe = std::fabs(m.following_error_mm[i]);
@@ -154,7 +178,21 @@ int run_logstat(const cnc::config::MachineConfig&, const cnc::service::Args& arg
     std::printf("%-28s %10lld %8zu %10lld %10lld\n", ch.c_str(), static_cast<long long>(st.received),
                 senders[ch].ids.size(), static_cast<long long>(st.seq_gaps), static_cast<long long>(st.seq_restarts));
   }
-  std::printf("%lld events in %s\n", static_cast<long long>(events), log.c_str());
+  std::printf("%lld events in %s (%lld signed)\n", static_cast<long long>(events), log.c_str(),
+              static_cast<long long>(signed_events));
+  if (verifier) {
+    std::printf("\nsignatures (key file %s)\n", key_file.c_str());
+    std::printf("%-28s %10s %10s %10s %10s %10s\n", "channel", "verified", "unsigned", "unknown_key", "forged",
+                "replayed");
+    for (const auto& [ch, c] : verifier->counts()) {
+      using R = cnc::bus::Reject;
+      auto b = [&](R r) { return static_cast<long long>(c.bad[static_cast<size_t>(r)]); };
+      std::printf("%-28s %10lld %10lld %10lld %10lld %10lld\n", ch.c_str(), static_cast<long long>(c.verified),
+                  b(R::kUnsigned), b(R::kUnknownKey), b(R::kForged), b(R::kReplayed));
+    }
+    std::printf("signatures: %lld verified, %lld bad\n", static_cast<long long>(verifier->verified()),
+                static_cast<long long>(verifier->bad()));
+  }
 
   if (args.flags.count("summary")) {
     auto hb_count = [&](const std::string& service, const std::string& channel, const char* what) -> long long {
@@ -191,6 +229,25 @@ int run_logstat(const cnc::config::MachineConfig&, const cnc::service::Args& arg
       }
     }
     for (const auto& [channel, line] : per_channel) std::printf("      %-26s %s\n", channel.c_str(), line.c_str());
+    // Signed cells: what each receiver dropped unverified (its last heartbeat).
+    std::map<std::string, std::string> dropped;
+    for (const auto& [service, hb] : last_hb) {
+      if (static_cast<int>(hb.rejected_unsigned.size()) != hb.num_channels) continue;
+      for (size_t i = 0; i < static_cast<size_t>(hb.num_channels); ++i) {
+        const int64_t u = hb.rejected_unsigned[i], k = hb.rejected_unknown_key[i], f = hb.rejected_forged[i],
+                      st = hb.rejected_stale[i], r = hb.rejected_replayed[i];
+        if (u + k + f + st + r == 0) continue;
+        char b[200];
+        std::snprintf(b, sizeof b, "%s unsigned %lld, unknown_key %lld, forged %lld, stale %lld, replayed %lld",
+                      service.substr(service.rfind("cnc-", 0) == 0 ? 4 : 0).c_str(), static_cast<long long>(u),
+                      static_cast<long long>(k), static_cast<long long>(f), static_cast<long long>(st),
+                      static_cast<long long>(r));
+        std::string& line = dropped[hb.channel[i]];
+        line += (line.empty() ? "" : "; ") + std::string(b);
+      }
+    }
+    std::printf("  dropped unverified  %s\n", dropped.empty() ? "none" : "per channel, as each receiver counted them:");
+    for (const auto& [channel, line] : dropped) std::printf("      %-26s %s\n", channel.c_str(), line.c_str());
     std::printf("  largest foll. error %.4f mm (axis %s)%s\n", largest_fe, largest_fe_axis.c_str(),
                 axis_faults ? "  -- drive FAULT reported" : "");
   }
@@ -204,6 +261,11 @@ int run_logstat(const cnc::config::MachineConfig&, const cnc::service::Args& arg
       return 1;
     }
   }
+  if (verifier && verifier->bad() > 0) {
+    std::fprintf(stderr, "cnc-logstat: %lld message(s) of the log fail verification\n",
+                 static_cast<long long>(verifier->bad()));
+    return 1;
+  }
   return 0;
 }
 
@@ -211,6 +273,6 @@ int run_logstat(const cnc::config::MachineConfig&, const cnc::service::Args& arg
 
 int main(int argc, char** argv) {
   cnc::service::Spec spec{"cnc-logstat", "per-channel statistics and run summary of a cell log",
-                          {"log", "require-no-gaps", "compare-monitor"}, {"summary"}, false};
+                          {"log", "require-no-gaps", "compare-monitor", "key"}, {"summary"}, false};
   return cnc::service::run(spec, argc, argv, run_logstat);
 }

@@ -4,7 +4,11 @@
 // divergence, which it names (cycle, time, block, line, field, both values); 2 when
 // the log cannot be replayed (no config, inputs lost).
 //
-//   cnc-replay --log LOG [--machine FILE] [--program FILE]
+//   cnc-replay --log LOG [--machine FILE] [--program FILE] [--key KEYFILE]
+//
+// --key verifies the MAC of every message of the log first (the logger keeps
+// them): a log with a message that does not verify (unsigned, unknown key, forged,
+// repeated) is not replayed (exit 2), the counts per cause are printed.
 //
 // --machine replays with another config, --program with another version of a
 // program: its blocks replace the recorded blocks of every recorded program with
@@ -36,7 +40,8 @@ constexpr int kExitUnreplayable = 2;
 template <class Msg>
 bool decode(const void* data, size_t size, Msg* m) {
   try {
-    return m->decode(data, 0, static_cast<int>(size)) == static_cast<int>(size);
+    const size_t n = cnc::bus::payload_size(data, size);  // a signed cell's trailer follows the message
+    return m->decode(data, 0, static_cast<int>(n)) == static_cast<int>(n);
   } catch (...) {
     return false;
   }
@@ -90,8 +95,13 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
   std::map<int64_t, cnc::lcmt_setpoint> setpoints;
   int32_t sender = 0;
   int64_t foreign = 0;
+  const std::string key_file = args.option("key");
+  std::optional<cnc::bus::LogVerifier> verifier;
+  if (!key_file.empty()) verifier.emplace(cnc::bus::read_key_file(key_file));
   {
     cnc::bus::Bus bus("file://" + log + "?speed=0");
+    if (verifier)
+      bus.subscribe_raw(".*", [&](const std::string& ch, const void* d, size_t n, int64_t) { verifier->check(ch, d, n); });
     bus.subscribe_raw(".*INTERP_CONFIG", [&](const std::string&, const void* d, size_t n, int64_t) {
       cnc::lcmt_config c;
       if (!config && decode(d, n, &c) && c.service == "cnc-interpolator") {
@@ -119,6 +129,20 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
                      ch.c_str());
         return kExitUnreplayable;
       }
+    }
+  }
+  if (verifier) {
+    std::printf("signatures: %lld verified, %lld bad\n", static_cast<long long>(verifier->verified()),
+                static_cast<long long>(verifier->bad()));
+    if (verifier->bad() > 0) {
+      for (const auto& [ch, c] : verifier->counts()) {
+        if (c.bad_total() == 0) continue;
+        std::fprintf(stderr, "cnc-replay: %s: %lld unsigned, %lld unknown key, %lld forged, %lld replayed\n",
+                     ch.c_str(), static_cast<long long>(c.bad[0]), static_cast<long long>(c.bad[1]),
+                     static_cast<long long>(c.bad[2]), static_cast<long long>(c.bad[4]));
+      }
+      std::fprintf(stderr, "cnc-replay: the log does not verify under %s: not replayed\n", key_file.c_str());
+      return kExitUnreplayable;
     }
   }
   if (!config) {
@@ -240,6 +264,6 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
 
 int main(int argc, char** argv) {
   cnc::service::Spec spec{"cnc-replay", "deterministic re-run of the interpolator from a log, compared bit for bit",
-                          {"log", "program"}, {}, false};
+                          {"log", "program", "key"}, {}, false};
   return cnc::service::run(spec, argc, argv, replay);
 }

@@ -1,0 +1,146 @@
+// cnc-key: the cell's signing keys (common/bus/auth.h).
+//
+//   cnc-key gen    (--machine FILE | --file KEYFILE) [--if-missing] [--force]
+//   cnc-key rotate (--machine FILE | --file KEYFILE) [--grace S] [--activate-in S]
+//   cnc-key show   (--machine FILE | --file KEYFILE)
+//
+// gen writes one new key (mode 0600). rotate adds a new key that signs from now
+// (+ --activate-in, for a cell over several PCs: copy the file to every PC before
+// then) and keeps the keys before it accepted for --grace seconds after that (60 by
+// default); running services read the changed file within a second. show prints the
+// key ids and their times, never a secret. Exit 0 done, 1 failed, 2 bad arguments
+// or an unusable key file.
+#include <sys/stat.h>
+
+#include <cstdio>
+#include <ctime>
+#include <filesystem>
+#include <string>
+
+#include "common/bus/auth.h"
+#include "common/config/machine_config.h"
+#include "common/config/yaml_reader.h"
+#include "common/util/clock.h"
+
+namespace {
+int usage() {
+  std::fprintf(stderr,
+               "usage: cnc-key gen    (--machine FILE | --file KEYFILE) [--if-missing] [--force]\n"
+               "       cnc-key rotate (--machine FILE | --file KEYFILE) [--grace S] [--activate-in S]\n"
+               "       cnc-key show   (--machine FILE | --file KEYFILE)\n");
+  return 2;
+}
+
+std::string when(int64_t utime) {
+  if (utime == 0) return "-";
+  const std::time_t t = static_cast<std::time_t>(utime / 1'000'000);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char b[40];
+  std::strftime(b, sizeof b, "%Y-%m-%d %H:%M:%S UTC", &tm);
+  return b;
+}
+
+void show(const std::string& path, const cnc::bus::KeySet& ks) {
+  const int64_t now = cnc::util::wall_utime();
+  const cnc::bus::Key* signer = ks.signing_key(now);
+  std::printf("key file %s: %d key(s)\n", path.c_str(), ks.count);
+  for (int i = 0; i < ks.count; ++i) {
+    const cnc::bus::Key& k = ks.keys[static_cast<size_t>(i)];
+    const char* state = &k == signer ? "signing"
+                        : (k.accept_until_utime != 0 && k.accept_until_utime < now) ? "expired"
+                        : k.sign_from_utime > now                                     ? "accepted, signs later"
+                                                                                      : "accepted (grace)";
+    std::printf("  key %08x  signs from %s  accepted until %s  [%s]\n", k.id, when(k.sign_from_utime).c_str(),
+                when(k.accept_until_utime).c_str(), state);
+  }
+}
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 2) return usage();
+  const std::string cmd = argv[1];
+  std::string machine, file;
+  bool if_missing = false, force = false;
+  double grace_s = 60.0, activate_s = 0.0;
+  for (int i = 2; i < argc; ++i) {
+    const std::string a = argv[i];
+    const auto value = [&]() -> std::string {
+      if (i + 1 >= argc) throw std::runtime_error(a + " needs a value");
+      return argv[++i];
+    };
+    try {
+      if (a == "--machine") machine = value();
+      else if (a == "--file") file = value();
+      else if (a == "--if-missing") if_missing = true;
+      else if (a == "--force") force = true;
+      else if (a == "--grace") grace_s = std::stod(value());
+      else if (a == "--activate-in") activate_s = std::stod(value());
+      else {
+        std::fprintf(stderr, "cnc-key: unknown argument '%s'\n", a.c_str());
+        return usage();
+      }
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "cnc-key: %s: %s\n", a.c_str(), e.what());
+      return 2;
+    }
+  }
+  if (machine.empty() == file.empty()) return usage();
+  if (grace_s < 0 || activate_s < 0) {
+    std::fprintf(stderr, "cnc-key: --grace and --activate-in must not be negative\n");
+    return 2;
+  }
+  try {
+    if (!machine.empty()) {
+      const auto cfg = cnc::config::load_machine_config(machine);
+      if (cfg.security.key_file.empty()) {
+        std::fprintf(stderr, "cnc-key: %s has no security.key_file\n", machine.c_str());
+        return 2;
+      }
+      file = cfg.security.key_file;
+    }
+    if (cmd == "gen") {
+      if (std::filesystem::exists(file)) {
+        if (if_missing) return 0;
+        if (!force) {
+          std::fprintf(stderr, "cnc-key: %s exists; not overwritten (--force replaces it, or: cnc-key rotate)\n",
+                       file.c_str());
+          return 1;
+        }
+      }
+      const auto dir = std::filesystem::path(file).parent_path();
+      if (!dir.empty() && !std::filesystem::exists(dir)) {
+        std::filesystem::create_directories(dir);
+        std::filesystem::permissions(dir, std::filesystem::perms::owner_all);
+      }
+      cnc::bus::KeySet ks;
+      ks.add(cnc::bus::generate_key());
+      cnc::bus::write_key_file(file, ks);
+      std::printf("cnc-key: new key %08x in %s (mode 0600)\n", ks.keys[0].id, file.c_str());
+      return 0;
+    }
+    if (cmd == "rotate") {
+      const cnc::bus::KeySet old = cnc::bus::read_key_file(file);
+      const cnc::bus::KeySet ks = cnc::bus::rotate_keys(old, cnc::util::wall_utime(), activate_s, grace_s);
+      cnc::bus::write_key_file(file, ks);
+      std::printf("cnc-key: rotated: new key %08x signs in %g s; the keys before it are accepted %g s longer\n",
+                  ks.keys[static_cast<size_t>(ks.count - 1)].id, activate_s, grace_s);
+      show(file, ks);
+      return 0;
+    }
+    if (cmd == "show") {
+      show(file, cnc::bus::read_key_file(file));
+      return 0;
+    }
+    return usage();
+  } catch (const cnc::config::ConfigError& e) {
+    std::fprintf(stderr, "cnc-key: config error: %s\n", e.what());
+    return 2;
+  } catch (const cnc::bus::KeyFileError& e) {
+    std::fprintf(stderr, "cnc-key: %s\n", e.what());
+    return 2;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "cnc-key: %s\n", e.what());
+    return 1;
+  }
+}
