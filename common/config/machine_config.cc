@@ -144,6 +144,9 @@ MachineConfig read_machine(MapReader top) {
     p.block_delete = r.get_bool("block_delete", p.block_delete);
     p.optional_stop = r.get_bool("optional_stop", p.optional_stop);
     p.max_validation_lines = r.get_int("max_validation_lines", p.max_validation_lines, 1000, int64_t{1} << 40);
+    p.g64_fit = r.get_bool("g64_fit", p.g64_fit);
+    p.g64_fit_max_segment_mm = r.get_double("g64_fit_max_segment_mm", p.g64_fit_max_segment_mm, 0.001, 1000.0);
+    p.g64_fit_max_turn_deg = r.get_double("g64_fit_max_turn_deg", p.g64_fit_max_turn_deg, 0.0, 90.0);
     r.finish();
   }
   {

@@ -74,6 +74,10 @@ struct ProgramConfig {
   bool block_delete = true;                  // '/' lines are skipped
   bool optional_stop = true;                 // M1 stops
   int64_t max_validation_lines = 200'000'000;  // lines interpreted to validate a program at load
+  // G64 P: runs of short G1 moves fitted to splines within P (else only corner blends).
+  bool g64_fit = true;
+  double g64_fit_max_segment_mm = 2.0;  // longer moves are not part of a fitted run
+  double g64_fit_max_turn_deg = 30.0;   // a sharper turn between two moves ends a run
 };
 
 // Signed channels (section `security:`): see common/bus/auth.h.

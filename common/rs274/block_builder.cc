@@ -1,7 +1,10 @@
 #include "common/rs274/block_builder.h"
 
+#include <algorithm>
 #include <cmath>
+#include <functional>
 
+#include "common/geometry/polyline_fit.h"
 #include "common/program/block_check.h"
 
 namespace cnc::rs274 {
@@ -65,6 +68,8 @@ double BlockBuilder::feed_mm_per_min(const SourceRef& ref) const {
 }
 
 program::Block& BlockBuilder::begin(const SourceRef& ref, program::BlockKind kind) {
+  // Whatever comes after a run of G1 moves held for blending ends the run first.
+  if (!run_.empty() && !flushing_) flush_run();
   program::Block b;
   b.index = next_index_++;
   b.source_line = ref.line;
@@ -116,13 +121,196 @@ void BlockBuilder::straight_traverse(const SourceRef& ref, const Pose& end) {
   position_ = std::move(e);
 }
 
+void BlockBuilder::set_motion_control_mode(const SourceRef&, PathMode mode, double tolerance) {
+  if (!run_.empty()) flush_run();
+  path_mode_ = mode;
+  path_tol_mm_ = mode == PathMode::kContinuous && tolerance > 0 && std::isfinite(tolerance) ? tolerance * scale_ : 0.0;
+}
+
+bool BlockBuilder::blending() const {
+  return path_tol_mm_ > 0 && setup_.axis_names.size() >= 3 && axis_of_pose_[0] == 0 && axis_of_pose_[1] == 1 &&
+         axis_of_pose_[2] == 2;
+}
+
 void BlockBuilder::straight_feed(const SourceRef& ref, const Pose& end) {
   std::vector<double> e = to_machine(ref, end);
   const double f = feed_mm_per_min(ref);
+  if (blending()) {
+    const double rpm = spindle_dir_ != 0 ? speed_rpm_ : 0.0;
+    bool same = !run_.empty() && f == run_feed_ && rpm == run_rpm_ &&
+                process_.ball_radius_mm == run_process_.ball_radius_mm && process_.flutes == run_process_.flutes &&
+                process_.pick_feed_mm == run_process_.pick_feed_mm &&
+                process_.target_rmax_um == run_process_.target_rmax_um;
+    // Only X Y Z move in a run (the blends and fits are curves in X Y Z).
+    bool xyz = true;
+    for (size_t a = 3; a < e.size(); ++a) xyz = xyz && e[a] == position_[a];
+    if (!run_.empty() && (!same || !xyz)) flush_run();
+    if (xyz) {
+      double len2 = 0;
+      for (size_t a = 0; a < 3; ++a) len2 += (e[a] - position_[a]) * (e[a] - position_[a]);
+      if (len2 == 0) return;  // a move to where the tool stands: nothing to blend
+      if (run_.empty()) {
+        run_.push_back({position_, ref});
+        run_feed_ = f;
+        run_rpm_ = rpm;
+        run_process_ = process_;
+      }
+      run_.push_back({e, ref});
+      position_ = std::move(e);
+      return;
+    }
+  }
   program::Block& b = begin(ref, program::BlockKind::kLine);
   b.end = e;
   b.feed_mm_per_min = f;
   position_ = std::move(e);
+}
+
+void BlockBuilder::emit_line(const SourceRef& ref, const std::vector<double>& from, const std::vector<double>& to) {
+  program::Block& b = begin(ref, program::BlockKind::kLine);
+  b.start = from;
+  b.end = to;
+  b.feed_mm_per_min = run_feed_;
+  b.spindle_rpm = run_rpm_;
+  b.process = run_process_;
+}
+
+// A run of G1 moves under G64 P, as blocks: stretches of short, gently turning
+// moves fitted to cubic splines within P (cut into NURBS blocks), the remaining
+// lines with each corner between two of them rounded within P by a quartic blend.
+// The run's end is where the last move ends, exactly.
+void BlockBuilder::flush_run() {
+  if (run_.size() < 2) {
+    run_.clear();
+    return;
+  }
+  flushing_ = true;
+  const double tol = path_tol_mm_;
+  const size_t n = run_.size() - 1;  // moves
+  std::vector<Eigen::Vector3d> pts(run_.size());
+  for (size_t i = 0; i < run_.size(); ++i) pts[i] = Eigen::Vector3d(run_[i].pos[0], run_[i].pos[1], run_[i].pos[2]);
+  std::vector<double> len(n);
+  std::vector<Eigen::Vector3d> dir(n);
+  for (size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3d d = pts[i + 1] - pts[i];
+    len[i] = d.norm();
+    dir[i] = d / len[i];
+  }
+  const double cos_turn = std::cos(setup_.fit_max_turn_deg * M_PI / 180.0);
+  // fitted[i]: move i belongs to a fitted stretch; stretches as [first, last) moves.
+  std::vector<char> fitted(n, 0);
+  struct Stretch {
+    size_t a, b;
+    geometry::CubicFit fit;
+  };
+  std::vector<Stretch> stretches;
+  constexpr size_t kMinMoves = 4;
+  // A stretch the fit cannot hold within P (a sharp turn that is no corner by the
+  // run's rule) is cut at its sharpest turn and each part tried again.
+  std::function<void(size_t, size_t)> fit_range = [&](size_t a, size_t b) {
+    if (b - a < kMinMoves) return;
+    std::vector<Eigen::Vector3d> sub(pts.begin() + static_cast<std::ptrdiff_t>(a),
+                                     pts.begin() + static_cast<std::ptrdiff_t>(b + 1));
+    geometry::CubicFit fit = geometry::fit_cubic(sub, tol);
+    if (fit.ok) {
+      for (size_t i = a; i < b; ++i) fitted[i] = 1;
+      stretches.push_back({a, b, std::move(fit)});
+      return;
+    }
+    size_t cut = a + 1;
+    for (size_t j = a + 1; j < b; ++j)
+      if (dir[j - 1].dot(dir[j]) < dir[cut - 1].dot(dir[cut])) cut = j;
+    fit_range(a, cut);
+    fit_range(cut, b);
+  };
+  if (setup_.fit_runs) {
+    for (size_t a = 0; a < n;) {
+      if (len[a] > setup_.fit_max_segment_mm) {
+        ++a;
+        continue;
+      }
+      size_t b = a + 1;
+      while (b < n && len[b] <= setup_.fit_max_segment_mm && dir[b - 1].dot(dir[b]) >= cos_turn) ++b;
+      fit_range(a, b);
+      a = b;
+    }
+  }
+  std::sort(stretches.begin(), stretches.end(), [](const Stretch& x, const Stretch& y) { return x.a < y.a; });
+  // Blend legs at the vertices between two lines (vertex j joins move j-1 and move j).
+  std::vector<double> leg(n + 1, 0.0);
+  for (size_t j = 1; j < n; ++j) {
+    if (fitted[j - 1] || fitted[j]) continue;
+    leg[j] = geometry::corner_blend_leg(dir[j - 1], dir[j], tol, 0.5 * std::min(len[j - 1], len[j]));
+    const double v = run_feed_ / 60.0;
+    if (4.0 * leg[j] < v * setup_.ipo_period_s || setup_.corner_dv_mm_s >= v * (dir[j] - dir[j - 1]).norm())
+      leg[j] = 0;
+  }
+  std::vector<double> cursor = run_[0].pos;
+  auto at = [&](const Eigen::Vector3d& p) {
+    std::vector<double> v = run_[0].pos;
+    for (size_t k = 0; k < 3; ++k) v[k] = p[static_cast<Eigen::Index>(k)];
+    return v;
+  };
+  auto nurbs_block = [&](const SourceRef& ref, int order, std::vector<double> knots,
+                         const std::vector<Eigen::Vector3d>& ctrl, const std::vector<double>& end) {
+    program::Block& b = begin(ref, program::BlockKind::kNurbs);
+    b.start = cursor;
+    b.end = end;
+    b.feed_mm_per_min = run_feed_;
+    b.spindle_rpm = run_rpm_;
+    b.process = run_process_;
+    b.nurbs.order = order;
+    b.nurbs.knots = std::move(knots);
+    for (const auto& c : ctrl) {
+      b.nurbs.control_points.push_back({c[0], c[1], c[2]});
+      b.nurbs.weights.push_back(1.0);
+    }
+    if (const std::string why = program::check_nurbs_block(b); !why.empty())
+      throw Error(file_name_(ref.file), ref, "G64 P: the fitted curve is not a valid NURBS (" + why + ")");
+    cursor = end;
+  };
+  size_t next_stretch = 0;
+  for (size_t i = 0; i < n;) {
+    if (next_stretch < stretches.size() && stretches[next_stretch].a == i) {
+      const Stretch& st = stretches[next_stretch++];
+      const std::vector<geometry::CubicPiece> pieces =
+          geometry::split_cubic(st.fit.knots, st.fit.ctrl, setup_.fit_max_spans);
+      for (size_t k = 0; k < pieces.size(); ++k) {
+        const geometry::CubicPiece& pc = pieces[k];
+        // The piece's source: the move its start lies on.
+        const double u0 = pc.knots.front();
+        const auto it = std::upper_bound(st.fit.params.begin(), st.fit.params.end(), u0);
+        size_t move = st.a + static_cast<size_t>(std::max<std::ptrdiff_t>(1, it - st.fit.params.begin()));
+        move = std::min(move, st.b);
+        // The last piece ends exactly where the stretch's last move ends.
+        const std::vector<double> end = k + 1 == pieces.size() ? run_[st.b].pos : at(pc.ctrl.back());
+        nurbs_block(run_[move].ref, 4, pc.knots, pc.ctrl, end);
+      }
+      i = st.b;
+      continue;
+    }
+    // A line, shortened by the blends at its ends, and the blend at its end.
+    const Eigen::Vector3d to = pts[i + 1] - 2.0 * leg[i + 1] * dir[i];
+    const std::vector<double> line_end = leg[i + 1] > 0 ? at(to) : run_[i + 1].pos;
+    double d2 = 0;
+    for (size_t k = 0; k < 3; ++k) d2 += (line_end[k] - cursor[k]) * (line_end[k] - cursor[k]);
+    if (d2 > 0) {
+      emit_line(run_[i + 1].ref, cursor, line_end);
+      cursor = line_end;
+    }
+    if (leg[i + 1] > 0) {
+      const double d = leg[i + 1];
+      const Eigen::Vector3d v = pts[i + 1];
+      const std::vector<Eigen::Vector3d> q = {v - 2 * d * dir[i], v - d * dir[i], v, v + d * dir[i + 1],
+                                              v + 2 * d * dir[i + 1]};
+      // Knots spanning the blend's approximate length, as the parameter of a G5.2 curve would.
+      const double s = 4.0 * d;
+      nurbs_block(run_[i + 1].ref, 5, {0, 0, 0, 0, 0, s, s, s, s, s}, q, at(q.back()));
+    }
+    ++i;
+  }
+  run_.clear();
+  flushing_ = false;
 }
 
 void BlockBuilder::arc_feed(const SourceRef& ref, double, double, double first_axis, double second_axis, int rotation,

@@ -21,6 +21,21 @@ struct BuilderSetup {
   std::vector<double> start_position_mm;   // where the machine stands
   double spindle_rpm = 0;                  // speed before any S word
   program::ProcessParams process;          // before any PROCESS directive
+  // G64 P (path blending within P): runs of short G1 moves are fitted to cubic
+  // splines within P (fit_runs), other corners between G1 lines are rounded within
+  // P by a quartic blend. A run: consecutive G1 moves of one feed, each at most
+  // fit_max_segment_mm long, turning by at most fit_max_turn_deg at each vertex.
+  bool fit_runs = true;
+  double fit_max_segment_mm = 2.0;
+  double fit_max_turn_deg = 30.0;
+  int fit_max_spans = 100;  // knot spans per NURBS block the fit is cut into
+  // No corner blend where the interpolator's corner rule passes the kink at the
+  // run's feed anyway (its velocity step |Δt|·v within corner_dv_mm_s, the least of
+  // one cycle's acceleration and half a cycle's jerk), nor where the blend would be
+  // shorter than one interpolation cycle's travel at that feed: a blend that short
+  // is run at a crawl by the jerk its curvature change asks.
+  double ipo_period_s = 0.004;
+  double corner_dv_mm_s = 0;
 };
 
 class BlockBuilder : public Canon {
@@ -34,6 +49,7 @@ class BlockBuilder : public Canon {
   bool ended() const { return ended_; }
 
   void use_length_units(const SourceRef&, Units) override;
+  void set_motion_control_mode(const SourceRef&, PathMode, double tolerance) override;
   void select_plane(const SourceRef&, Plane) override;
   void set_g5x_offset(const SourceRef&, int, const Pose&) override;
   void set_g92_offset(const SourceRef&, const Pose&) override;
@@ -77,6 +93,10 @@ class BlockBuilder : public Canon {
   void event(const SourceRef& ref, program::EventKind kind, int32_t number, double value, std::string text = {});
   std::vector<double> to_machine(const SourceRef& ref, const Pose& p) const;
   double feed_mm_per_min(const SourceRef& ref) const;
+  // G64 P: the G1 moves held back to be blended or fitted, and their emission.
+  bool blending() const;
+  void flush_run();
+  void emit_line(const SourceRef& ref, const std::vector<double>& from, const std::vector<double>& to);
 
   BuilderSetup setup_;
   std::function<const std::string&(int32_t)> file_name_;
@@ -97,6 +117,18 @@ class BlockBuilder : public Canon {
   int coolant_ = 0;
   int overrides_ = 0xF;
   program::ProcessParams process_;
+
+  PathMode path_mode_ = PathMode::kContinuous;
+  double path_tol_mm_ = 0;  // G64 P in mm; 0: no blending
+  struct RunPoint {
+    std::vector<double> pos;  // machine mm, every axis
+    SourceRef ref;            // the move that ends here (the first: the run's first move)
+  };
+  std::vector<RunPoint> run_;  // run_[0]: where the run starts
+  double run_feed_ = 0;
+  double run_rpm_ = 0;
+  program::ProcessParams run_process_;
+  bool flushing_ = false;
 };
 
 }  // namespace cnc::rs274

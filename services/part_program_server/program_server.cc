@@ -175,6 +175,17 @@ ProgramSetup program_setup(const config::MachineConfig& cfg) {
   s.builder.process = program::ProcessParams{cfg.process.ball_radius_mm, cfg.process.flutes, cfg.process.pick_feed_mm,
                                              cfg.process.target_rmax_um};
   s.max_validation_lines = cfg.program.max_validation_lines;
+  s.builder.fit_runs = cfg.program.g64_fit;
+  s.builder.fit_max_segment_mm = cfg.program.g64_fit_max_segment_mm;
+  s.builder.fit_max_turn_deg = cfg.program.g64_fit_max_turn_deg;
+  s.builder.ipo_period_s = cfg.ipo_period_s;
+  {
+    // The interpolator's corner rule (planner.cc, corner_speed) with the path limits.
+    const double T = cfg.ipo_period_s;
+    s.builder.corner_dv_mm_s = std::min(cfg.path_accel_mm_s2 * T, 0.5 * cfg.path_jerk_mm_s3 * T * T);
+    for (const auto& a : cfg.axes)
+      s.builder.corner_dv_mm_s = std::min(s.builder.corner_dv_mm_s, std::min(a.max_accel_mm_s2 * T, 0.5 * a.max_jerk_mm_s3 * T * T));
+  }
   for (const auto& a : cfg.axes) s.travel_mm.emplace_back(a.min_mm, a.max_mm);
   return s;
 }

@@ -1,0 +1,300 @@
+#include "common/geometry/polyline_fit.h"
+
+#include <Eigen/Sparse>
+#include <Eigen/SparseCholesky>
+#include <algorithm>
+#include <cmath>
+
+#include "common/geometry/nurbs.h"
+
+namespace cnc::geometry {
+
+namespace {
+
+constexpr int kDegree = 3;
+// Data points per knot span to start from: smooth through posted rounding noise;
+// the refinement adds knots where the tolerance asks for them.
+constexpr int kPointsPerSpan = 8;
+constexpr int kMaxRounds = 30;
+// Weight of the control polygon's second differences against the data's squared
+// distances: regularizes spans without data and damps noise, a bias far below
+// any tolerance used here (κ·h²·λ for control spacing h).
+constexpr double kSmoothing = 1e-3;
+constexpr double kMidWeight = 0.25;
+constexpr int kMinInSpan = 1;
+
+// Index k of the span [U[k], U[k+1]) holding u (clamped cubic; u_max in the last span).
+int span_of(const std::vector<double>& U, int n_ctrl, double u) {
+  if (u >= U[static_cast<size_t>(n_ctrl)]) return n_ctrl - 1;
+  if (u <= U[kDegree]) return kDegree;
+  const auto it = std::upper_bound(U.begin() + kDegree, U.begin() + n_ctrl + 1, u);
+  return static_cast<int>(it - U.begin()) - 1;
+}
+
+// The four non-zero cubic basis functions at u in span k (The NURBS Book, A2.2).
+void basis(const std::vector<double>& U, int k, double u, double N[4]) {
+  double left[4], right[4];
+  N[0] = 1.0;
+  for (int j = 1; j <= kDegree; ++j) {
+    left[j] = u - U[static_cast<size_t>(k + 1 - j)];
+    right[j] = U[static_cast<size_t>(k + j)] - u;
+    double saved = 0.0;
+    for (int r = 0; r < j; ++r) {
+      const double den = right[r + 1] + left[j - r];
+      const double t = den != 0 ? N[r] / den : 0.0;
+      N[r] = saved + right[r + 1] * t;
+      saved = left[j - r] * t;
+    }
+    N[j] = saved;
+  }
+}
+
+std::vector<double> clamped_knots(const std::vector<double>& breaks) {
+  std::vector<double> U;
+  U.reserve(breaks.size() + 6);
+  for (int i = 0; i < kDegree; ++i) U.push_back(breaks.front());
+  U.insert(U.end(), breaks.begin(), breaks.end());
+  for (int i = 0; i < kDegree; ++i) U.push_back(breaks.back());
+  return U;
+}
+
+// Projects q onto the curve near parameter t (Newton on (C - q)·C' = 0, kept in [lo, hi]).
+double project(const NurbsCurve& c, const Eigen::Vector3d& q, double t, double lo, double hi, double* dist) {
+  Vec3 d[3];
+  for (int it = 0; it < 4; ++it) {
+    c.derivatives(t, 2, d);
+    const Vec3 r = d[0] - q;
+    const double f = r.dot(d[1]);
+    const double fp = d[1].squaredNorm() + r.dot(d[2]);
+    if (!(fp > 0)) break;
+    const double next = std::clamp(t - f / fp, lo, hi);
+    if (std::fabs(next - t) < 1e-13 * (1.0 + std::fabs(t))) {
+      t = next;
+      break;
+    }
+    t = next;
+  }
+  *dist = (c.point(t) - q).norm();
+  return t;
+}
+
+}  // namespace
+
+Eigen::Vector3d cubic_point(const std::vector<double>& knots, const std::vector<Eigen::Vector3d>& ctrl, double u) {
+  const int n = static_cast<int>(ctrl.size());
+  const int k = span_of(knots, n, u);
+  double N[4];
+  basis(knots, k, u, N);
+  Eigen::Vector3d p = Eigen::Vector3d::Zero();
+  for (int j = 0; j < 4; ++j) p += N[j] * ctrl[static_cast<size_t>(k - kDegree + j)];
+  return p;
+}
+
+CubicFit fit_cubic(const std::vector<Eigen::Vector3d>& pts, double tol) {
+  CubicFit out;
+  const int np = static_cast<int>(pts.size());
+  if (np < 2 || !(tol > 0)) return out;
+  std::vector<double> t(static_cast<size_t>(np), 0.0);
+  for (int i = 1; i < np; ++i) {
+    const double l = (pts[static_cast<size_t>(i)] - pts[static_cast<size_t>(i - 1)]).norm();
+    if (!(l > 0)) return out;
+    t[static_cast<size_t>(i)] = t[static_cast<size_t>(i - 1)] + l;
+  }
+  const double L = t.back();
+  // Segment midpoints and their parameters (checked, not fitted).
+  std::vector<Eigen::Vector3d> mids(static_cast<size_t>(np - 1));
+  std::vector<double> tm(static_cast<size_t>(np - 1));
+  for (int i = 0; i + 1 < np; ++i) {
+    mids[static_cast<size_t>(i)] = 0.5 * (pts[static_cast<size_t>(i)] + pts[static_cast<size_t>(i + 1)]);
+    tm[static_cast<size_t>(i)] = 0.5 * (t[static_cast<size_t>(i)] + t[static_cast<size_t>(i + 1)]);
+  }
+
+  std::vector<double> breaks;
+  const int spans0 = std::max(1, (np - 1) / kPointsPerSpan);
+  for (int j = 0; j <= spans0; ++j) {
+    const int i = static_cast<int>(std::lround(static_cast<double>(j) * (np - 1) / spans0));
+    breaks.push_back(j == spans0 ? L : t[static_cast<size_t>(i)]);
+  }
+  breaks.erase(std::unique(breaks.begin(), breaks.end()), breaks.end());
+
+  for (int round = 1; round <= kMaxRounds; ++round) {
+    out.rounds = round;
+    const std::vector<double> U = clamped_knots(breaks);
+    const int nc = static_cast<int>(U.size()) - kDegree - 1;  // control points
+    const int nu = nc - 2;                                     // unknowns: all but the two ends
+    std::vector<Eigen::Vector3d> P(static_cast<size_t>(nc), Eigen::Vector3d::Zero());
+    P.front() = pts.front();
+    P.back() = pts.back();
+    if (nu > 0) {
+      std::vector<Eigen::Triplet<double>> trip;
+      trip.reserve(static_cast<size_t>(np) * 16 + static_cast<size_t>(nc) * 9);
+      Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(nu, 3);
+      auto add_row = [&](const int* idx, const double* w, int cnt, const Eigen::Vector3d& target, double weight) {
+        // One squared residual weight·|Σ w_j P_idx_j - target|²: known ends move to the right-hand side.
+        Eigen::Vector3d known = target;
+        for (int a = 0; a < cnt; ++a)
+          if (idx[a] == 0 || idx[a] == nc - 1) known -= w[a] * P[static_cast<size_t>(idx[a])];
+        for (int a = 0; a < cnt; ++a) {
+          const int ia = idx[a] - 1;
+          if (ia < 0 || ia >= nu) continue;
+          rhs.row(ia) += weight * w[a] * known.transpose();
+          for (int b = 0; b < cnt; ++b) {
+            const int ib = idx[b] - 1;
+            if (ib < 0 || ib >= nu) continue;
+            trip.emplace_back(ia, ib, weight * w[a] * w[b]);
+          }
+        }
+      };
+      // The vertices, and the segments' midpoints with a lower weight: the run is a
+      // polyline, and the curve must not swing away from it between its vertices.
+      auto add_data = [&](double u, const Eigen::Vector3d& q, double weight) {
+        const int k = span_of(U, nc, u);
+        double N[4];
+        basis(U, k, u, N);
+        int idx[4];
+        for (int j = 0; j < 4; ++j) idx[j] = k - kDegree + j;
+        add_row(idx, N, 4, q, weight);
+      };
+      for (int i = 0; i < np; ++i) add_data(t[static_cast<size_t>(i)], pts[static_cast<size_t>(i)], 1.0);
+      for (int i = 0; i + 1 < np; ++i) add_data(tm[static_cast<size_t>(i)], mids[static_cast<size_t>(i)], kMidWeight);
+      const double lambda = kSmoothing * static_cast<double>(np) / static_cast<double>(nc);
+      for (int j = 1; j + 1 < nc; ++j) {
+        const int idx[3] = {j - 1, j, j + 1};
+        const double w[3] = {1.0, -2.0, 1.0};
+        add_row(idx, w, 3, Eigen::Vector3d::Zero(), lambda);
+      }
+      Eigen::SparseMatrix<double> A(nu, nu);
+      A.setFromTriplets(trip.begin(), trip.end());
+      Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(A);
+      if (solver.info() != Eigen::Success) return out;
+      const Eigen::MatrixXd X = solver.solve(rhs);
+      if (solver.info() != Eigen::Success) return out;
+      for (int j = 0; j < nu; ++j) P[static_cast<size_t>(j + 1)] = X.row(j).transpose();
+    }
+    for (const auto& p : P)
+      if (!p.allFinite()) return out;
+
+    const NurbsCurve curve(kDegree + 1, U, P, std::vector<double>(P.size(), 1.0));
+    // Projections: vertices (their parameters are corrected for the next round) and midpoints.
+    double worst = 0;
+    std::vector<char> bad(breaks.size(), 0);
+    auto mark = [&](double u) {
+      const auto it = std::upper_bound(breaks.begin(), breaks.end(), u);
+      size_t s = static_cast<size_t>(std::max<std::ptrdiff_t>(0, (it - breaks.begin()) - 1));
+      s = std::min(s, breaks.size() - 2);
+      bad[s] = 1;
+    };
+    for (int i = 1; i + 1 < np; ++i) {
+      double dist = 0;
+      const double lo = t[static_cast<size_t>(i - 1)], hi = t[static_cast<size_t>(i + 1)];
+      const double u = project(curve, pts[static_cast<size_t>(i)], t[static_cast<size_t>(i)], lo, hi, &dist);
+      worst = std::max(worst, dist);
+      if (dist > tol) mark(u);
+    }
+    for (int i = 0; i + 1 < np; ++i) {
+      double dist = 0;
+      const double u = project(curve, mids[static_cast<size_t>(i)], tm[static_cast<size_t>(i)],
+                               t[static_cast<size_t>(i)], t[static_cast<size_t>(i + 1)], &dist);
+      worst = std::max(worst, dist);
+      if (dist > tol) mark(u);
+    }
+    out.max_error = worst;
+    if (worst <= tol) {
+      out.ok = true;
+      out.knots = U;
+      out.ctrl = std::move(P);
+      out.params = std::move(t);
+      return out;
+    }
+    // A span is halved only while it holds at least two of the fitted points
+    // (vertices and midpoints): an empty span would let the curve swing freely.
+    std::vector<int> inside(breaks.size(), 0);
+    auto count = [&](double u) {
+      const auto it = std::upper_bound(breaks.begin(), breaks.end(), u);
+      const size_t sp = std::min(static_cast<size_t>(std::max<std::ptrdiff_t>(0, (it - breaks.begin()) - 1)),
+                                 breaks.size() - 2);
+      if (u > breaks[sp] && u < breaks[sp + 1]) ++inside[sp];
+    };
+    for (int i = 1; i + 1 < np; ++i) count(t[static_cast<size_t>(i)]);
+    for (int i = 0; i + 1 < np; ++i) count(tm[static_cast<size_t>(i)]);
+    std::vector<double> next;
+    next.reserve(breaks.size() * 2);
+    bool added = false;
+    for (size_t s = 0; s + 1 < breaks.size(); ++s) {
+      next.push_back(breaks[s]);
+      if (bad[s] && inside[s] >= kMinInSpan) {
+        next.push_back(0.5 * (breaks[s] + breaks[s + 1]));
+        added = true;
+      }
+    }
+    next.push_back(breaks.back());
+    if (!added) return out;
+    breaks = std::move(next);
+  }
+  return out;
+}
+
+std::vector<CubicPiece> split_cubic(const std::vector<double>& knots, const std::vector<Eigen::Vector3d>& ctrl,
+                                    int max_spans) {
+  std::vector<double> U = knots;
+  std::vector<Eigen::Vector3d> P = ctrl;
+  // Distinct interior knot values; every max_spans-th is a cut.
+  std::vector<double> cuts;
+  {
+    int spans = 0;
+    for (size_t i = kDegree + 1; i + kDegree + 1 < U.size(); ++i) {
+      if (U[i] == U[i - 1]) continue;
+      if (++spans % std::max(1, max_spans) == 0) cuts.push_back(U[i]);
+    }
+  }
+  for (double u : cuts) {
+    int s = static_cast<int>(std::count(U.begin(), U.end(), u));
+    while (s < kDegree) {
+      const int n = static_cast<int>(P.size());
+      const int k = static_cast<int>(std::upper_bound(U.begin(), U.end(), u) - U.begin()) - 1;
+      std::vector<Eigen::Vector3d> Q(static_cast<size_t>(n + 1));
+      for (int i = 0; i <= n; ++i) {
+        if (i <= k - kDegree) {
+          Q[static_cast<size_t>(i)] = P[static_cast<size_t>(i)];
+        } else if (i >= k - s + 1) {
+          Q[static_cast<size_t>(i)] = P[static_cast<size_t>(i - 1)];
+        } else {
+          const double a = (u - U[static_cast<size_t>(i)]) / (U[static_cast<size_t>(i + kDegree)] - U[static_cast<size_t>(i)]);
+          Q[static_cast<size_t>(i)] = a * P[static_cast<size_t>(i)] + (1.0 - a) * P[static_cast<size_t>(i - 1)];
+        }
+      }
+      U.insert(U.begin() + k + 1, u);
+      P = std::move(Q);
+      ++s;
+    }
+  }
+  std::vector<CubicPiece> out;
+  size_t first_ctrl = 0;
+  size_t a_prev = 1;  // first index of the piece's start knot among the triple (clamped start: 1..3)
+  auto emit = [&](size_t a_end, double u_end) {
+    CubicPiece piece;
+    const double u_start = U[a_prev];
+    for (int i = 0; i < kDegree + 1; ++i) piece.knots.push_back(u_start);
+    for (size_t i = a_prev + kDegree; i < a_end; ++i) piece.knots.push_back(U[i]);
+    for (int i = 0; i < kDegree + 1; ++i) piece.knots.push_back(u_end);
+    piece.ctrl.assign(P.begin() + static_cast<std::ptrdiff_t>(first_ctrl), P.begin() + static_cast<std::ptrdiff_t>(a_end));
+    out.push_back(std::move(piece));
+  };
+  for (double u : cuts) {
+    const size_t a = static_cast<size_t>(std::lower_bound(U.begin(), U.end(), u) - U.begin());
+    emit(a, u);  // control points first_ctrl .. a-1 (P[a-1] is on the curve at u)
+    first_ctrl = a - 1;
+    a_prev = a;
+  }
+  emit(P.size(), U.back());
+  return out;
+}
+
+double corner_blend_leg(const Eigen::Vector3d& u_in, const Eigen::Vector3d& u_out, double tol, double max_leg) {
+  const double gap = (u_out - u_in).norm();
+  if (!(gap > 1e-9) || !(tol > 0) || !(max_leg > 0)) return 0;
+  if (u_in.dot(u_out) < std::cos(150.0 * M_PI / 180.0)) return 0;
+  return std::min(tol / (0.375 * gap), 0.5 * max_leg);
+}
+
+}  // namespace cnc::geometry
