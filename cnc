@@ -9,7 +9,8 @@
 #   ./cnc replay LOG [--machine F] [--program P]   re-run the interpolator from a log, bit for bit
 #   ./cnc plan PROGRAM [--machine FILE] --csv OUT [--plot PNG]  dry run: setpoints, time, feed plot
 #   ./cnc report LOG --out DIR [--tolerance-um U] [--target-rmax-um U]  run report to open in a browser
-#   ./cnc predict slot|wall|zmap|calibrate ...      cutting force, deflection, Z-map (cnc-predict --help)
+#   ./cnc predict PROGRAM --tool F [--material F] --out DIR  force, deflection, surface along a dry run
+#   ./cnc predict slot|wall|zmap|zmap-check|calibrate ...    one model at a time (cnc-predict --help)
 #   ./cnc conformance [conformance.py options]     our interpreter against LinuxCNC's rs274
 #   ./cnc bench latency [--load N] [--out DIR]     cycle timing of the demo, idle and with N busy loops
 #   ./cnc key gen|rotate|show [--machine FILE] [--grace S] [--activate-in S]  the cell's signing key
@@ -220,6 +221,28 @@ cmd_plan() {
   run_child /usr/bin/python3 "$ROOT/tools/report/plot_plan.py" "$csv" --out "$plot" --title "$(basename "$program")"
 }
 
+# predict PROGRAM --tool FILE [--material FILE] --out DIR [--machine FILE] [cnc-predict program options]
+# runs the dry run (cnc-plan) into DIR/setpoints.csv, predicts along it and writes DIR/index.html;
+# predict slot|wall|zmap|zmap-check|calibrate ...: cnc-predict itself.
+cmd_predict() {
+  if [ $# -eq 0 ] || [ ! -f "$1" ]; then exec "$BUILD/tools/cnc-predict" "$@"; fi
+  local program="$1"; shift
+  local machine="$DEFAULT_MACHINE" out="" rest=()
+  while [ $# -gt 0 ]; do
+    case "$1" in
+      --machine) machine="$2"; shift 2 ;;
+      --out) out="$2"; shift 2 ;;
+      *) rest+=("$1"); shift ;;
+    esac
+  done
+  [ -n "$out" ] || die "predict: --out DIR is required"
+  mkdir -p "$out"
+  say "predict: dry run of $program"
+  run_child "$BUILD/tools/cnc-plan" --machine "$machine" --program "$program" --csv "$out/setpoints.csv" >&2
+  run_child "$BUILD/tools/cnc-predict" program --csv "$out/setpoints.csv" --program "$program" --out "$out" "${rest[@]}"
+  run_child /usr/bin/python3 "$ROOT/tools/predict/make_predict_report.py" "$out" --title "$(basename "$program")"
+}
+
 # report LOG --out DIR [--tolerance-um U] [--target-rmax-um U] [--title T]
 # cnc-logexport writes the run's tables into DIR, make_report.py plots them into DIR/index.html.
 cmd_report() {
@@ -297,7 +320,7 @@ main() {
     replay) [ $# -gt 0 ] || die "replay: LOG is required"; log="$1"; shift; exec "$BUILD/tools/cnc-replay" --log "$log" "$@" ;;
     plan) [ -x "$BUILD/tools/cnc-plan" ] || build; cmd_plan "$@" ;;
     report) [ -x "$BUILD/tools/cnc-logexport" ] || build; cmd_report "$@" ;;
-    predict) [ -x "$BUILD/tools/cnc-predict" ] || build; exec "$BUILD/tools/cnc-predict" "$@" ;;
+    predict) { [ -x "$BUILD/tools/cnc-predict" ] && [ -x "$BUILD/tools/cnc-plan" ]; } || build; cmd_predict "$@" ;;
     conformance) [ -x "$BUILD/tools/rs274/cnc-rs274" ] || build; cmd_conformance "$@" ;;
     bench) cmd_bench "$@" ;;
     key) cmd_key "$@" ;;

@@ -229,6 +229,12 @@ ZMap::ZMap(double x0, double y0, double pitch, int nx, int ny, double z_init)
     : x0_(x0), y0_(y0), pitch_(pitch), nx_(std::max(1, nx)), ny_(std::max(1, ny)),
       z_(static_cast<size_t>(nx_) * static_cast<size_t>(ny_), static_cast<float>(z_init)) {}
 
+double ZMap::sample(double px, double py) const {
+  const double fi = std::floor((px - x0_) / pitch_), fj = std::floor((py - y0_) / pitch_);
+  if (!(fi >= 0 && fj >= 0 && fi < nx_ && fj < ny_)) return std::numeric_limits<double>::quiet_NaN();
+  return z(static_cast<int>(fi), static_cast<int>(fj));
+}
+
 void ZMap::fill(const std::function<double(double, double)>& z_of_xy) {
   for (int j = 0; j < ny_; ++j) {
     for (int i = 0; i < nx_; ++i) z_[static_cast<size_t>(j) * static_cast<size_t>(nx_) + static_cast<size_t>(i)] = static_cast<float>(z_of_xy(x(i), y(j)));

@@ -62,6 +62,11 @@ class ZMap {
   double y(int j) const { return y0_ + (j + 0.5) * pitch_; }
   float z(int i, int j) const { return z_[static_cast<size_t>(j) * static_cast<size_t>(nx_) + static_cast<size_t>(i)]; }
   const std::vector<float>& data() const { return z_; }
+  // The column holding (x, y), or NaN outside the grid.
+  double sample(double px, double py) const;
+  float& cell(int i, int j) { return z_[static_cast<size_t>(j) * static_cast<size_t>(nx_) + static_cast<size_t>(i)]; }
+  double x0() const { return x0_; }
+  double y0() const { return y0_; }
 
  private:
   friend struct ZMapBand;

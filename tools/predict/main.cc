@@ -14,6 +14,11 @@
 //   cnc-predict zmap-check --out DIR [--pitch MM] [--threads N]
 //       the digest's cases and an (α, f_t) grid: rmax_cases.csv, rmax_grid.csv, two surfaces;
 //       tools/predict/plot_zmap.py DIR plots them
+//   cnc-predict program --csv SETPOINTS --tool FILE [--material FILE] --out DIR [--program NGC]
+//                    [--spindle-rpm S] [--pitch MM] [--stock-top Z] [--margin MM]
+//       along a dry run's setpoints (cnc-plan --csv) through a Z-map stock: a flat end
+//       mill's engagement, forces, deflection and wall error per setpoint; a ball end
+//       mill's surface and R_max map (./cnc predict PROGRAM … runs the dry run first)
 //   cnc-predict calibrate --tool FILE --csv HISTORY --radial-depth AE --axial-depth A
 //                    --feed-per-tooth C [--mode up|down] --steps-per-rev N [--min-sin S]
 //       identifies K_T(h), K_R(h) and the linear edge coefficients from a measured
@@ -33,6 +38,7 @@
 #include "common/process/roughness.h"
 #include "common/process/zmap.h"
 #include "tools/predict/args.h"
+#include "tools/predict/program_predict.h"
 
 namespace {
 using namespace cnc::process;
@@ -46,6 +52,8 @@ constexpr const char* kUsage =
     "       cnc-predict zmap --alpha DEG --feed-per-tooth C [--pick-feed P] [--radius R] [--flutes N] [--window MM] "
     "[--pitch MM] [--threads N] [--out DIR]\n"
     "       cnc-predict zmap-check --out DIR [--pitch MM] [--threads N]\n"
+    "       cnc-predict program --csv SETPOINTS --tool FILE [--material FILE] --out DIR [--program NGC] "
+    "[--spindle-rpm S] [--pitch MM] [--stock-top Z]\n"
     "       cnc-predict calibrate --tool FILE --csv HISTORY --radial-depth AE --axial-depth A "
     "--feed-per-tooth C --steps-per-rev N [--mode up|down] [--min-sin S]\n";
 
@@ -250,6 +258,7 @@ int main(int argc, char** argv) {
     if (cmd == "wall") return cmd_wall(a);
     if (cmd == "zmap") return cmd_zmap(a);
     if (cmd == "zmap-check") return cmd_zmap_check(a);
+    if (cmd == "program") return cnc::predict::cmd_program(a);
     if (cmd == "--help" || cmd == "-h") {
       std::fputs(kUsage, stdout);
       return 0;
