@@ -54,12 +54,23 @@ struct ZMapBand {
     nty = (j1 - 1) / kTile - ty0 + 1;
     tmax.assign(static_cast<size_t>(ntx * nty), -std::numeric_limits<float>::infinity());
     dilated = tmax;
-    dirty.assign(tmax.size(), 1);
-    refresh();
+    // The map keeps its tile maxima between cuts (a program's passes are separate
+    // cuts); they are recomputed only after fill() or cell() changed the columns.
+    const bool valid = m.tiles_valid_ && m.tile_max_.size() == static_cast<size_t>(ntx) * static_cast<size_t>((m.ny_ + kTile - 1) / kTile);
+    if (valid) std::copy_n(m.tile_max_.begin() + static_cast<long>(ty0) * ntx, tmax.size(), tmax.begin());
+    dirty.assign(tmax.size(), valid ? 0 : 1);
+    refresh(true);
   }
 
-  void refresh() {
-    bool any = false;
+  // The band's tiles back into the map's.
+  void store() const {
+    const size_t total = static_cast<size_t>(ntx) * static_cast<size_t>((m.ny_ + kTile - 1) / kTile);
+    if (m.tile_max_.size() != total) return;
+    std::copy(tmax.begin(), tmax.end(), m.tile_max_.begin() + static_cast<long>(ty0) * ntx);
+  }
+
+  void refresh(bool force = false) {
+    bool any = force;
     for (int ty = 0; ty < nty; ++ty) {
       for (int tx = 0; tx < ntx; ++tx) {
         const size_t t = static_cast<size_t>(ty * ntx + tx);
@@ -236,6 +247,7 @@ double ZMap::sample(double px, double py) const {
 }
 
 void ZMap::fill(const std::function<double(double, double)>& z_of_xy) {
+  tiles_valid_ = false;
   for (int j = 0; j < ny_; ++j) {
     for (int i = 0; i < nx_; ++i) z_[static_cast<size_t>(j) * static_cast<size_t>(nx_) + static_cast<size_t>(i)] = static_cast<float>(z_of_xy(x(i), y(j)));
   }
@@ -258,6 +270,10 @@ ZMapStats ZMap::cut(const BallCutter& tool, const std::vector<ToolSample>& path,
     for (ZMapBand& b : bands) pool.emplace_back([&b, &steps, &tool] { b.sweep(steps, tool); });
     for (std::thread& th : pool) th.join();
   }
+  const size_t tiles = static_cast<size_t>((nx_ + kTile - 1) / kTile) * static_cast<size_t>(tile_rows);
+  tile_max_.assign(tiles, 0.0f);
+  for (const ZMapBand& b : bands) b.store();
+  tiles_valid_ = true;
   ZMapStats total;
   total.steps = bands[0].stats.steps;
   for (const ZMapBand& b : bands) {

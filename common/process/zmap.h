@@ -64,7 +64,10 @@ class ZMap {
   const std::vector<float>& data() const { return z_; }
   // The column holding (x, y), or NaN outside the grid.
   double sample(double px, double py) const;
-  float& cell(int i, int j) { return z_[static_cast<size_t>(j) * static_cast<size_t>(nx_) + static_cast<size_t>(i)]; }
+  float& cell(int i, int j) {
+    tiles_valid_ = false;
+    return z_[static_cast<size_t>(j) * static_cast<size_t>(nx_) + static_cast<size_t>(i)];
+  }
   double x0() const { return x0_; }
   double y0() const { return y0_; }
 
@@ -73,6 +76,8 @@ class ZMap {
   double x0_, y0_, pitch_;
   int nx_, ny_;
   std::vector<float> z_;
+  std::vector<float> tile_max_;  // kept between cuts, see ZMapBand
+  bool tiles_valid_ = false;
 };
 
 // Peak-to-valley of the deviation dev(x, y, z) (e.g. the distance from the nominal
