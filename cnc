@@ -11,6 +11,8 @@
 #   ./cnc report LOG --out DIR [--tolerance-um U] [--target-rmax-um U]  run report to open in a browser
 #   ./cnc predict PROGRAM --tool F [--material F] --out DIR  force, deflection, surface along a dry run
 #   ./cnc predict slot|wall|zmap|zmap-check|calibrate ...    one model at a time (cnc-predict --help)
+#   ./cnc cam drop --stl MESH --tool ball:D|flat:D|bull:D:r --points XY.csv --out XYZ.csv [--threads N]
+#                                                  offline CAM: drop-cutter CL heights (cnc-cam --help)
 #   ./cnc conformance [conformance.py options]     our interpreter against LinuxCNC's rs274
 #   ./cnc bench latency [--load N] [--out DIR]     cycle timing of the demo, idle and with N busy loops
 #   ./cnc key gen|rotate|show [--machine FILE] [--grace S] [--activate-in S]  the cell's signing key
@@ -35,6 +37,7 @@ PACKAGES=(
   python3-pymodbus python3-serial python3-serial-asyncio python3-yaml  # drive emulated with pymodbus (interop test)
   mbpoll                                 # reads the simulator's registers (interop test)
   linuxcnc-uspace                        # rs274: LinuxCNC's interpreter, the conformance oracle (tools/conformance)
+  libcli11-dev                           # command-line flags of cnc-cam
 )
 
 # Service name -> executable, in start order. The logger starts first and stops
@@ -320,6 +323,7 @@ main() {
     replay) [ $# -gt 0 ] || die "replay: LOG is required"; log="$1"; shift; exec "$BUILD/tools/cnc-replay" --log "$log" "$@" ;;
     plan) [ -x "$BUILD/tools/cnc-plan" ] || build; cmd_plan "$@" ;;
     report) [ -x "$BUILD/tools/cnc-logexport" ] || build; cmd_report "$@" ;;
+    cam) [ -x "$BUILD/tools/cam/cnc-cam" ] || build; exec "$BUILD/tools/cam/cnc-cam" "$@" ;;
     predict) { [ -x "$BUILD/tools/cnc-predict" ] && [ -x "$BUILD/tools/cnc-plan" ]; } || build; cmd_predict "$@" ;;
     conformance) [ -x "$BUILD/tools/rs274/cnc-rs274" ] || build; cmd_conformance "$@" ;;
     bench) cmd_bench "$@" ;;
