@@ -65,16 +65,18 @@ enum Class : uint32_t {
   kSmallArc = 1u << 13,        // an arc of radius below 1 mm
   kArcXZYZ = 1u << 14,         // an arc in G18 or G19
   kHelix = 1u << 15,           // an arc whose third axis moves
-  kAllClasses = (1u << 16) - 1,
+  kMicroG64 = 1u << 16,        // a run of G1 micro-segments under G64 P (fitted, blended)
+  kAllClasses = (1u << 17) - 1,
 };
 
 inline std::string class_names(uint32_t c) {
   static const char* const kNames[] = {"nurbs-g5.2", "nurbs-g6.2",      "clustered-knots", "repeated-knots",
                                        "zero-tangent-start", "zero-tangent-end", "extreme-weights", "short",
                                        "long",       "arc",             "arc-end-off-radius", "micro-segments",
-                                       "line",       "small-arc",       "arc-g18-g19",     "helix"};
+                                       "line",       "small-arc",       "arc-g18-g19",     "helix",
+                                       "micro-segments-g64"};
   std::string s;
-  for (int i = 0; i < 16; ++i)
+  for (int i = 0; i < 17; ++i)
     if (c & (1u << i)) {
       if (!s.empty()) s += '+';
       s += kNames[i];
@@ -231,7 +233,11 @@ class Generator {
     V3 p = cur;
     const double f = feed();
     double len = 0;
-    pc.text = "G1";
+    // Half the runs under G64 P (fitted within P, corners blended), as CAM output runs
+    // (drawn only where the class is allowed: other masks keep their programs).
+    const bool g64 = (allowed_ & kMicroG64) != 0 && coin(0.5);
+    if (g64) pc.classes |= kMicroG64;
+    pc.text = g64 ? "G64 P" + fmt(log_uni(1e-3, 0.05), 4) + "\nG1" : "G1";
     for (int i = 0; i < n; ++i) {
       const double L = uni(0.05, 0.5);
       th += turn(rng_);
@@ -249,6 +255,7 @@ class Generator {
       len += L;
     }
     if (p == cur) return {};
+    if (g64) pc.text += "G61\n";
     pc.end = p;
     pc.time_s = len / (f / 60);
     return pc;
