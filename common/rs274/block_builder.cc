@@ -166,13 +166,15 @@ void BlockBuilder::straight_feed(const SourceRef& ref, const Pose& end) {
   position_ = std::move(e);
 }
 
-void BlockBuilder::emit_line(const SourceRef& ref, const std::vector<double>& from, const std::vector<double>& to) {
-  program::Block& b = begin(ref, program::BlockKind::kLine);
+program::Block& BlockBuilder::run_block(const SourceRef& ref, program::BlockKind kind, const std::vector<double>& from,
+                                        const std::vector<double>& to) {
+  program::Block& b = begin(ref, kind);
   b.start = from;
   b.end = to;
   b.feed_mm_per_min = run_feed_;
   b.spindle_rpm = run_rpm_;
   b.process = run_process_;
+  return b;
 }
 
 // A run of G1 moves under G64 P, as blocks: stretches of short, gently turning
@@ -253,12 +255,7 @@ void BlockBuilder::flush_run() {
   };
   auto nurbs_block = [&](const SourceRef& ref, int order, std::vector<double> knots,
                          const std::vector<Eigen::Vector3d>& ctrl, const std::vector<double>& end) {
-    program::Block& b = begin(ref, program::BlockKind::kNurbs);
-    b.start = cursor;
-    b.end = end;
-    b.feed_mm_per_min = run_feed_;
-    b.spindle_rpm = run_rpm_;
-    b.process = run_process_;
+    program::Block& b = run_block(ref, program::BlockKind::kNurbs, cursor, end);
     b.nurbs.order = order;
     b.nurbs.knots = std::move(knots);
     for (const auto& c : ctrl) {
@@ -295,7 +292,7 @@ void BlockBuilder::flush_run() {
     double d2 = 0;
     for (size_t k = 0; k < 3; ++k) d2 += (line_end[k] - cursor[k]) * (line_end[k] - cursor[k]);
     if (d2 > 0) {
-      emit_line(run_[i + 1].ref, cursor, line_end);
+      run_block(run_[i + 1].ref, program::BlockKind::kLine, cursor, line_end);
       cursor = line_end;
     }
     if (leg[i + 1] > 0) {

@@ -96,7 +96,9 @@ class BlockBuilder : public Canon {
   // G64 P: the G1 moves held back to be blended or fitted, and their emission.
   bool blending() const;
   void flush_run();
-  void emit_line(const SourceRef& ref, const std::vector<double>& from, const std::vector<double>& to);
+  // A block of the run being flushed: its feed, spindle and process, from `from` to `to`.
+  program::Block& run_block(const SourceRef& ref, program::BlockKind kind, const std::vector<double>& from,
+                            const std::vector<double>& to);
 
   BuilderSetup setup_;
   std::function<const std::string&(int32_t)> file_name_;
