@@ -18,7 +18,10 @@
 //                    [--spindle-rpm S] [--pitch MM] [--stock-top Z] [--margin MM]
 //       along a dry run's setpoints (cnc-plan --csv) through a Z-map stock: a flat end
 //       mill's engagement, forces, deflection and wall error per setpoint; a ball end
-//       mill's surface and R_max map (./cnc predict PROGRAM … runs the dry run first)
+//       mill's surface and R_max map (./cnc predict PROGRAM … runs the dry run first);
+//       --window X0,Y0,X1,Y1 [--pick-feed P]: a ball's Z-map over that window only, its
+//       R_max against the nominal surface and the extended model (the Fig. 11-like check,
+//       tools/predict/fig11_passes.py writes the program)
 //   cnc-predict calibrate --tool FILE --csv HISTORY --radial-depth AE --axial-depth A
 //                    --feed-per-tooth C [--mode up|down] --steps-per-rev N [--min-sin S]
 //       identifies K_T(h), K_R(h) and the linear edge coefficients from a measured

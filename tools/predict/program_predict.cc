@@ -15,6 +15,7 @@
 #include "common/process/cutting_config.h"
 #include "common/process/deflection.h"
 #include "common/process/engagement.h"
+#include "common/process/roughness.h"
 #include "common/process/zmap.h"
 #include "tools/predict/args.h"
 
@@ -122,6 +123,13 @@ int cmd_program(const Args& a) {
   if (x0 > x1) throw std::invalid_argument("no cutting move in the setpoints");
   const double margin = r + a.num("margin", 1.0);
   x0 -= margin, x1 += margin, y0 -= margin, y1 += margin;
+  if (a.has("window")) {  // X0,Y0,X1,Y1: the Z-map over this window only
+    std::string w = a.str("window");
+    std::replace(w.begin(), w.end(), ',', ' ');
+    std::istringstream ws(w);
+    if (!(ws >> x0 >> y0 >> x1 >> y1) || !(x1 > x0) || !(y1 > y0))
+      throw std::invalid_argument("--window expects X0,Y0,X1,Y1 with X1 > X0 and Y1 > Y0");
+  }
   ztop = a.num("stock-top", ztop);
   const double area = (x1 - x0) * (y1 - y0);
   const double pitch = a.num("pitch", std::max(0.01, std::sqrt(area / a.num("max-cells", 4e6))));
@@ -147,6 +155,66 @@ int cmd_program(const Args& a) {
     std::fprintf(out, "t_s,line,x_mm,y_mm,z_mm,feed_mm_min\n");
     for (const Setpoint& s : sp) std::fprintf(out, "%.4f,%d,%.4f,%.4f,%.4f,%.1f\n", s.t, s.line, s.p.x(), s.p.y(), s.p.z(), s.feed);
     std::fprintf(stderr, "cnc-predict program: ball end mill: %lld steps, %lld columns lowered\n", st.steps, st.cells_cut);
+    if (a.has("window")) {
+      // R_max over the window against the nominal surface: the ball centre path of the
+      // pass nearest the window's centre line (in XZ, extruded along Y) offset by r
+      // along its normal; deviations along that normal. (A least-squares reference
+      // fitted to the cusps and cutting remains would tilt and bend towards them and
+      // read several µm high.) Against the extended model at that pass's setpoints in
+      // the window.
+      const double yc = 0.5 * (y0 + y1);
+      double best = 1e300;
+      for (const Setpoint& q : sp) {
+        if (q.cutting) best = std::min(best, std::abs(q.p.y() - yc));
+      }
+      std::vector<Eigen::Vector2d> feet;  // (x, z) of the nominal surface
+      for (size_t k = 1; k + 1 < sp.size(); ++k) {
+        const Setpoint& q = sp[k];
+        if (!q.cutting || std::abs(std::abs(q.p.y() - yc) - best) > 1e-6 || q.p.x() < x0 - r || q.p.x() > x1 + r) continue;
+        const Eigen::Vector2d t(sp[k + 1].p.x() - sp[k - 1].p.x(), sp[k + 1].p.z() - sp[k - 1].p.z());
+        if (t.norm() < 1e-12 || std::abs(sp[k + 1].p.y() - q.p.y()) > 1e-6 || std::abs(sp[k - 1].p.y() - q.p.y()) > 1e-6) continue;
+        Eigen::Vector2d nrm(-t.y(), t.x());
+        nrm.normalize();
+        if (nrm.y() < 0) nrm = -nrm;
+        feet.push_back(Eigen::Vector2d(q.p.x(), q.p.z() + r) - r * nrm);
+      }
+      std::sort(feet.begin(), feet.end(), [](const Eigen::Vector2d& l, const Eigen::Vector2d& m) { return l.x() < m.x(); });
+      if (feet.size() < 2) throw std::invalid_argument("--window: no cutting pass crosses the window");
+      double lo = 1e300, hi = -1e300;
+      size_t seg = 0;
+      for (int i = 0; i < nx; ++i) {
+        const double x = stock.x(i);
+        while (seg + 2 < feet.size() && feet[seg + 1].x() < x) ++seg;
+        const Eigen::Vector2d& fa = feet[seg];
+        const Eigen::Vector2d& fb = feet[seg + 1];
+        const double dxs = fb.x() - fa.x();
+        const double slope = dxs > 0 ? (fb.y() - fa.y()) / dxs : 0.0;
+        const double znom = fa.y() + slope * (x - fa.x());
+        const double cosa = 1.0 / std::sqrt(1 + slope * slope);
+        for (int j = 0; j < ny; ++j) {
+          const double dn = (stock.z(i, j) - znom) * cosa;
+          lo = std::min(lo, dn), hi = std::max(hi, dn);
+        }
+      }
+      double mlo = 1e300, mhi = -1e300, ftlo = 1e300, fthi = -1e300, alo = 1e300, ahi = -1e300;
+      const double fp = a.num("pick-feed", 0.5);
+      for (size_t k = 1; k < sp.size(); ++k) {
+        const Setpoint& q = sp[k];
+        if (!q.cutting || std::abs(std::abs(q.p.y() - yc) - best) > 1e-6 || q.p.x() < x0 || q.p.x() > x1) continue;
+        const Eigen::Vector3d tan = q.p - sp[k - 1].p;
+        if (tan.norm() < 1e-9) continue;
+        const double ft = q.feed / (tool.flutes * rpm);
+        const double alpha = feed_inclination_angle(tan);
+        const double m = rmax_extended(r, ft, fp, alpha);
+        mlo = std::min(mlo, m), mhi = std::max(mhi, m);
+        ftlo = std::min(ftlo, ft), fthi = std::max(fthi, ft);
+        alo = std::min(alo, alpha), ahi = std::max(ahi, alpha);
+      }
+      std::printf("window %.3f,%.3f..%.3f,%.3f pitch_um=%.2f rmax_um=%.3f model_um=%.3f..%.3f f_t=%.4f..%.4f "
+                  "alpha_deg=%.2f..%.2f\n",
+                  x0, y0, x1, y1, pitch * 1e3, (hi - lo) * 1e3, mlo * 1e3, mhi * 1e3, ftlo, fthi, alo * 180 / kPi,
+                  ahi * 180 / kPi);
+    }
   } else {
     const Material mat = load_material(a.require("material"));
     const ForceModel model = a.has("model") ? force_model_from_string(a.str("model")) : mat.model;
