@@ -227,6 +227,7 @@ void Bus::reject(const std::string& channel, Reject why, const void* data, size_
   const auto hdr = peek_header(data, size);
   std::snprintf(last_reject_.data(), last_reject_.size(), "%s from sender %d: %s", it->first.c_str(),
                 hdr ? hdr->sender : 0, reject_name(why));
+  std::memcpy(last_reject_by_cause_[static_cast<size_t>(why)].data(), last_reject_.data(), last_reject_.size());
 }
 
 bool Bus::admit(const std::string& channel, const void* data, size_t size, int64_t recv_utime) {

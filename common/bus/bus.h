@@ -165,6 +165,7 @@ class Bus {
   // forged"); fixed storage, no allocation.
   int64_t rejected_total(Reject r) const { return rejects_[static_cast<int>(r)]; }
   const char* last_reject() const { return last_reject_.data(); }
+  const char* last_reject(Reject r) const { return last_reject_by_cause_[static_cast<size_t>(r)].data(); }
   // Re-reads the key file now (tests, or a bus without the watch thread). False when
   // it cannot be used (the keys in use stay); why in key_error().
   bool reload_keys();
@@ -243,6 +244,7 @@ class Bus {
   mutable std::mutex key_write_mutex_;        // held only while a new key set is written (never by the reader)
   std::array<int64_t, kRejectCauses> rejects_{};
   std::array<char, 160> last_reject_{};
+  std::array<std::array<char, 160>, kRejectCauses> last_reject_by_cause_{};
   std::atomic<int64_t> key_reloads_{0};
   std::atomic<int64_t> key_reload_failures_{0};
   std::string key_error_;

@@ -125,7 +125,7 @@ class RejectAlarms {
       char head[96];
       std::snprintf(head, sizeof head, "%lld %s message(s) dropped (total %lld): ",
                     static_cast<long long>(n - reported_[c]), bus::reject_name(cause), static_cast<long long>(n));
-      al.text = head + where + "; last: " + bus_.last_reject();
+      al.text = head + where + "; last: " + bus_.last_reject(cause);
       reported_[c] = n;
       last_s_[c] = now_s;
       ++alarms_;

@@ -4,10 +4,12 @@
 //   cnc-key rotate (--machine FILE | --file KEYFILE) [--grace S] [--activate-in S]
 //   cnc-key show   (--machine FILE | --file KEYFILE)
 //
-// gen writes one new key (mode 0600). rotate adds a new key that signs from now
-// (+ --activate-in, for a cell over several PCs: copy the file to every PC before
-// then) and keeps the keys before it accepted for --grace seconds after that (60 by
-// default); running services read the changed file within a second. show prints the
+// gen writes one new key (mode 0600). rotate adds a new key that every running
+// service accepts as soon as it has read the changed file (each checks it once a
+// second) but that signs only --activate-in seconds later (3 by default: every
+// service on this PC knows it by then; for a cell over several PCs, give the time to
+// copy the file to all of them); the keys before it stay accepted for --grace
+// seconds after that (60 by default), for messages in flight and PCs still behind. show prints the
 // key ids and their times, never a secret. Exit 0 done, 1 failed, 2 bad arguments
 // or an unusable key file.
 #include <sys/stat.h>
@@ -62,7 +64,7 @@ int main(int argc, char** argv) {
   const std::string cmd = argv[1];
   std::string machine, file;
   bool if_missing = false, force = false;
-  double grace_s = 60.0, activate_s = 0.0;
+  double grace_s = 60.0, activate_s = 3.0;
   for (int i = 2; i < argc; ++i) {
     const std::string a = argv[i];
     const auto value = [&]() -> std::string {
