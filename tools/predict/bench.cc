@@ -5,6 +5,8 @@
 //                             α 10°, 2 flutes) on a 5×5 mm window at 2 µm, 1 and 2 threads
 //                             [--window MM] [--pitch MM] [--alpha DEG]; wall and process CPU
 //                             time, and the load average (other work on the machine)
+//   cnc-predict-bench deflection  the wall's largest surface error over the paper's Table 2
+//                             ranges (RDC 0.5-2 mm, ADC 2-6 mm, 0.01-0.02 mm/tooth), its Al and S41C
 //   cnc-predict-bench calibration  coefficients recovered from synthetic noisy histories
 //                             (the unit test's set-up: 6 cuts, 1 % noise, 20 revolutions)
 #include <cmath>
@@ -18,6 +20,7 @@
 
 #include "common/process/cutting_config.h"
 #include "common/process/cutting_force.h"
+#include "common/process/deflection.h"
 #include "common/process/force_calibration.h"
 #include "common/process/zmap.h"
 #include "tools/predict/args.h"
@@ -73,6 +76,36 @@ int bench_zmap(const cnc::predict::Args& args) {
   }
   return 0;
 }
+int bench_deflection() {
+  const std::string cfg = std::string(CNC_SOURCE_DIR) + "/config/";
+  const EndMill tool = load_tool(cfg + "tools/hss_flat_4f_d6.yaml");
+  std::printf("deflection: %s, overhang %g mm, EI %.4g N mm^2; largest |surface error| over the wall, mm "
+              "(+ material left), down / up milling\n",
+              tool.name.c_str(), tool.overhang_mm, CantileverTool(tool).ei());
+  for (const char* file : {"materials/al_paper004.yaml", "materials/s41c.yaml"}) {
+    const Material mat = load_material(cfg + file);
+    const CuttingForceModel m(tool, mat, mat.model, 100);
+    std::printf("deflection: %-16s %5s %5s %6s %10s %10s %9s\n", mat.name.c_str(), "RDC", "ADC", "feed", "down_mm",
+                "up_mm", "Fmax_N");
+    for (double ae : {0.5, 1.0, 2.0}) {
+      for (double ap : {2.0, 4.0, 6.0}) {
+        for (double c : {0.01, 0.02}) {
+          double w[2] = {0, 0}, fmax = 0;
+          for (int up = 0; up < 2; ++up) {
+            const Engagement e = up ? Engagement::up_milling(6.0, ae, ap, c) : Engagement::down_milling(6.0, ae, ap, c);
+            for (const WallErrorPoint& p : wall_surface_error(m, e, 30, wall_angle(e))) {
+              if (std::abs(p.surface_error_mm) > std::abs(w[up])) w[up] = p.surface_error_mm;
+            }
+            for (const Eigen::Vector3d& f : m.simulate_revolution(e, 360).force) fmax = std::max(fmax, f.head<2>().norm());
+          }
+          std::printf("deflection: %-16s %5.1f %5.1f %6.3f %10.4f %10.4f %9.1f\n", "", ae, ap, c, w[0], w[1], fmax);
+        }
+      }
+    }
+  }
+  return 0;
+}
+
 int bench_calibration() {
   constexpr double kPi = std::numbers::pi;
   EndMill tool;
@@ -123,6 +156,7 @@ int main(int argc, char** argv) {
   try {
     const cnc::predict::Args args(argc, argv, 2);
     if (what == "force" || what == "all") bench_force(args);
+    if (what == "deflection" || what == "all") bench_deflection();
     if (what == "calibration" || what == "all") bench_calibration();
     if (what == "zmap" || what == "all") bench_zmap(args);
     return 0;
