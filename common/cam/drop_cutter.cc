@@ -2,6 +2,9 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cstring>
+#include <unordered_map>
+#include <unordered_set>
 #include <cmath>
 #include <stdexcept>
 #include <thread>
@@ -134,31 +137,53 @@ double CutterContacts::edge(double x, double y, const Vec3& p, const Vec3& q, do
   }
   // Bull: g(s) = z(s) − h(rho(s)), rho = sqrt(d² + s²), concave on [−w, w] with
   // g'(−w) = +inf and g'(w) = −inf. Newton on g' = m − h'(rho)·s/rho, kept inside the
-  // bracket of its sign change (bisection where Newton would leave it).
-  double lo = -w, hi = w;
-  s = std::clamp(m * w / std::sqrt(1 + m * m), lo, hi);  // the ball's root: a good start
+  // bracket of its sign change (bisection where Newton would leave it). The bracket
+  // starts at the edge's ends: if g' does not change sign inside the edge, a vertex
+  // holds the maximum. Each evaluation's tangent bounds g over the bracket (concavity):
+  // once that bound is not above `floor`, the edge cannot win and the search stops.
   const double r2 = r_ * r_;
+  double g = 0, gp = 0, gpp = 0;
+  auto eval = [&](double at) {
+    const double rho = std::sqrt(d2 + at * at);
+    const double t = rho - a_;
+    const double zs = p.z + m * (at - sp);
+    if (t <= 0) {
+      g = zs, gp = m, gpp = 0;
+      return;
+    }
+    const double den2 = (r_ - t) * (r_ + t);
+    if (den2 <= 0) {  // on the rim: h' infinite, only its sign matters
+      g = zs - r_, gp = at > 0 ? -std::numeric_limits<double>::infinity() : std::numeric_limits<double>::infinity();
+      gpp = 0;
+      return;
+    }
+    const double den = std::sqrt(den2);
+    const double hp = t / den, hpp = r2 / (den2 * den);
+    const double c = at / rho;
+    g = zs - (r_ - den);
+    gp = m - hp * c;
+    gpp = -(hpp * c * c + hp * d2 / (rho * rho * rho));
+  };
+  double lo = -w, hi = w;
+  auto cannot_win = [&](double at) {
+    const double ub = gp > 0 ? g + gp * (hi - at) : g + gp * (lo - at);
+    return std::isfinite(ub) && ub <= floor;
+  };
+  if (sp > lo) {
+    eval(sp);
+    if (gp <= 0) return kNoContact;  // g falls from p on: vertex p is the edge's maximum
+    lo = sp;
+  }
+  if (sq < hi) {
+    eval(sq);
+    if (gp >= 0) return kNoContact;  // g rises up to q: vertex q is the edge's maximum
+    hi = sq;
+    if (cannot_win(sq)) return kNoContact;
+  }
+  s = std::clamp(m * w / std::sqrt(1 + m * m), lo, hi);  // the ball's root: a good start
   const double eps = 1e-14 * R_;
   for (int it = 0; it < 200; ++it) {
-    const double rho = std::sqrt(d2 + s * s);
-    const double t = rho - a_;
-    double gp, gpp;
-    if (t <= 0) {
-      gp = m;
-      gpp = 0;
-    } else {
-      const double den2 = (r_ - t) * (r_ + t);
-      if (den2 <= 0) {
-        gp = s > 0 ? -1.0 : 1.0;  // on the rim: h' infinite, only its sign matters
-        gpp = 0;
-      } else {
-        const double den = std::sqrt(den2);
-        const double hp = t / den, hpp = r2 / (den2 * den);
-        const double c = s / rho;
-        gp = m - hp * c;
-        gpp = -(hpp * c * c + hp * d2 / (rho * rho * rho));
-      }
-    }
+    eval(s);
     if (gp > 0) {
       lo = s;
     } else if (gp < 0) {
@@ -166,6 +191,7 @@ double CutterContacts::edge(double x, double y, const Vec3& p, const Vec3& q, do
     } else {
       break;
     }
+    if (cannot_win(s)) return kNoContact;
     double next = gpp < 0 ? s - gp / gpp : lo - 1;
     if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
     const double step = std::abs(next - s);
@@ -187,6 +213,7 @@ void CutterContacts::vertices_and_facet(double x, double y, const PreparedTriang
 
 void CutterContacts::edges(double x, double y, const PreparedTriangle& t, ClPoint& best) const {
   for (std::size_t k = 0; k < 3; ++k) {
+    if (!(t.edge_mask >> k & 1u)) continue;  // another triangle holds this edge
     const Vec3 &p = t.v[k], &q = t.v[(k + 1) % 3];
     if (std::max(p.z, q.z) <= best.z) continue;  // h >= 0: no contact above the edge's top
     const double z = edge(x, y, p, q, best.z);
@@ -226,6 +253,7 @@ DropCutter::DropCutter(const Mesh& mesh, const Cutter& cutter, Options options)
     throw std::invalid_argument("DropCutter: more than 2^32 - 1 triangles");
   tris_.reserve(mesh.triangles.size());
   for (const Triangle& t : mesh.triangles) tris_.push_back(prepare(t));
+  share_edges();
   const double R = cutter.radius();
   const Bounds b = mesh_bounds(mesh);
   x0_ = b.min.x - R;
@@ -272,13 +300,61 @@ DropCutter::DropCutter(const Mesh& mesh, const Cutter& cutter, Options options)
     std::int64_t ix0, ix1, iy0, iy1;
     cells_of(t, cell_, ix0, ix1, iy0, iy1);
     const Entry e{float_down(t.xmin - R), float_up(t.xmax + R), float_down(t.ymin - R), float_up(t.ymax + R),
-                  float_up(t.zmax), static_cast<std::uint32_t>(i)};
-    for (std::int64_t iy = iy0; iy <= iy1; ++iy)
-      for (std::int64_t ix = ix0; ix <= ix1; ++ix) entries_[fill[static_cast<std::size_t>(iy * nx_ + ix)]++] = e;
+                  0.0f, static_cast<std::uint32_t>(i)};
+    for (std::int64_t iy = iy0; iy <= iy1; ++iy) {
+      for (std::int64_t ix = ix0; ix <= ix1; ++ix) {
+        // The highest contact T can give anywhere in this cell: its top lowered by the
+        // cutter's height at the nearest approach of T's bounds to the cell.
+        const double cx0 = x0_ + static_cast<double>(ix) * cell_, cy0 = y0_ + static_cast<double>(iy) * cell_;
+        const double gx = std::max({t.xmin - (cx0 + cell_), cx0 - t.xmax, 0.0});
+        const double gy = std::max({t.ymin - (cy0 + cell_), cy0 - t.ymax, 0.0});
+        const double gap = std::min(R, std::sqrt(gx * gx + gy * gy));
+        Entry& slot = entries_[fill[static_cast<std::size_t>(iy * nx_ + ix)]++];
+        slot = e;
+        slot.top = float_up(t.zmax - cutter.height_at(gap));
+      }
+    }
   }
   for (std::size_t c = 0; c + 1 < cell_start_.size(); ++c)
     std::sort(entries_.begin() + cell_start_[c], entries_.begin() + cell_start_[c + 1],
-              [](const Entry& l, const Entry& r) { return l.zmax > r.zmax || (l.zmax == r.zmax && l.tri < r.tri); });
+              [](const Entry& l, const Entry& r) { return l.top > r.top || (l.top == r.top && l.tri < r.tri); });
+}
+
+// An edge that two triangles share (same vertices, bit for bit) is solved by the first
+// only. Exact: whatever excludes that triangle from a query (its bounds, its cell's
+// order) excludes the edge, a subset of it, as well.
+void DropCutter::share_edges() {
+  struct Key {
+    std::uint64_t b[3];
+    bool operator==(const Key&) const = default;
+  };
+  struct KeyHash {
+    std::size_t operator()(const Key& k) const {
+      std::uint64_t h = k.b[0] * 0x9E3779B97F4A7C15ull;
+      h ^= (k.b[1] + 0x632BE59BD9B4E019ull) * 0xC2B2AE3D27D4EB4Full;
+      h ^= (k.b[2] + 0x85EBCA77C2B2AE63ull) * 0x165667B19E3779F9ull;
+      return static_cast<std::size_t>(h ^ (h >> 29));
+    }
+  };
+  std::unordered_map<Key, std::uint32_t, KeyHash> ids;
+  ids.reserve(tris_.size());
+  std::unordered_set<std::uint64_t> seen;
+  seen.reserve(2 * tris_.size());
+  for (PreparedTriangle& t : tris_) {
+    std::uint32_t id[3];
+    for (std::size_t k = 0; k < 3; ++k) {
+      Key key{};
+      std::memcpy(&key.b[0], &t.v[k].x, 8);
+      std::memcpy(&key.b[1], &t.v[k].y, 8);
+      std::memcpy(&key.b[2], &t.v[k].z, 8);
+      id[k] = ids.try_emplace(key, static_cast<std::uint32_t>(ids.size())).first->second;
+    }
+    t.edge_mask = 0;
+    for (std::size_t k = 0; k < 3; ++k) {
+      const std::uint64_t lo = std::min(id[k], id[(k + 1) % 3]), hi = std::max(id[k], id[(k + 1) % 3]);
+      if (seen.insert(lo << 32 | hi).second) t.edge_mask = static_cast<std::uint8_t>(t.edge_mask | 1u << k);
+    }
+  }
 }
 
 ClPoint DropCutter::drop(double x, double y) const {
@@ -292,10 +368,11 @@ ClPoint DropCutter::drop(double x, double y) const {
   // Two passes, as the paper's lower bound from the vertex spheres first: the closed
   // forms (vertices, facets) of every triangle that can still matter, then the edges,
   // most of which the higher floor now excludes without a root search. Entries are
-  // sorted by their top, so each pass stops at the first one not above the best.
+  // sorted by the highest contact they can give in the cell, so each pass stops at the
+  // first one not above the best.
   for (int pass = 0; pass < 2; ++pass) {
     for (const Entry* e = begin; e != end; ++e) {
-      if (static_cast<double>(e->zmax) <= best.z) break;
+      if (static_cast<double>(e->top) <= best.z) break;
       if (x < static_cast<double>(e->xmin) || x > static_cast<double>(e->xmax) ||
           y < static_cast<double>(e->ymin) || y > static_cast<double>(e->ymax))
         continue;

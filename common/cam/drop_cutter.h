@@ -19,8 +19,10 @@
 // not take part: only points within R of the axis can be touched first from above.
 //
 // DropCutter adds a spatial index: a uniform 2-D grid whose cells list every triangle
-// whose xy bounds, grown by R, overlap the cell, sorted by their highest z, so a query
-// reads one cell and stops at the first triangle lower than the best contact so far.
+// whose xy bounds, grown by R, overlap the cell, sorted by the highest contact the
+// triangle can give anywhere in the cell (its top lowered by the cutter's height at its
+// nearest approach), so a query reads one cell and stops at the first triangle that
+// cannot beat the best contact so far.
 // The algorithms know nothing of threads or files; drop_batch only splits points.
 #include <array>
 #include <atomic>
@@ -53,6 +55,7 @@ struct PreparedTriangle {
   std::array<Vec3, 3> v;
   double nx = 0, ny = 0, nz = 0;  // unit normal with nz >= 0; nz == 0: vertical, no facet contact
   double xmin = 0, xmax = 0, ymin = 0, ymax = 0, zmax = 0;
+  std::uint8_t edge_mask = 7;  // bit k: this triangle answers for edge v[k]–v[k+1]
 };
 PreparedTriangle prepare(const Triangle& t);
 
@@ -113,10 +116,13 @@ class DropCutter {
   std::size_t triangle_count() const { return tris_.size(); }
 
  private:
-  struct Entry {  // one triangle in one cell: its xy bounds grown by R and its top, as floats rounded outward
-    float xmin, xmax, ymin, ymax, zmax;
+  struct Entry {  // one triangle in one cell, as floats rounded outward: its xy bounds grown by R, and
+                 // its top lowered by the cutter's height at the triangle's nearest approach to the cell
+    float xmin, xmax, ymin, ymax, top;
     std::uint32_t tri;
   };
+  void share_edges();
+
   CutterContacts contacts_;
   std::vector<PreparedTriangle> tris_;
   double R2_;
