@@ -8,6 +8,7 @@
 # exactly what was sent (heartbeats), 0 accepted; bus_* ALARMs come at most once a
 # second per service and cause. Mid-program the key is rotated (cnc-key rotate):
 # the services change keys without a stop, the log holds both keys and verifies.
+# Before all that: a key file others may read is refused by every executable.
 #   stranger_test.sh BUILD_DIR SOURCE_DIR
 source "$(dirname "$0")/lib.sh"
 enter_private_netns "$@"
@@ -30,6 +31,18 @@ G1 X150.5 Y45.6789 Z-4
 G1 X123.4567 F1800
 M30
 NGC
+
+# A key file others may read: every executable that signs refuses to start (exit 2),
+# naming the file and its mode.
+chmod 640 "$TEST_KEY"
+for exe in services/cnc-logger services/cnc-drive-bridge services/cnc-monitor services/cnc-program-server \
+           services/cnc-interpolator tools/cnc-ctl; do
+  rc=0; timeout 10 "$BUILD/$exe" --machine "$M" >"$WORK/mode.out" 2>&1 || rc=$?
+  { [ "$rc" -eq 2 ] && grep -q "key file $TEST_KEY has mode 0640" "$WORK/mode.out"; } \
+    || { cat "$WORK/mode.out" >&2; fail "$exe with a key file of mode 0640: exit $rc"; }
+done
+note "a key file of mode 0640 is refused: $(head -1 "$WORK/mode.out")"
+chmod 600 "$TEST_KEY"
 
 start logger "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/run"
 start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M" --final-state "$WORK/final.json"
