@@ -128,7 +128,7 @@ class CuttingForceModel {
 
   // The paper's angular step (eq. 11): the rotation per step equals the lag between
   // discs, Δθ = Dz·tan(h)/R, rounded so that a revolution has a whole multiple of N
-  // steps; 360·N/gcd-free fallback (N·90 steps) for a straight flute.
+  // steps; 90·N steps for a straight flute (no lag to tie the step to).
   int paper_steps_per_rev(const Engagement& e) const;
   // One revolution sampled at `steps` equal angles θ_j = j·2π/steps.
   ForceHistory simulate_revolution(const Engagement& e, int steps) const;
