@@ -253,7 +253,7 @@ DropCutter::DropCutter(const Mesh& mesh, const Cutter& cutter, Options options)
     throw std::invalid_argument("DropCutter: more than 2^32 - 1 triangles");
   tris_.reserve(mesh.triangles.size());
   for (const Triangle& t : mesh.triangles) tris_.push_back(prepare(t));
-  share_edges();
+  share_edges(tris_);
   const double R = cutter.radius();
   const Bounds b = mesh_bounds(mesh);
   x0_ = b.min.x - R;
@@ -320,10 +320,7 @@ DropCutter::DropCutter(const Mesh& mesh, const Cutter& cutter, Options options)
               [](const Entry& l, const Entry& r) { return l.top > r.top || (l.top == r.top && l.tri < r.tri); });
 }
 
-// An edge that two triangles share (same vertices, bit for bit) is solved by the first
-// only. Exact: whatever excludes that triangle from a query (its bounds, its cell's
-// order) excludes the edge, a subset of it, as well.
-void DropCutter::share_edges() {
+void share_edges(std::vector<PreparedTriangle>& tris) {
   struct Key {
     std::uint64_t b[3];
     bool operator==(const Key&) const = default;
@@ -337,10 +334,10 @@ void DropCutter::share_edges() {
     }
   };
   std::unordered_map<Key, std::uint32_t, KeyHash> ids;
-  ids.reserve(tris_.size());
+  ids.reserve(tris.size());
   std::unordered_set<std::uint64_t> seen;
-  seen.reserve(2 * tris_.size());
-  for (PreparedTriangle& t : tris_) {
+  seen.reserve(2 * tris.size());
+  for (PreparedTriangle& t : tris) {
     std::uint32_t id[3];
     for (std::size_t k = 0; k < 3; ++k) {
       Key key{};

@@ -59,6 +59,12 @@ struct PreparedTriangle {
 };
 PreparedTriangle prepare(const Triangle& t);
 
+// Clears edge_mask bits so that an edge two triangles share (same vertices, bit for
+// bit) is answered by the first only. Exact for any query that skips a triangle only
+// for reasons that hold for its edges too (its bounds, its highest point): the edge is
+// a subset of either triangle.
+void share_edges(std::vector<PreparedTriangle>& tris);
+
 // The contact queries of one cutter; -inf where the contact does not exist (facet:
 // the contact point is outside T or T is vertical; edge: the critical point is not
 // strictly inside the edge, where a vertex query gives the maximum; all: farther
@@ -121,8 +127,6 @@ class DropCutter {
     float xmin, xmax, ymin, ymax, top;
     std::uint32_t tri;
   };
-  void share_edges();
-
   CutterContacts contacts_;
   std::vector<PreparedTriangle> tris_;
   double R2_;
