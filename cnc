@@ -38,6 +38,7 @@ PACKAGES=(
   mbpoll                                 # reads the simulator's registers (interop test)
   linuxcnc-uspace                        # rs274: LinuxCNC's interpreter, the conformance oracle (tools/conformance)
   libcli11-dev                           # command-line flags of cnc-cam
+  libcgal-dev                            # CGAL's AABB tree, the baseline of cnc-cam-index-bench (optional)
 )
 
 # Service name -> executable, in start order. The logger starts first and stops
