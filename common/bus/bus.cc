@@ -1,5 +1,7 @@
 #include "common/bus/bus.h"
 
+#include <pthread.h>
+#include <sched.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -155,6 +157,10 @@ Bus::Bus(const std::string& url, int32_t sender, int queue_capacity, Security se
 }
 
 void Bus::watch_keys(std::stop_token stop) {
+  // Created after the service made itself real-time: this thread is not cyclic work.
+  sched_param normal{};
+  normal.sched_priority = 0;
+  pthread_setschedparam(pthread_self(), SCHED_OTHER, &normal);
   FileStamp seen = stamp_of(security_.key_file);
   std::mutex m;
   std::condition_variable_any cv;
