@@ -1,11 +1,18 @@
 // cnc-cam: offline CAM on triangle meshes (seeds 002, 003).
 //
 //   cnc-cam drop --stl MESH --tool ball:D|flat:D|bull:D:r --points XY.csv --out XYZ.csv [--threads N]
+//   cnc-cam raster --stl MESH --tool SPEC --pick P --step S [--angle A] --out part.ngc
+//                  [--origin corner|mesh] [--feed F] [--plunge F] [--spindle S] [--safe-z Z] [--threads N]
 //
 // drop: the drop-cutter's CL height for each point of XY.csv, in order, into XYZ.csv
 // (x and y echoed as written, z empty where nothing is touched); prints
 // "points=N seconds=S pts_per_s=R" on stdout (S: the queries only), and on stderr
 // the mesh's load and the index's build, and progress for runs over a second.
+//
+// raster: parallel passes with a fixed step (common/cam/raster.h) written as G-code
+// (common/cam/gcode_writer.h). --origin corner (default) puts the program's zero at
+// the mesh's lowest x and y and its highest z (the part's top), so cuts are at Z <= 0;
+// --origin mesh keeps the mesh's coordinates.
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
@@ -18,6 +25,8 @@
 
 #include "common/cam/cutter.h"
 #include "common/cam/drop_cutter.h"
+#include "common/cam/gcode_writer.h"
+#include "common/cam/raster.h"
 #include "common/cam/points_csv.h"
 #include "common/cam/stl.h"
 
@@ -72,6 +81,51 @@ int run_drop(const DropArgs& a) {
   return 0;
 }
 
+struct RasterArgs {
+  std::string stl, tool, out, origin = "corner";
+  double pick = 1, step = 0.1, angle = 0, feed = 1000, plunge = 300, spindle = 10000, safe_z = 2;
+  int threads = 0;
+};
+
+int run_raster(const RasterArgs& a) {
+  using namespace cnc::cam;
+  const Cutter cutter = parse_cutter(a.tool);
+  if (a.origin != "corner" && a.origin != "mesh") throw std::invalid_argument("--origin must be corner or mesh");
+  const Mesh mesh = read_stl(a.stl);
+  const Bounds b = mesh_bounds(mesh);
+  const DropCutter dc(mesh, cutter);
+  const int threads = a.threads > 0 ? a.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  const auto t0 = Clock::now();
+  RasterPath path = raster_fixed_step(dc, b, RasterSpec{a.pick, a.step, a.angle}, threads);
+  const double s = seconds_since(t0);
+  const Vec3 zero = a.origin == "corner" ? Vec3{b.min.x, b.min.y, b.max.z} : Vec3{0, 0, 0};
+  GcodeSetup setup;
+  setup.title = "cnc-cam raster " + a.stl + " tool " + a.tool + " pick " + std::to_string(a.pick) + " step " +
+                std::to_string(a.step) + " angle " + std::to_string(a.angle) +
+                (a.origin == "corner" ? ", zero at the mesh's min x, min y, max z" : ", mesh coordinates");
+  setup.cutter = cutter;
+  setup.feed_mm_per_min = a.feed;
+  setup.plunge_mm_per_min = a.plunge;
+  setup.spindle_rpm = a.spindle;
+  setup.safe_z_mm = a.safe_z + (a.origin == "mesh" ? b.max.z : 0);
+  GcodeWriter w(setup);
+  std::size_t cl_points = 0;
+  for (std::vector<Vec3>& cut : path.cuts) {
+    for (Vec3& p : cut) p = {p.x - zero.x, p.y - zero.y, p.z - zero.z};
+    cl_points += cut.size();
+    w.cut(cut.data(), cut.size());
+  }
+  const std::string text = w.finish();
+  std::FILE* f = std::fopen(a.out.c_str(), "w");
+  if (!f || std::fwrite(text.data(), 1, text.size(), f) != text.size() || std::fclose(f) != 0)
+    throw std::runtime_error(a.out + ": cannot write");
+  std::fprintf(stderr, "cnc-cam raster: %zu passes, %zu cuts, %zu CL points on the surface, %zu G1 moves, %.1f mm of feed\n",
+               path.passes, path.cuts.size(), cl_points, w.feed_moves(), w.feed_length_mm());
+  std::printf("points=%zu seconds=%.6f pts_per_s=%.0f\n", path.points_dropped, s,
+              s > 0 ? static_cast<double>(path.points_dropped) / s : 0.0);
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -84,9 +138,24 @@ int main(int argc, char** argv) {
   d->add_option("--points", drop.points, "CSV with header x,y")->required();
   d->add_option("--out", drop.out, "CSV x,y,z to write")->required();
   d->add_option("--threads", drop.threads, "worker threads (default: all cores)")->check(CLI::Range(1, 256));
+  RasterArgs raster;
+  CLI::App* r = app.add_subcommand("raster", "parallel finishing passes with a fixed step, as G-code");
+  r->add_option("--stl", raster.stl, "mesh, ASCII or binary STL")->required();
+  r->add_option("--tool", raster.tool, "ball:D, flat:D or bull:D:r (mm)")->required();
+  r->add_option("--pick", raster.pick, "distance between passes, mm")->required()->check(CLI::PositiveNumber);
+  r->add_option("--step", raster.step, "largest distance between CL points along a pass, mm")->required()->check(CLI::PositiveNumber);
+  r->add_option("--angle", raster.angle, "direction of the passes, degrees from +X");
+  r->add_option("--out", raster.out, "G-code file to write")->required();
+  r->add_option("--origin", raster.origin, "corner: zero at the mesh's min x, min y, max z; mesh: as is");
+  r->add_option("--feed", raster.feed, "cutting feed, mm/min")->check(CLI::PositiveNumber);
+  r->add_option("--plunge", raster.plunge, "plunge feed, mm/min")->check(CLI::PositiveNumber);
+  r->add_option("--spindle", raster.spindle, "spindle speed, rpm")->check(CLI::PositiveNumber);
+  r->add_option("--safe-z", raster.safe_z, "retract height above the part's top, mm");
+  r->add_option("--threads", raster.threads, "worker threads (default: all cores)")->check(CLI::Range(1, 256));
   CLI11_PARSE(app, argc, argv);
   try {
     if (d->parsed()) return run_drop(drop);
+    if (r->parsed()) return run_raster(raster);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "cnc-cam: %s\n", e.what());
     return 2;

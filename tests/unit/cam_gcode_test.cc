@@ -1,0 +1,85 @@
+// Raster passes with a fixed step, and the G-code writer: header words, modal words
+// left out, coordinates within 5e-5 mm of the CL points.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <sstream>
+#include <string>
+
+#include "common/cam/gcode_writer.h"
+#include "common/cam/raster.h"
+
+namespace cnc::cam {
+namespace {
+
+Mesh slope_30deg() {  // z = x·tan 30° over [0, 20] × [0, 10]
+  const double k = std::tan(M_PI / 6);
+  Mesh m;
+  m.triangles.push_back({{Vec3{0, 0, 0}, Vec3{20, 0, 20 * k}, Vec3{20, 10, 20 * k}}});
+  m.triangles.push_back({{Vec3{0, 0, 0}, Vec3{20, 10, 20 * k}, Vec3{0, 10, 0}}});
+  return m;
+}
+
+TEST(CamRaster, PassesCoverTheBoundsZigZagWithinPickAndStep) {
+  Bounds b{{0, 0, 0}, {20, 10, 5}};
+  const auto passes = raster_passes(b, RasterSpec{1.5, 0.3, 0});
+  ASSERT_EQ(passes.size(), 8u);  // y = 0, 1.5, ..., 9, then 10
+  EXPECT_DOUBLE_EQ(passes.front().front().y, 0);
+  EXPECT_DOUBLE_EQ(passes.back().front().y, 10);
+  for (std::size_t k = 0; k < passes.size(); ++k) {
+    const auto& p = passes[k];
+    EXPECT_DOUBLE_EQ(p.front().x, k % 2 ? 20 : 0);  // zig-zag
+    EXPECT_DOUBLE_EQ(p.back().x, k % 2 ? 0 : 20);
+    for (std::size_t i = 1; i < p.size(); ++i) EXPECT_LE(std::abs(p[i].x - p[i - 1].x), 0.3 + 1e-12);
+    if (k > 0) {
+      EXPECT_LE(std::abs(p[0].y - passes[k - 1][0].y), 1.5 + 1e-12);
+    }
+  }
+  // At 90°, passes run along y.
+  const auto turned = raster_passes(b, RasterSpec{1, 0.5, 90});
+  EXPECT_NEAR(turned[0].front().x, turned[0].back().x, 1e-12);
+  EXPECT_THROW(raster_passes(b, RasterSpec{0, 0.1, 0}), std::invalid_argument);
+}
+
+TEST(CamRaster, FixedStepPointsLieOnTheExactClSurface) {
+  const Mesh m = slope_30deg();
+  const Cutter c = parse_cutter("bull:6:1");
+  const DropCutter dc(m, c);
+  const RasterPath path = raster_fixed_step(dc, mesh_bounds(m), RasterSpec{2, 0.25, 0}, 2);
+  ASSERT_FALSE(path.cuts.empty());
+  const double th = M_PI / 6;
+  std::size_t checked = 0;
+  for (const auto& cut : path.cuts)
+    for (const Vec3& p : cut) {
+      // Where the whole torus sits over the plane: plane + r (1/cos θ − 1) + a tan θ.
+      if (p.x < 4 || p.x > 16 || p.y < 4 || p.y > 6) continue;
+      EXPECT_NEAR(p.z, p.x * std::tan(th) + 1 * (1 / std::cos(th) - 1) + 2 * std::tan(th), 1e-12);
+      ++checked;
+    }
+  EXPECT_GT(checked, 40u);
+}
+
+TEST(CamGcode, HeaderModalWordsAndRoundTripOfCoordinates) {
+  GcodeSetup s;
+  s.title = "part (test)";
+  s.tool_number = 3;
+  s.cutter = parse_cutter("ball:2");
+  s.spindle_rpm = 12000;
+  s.feed_mm_per_min = 800;
+  s.plunge_mm_per_min = 200;
+  s.safe_z_mm = 2;
+  GcodeWriter w(s);
+  const std::vector<Vec3> pts = {{1, 2, -0.123456}, {1.1, 2, -0.2}, {1.2, 2, -0.2}, {1.3, 2.05, -0.19999}};
+  w.cut(pts.data(), pts.size());
+  const std::string g = w.finish();
+  EXPECT_NE(g.find("(part  test )\n"), std::string::npos) << g;
+  EXPECT_NE(g.find("G21 G17 G90 G54\nT3 M6\nS12000 M3\nG0 Z2\n"), std::string::npos) << g;
+  EXPECT_NE(g.find("X1 Y2 Z2\nG1 Z-0.1235 F200\nX1.1 Z-0.2 F800\nX1.2\nX1.3 Y2.05\nG0 Z2\nM5\nM2\n%\n"),
+            std::string::npos)
+      << g;
+  EXPECT_EQ(w.feed_moves(), 4u);  // the plunge and three cutting moves
+}
+
+}  // namespace
+}  // namespace cnc::cam
