@@ -13,7 +13,8 @@
         unknown    the same with a trailer under a key id the cell does not have
         replayed   captured signed datagrams (PROGRAM_CMD LOAD/START, SETPOINTS,
                    PROGRAM_BLOCKS, BLOCK_REQUEST, INTERP_INPUT), unchanged, >= 50 ms
-                   after their capture (repetition, delay, wrong order)
+                   after their capture (repetition, wrong order)
+        delayed    the first setpoints captured, sent again 2.5 s later (delay)
       and writes what it sent per channel and kind into FILE.json.
 
   stranger.py check --log LOG --py DIR --sent FILE.json --prefix PFX
@@ -159,6 +160,13 @@ def attack(a):
             bad = bytearray(payload)
             bad[40] ^= 0x10  # one bit of the payload: corruption
             send(ch, bytes(bad), "forged")
+    # Delay: the first setpoints captured, sent again once they are 2.5 s old (more
+    # than the cell's 2 s freshness window): dropped as stale.
+    first = [(t, p) for (t, p) in captured.get(sp_ch, []) if p.endswith(TRAILER_MAGIC)][:N]
+    if first:
+        time.sleep(max(0.0, first[-1][0] + 2.5 - time.monotonic()))
+        for _t, payload in first:
+            send(sp_ch, payload, "delayed")
     json.dump({"sent": sent, "key_id": key_id.hex()}, open(a.out, "w"), indent=1)
     total = sum(sum(k.values()) for k in sent.values())
     print("stranger: sent %d datagrams: %s" % (total, json.dumps(sent, sort_keys=True)))
@@ -211,8 +219,8 @@ def check(a):
         "cnc-drive-bridge": {"SETPOINTS", "DRIVE_CMD"},
         "cnc-monitor": {"SETPOINTS", "INTERP_INPUT"},
     }
-    print("%-18s %-16s %8s %8s %8s %8s   %s" % ("receiver", "channel", "unsigned", "forged", "unkn.key",
-                                                 "repl+stale", "sent u/f/k/r  accepted-of-stranger"))
+    print("%-18s %-16s %8s %8s %8s %8s %8s   %s" % ("receiver", "channel", "unsigned", "forged", "unkn.key",
+                                                     "replayed", "stale", "sent u/f/k/r/d  accepted-of-stranger"))
     for service, chans in subscribed.items():
         m = hb.get(service)
         if m is None:
@@ -223,13 +231,13 @@ def check(a):
             if chans is not None and base not in chans:
                 continue
             i = m.channel.index(ch) if ch in m.channel else -1
-            got = [0, 0, 0, 0] if i < 0 else [m.rejected_unsigned[i], m.rejected_forged[i],
-                                               m.rejected_unknown_key[i],
-                                               m.rejected_replayed[i] + m.rejected_stale[i]]
+            got = [0, 0, 0, 0, 0] if i < 0 else [m.rejected_unsigned[i], m.rejected_forged[i],
+                                                  m.rejected_unknown_key[i], m.rejected_replayed[i],
+                                                  m.rejected_stale[i]]
             want = [kinds.get("unsigned", 0), kinds.get("forged", 0), kinds.get("unknown_key", 0),
-                    kinds.get("replayed", 0)]
-            print("%-18s %-16s %8d %8d %8d %8d   %d/%d/%d/%d  %d" % (service[4:], base, *got, *want,
-                                                                   sum(want) - sum(got)))
+                    kinds.get("replayed", 0), kinds.get("delayed", 0)]
+            print("%-18s %-16s %8d %8d %8d %8d %8d   %d/%d/%d/%d/%d  %d" % (service[4:], base, *got, *want,
+                                                                         sum(want) - sum(got)))
             if got != want:
                 failures.append("%s on %s counted %s dropped, the stranger sent %s" % (service, base, got, want))
     # Alarms: every cause raised, at most one a second per service and cause.
@@ -237,7 +245,7 @@ def check(a):
     for al in alarms:
         if al.code.startswith("bus_"):
             by.setdefault((al.source, al.code), []).append(al.utime)
-    for cause in ("bus_unsigned", "bus_forged", "bus_unknown_key", "bus_replayed"):
+    for cause in ("bus_unsigned", "bus_forged", "bus_unknown_key", "bus_replayed", "bus_stale"):
         n = sum(len(v) for (s, c), v in by.items() if c == cause)
         print("alarms %-16s %d (from %d services)" % (cause, n, sum(1 for (s, c) in by if c == cause)))
         if n == 0:

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # A stranger on the cell's network (a plain UDP socket, no key: stranger.py) sends
-# forged, unsigned, wrong-key, corrupted and replayed STOP, HOLD, OVERRIDE 1.5,
+# forged, unsigned, wrong-key, corrupted, replayed and delayed STOP, HOLD, OVERRIDE 1.5,
 # LOAD /etc/shadow, setpoints 100 mm off, DISABLE, and captured blocks, requests and
 # interpolator inputs to a running signing cell. The program completes unaffected
 # (ctl "program done", end point within 1 µm, one START and no STOP/HOLD/OVERRIDE
@@ -22,12 +22,12 @@ make_machine "$SRC/config/machines/sim3.yaml" "$M"
 mkdir -p "$WORK/py"
 lcm-gen --python --ppath "$WORK/py" "$SRC"/lcmtypes/*.lcm || fail "lcm-gen --python failed"
 
-# End point: X 123.4567 Y 45.6789 Z -4; about 5 s.
+# End point: X 123.4567 Y 45.6789 Z -4; about 8 s.
 cat >"$WORK/part.ngc" <<'NGC'
 G21 G90
 G0 X5 Y5 Z1
 G1 Z-2 F600
-G1 X150 Y20 F2400
+G1 X150 Y20 F1500
 G1 X150.5 Y45.6789 Z-4
 G1 X123.4567 F1800
 M30
