@@ -37,7 +37,8 @@ double twice_area(const Triangle& t) {
 bool is_zero_area(const Triangle& t) {
   const double longest2 = std::max({norm2(sub(t.v[1], t.v[0])), norm2(sub(t.v[2], t.v[1])),
                                     norm2(sub(t.v[0], t.v[2]))});
-  return twice_area(t) <= 1e-12 * longest2;
+  // |cross| <= 1e-12·longest², squared (no square root: this runs on every triangle read).
+  return norm2(cross(sub(t.v[1], t.v[0]), sub(t.v[2], t.v[0]))) <= 1e-24 * longest2 * longest2;
 }
 
 }  // namespace cnc::cam

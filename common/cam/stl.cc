@@ -1,5 +1,6 @@
 #include "common/cam/stl.h"
 
+#include <bit>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
@@ -29,12 +30,7 @@ std::uint32_t read_u32_le(const char* p) {
          static_cast<std::uint32_t>(b[2]) << 16 | static_cast<std::uint32_t>(b[3]) << 24;
 }
 
-float read_f32_le(const char* p) {
-  const std::uint32_t bits = read_u32_le(p);
-  float f;
-  std::memcpy(&f, &bits, sizeof f);
-  return f;
-}
+static_assert(std::endian::native == std::endian::little, "binary STL is little-endian; so must the host be");
 
 Mesh parse_binary(std::string_view data, const std::string& name, std::size_t count, StlInfo& info) {
   info.binary = true;
@@ -42,19 +38,18 @@ Mesh parse_binary(std::string_view data, const std::string& name, std::size_t co
   mesh.triangles.reserve(count);
   const char* p = data.data() + kHeaderBytes;
   for (std::size_t i = 0; i < count; ++i, p += kTriangleBytes) {
+    float f[9];
+    std::memcpy(f, p + 12, sizeof f);  // past the normal; little-endian host, as the format
     Triangle t;
-    const char* q = p + 12;  // past the normal
-    for (int k = 0; k < 3; ++k) {
-      const float x = read_f32_le(q), y = read_f32_le(q + 4), z = read_f32_le(q + 8);
-      q += 12;
-      if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) {
+    for (std::size_t k = 0; k < 3; ++k) {
+      if (!std::isfinite(f[3 * k]) || !std::isfinite(f[3 * k + 1]) || !std::isfinite(f[3 * k + 2])) {
         char buf[160];
-        std::snprintf(buf, sizeof buf, "triangle %zu of %zu (byte %zu): vertex %d is (%g, %g, %g), not finite",
-                      i + 1, count, kHeaderBytes + i * kTriangleBytes, k + 1, static_cast<double>(x),
-                      static_cast<double>(y), static_cast<double>(z));
+        std::snprintf(buf, sizeof buf, "triangle %zu of %zu (byte %zu): vertex %zu is (%g, %g, %g), not finite",
+                      i + 1, count, kHeaderBytes + i * kTriangleBytes, k + 1, static_cast<double>(f[3 * k]),
+                      static_cast<double>(f[3 * k + 1]), static_cast<double>(f[3 * k + 2]));
         fail(name, buf);
       }
-      t.v[static_cast<std::size_t>(k)] = {x, y, z};
+      t.v[k] = {f[3 * k], f[3 * k + 1], f[3 * k + 2]};
     }
     if (is_zero_area(t)) {
       ++info.zero_area_skipped;
