@@ -46,6 +46,7 @@ PreparedTriangle prepare(const Triangle& t) {
   if (n > 0) {
     if (nz < 0) nx = -nx, ny = -ny, nz = -nz;
     p.nx = nx / n, p.ny = ny / n, p.nz = nz / n;
+    p.nxy = std::hypot(p.nx, p.ny);
   }
   p.xmin = std::min({a.x, b.x, c.x});
   p.xmax = std::max({a.x, b.x, c.x});
@@ -74,7 +75,7 @@ double CutterContacts::facet(double x, double y, const PreparedTriangle& t) cons
   // The corner ball's centre q = (x, y, z + r) + a·u with u pointing down the plane's
   // slope touches the plane at q − r·n; the tip is then at
   //   z = v0.z + (nx (v0.x − x) + ny (v0.y − y) + r + a |nxy|) / nz − r.
-  const double nxy = std::hypot(t.nx, t.ny);
+  const double nxy = t.nxy;
   double cx = x, cy = y;
   if (nxy > 0) {
     const double k = a_ / nxy + r_;
@@ -248,7 +249,7 @@ ClPoint BruteForceDropCutter::drop(double x, double y) const {
 DropCutter::DropCutter(const Mesh& mesh, const Cutter& cutter) : DropCutter(mesh, cutter, Options{}) {}
 
 DropCutter::DropCutter(const Mesh& mesh, const Cutter& cutter, Options options)
-    : contacts_(cutter), R2_(cutter.radius() * cutter.radius()) {
+    : contacts_(cutter), R2_(cutter.radius() * cutter.radius()), a2_(cutter.ring_radius() * cutter.ring_radius()) {
   if (mesh.triangles.size() >= std::numeric_limits<std::uint32_t>::max())
     throw std::invalid_argument("DropCutter: more than 2^32 - 1 triangles");
   tris_.reserve(mesh.triangles.size());
@@ -365,28 +366,33 @@ ClPoint DropCutter::drop(double x, double y) const {
   // Two passes, as the paper's lower bound from the vertex spheres first: the closed
   // forms (vertices, facets) of every triangle that can still matter, then the edges,
   // most of which the higher floor now excludes without a root search. Entries are
-  // sorted by the highest contact they can give in the cell, so each pass stops at the
-  // first one not above the best.
-  for (int pass = 0; pass < 2; ++pass) {
-    for (const Entry* e = begin; e != end; ++e) {
-      if (static_cast<double>(e->top) <= best.z) break;
-      if (x < static_cast<double>(e->xmin) || x > static_cast<double>(e->xmax) ||
-          y < static_cast<double>(e->ymin) || y > static_cast<double>(e->ymax))
-        continue;
-      const PreparedTriangle& t = tris_[e->tri];
-      // Nearest approach of T's xy bounds to the axis: beyond R, nothing; else the top
-      // of T lowered by the cutter's height there bounds every contact of T.
-      const double dx = std::max({t.xmin - x, x - t.xmax, 0.0}), dy = std::max({t.ymin - y, y - t.ymax, 0.0});
-      const double d2 = dx * dx + dy * dy;
-      if (d2 > R2_) continue;
-      if (d2 > 0 && t.zmax - cutter.height_at(std::sqrt(d2)) <= best.z) continue;
-      if (pass == 0) {
-        contacts_.vertices_and_facet(x, y, t, best);
-      } else {
-        contacts_.edges(x, y, t, best);
-      }
-    }
+  // sorted by the highest contact they can give in the cell, so the first pass stops at
+  // the first one not above the best; it keeps the triangles it looked at, with their
+  // own bound, for the second.
+  struct Candidate {
+    const PreparedTriangle* t;
+    double bound;
+  };
+  thread_local std::vector<Candidate> candidates;
+  candidates.clear();
+  for (const Entry* e = begin; e != end; ++e) {
+    if (static_cast<double>(e->top) <= best.z) break;
+    if (x < static_cast<double>(e->xmin) || x > static_cast<double>(e->xmax) || y < static_cast<double>(e->ymin) ||
+        y > static_cast<double>(e->ymax))
+      continue;
+    const PreparedTriangle& t = tris_[e->tri];
+    // Nearest approach of T's xy bounds to the axis: beyond R, nothing; else the top
+    // of T lowered by the cutter's height there bounds every contact of T.
+    const double dx = std::max({t.xmin - x, x - t.xmax, 0.0}), dy = std::max({t.ymin - y, y - t.ymax, 0.0});
+    const double d2 = dx * dx + dy * dy;
+    if (d2 > R2_) continue;
+    const double bound = d2 > a2_ ? t.zmax - cutter.height_at(std::sqrt(d2)) : t.zmax;
+    if (bound <= best.z) continue;
+    contacts_.vertices_and_facet(x, y, t, best);
+    candidates.push_back({&t, bound});
   }
+  for (const Candidate& cand : candidates)
+    if (cand.bound > best.z) contacts_.edges(x, y, *cand.t, best);
   return best;
 }
 

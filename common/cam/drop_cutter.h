@@ -54,6 +54,7 @@ struct XY {
 struct PreparedTriangle {
   std::array<Vec3, 3> v;
   double nx = 0, ny = 0, nz = 0;  // unit normal with nz >= 0; nz == 0: vertical, no facet contact
+  double nxy = 0;                 // |(nx, ny)|
   double xmin = 0, xmax = 0, ymin = 0, ymax = 0, zmax = 0;
   std::uint8_t edge_mask = 7;  // bit k: this triangle answers for edge v[k]–v[k+1]
 };
@@ -129,7 +130,7 @@ class DropCutter {
   };
   CutterContacts contacts_;
   std::vector<PreparedTriangle> tris_;
-  double R2_;
+  double R2_, a2_;
   double cell_ = 1, x0_ = 0, y0_ = 0;
   std::int64_t nx_ = 0, ny_ = 0;
   std::vector<std::uint32_t> cell_start_;  // nx·ny + 1 offsets into entries_
