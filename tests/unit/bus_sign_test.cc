@@ -12,10 +12,12 @@
 #include <string>
 #include <vector>
 
+#include "cnc/lcmt_alarm.hpp"
 #include "cnc/lcmt_program_command.hpp"
 #include "cnc/lcmt_setpoint.hpp"
 #include "common/bus/auth.h"
 #include "common/bus/bus.h"
+#include "common/service/bus_health.h"
 #include "common/util/clock.h"
 #include "temp_dir.h"
 #include "tests/unit/alloc_guard.h"
@@ -359,6 +361,46 @@ TEST(BusSigning, UnsignedReceiverReadsSignedMessagesAndSignedLogsVerifyOffline) 
   EXPECT_EQ(c.bad[static_cast<size_t>(Reject::kReplayed)], 1);
   EXPECT_EQ(c.bad[static_cast<size_t>(Reject::kUnsigned)], 1);
   EXPECT_EQ(c.bad[static_cast<size_t>(Reject::kForged)], 1);
+}
+
+TEST(BusSigning, DropsRaiseAtMostOneAlarmPerCauseAndSecondWithTheCount) {
+  const KeySet ks = one_key();
+  Bus bus("memq://", 11, 1000, signing(ks));
+  Received r;
+  listen(bus, r);
+  std::vector<cnc::lcmt_alarm> alarms;
+  bus.subscribe<cnc::lcmt_alarm>("T.ALARM", [&](const cnc::lcmt_alarm& a) { alarms.push_back(a); });
+  cnc::service::RejectAlarms ra(bus, "T.ALARM", "cnc-test");
+  const auto flood = [&](int n, bool forged) {
+    for (int i = 0; i < n; ++i) {
+      auto b = encoded(setpoint(i), util::wall_utime(), i, 99);
+      if (forged) b = signed_with(generate_key(), kCh, b);  // unknown key id
+      bus.publish_raw(kCh, b.data(), b.size());
+    }
+    bus.drain();
+  };
+  EXPECT_EQ(ra.report(0.0), 0);  // nothing dropped: nothing raised
+  flood(500, false);
+  EXPECT_EQ(ra.report(10.0), 1);
+  flood(300, false);
+  EXPECT_EQ(ra.report(10.5), 0);  // within the second: counted, not raised
+  EXPECT_EQ(ra.report(10.9), 0);
+  flood(7, true);                 // another cause: its own alarm at once
+  EXPECT_EQ(ra.report(10.95), 1);
+  EXPECT_EQ(ra.report(11.0), 1);  // the 300 unsigned, one second after the first alarm
+  EXPECT_EQ(ra.report(12.5), 0);  // nothing new
+  bus.drain();
+  ASSERT_EQ(alarms.size(), 3u);
+  EXPECT_EQ(alarms[0].code, "bus_unsigned");
+  EXPECT_NE(alarms[0].text.find("500 unsigned message(s) dropped (total 500): T.SETPOINTS 500"), std::string::npos)
+      << alarms[0].text;
+  EXPECT_EQ(alarms[1].code, "bus_unknown_key");
+  EXPECT_NE(alarms[1].text.find("7 unknown_key"), std::string::npos) << alarms[1].text;
+  EXPECT_EQ(alarms[2].code, "bus_unsigned");
+  EXPECT_NE(alarms[2].text.find("300 unsigned message(s) dropped (total 800): T.SETPOINTS 300"), std::string::npos)
+      << alarms[2].text;
+  EXPECT_NE(alarms[2].text.find("last: T.SETPOINTS from sender 99: unsigned"), std::string::npos) << alarms[2].text;
+  EXPECT_TRUE(r.typed.empty());
 }
 
 // Over UDP multicast: two buses of one cell, and a stranger's unsigned bus.
