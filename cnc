@@ -192,7 +192,11 @@ cmd_demo() {
   wait "$up_pid" || up_rc=$?
   echo
   echo "== summary =="
-  "$BUILD/tools/cnc-logstat" --log "$run_dir/cell.lcmlog" --summary | sed -n '/^run summary/,$p'
+  # With the machine's key: every logged message's MAC verified (signing cells).
+  local stat
+  stat="$("$BUILD/tools/cnc-logstat" --log "$run_dir/cell.lcmlog" --summary --machine "$machine" 2>&1 || true)"
+  sed -n '/^run summary/,$p' <<<"$stat"
+  sed -n 's/^signatures: /  signatures (MAC)    /p' <<<"$stat"
   echo "  final positions     $(cat "$run_dir/final-positions.json" 2>/dev/null || echo '(simulator did not report)')"
   echo "  services            $( [ $up_rc -eq 0 ] && echo 'all exited 0 on SIGTERM' || echo "a service failed, see $run_dir/services.log")"
   echo "  log                 $run_dir/cell.lcmlog"
