@@ -8,6 +8,8 @@
 
 #include <cstdio>
 #include <cstring>
+#include <fstream>
+#include <sstream>
 #include <memory>
 #include <string>
 #include <vector>
@@ -17,6 +19,8 @@
 #include "cnc/lcmt_setpoint.hpp"
 #include "common/bus/auth.h"
 #include "common/bus/bus.h"
+#include "common/config/machine_config.h"
+#include "common/config/yaml_reader.h"
 #include "common/service/bus_health.h"
 #include "common/util/clock.h"
 #include "temp_dir.h"
@@ -401,6 +405,38 @@ TEST(BusSigning, DropsRaiseAtMostOneAlarmPerCauseAndSecondWithTheCount) {
       << alarms[2].text;
   EXPECT_NE(alarms[2].text.find("last: T.SETPOINTS from sender 99: unsigned"), std::string::npos) << alarms[2].text;
   EXPECT_TRUE(r.typed.empty());
+}
+
+std::string sim3_yaml() {
+  std::ifstream in(std::string(CNC_SOURCE_DIR) + "/config/machines/sim3.yaml");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+TEST(BusSigning, ShippedConfigsSignAndTheKeyFileIsBesideTheConfig) {
+  for (const char* name : {"sim3", "sim3_cia402_rtu", "sim3_cia402_tcp", "sim3_leadshine_rtu", "sim3_leadshine_tcp"}) {
+    const auto cfg =
+        config::load_machine_config(std::string(CNC_SOURCE_DIR) + "/config/machines/" + name + ".yaml");
+    EXPECT_TRUE(cfg.security.signing) << name;
+    EXPECT_EQ(cfg.security.key_file, std::string(CNC_SOURCE_DIR) + "/config/machines/sim3.key") << name;
+    EXPECT_EQ(cfg.security.max_age_s, 2.0) << name;
+  }
+  // Signing without a key file is a config error naming the key path.
+  std::string y = sim3_yaml();
+  const auto at = y.find("  key_file: sim3.key");
+  ASSERT_NE(at, std::string::npos);
+  y.erase(at, y.find('\n', at) - at);
+  try {
+    config::parse_machine_config(y, "/x/m.yaml");
+    FAIL() << "signing without key_file accepted";
+  } catch (const config::ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("security.key_file"), std::string::npos) << e.what();
+  }
+  // No security section: unsigned (the services warn).
+  std::string none = sim3_yaml();
+  none.erase(none.find("security:"));
+  EXPECT_FALSE(config::parse_machine_config(none, "/x/m.yaml").security.signing);
 }
 
 // Over UDP multicast: two buses of one cell, and a stranger's unsigned bus.
