@@ -134,10 +134,15 @@ Bus::Bus(const std::string& url, int32_t sender, int queue_capacity, Security se
     : url_(url), queue_capacity_(queue_capacity), security_(std::move(security)) {
   if (security_.enabled) {
     if (sodium_init() < 0) throw BusError("libsodium could not be initialised");
-    if (security_.keys.count == 0) {
-      if (security_.key_file.empty()) throw BusError("signing is on but there is no key");
+    if (!security_.key_file.empty()) {
+      // The file's stamp before reading it: a change after this is seen by the watch thread.
+      const FileStamp st = stamp_of(security_.key_file);
+      key_file_stamp_ns_ = st.mtime_ns;
+      key_file_ino_ = static_cast<uint64_t>(st.ino);
+      key_file_size_ = static_cast<int64_t>(st.size);
       security_.keys = read_key_file(security_.key_file);  // KeyFileError names the file and its mode
     }
+    if (security_.keys.count == 0) throw BusError("signing is on but there is no key");
     max_age_us_ = static_cast<int64_t>(security_.max_age_s * 1e6);
     keybuf_.write(security_.keys);
   }
@@ -161,7 +166,7 @@ void Bus::watch_keys(std::stop_token stop) {
   sched_param normal{};
   normal.sched_priority = 0;
   pthread_setschedparam(pthread_self(), SCHED_OTHER, &normal);
-  FileStamp seen = stamp_of(security_.key_file);
+  FileStamp seen{true, static_cast<ino_t>(key_file_ino_), static_cast<off_t>(key_file_size_), key_file_stamp_ns_};
   std::mutex m;
   std::condition_variable_any cv;
   std::unique_lock lock(m);

@@ -248,6 +248,9 @@ class Bus {
   std::atomic<int64_t> key_reloads_{0};
   std::atomic<int64_t> key_reload_failures_{0};
   std::string key_error_;
+  int64_t key_file_stamp_ns_ = 0;  // the key file as read at construction (mtime, inode, size)
+  uint64_t key_file_ino_ = 0;
+  int64_t key_file_size_ = 0;
   std::jthread watcher_;  // last: stopped and joined first
 };
 
