@@ -10,6 +10,7 @@
 // failed publishes and the time the streak lasted, once the bus carries messages
 // again: it tries at most every 100 ms, and a try that fails counts in the streak.
 // No allocation while the bus fails (the cause is kept in fixed storage).
+#include <algorithm>
 #include <array>
 #include <cstdio>
 #include <cstring>
@@ -92,13 +93,24 @@ class BusHealth {
 // most one per cause and second, naming the count since the last alarm of that
 // cause, the channels and the last sender, so an attacker's flood makes one alarm a
 // second and cause, never a flood of alarms. Call it as often as you like (every
-// cycle): when nothing was dropped it compares five counters and returns.
+// cycle): when nothing was dropped it compares five counters and returns. Raising
+// an alarm allocates nothing either: the text is formatted into fixed storage and
+// the alarm message, its strings reserved up front, is reused; the counts already
+// reported are kept per channel in a fixed table (keyed by the bus's stats entries,
+// which do not move).
 class RejectAlarms {
  public:
   static constexpr double kMinPeriodS = 1.0;
+  static constexpr size_t kTextBytes = 480;
+  static constexpr size_t kMaxChannels = 64;
 
   RejectAlarms(bus::Bus& bus, std::string alarm_channel, std::string source)
-      : bus_(bus), channel_(std::move(alarm_channel)), source_(std::move(source)) {}
+      : bus_(bus), channel_(std::move(alarm_channel)) {
+    al_.source = std::move(source);
+    al_.severity = cnc::lcmt_alarm::WARNING;
+    al_.code.reserve(32);
+    al_.text.reserve(kTextBytes);
+  }
 
   // Returns the number of alarms sent.
   int report(double now_s) {
@@ -107,41 +119,60 @@ class RejectAlarms {
       const auto cause = static_cast<bus::Reject>(c);
       const int64_t n = bus_.rejected_total(cause);
       if (n == reported_[c] || now_s - last_s_[c] < kMinPeriodS) continue;
-      // Per channel: the drops since this cause's last alarm.
-      std::string where;
-      for (const auto& [ch, st] : bus_.stats()) {
+      char text[kTextBytes];
+      size_t len = 0;
+      const auto add = [&](const char* fmt, auto... args) {
+        if (len >= sizeof text) return;
+        const int k = std::snprintf(text + len, sizeof text - len, fmt, args...);
+        if (k > 0) len = std::min(sizeof text - 1, len + static_cast<size_t>(k));
+      };
+      add("%lld %s message(s) dropped (total %lld): ", static_cast<long long>(n - reported_[c]),
+          bus::reject_name(cause), static_cast<long long>(n));
+      bool first = true;
+      for (const auto& [ch, st] : bus_.stats()) {  // per channel: the drops since this cause's last alarm
         const int64_t now_n = bus::rejected_count(st, cause);
-        int64_t& seen = seen_[ch][c];
-        if (now_n > seen) {
-          if (!where.empty()) where += ", ";
-          where += ch + " " + std::to_string(now_n - seen);
-          seen = now_n;
-        }
+        int64_t& seen = seen_for(&st)[c];
+        if (now_n <= seen) continue;
+        add("%s%s %lld", first ? "" : ", ", ch.c_str(), static_cast<long long>(now_n - seen));
+        first = false;
+        seen = now_n;
       }
-      cnc::lcmt_alarm al{};
-      al.source = source_;
-      al.severity = cnc::lcmt_alarm::WARNING;
-      al.code = std::string("bus_") + bus::reject_name(cause);
-      char head[96];
-      std::snprintf(head, sizeof head, "%lld %s message(s) dropped (total %lld): ",
-                    static_cast<long long>(n - reported_[c]), bus::reject_name(cause), static_cast<long long>(n));
-      al.text = head + where + "; last: " + bus_.last_reject(cause);
+      add("; last: %s", bus_.last_reject(cause));
+      al_.code.assign("bus_");
+      al_.code.append(bus::reject_name(cause));
+      al_.text.assign(text, len);
       reported_[c] = n;
       last_s_[c] = now_s;
       ++alarms_;
-      if (bus_.publish(channel_, al)) ++sent;
+      if (bus_.publish(channel_, al_)) ++sent;
     }
     return sent;
   }
   int64_t alarms() const { return alarms_; }
 
  private:
+  struct Seen {
+    const bus::ChannelStats* stats = nullptr;
+    std::array<int64_t, bus::kRejectCauses> counts{};
+  };
+  std::array<int64_t, bus::kRejectCauses>& seen_for(const bus::ChannelStats* st) {
+    for (Seen& s : seen_) {
+      if (s.stats == st) return s.counts;
+      if (s.stats == nullptr) {
+        s.stats = st;
+        return s.counts;
+      }
+    }
+    return overflow_;  // more channels than the table: counted together
+  }
+
   bus::Bus& bus_;
   std::string channel_;
-  std::string source_;
+  cnc::lcmt_alarm al_{};
   std::array<int64_t, bus::kRejectCauses> reported_{};
   std::array<double, bus::kRejectCauses> last_s_{-1e9, -1e9, -1e9, -1e9, -1e9};
-  std::map<std::string, std::array<int64_t, bus::kRejectCauses>> seen_;
+  std::array<Seen, kMaxChannels> seen_{};
+  std::array<int64_t, bus::kRejectCauses> overflow_{};
   int64_t alarms_ = 0;
 };
 
