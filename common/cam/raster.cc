@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <atomic>
 #include <stdexcept>
+#include <thread>
 
 namespace cnc::cam {
 
@@ -58,6 +60,195 @@ RasterPath raster_fixed_step(const DropCutter& dc, const Bounds& bounds, const R
     if (!cut.empty()) path.cuts.push_back(std::move(cut));
   }
   return path;
+}
+
+namespace {
+
+// Runs body(i) for i in [0, n) on `threads` threads, indices taken in turn.
+template <class F>
+void parallel_for(std::size_t n, int threads, F&& body) {
+  std::atomic<std::size_t> next{0};
+  auto work = [&] {
+    for (std::size_t i; (i = next.fetch_add(1)) < n;) body(i);
+  };
+  std::vector<std::thread> pool;
+  for (int k = 1; k < threads; ++k) pool.emplace_back(work);
+  work();
+  for (std::thread& t : pool) t.join();
+}
+
+struct PassWalker {
+  const DropCutter& dc;
+  XY a, b;  // the pass from a (u = 0) to b (u = len)
+  double len;
+  const RasterSpec& spec;
+  const AdaptiveSpec& ad;
+
+  XY at(double u) const { return {a.x + (b.x - a.x) * u / len, a.y + (b.y - a.y) * u / len}; }
+  ClPoint drop(double u) const {
+    const XY p = at(u);
+    return dc.drop(p.x, p.y);
+  }
+  Vec3 cl(double u, double z) const {
+    const XY p = at(u);
+    return {p.x, p.y, z};
+  }
+
+  // The boundary between u_off (touches nothing) and u_on (touches) to min_step; the
+  // touching side's point.
+  std::pair<double, double> edge(double u_off, double u_on, double z_on) const {
+    while (std::abs(u_on - u_off) > ad.min_step_mm) {
+      const double m = 0.5 * (u_off + u_on);
+      const ClPoint c = drop(m);
+      if (c.touched()) {
+        u_on = m, z_on = c.z;
+      } else {
+        u_off = m;
+      }
+    }
+    return {u_on, z_on};
+  }
+
+  void walk(std::vector<std::vector<Vec3>>& cuts, std::size_t& dropped) const {
+    double u = 0;
+    ClPoint c = drop(0);
+    ++dropped;
+    std::vector<Vec3> cut;
+    // (u, z) of the last three points, for the curvature prediction.
+    double pu[2] = {0, 0}, pz[2] = {0, 0};
+    int history = 0;
+    double h = spec.step_mm;
+    while (true) {
+      if (!c.touched()) {  // off the surface: find the next point on it
+        double v = u;
+        ClPoint d;
+        do {
+          v = std::min(len, v + spec.step_mm);
+          d = drop(v);
+          ++dropped;
+        } while (!d.touched() && v < len);
+        if (!d.touched()) break;
+        const auto [ue, ze] = edge(u, v, d.z);
+        u = ue;
+        c = {ze, Contact::kVertex};
+        history = 0;
+        h = spec.step_mm;
+      }
+      if (cut.empty()) cut.push_back(cl(u, c.z));
+      if (u >= len) break;
+      // Predict: chord error κL²/8 = β on the circle through the last three points.
+      double step = std::min(h * 2, spec.step_mm);
+      if (history == 2) {
+        const double x1 = pu[0], y1 = pz[0], x2 = pu[1], y2 = pz[1], x3 = u, y3 = c.z;
+        const double area2 = std::abs((x2 - x1) * (y3 - y1) - (y2 - y1) * (x3 - x1));
+        const double d12 = std::hypot(x2 - x1, y2 - y1), d23 = std::hypot(x3 - x2, y3 - y2),
+                     d13 = std::hypot(x3 - x1, y3 - y1);
+        const double kappa = d12 * d23 * d13 > 0 ? 2 * area2 / (d12 * d23 * d13) : 0;
+        if (kappa > 0) step = std::min(step, std::sqrt(8 * ad.beta_mm / kappa));
+      }
+      step = std::max(step, ad.min_step_mm);
+      double u1 = std::min(len, u + step);
+      ClPoint c1 = drop(u1);
+      ++dropped;
+      bool off_edge = false;
+      while (true) {
+        if (!c1.touched()) {  // the surface ends inside this step
+          const auto [ue, ze] = edge(u1, u, c.z);
+          if (ue <= u) {
+            off_edge = true;
+            break;
+          }
+          u1 = ue, c1 = {ze, Contact::kVertex};
+          continue;
+        }
+        if (u1 - u <= ad.min_step_mm) break;
+        // The CL points at k/16 of the step (k = 1..15, the middle first) against the chord.
+        const double um = 0.5 * (u + u1);
+        const ClPoint cm = drop(um);
+        ++dropped;
+        // The probes hold 0.9 β: between them, the CL surface of a faceted mesh still
+        // wiggles (a ball over 0.25 mm facets: up to 6 % of β beyond the probes' worst).
+        // Distances normal to the chord (vertical ones times its cosine): on a steep
+        // wall the path is near the surface though far below it vertically.
+        const double L = u1 - u;
+        const double limit = 0.9 * ad.beta_mm * std::hypot(L, c1.z - c.z) / L;
+        bool within = cm.touched() && std::abs(cm.z - 0.5 * (c.z + c1.z)) <= limit;
+        for (int k = 1; k < 16 && within; ++k) {
+          if (k == 8) continue;
+          const double t = k / 16.0;
+          const ClPoint cq = drop(u + t * (u1 - u));
+          ++dropped;
+          within = cq.touched() && std::abs(cq.z - (c.z + t * (c1.z - c.z))) <= limit;
+        }
+        if (within) break;
+        u1 = um, c1 = cm;  // halve: the middle becomes the end
+      }
+      if (off_edge) {
+        cuts.push_back(std::move(cut));
+        cut.clear();
+        // Step past the edge and look for the surface again.
+        u = std::min(len, u + ad.min_step_mm);
+        c = drop(u);
+        ++dropped;
+        if (u >= len && !c.touched()) break;
+        continue;
+      }
+      h = u1 - u;
+      pu[0] = pu[1], pz[0] = pz[1], pu[1] = u, pz[1] = c.z;
+      history = std::min(history + 1, 2);
+      u = u1, c = c1;
+      cut.push_back(cl(u, c.z));
+    }
+    if (cut.size() > 0) cuts.push_back(std::move(cut));
+  }
+};
+
+}  // namespace
+
+RasterPath raster_adaptive(const DropCutter& dc, const Bounds& bounds, const RasterSpec& spec,
+                           const AdaptiveSpec& adaptive, int threads) {
+  if (!(adaptive.beta_mm > 0) || !(adaptive.min_step_mm > 0))
+    throw std::invalid_argument("raster: beta and the smallest step must be > 0");
+  const std::vector<std::vector<XY>> passes = raster_passes(bounds, spec);
+  std::vector<std::vector<std::vector<Vec3>>> per_pass(passes.size());
+  std::vector<std::size_t> dropped(passes.size(), 0);
+  parallel_for(passes.size(), std::max(1, threads), [&](std::size_t k) {
+    const XY a = passes[k].front(), b = passes[k].back();
+    const double len = std::hypot(b.x - a.x, b.y - a.y);
+    if (len == 0) return;
+    PassWalker{dc, a, b, len, spec, adaptive}.walk(per_pass[k], dropped[k]);
+  });
+  RasterPath path;
+  path.passes = passes.size();
+  for (std::size_t k = 0; k < passes.size(); ++k) {
+    path.points_dropped += dropped[k];
+    for (auto& cut : per_pass[k])
+      if (!cut.empty()) path.cuts.push_back(std::move(cut));
+  }
+  return path;
+}
+
+double path_deviation(const DropCutter& dc, const RasterPath& path, int samples, int threads) {
+  std::vector<double> worst(path.cuts.size(), 0);
+  parallel_for(path.cuts.size(), std::max(1, threads), [&](std::size_t k) {
+    const std::vector<Vec3>& cut = path.cuts[k];
+    for (std::size_t i = 1; i < cut.size(); ++i) {
+      for (int j = 1; j <= samples; ++j) {
+        const double t = static_cast<double>(j) / (samples + 1);
+        const double x = cut[i - 1].x + t * (cut[i].x - cut[i - 1].x), y = cut[i - 1].y + t * (cut[i].y - cut[i - 1].y);
+        const ClPoint c = dc.drop(x, y);
+        if (!c.touched()) continue;
+        // Distance of the CL point from the segment, in 3-D.
+        const Vec3 &p = cut[i - 1], &q = cut[i];
+        const double ex = q.x - p.x, ey = q.y - p.y, ez = q.z - p.z;
+        const double wx = x - p.x, wy = y - p.y, wz = c.z - p.z;
+        const double e2 = ex * ex + ey * ey + ez * ez;
+        const double s = e2 > 0 ? std::clamp((wx * ex + wy * ey + wz * ez) / e2, 0.0, 1.0) : 0;
+        worst[k] = std::max(worst[k], std::hypot(wx - s * ex, wy - s * ey, wz - s * ez));
+      }
+    }
+  });
+  return worst.empty() ? 0 : *std::max_element(worst.begin(), worst.end());
 }
 
 }  // namespace cnc::cam

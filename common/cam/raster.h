@@ -31,4 +31,24 @@ std::vector<std::vector<XY>> raster_passes(const Bounds& bounds, const RasterSpe
 
 RasterPath raster_fixed_step(const DropCutter& dc, const Bounds& bounds, const RasterSpec& spec, int threads);
 
+// Seed 003's step control along each pass (same passes as above): the next step is
+// predicted from the circle through the last three CL points (chord error κL²/8 = β),
+// at most `spec.step_mm`; the CL points at k/16 of the step (k = 1..15) are computed and
+// the step halved (the middle becoming its end) while the distance of any of them from
+// the chord (normal to it) exceeds 0.9·`beta_mm` (a margin for the CL surface between
+// the probes), down to `min_step_mm` — which also walks into
+// concave corners, where the curvature has no bound, by bisection. Surface edges (a
+// step whose end touches nothing) are found by bisection to `min_step_mm`, so a cut
+// starts and ends on the surface's last CL points.
+struct AdaptiveSpec {
+  double beta_mm = 0.01;
+  double min_step_mm = 1e-3;
+};
+RasterPath raster_adaptive(const DropCutter& dc, const Bounds& bounds, const RasterSpec& spec,
+                           const AdaptiveSpec& adaptive, int threads);
+
+// The largest distance between the path's segments and the exact CL surface along
+// them: of `samples` CL points inside each segment from the segment (3-D); 0 for none.
+double path_deviation(const DropCutter& dc, const RasterPath& path, int samples, int threads);
+
 }  // namespace cnc::cam

@@ -9,6 +9,7 @@
 
 #include "common/cam/gcode_writer.h"
 #include "common/cam/raster.h"
+#include "common/cam/terrain.h"
 
 namespace cnc::cam {
 namespace {
@@ -58,6 +59,37 @@ TEST(CamRaster, FixedStepPointsLieOnTheExactClSurface) {
       ++checked;
     }
   EXPECT_GT(checked, 40u);
+}
+
+// Seed 003's step control on a smooth terrain: the measured deviation (32 CL points
+// inside every segment, 3-D distance) stays within beta, with fewer points than the
+// largest fixed step that does.
+TEST(CamRaster, StepControlHoldsBetaWithFewerPointsThanAFixedStep) {
+  TerrainSpec spec;
+  spec.cols = 60;
+  spec.rows = 40;
+  spec.step_mm = 0.5;
+  spec.bumps = 10;
+  spec.height_mm = 6;
+  const Mesh m = make_terrain(spec);
+  for (const char* tool : {"ball:2", "bull:6:1"}) {
+    const DropCutter dc(m, parse_cutter(tool));
+    const double beta = 0.01;
+    const RasterPath ad = raster_adaptive(dc, mesh_bounds(m), RasterSpec{4, 2, 30}, AdaptiveSpec{beta, 1e-3}, 2);
+    const double dev = path_deviation(dc, ad, 32, 2);
+    EXPECT_LE(dev, beta) << tool;
+    std::size_t n_ad = 0;
+    for (const auto& c : ad.cuts) n_ad += c.size();
+    std::size_t n_fixed = 0;
+    for (double step = 2; step > 1e-3; step *= 0.5) {
+      const RasterPath fx = raster_fixed_step(dc, mesh_bounds(m), RasterSpec{4, step, 30}, 2);
+      if (path_deviation(dc, fx, 32, 2) > beta) continue;
+      for (const auto& c : fx.cuts) n_fixed += c.size();
+      break;
+    }
+    std::printf("%s: step control %zu points (deviation %.4g mm), fixed step as accurate %zu\n", tool, n_ad, dev, n_fixed);
+    EXPECT_LT(2 * n_ad, n_fixed) << tool;
+  }
 }
 
 TEST(CamGcode, HeaderModalWordsAndRoundTripOfCoordinates) {

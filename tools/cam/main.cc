@@ -2,6 +2,7 @@
 //
 //   cnc-cam drop --stl MESH --tool ball:D|flat:D|bull:D:r --points XY.csv --out XYZ.csv [--threads N]
 //   cnc-cam raster --stl MESH --tool SPEC --pick P --step S [--angle A] --out part.ngc
+//                  [--tol-beta B [--tol-alpha A] [--min-step M] [--compare-fixed]]
 //                  [--origin corner|mesh] [--feed F] [--plunge F] [--spindle S] [--safe-z Z] [--threads N]
 //
 // drop: the drop-cutter's CL height for each point of XY.csv, in order, into XYZ.csv
@@ -9,8 +10,13 @@
 // "points=N seconds=S pts_per_s=R" on stdout (S: the queries only), and on stderr
 // the mesh's load and the index's build, and progress for runs over a second.
 //
-// raster: parallel passes with a fixed step (common/cam/raster.h) written as G-code
-// (common/cam/gcode_writer.h). --origin corner (default) puts the program's zero at
+// raster: parallel passes written as G-code (common/cam/gcode_writer.h), with a fixed
+// step, or with --tol-beta seed 003's step control up to --step (common/cam/raster.h);
+// then the path's measured deviation from the exact CL surface (32 CL points inside
+// every segment) is printed, and with --compare-fixed the point count of the largest
+// fixed step (--step halved until it holds) that is as accurate. --tol-alpha is the
+// mesh's own tolerance against the design surface, which the mesh does not tell: it is
+// only reported with the budget α + β. --origin corner (default) puts the program's zero at
 // the mesh's lowest x and y and its highest z (the part's top), so cuts are at Z <= 0;
 // --origin mesh keeps the mesh's coordinates.
 #include <CLI/CLI.hpp>
@@ -84,8 +90,16 @@ int run_drop(const DropArgs& a) {
 struct RasterArgs {
   std::string stl, tool, out, origin = "corner";
   double pick = 1, step = 0.1, angle = 0, feed = 1000, plunge = 300, spindle = 10000, safe_z = 2;
+  double beta = 0, alpha = 0, min_step = 1e-3;
+  bool compare_fixed = false;
   int threads = 0;
 };
+
+std::size_t cl_point_count(const cnc::cam::RasterPath& p) {
+  std::size_t n = 0;
+  for (const auto& c : p.cuts) n += c.size();
+  return n;
+}
 
 int run_raster(const RasterArgs& a) {
   using namespace cnc::cam;
@@ -96,8 +110,30 @@ int run_raster(const RasterArgs& a) {
   const DropCutter dc(mesh, cutter);
   const int threads = a.threads > 0 ? a.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   const auto t0 = Clock::now();
-  RasterPath path = raster_fixed_step(dc, b, RasterSpec{a.pick, a.step, a.angle}, threads);
+  const RasterSpec spec{a.pick, a.step, a.angle};
+  RasterPath path = a.beta > 0 ? raster_adaptive(dc, b, spec, AdaptiveSpec{a.beta, a.min_step}, threads)
+                               : raster_fixed_step(dc, b, spec, threads);
   const double s = seconds_since(t0);
+  const double deviation = path_deviation(dc, path, 32, threads);
+  std::fprintf(stderr, "cnc-cam raster: %s: %zu CL points, largest deviation from the CL surface %.3g mm%s\n",
+               a.beta > 0 ? "step control" : "fixed step", cl_point_count(path), deviation,
+               a.beta > 0 ? (" (beta " + std::to_string(a.beta) + ", alpha + beta " + std::to_string(a.alpha + a.beta) +
+                             ")").c_str()
+                          : "");
+  if (a.compare_fixed && a.beta > 0) {
+    for (double st = a.step; st >= a.min_step; st *= 0.5) {
+      const RasterPath fixed = raster_fixed_step(dc, b, RasterSpec{a.pick, st, a.angle}, threads);
+      const double dev = path_deviation(dc, fixed, 32, threads);
+      std::fprintf(stderr, "cnc-cam raster: fixed step %.4g mm: %zu CL points, deviation %.3g mm\n", st,
+                   cl_point_count(fixed), dev);
+      if (dev <= a.beta) {
+        std::fprintf(stderr, "cnc-cam raster: as accurate: fixed step %zu points, step control %zu (%.2fx fewer)\n",
+                     cl_point_count(fixed), cl_point_count(path),
+                     static_cast<double>(cl_point_count(fixed)) / static_cast<double>(cl_point_count(path)));
+        break;
+      }
+    }
+  }
   const Vec3 zero = a.origin == "corner" ? Vec3{b.min.x, b.min.y, b.max.z} : Vec3{0, 0, 0};
   GcodeSetup setup;
   setup.title = "cnc-cam raster " + a.stl + " tool " + a.tool + " pick " + std::to_string(a.pick) + " step " +
@@ -146,6 +182,11 @@ int main(int argc, char** argv) {
   r->add_option("--step", raster.step, "largest distance between CL points along a pass, mm")->required()->check(CLI::PositiveNumber);
   r->add_option("--angle", raster.angle, "direction of the passes, degrees from +X");
   r->add_option("--out", raster.out, "G-code file to write")->required();
+  r->add_option("--tol-beta", raster.beta, "step control: largest deviation of the path from the CL surface, mm")
+      ->check(CLI::PositiveNumber);
+  r->add_option("--tol-alpha", raster.alpha, "the mesh's tolerance against the design surface, mm (reported)");
+  r->add_option("--min-step", raster.min_step, "smallest step of the step control, mm")->check(CLI::PositiveNumber);
+  r->add_flag("--compare-fixed", raster.compare_fixed, "also find the fixed step that is as accurate");
   r->add_option("--origin", raster.origin, "corner: zero at the mesh's min x, min y, max z; mesh: as is");
   r->add_option("--feed", raster.feed, "cutting feed, mm/min")->check(CLI::PositiveNumber);
   r->add_option("--plunge", raster.plunge, "plunge feed, mm/min")->check(CLI::PositiveNumber);
