@@ -562,9 +562,16 @@ double Interpolator::advance(double ds, bool* reached_stop) {
             (L < step ? lo : hi) = mid;
           }
           u = hi;
+        } else if (u <= u_ && p.length - s_ < 2 * step) {
+          // Newton found no forward u and the block's end is less than a step away
+          // along the curve, though the arc-length count (chords fall short of the
+          // arc) says a little more is left: the step ends the block here and goes
+          // on into the next, rather than standing still for a cycle (a jerk spike,
+          // seen at the ends of G64 P fits).
+          s_ = p.length - chord(u_end);
+          continue;
         }
-        // Else nothing is a step away before the block's end (its last step, or a
-        // curve closing on itself): Newton's u stands, as everywhere else.
+        // Else (a curve closing on itself) Newton's u stands, as everywhere else.
       }
     }
     u_ = u;

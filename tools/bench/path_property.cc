@@ -124,9 +124,22 @@ int main(int argc, char** argv) {
   std::printf("seed %" PRIu64 ", %.1f s: %" PRId64 " programs, %" PRId64 " setpoints, %" PRId64
               " chord steps measured, %" PRId64 " property checks; %" PRId64 " programs with a violation\n",
               seed, wall, programs, setpoints, chord_steps, checks, bad);
+  int n_found = 0;
   for (const auto& [key, fd] : found) {
+    // A long reproducer goes to a file in the working folder instead of the terminal.
+    std::string shown = fd.repro;
+    if (fd.repro.size() >= 4000) {
+      const std::string file = "cnc-path-property-" + std::to_string(++n_found) + ".ngc";
+      if (std::FILE* f = std::fopen(file.c_str(), "w")) {
+        std::fwrite(fd.repro.data(), 1, fd.repro.size(), f);
+        std::fclose(f);
+        shown = "(long: written to " + file + ")\n";
+      } else {
+        shown = "(long)\n";
+      }
+    }
     std::printf("\n== %s: %d programs, worst %.4g; smallest reproducer (%.4g, %zu bytes):\n%s", key.c_str(), fd.count,
-                fd.worst, fd.repro_value, fd.repro.size(), fd.repro.size() < 4000 ? fd.repro.c_str() : "(long)\n");
+                fd.worst, fd.repro_value, fd.repro.size(), shown.c_str());
   }
   return bad == 0 ? 0 : 1;
 }
