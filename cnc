@@ -39,6 +39,7 @@ PACKAGES=(
   linuxcnc-uspace                        # rs274: LinuxCNC's interpreter, the conformance oracle (tools/conformance)
   libcli11-dev                           # command-line flags of cnc-cam
   libcgal-dev                            # CGAL's AABB tree, the baseline of cnc-cam-index-bench (optional)
+  clang libclang-rt-14-dev               # libFuzzer with ASan and UBSan: tests/fuzz/run (optional)
 )
 
 # Service name -> executable, in start order. The logger starts first and stops
