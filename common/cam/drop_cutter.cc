@@ -133,7 +133,8 @@ double CutterContacts::edge(double x, double y, const Vec3& p, const Vec3& q, do
   // nearest approach, bounds the contact from above.
   if (floor > kNoContact) {
     const double s_near = std::clamp(0.0, lo_in, hi_in);
-    if (p.z + m * ((m > 0 ? hi_in : lo_in) - sp) - cutter_.height_at(std::sqrt(d2 + s_near * s_near)) <= floor)
+    const double rho_near = std::max(0.0, std::sqrt(d2 + s_near * s_near) - 1e-9);  // see DropCutter::drop
+    if (p.z + m * ((m > 0 ? hi_in : lo_in) - sp) - cutter_.height_at(rho_near) <= floor)
       return kNoContact;
   }
   // Bull: g(s) = z(s) − h(rho(s)), rho = sqrt(d² + s²), concave on [−w, w] with
@@ -309,7 +310,9 @@ DropCutter::DropCutter(const Mesh& mesh, const Cutter& cutter, Options options)
         const double cx0 = x0_ + static_cast<double>(ix) * cell_, cy0 = y0_ + static_cast<double>(iy) * cell_;
         const double gx = std::max({t.xmin - (cx0 + cell_), cx0 - t.xmax, 0.0});
         const double gy = std::max({t.ymin - (cy0 + cell_), cy0 - t.ymax, 0.0});
-        const double gap = std::min(R, std::sqrt(gx * gx + gy * gy));
+        // Less 1e-9 mm: h is steep near the rim, and a query point may lie an ulp
+        // outside the cell it is filed in.
+        const double gap = std::clamp(std::sqrt(gx * gx + gy * gy) - 1e-9, 0.0, R);
         Entry& slot = entries_[fill[static_cast<std::size_t>(iy * nx_ + ix)]++];
         slot = e;
         slot.top = float_up(t.zmax - cutter.height_at(gap));
@@ -386,7 +389,8 @@ ClPoint DropCutter::drop(double x, double y) const {
     const double dx = std::max({t.xmin - x, x - t.xmax, 0.0}), dy = std::max({t.ymin - y, y - t.ymax, 0.0});
     const double d2 = dx * dx + dy * dy;
     if (d2 > R2_) continue;
-    const double bound = d2 > a2_ ? t.zmax - cutter.height_at(std::sqrt(d2)) : t.zmax;
+    // (1e-9 mm nearer than computed: h is steep near the rim and the bound must hold.)
+    const double bound = d2 > a2_ ? t.zmax - cutter.height_at(std::max(0.0, std::sqrt(d2) - 1e-9)) : t.zmax;
     if (bound <= best.z) continue;
     contacts_.vertices_and_facet(x, y, t, best);
     candidates.push_back({&t, bound});
