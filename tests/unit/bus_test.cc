@@ -152,20 +152,27 @@ TEST(Bus, CorruptedMessagesAreCountedAndDropped) {
   wrong_fingerprint[3] ^= 0x5A;
   std::vector<uint8_t> negative_length = good;
   put_be32(negative_length.data() + kNumAxesOffset, -5);
-  // Check the patch hit num_axes: LCM 1.3.1's decode throws on it.
+  std::vector<uint8_t> huge_length = good;
+  put_be32(huge_length.data() + kNumAxesOffset, 0x7fffffff);
+  // Check the patch hit num_axes: the decode refuses it before any allocation (the
+  // generated code is patched by lcmtypes/bound_arrays.cmake; LCM 1.3.1's own threw
+  // on a negative length and allocated up to 16 GB for a huge one).
   cnc::lcmt_setpoint probe;
-  EXPECT_ANY_THROW(probe.decode(negative_length.data(), 0, static_cast<int>(negative_length.size())));
+  EXPECT_LT(probe.decode(negative_length.data(), 0, static_cast<int>(negative_length.size())), 0);
+  EXPECT_LT(probe.decode(huge_length.data(), 0, static_cast<int>(huge_length.size())), 0);
+  EXPECT_EQ(probe.position_mm.capacity(), 0u);
 
   bus.publish_raw("SP", truncated.data(), truncated.size());
   bus.publish_raw("SP", wrong_fingerprint.data(), wrong_fingerprint.size());
   bus.publish_raw("SP", negative_length.data(), negative_length.size());
+  bus.publish_raw("SP", huge_length.data(), huge_length.size());
   cnc::lcmt_setpoint later = make_setpoint(2);
   bus.publish("SP", later);
-  EXPECT_EQ(bus.drain(), 4);
+  EXPECT_EQ(bus.drain(), 5);
 
   const ChannelStats st = bus.stats("SP");
-  EXPECT_EQ(st.decode_failures, 3);
-  EXPECT_EQ(st.received, 4);
+  EXPECT_EQ(st.decode_failures, 4);
+  EXPECT_EQ(st.received, 5);
   EXPECT_EQ(st.handler_errors, 0);
   EXPECT_EQ(cycles, (std::vector<int64_t>{2}));
 }
