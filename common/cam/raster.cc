@@ -162,23 +162,31 @@ struct PassWalker {
           continue;
         }
         if (u1 - u <= ad.min_step_mm) break;
-        // The CL points at k/16 of the step (k = 1..15, the middle first) against the chord.
+        // The CL points at k/n of the step (the middle first) against the chord, n = 16 at
+        // least and 16 per chord length of the step's length in xy, up to 512: a steep
+        // chord (a wall) gets as many probes along its length as a flat one.
         const double um = 0.5 * (u + u1);
         const ClPoint cm = drop(um);
         ++dropped;
         // The probes hold 0.9 β: between them, the CL surface of a faceted mesh still
         // wiggles (a ball over 0.25 mm facets: up to 6 % of β beyond the probes' worst).
-        // Distances normal to the chord (vertical ones times its cosine): on a steep
-        // wall the path is near the surface though far below it vertically.
-        const double L = u1 - u;
-        const double limit = 0.9 * ad.beta_mm * std::hypot(L, c1.z - c.z) / L;
-        bool within = cm.touched() && std::abs(cm.z - 0.5 * (c.z + c1.z)) <= limit;
-        for (int k = 1; k < 16 && within; ++k) {
-          if (k == 8) continue;
-          const double t = k / 16.0;
-          const ClPoint cq = drop(u + t * (u1 - u));
+        // Distances from the chord segment in the pass's (u, z) plane, not vertical ones:
+        // on a steep wall the path is near the surface though far below it vertically.
+        const double L = u1 - u, dz = c1.z - c.z, len2 = L * L + dz * dz;
+        const double limit = 0.9 * ad.beta_mm;
+        auto off_chord = [&](double t, double zq) {
+          const double wu = t * L, wz = zq - c.z;
+          const double s = std::clamp((wu * L + wz * dz) / len2, 0.0, 1.0);
+          return std::hypot(wu - s * L, wz - s * dz);
+        };
+        bool within = cm.touched() && off_chord(0.5, cm.z) <= limit;
+        const int n = 2 * static_cast<int>(std::clamp(std::ceil(8 * std::sqrt(len2) / L), 8.0, 256.0));
+        for (int k = 1; k < n && within; ++k) {
+          if (2 * k == n) continue;
+          const double t = static_cast<double>(k) / n;
+          const ClPoint cq = drop(u + t * L);
           ++dropped;
-          within = cq.touched() && std::abs(cq.z - (c.z + t * (c1.z - c.z))) <= limit;
+          within = cq.touched() && off_chord(t, cq.z) <= limit;
         }
         if (within) break;
         u1 = um, c1 = cm;  // halve: the middle becomes the end

@@ -33,7 +33,8 @@ RasterPath raster_fixed_step(const DropCutter& dc, const Bounds& bounds, const R
 
 // Seed 003's step control along each pass (same passes as above): the next step is
 // predicted from the circle through the last three CL points (chord error κL²/8 = β),
-// at most `spec.step_mm`; the CL points at k/16 of the step (k = 1..15) are computed and
+// at most `spec.step_mm`; the CL points at k/n of the step (n = 16, more on steep chords
+// so that their spacing along the chord stays that of a flat one, up to 512) are computed and
 // the step halved (the middle becoming its end) while the distance of any of them from
 // the chord (normal to it) exceeds 0.9·`beta_mm` (a margin for the CL surface between
 // the probes), down to `min_step_mm` — which also walks into
