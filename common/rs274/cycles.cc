@@ -8,6 +8,8 @@
 
 namespace cnc::rs274 {
 namespace {
+// Moves one cycle block may make (repeats × pecks): beyond it the block is refused.
+constexpr int kMaxCycleMoves = 100'000;
 
 // Axis indices into a Pose of the plane's first axis, second axis and depth axis.
 struct Axes {
@@ -101,6 +103,13 @@ class Runner {
 // the last peck). LinuxCNC 2.9's clearance is 0.010 in, or 0.254 mm.
 void Runner::peck(double a, double b, double r, double clear, double bottom, double delta, bool full_retract) {
   if (delta <= 0.0) refuse("Negative or zero q value used");
+  // Pecks of every repeat: a Q far below the depth made billions of moves in one
+  // block (or, below the depth's rounding step, a loop that never ended).
+  const double pecks = std::ceil((r - bottom) / delta) * static_cast<double>(in_.repeats);
+  if (!(pecks <= static_cast<double>(kMaxCycleMoves)))
+    refuse(gcode_text(in_.g) + " with Q" + std::to_string(delta) + " from R" + std::to_string(r) + " to " +
+           std::to_string(bottom) + " (L" + std::to_string(in_.repeats) + "): more than " +
+           std::to_string(kMaxCycleMoves) + " pecks in one block");
   const double clearance = in_.units == Units::kMm ? 0.010 * 25.4 : 0.010;
   for (double depth = r - delta; depth > bottom; depth = depth - delta) {
     feed(a, b, depth);
@@ -176,6 +185,11 @@ CycleResult Runner::run() {
   if (!in_.has_r && !in_.continuing) refuse("R clearance plane unspecified in cycle");
   if (in_.repeats < 0) refuse("Negative l word used");
   if (in_.repeats == 0) refuse("Cannot do zero repeats of cycle");
+  // Not LinuxCNC's: one cycle block makes all its moves at once (into the block
+  // builder's queue), so their number is bounded (L here, the pecks in peck()).
+  if (in_.repeats > kMaxCycleMoves)
+    refuse("L" + std::to_string(in_.repeats) + " repeats of " + gcode_text(in_.g) + ": more than " +
+           std::to_string(kMaxCycleMoves) + " in one block");
 
   // LinuxCNC's convert_cycle_xy (yz, zx, uv, vw, wu).
   // LinuxCNC's letters: "Z value unspecified in xy plane ...", "R less than z in ... xy".

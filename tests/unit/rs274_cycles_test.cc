@@ -1411,5 +1411,30 @@ TEST(Cycles, NotACycleIsRefused) {
   EXPECT_TRUE(rec.calls.empty());
 }
 
+// Found by fuzz_gcode: G73 Z-9999999999992 Q0.5 made 2e13 pecks in one block (and a
+// Q below the depth's rounding step a loop without end). One cycle block makes at
+// most 100,000 moves (repeats x pecks); beyond it the block is refused.
+TEST(Cycles, TooManyPecksOrRepeatsAreRefused) {
+  Recorder rec;
+  CycleInput in = g17(730, false);
+  in.q = 0.5;
+  in.has_q = true;
+  in.z = -9999999999992;
+  EXPECT_THROW(run_cycle(in, SourceRef{}, rec), Error);
+  in.z = -1e300;
+  in.q = 1e-300;
+  EXPECT_THROW(run_cycle(in, SourceRef{}, rec), Error);
+  in = g17(830, false);
+  in.q = 0.001;
+  in.has_q = true;
+  in.z = -5;  // R2 to Z-5 in 0.001 mm pecks: 7,000 pecks, allowed
+  EXPECT_NO_THROW(run_cycle(in, SourceRef{}, rec));
+  in.repeats = 20;  // 140,000 pecks
+  EXPECT_THROW(run_cycle(in, SourceRef{}, rec), Error);
+  in = g17(810, false);
+  in.repeats = 100'001;
+  EXPECT_THROW(run_cycle(in, SourceRef{}, rec), Error);
+}
+
 }  // namespace
 }  // namespace cnc::rs274
