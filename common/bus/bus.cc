@@ -23,6 +23,14 @@ int32_t read_be32(const uint8_t* p) {
   for (int i = 0; i < 4; ++i) v = (v << 8) | p[i];
   return static_cast<int32_t>(v);
 }
+// a - b for a >= b: exact in unsigned arithmetic, where int64_t would overflow
+// (sequence numbers are whatever a sender writes: INT64_MIN and INT64_MAX included).
+uint64_t distance(int64_t a, int64_t b) { return static_cast<uint64_t>(a) - static_cast<uint64_t>(b); }
+// total += n, saturating at INT64_MAX (total >= 0).
+void add_saturated(int64_t& total, uint64_t n) {
+  const auto room = static_cast<uint64_t>(INT64_MAX - total);
+  total = n > room ? INT64_MAX : total + static_cast<int64_t>(n);
+}
 }  // namespace
 
 std::optional<WireHeader> peek_header(const void* data, size_t size) {
@@ -97,11 +105,11 @@ bool LogVerifier::check(const std::string& channel, const void* data, size_t siz
   if (!fresh) {
     auto& [last, seen] = it->second;
     if (hdr->seq > last) {
-      const int64_t ahead = hdr->seq - last;
+      const uint64_t ahead = distance(hdr->seq, last);
       seen = ahead >= 64 ? 1 : (seen << ahead) | 1;
       last = hdr->seq;
     } else {
-      const int64_t behind = last - hdr->seq;
+      const uint64_t behind = distance(last, hdr->seq);
       if (behind >= 64 || ((seen >> behind) & 1u)) return bad(Reject::kReplayed);
       seen |= uint64_t{1} << behind;
     }
@@ -267,15 +275,15 @@ bool Bus::admit(const std::string& channel, const void* data, size_t size, int64
     if (it != ch_it->second.end()) {
       SenderSeq& s = it->second;
       if (hdr->seq > s.last) {
-        const int64_t ahead = hdr->seq - s.last;
+        const uint64_t ahead = distance(hdr->seq, s.last);
         ChannelStats& st = stats_[channel];
-        st.seq_gaps += ahead - 1;
+        add_saturated(st.seq_gaps, ahead - 1);
         s.seen = ahead >= 64 ? 1 : (s.seen << ahead) | 1;
         s.last = hdr->seq;
         ++st.received;
         return true;
       }
-      const int64_t behind = s.last - hdr->seq;
+      const uint64_t behind = distance(s.last, hdr->seq);
       if (behind >= 64 || (s.seen >> behind) & 1u) {
         reject(channel, Reject::kReplayed, data, size);
         return false;
@@ -361,10 +369,9 @@ void Bus::account(const std::string& channel, const void* data, size_t size) {
     ch_it->second.emplace(hdr->sender, SenderSeq{hdr->seq, 0});
     return;
   }
-  const int64_t expected = it->second.last + 1;
-  if (hdr->seq > expected) {
-    st.seq_gaps += hdr->seq - expected;
-  } else if (hdr->seq < expected) {
+  if (hdr->seq > it->second.last) {
+    add_saturated(st.seq_gaps, distance(hdr->seq, it->second.last) - 1);
+  } else {
     ++st.seq_restarts;
   }
   it->second.last = hdr->seq;

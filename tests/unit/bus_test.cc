@@ -177,6 +177,23 @@ TEST(Bus, CorruptedMessagesAreCountedAndDropped) {
   EXPECT_EQ(cycles, (std::vector<int64_t>{2}));
 }
 
+// Found by fuzz_bus_decode (UBSan): sequence numbers are whatever a sender writes;
+// the gap and replay arithmetic overflowed int64 between INT64_MIN and INT64_MAX.
+TEST(Bus, ExtremeSequenceNumbersAreCountedWithoutOverflow) {
+  Bus bus("memq://", 1);
+  int count = 0;
+  bus.subscribe<cnc::lcmt_setpoint>("SP", [&](const cnc::lcmt_setpoint&) { ++count; });
+  for (int64_t seq : {INT64_MIN, INT64_MAX, INT64_MIN, int64_t{0}, INT64_MAX}) {
+    const auto buf = encode(make_setpoint(1, seq, 5));
+    bus.publish_raw("SP", buf.data(), buf.size());
+  }
+  EXPECT_EQ(bus.drain(), 5);
+  EXPECT_EQ(count, 5);
+  const ChannelStats st = bus.stats("SP");
+  EXPECT_EQ(st.seq_gaps, INT64_MAX);  // 2^64 - 2 missing, saturated, then more
+  EXPECT_EQ(st.seq_restarts, 1);      // INT64_MAX -> INT64_MIN
+}
+
 TEST(Bus, TrailingBytesAreADecodeFailure) {
   Bus bus("memq://", 1);
   int count = 0;
