@@ -6,6 +6,7 @@
 #include <limits>
 #include <string>
 
+#include "common/cam/points_csv.h"
 #include "common/cam/stl.h"
 #include "temp_dir.h"
 
@@ -164,6 +165,39 @@ TEST(CamStl, MissingFileIsAnErrorNamingIt) {
   } catch (const StlError& e) {
     EXPECT_NE(std::string(e.what()).find("/nonexistent/x.stl: cannot open"), std::string::npos);
   }
+}
+
+// The drop command's files: x and y echoed exactly as written, z the shortest text
+// that reads back as the same double, empty where nothing is touched.
+TEST(CamPointsCsv, EchoesXYAsWrittenAndLeavesUntouchedZEmpty) {
+  const PointsCsv in = parse_points_csv("x,y\r\n 1.50, -2e-1\n\n+3,4.000\n", "p.csv");
+  ASSERT_EQ(in.points.size(), 2u);
+  EXPECT_EQ(in.points[0].x, 1.5);
+  EXPECT_EQ(in.points[0].y, -0.2);
+  EXPECT_EQ(in.points[1].x, 3);
+  test::TempDir dir;
+  const std::string out = (dir / "o.csv").string();
+  write_xyz_csv(out, in, {ClPoint{0.1 + 0.2, Contact::kFacet}, ClPoint{}});
+  std::ifstream f(out);
+  const std::string text(std::istreambuf_iterator<char>(f), {});
+  EXPECT_EQ(text, "x,y,z\n1.50,-2e-1,0.30000000000000004\n+3,4.000,\n");
+}
+
+TEST(CamPointsCsv, ErrorsNameTheLine) {
+  auto error_of_csv = [](const std::string& text) {
+    try {
+      parse_points_csv(text, "p.csv");
+    } catch (const std::runtime_error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(error_of_csv("a,b\n1,2\n").find("p.csv:1: expected the header 'x,y'"), std::string::npos);
+  EXPECT_NE(error_of_csv("x,y\n1,2\n3\n").find("p.csv:3: expected two fields"), std::string::npos);
+  EXPECT_NE(error_of_csv("x,y\n1,2,3\n").find("p.csv:2: expected two fields"), std::string::npos);
+  EXPECT_NE(error_of_csv("x,y\n1,nan\n").find("p.csv:2: 'nan' is not a finite number"), std::string::npos);
+  EXPECT_NE(error_of_csv("x,y\n1,2x\n").find("p.csv:2: '2x' is not a finite number"), std::string::npos);
+  EXPECT_NE(error_of_csv("").find("p.csv: empty"), std::string::npos);
 }
 
 }  // namespace
