@@ -1048,6 +1048,7 @@ void Interpreter::fanuc_call() {
   const double runs = std::nearbyint(l);
   if (std::fabs(l - runs) > 1e-4 || runs < 0)
     fail(lcol, "M98 L" + num(l) + ": the repeat count is a whole number, 0 or more");
+  if (!(runs <= 2147483647.0)) fail(lcol, "M98 L" + num(l) + ": the repeat count is at most 2147483647");
   // LinuxCNC's execute_call: with L, a counter of the caller's level takes L when it
   // is idle (-1) and counts down; while runs remain, M99 returns to the M98 line
   // itself, which is read and evaluated again (so P#n can name another subprogram

@@ -406,5 +406,13 @@ TEST(Rs274Subprogram, G10L10InARotatedSystemAndTheToolTableEntry) {
   EXPECT_NEAR(r.param(2), 0.0, 1e-9);
 }
 
+// Found by fuzz_gcode (UBSan): M98 L333...3 (98 digits) converted the count to int64_t, beyond its range.
+TEST(Rs274Subprogram, RepeatCountBeyondInt32IsRefused) {
+  const Error e = refusal("G90\nM98 P1000 L3333333333333333333333\nM30\nO1000\nM99\n");
+  EXPECT_EQ(e.where().line, 2);
+  EXPECT_EQ(e.where().column, 11);
+  EXPECT_NE(e.detail().find("repeat count is at most 2147483647"), std::string::npos) << e.what();
+}
+
 }  // namespace
 }  // namespace cnc::rs274
