@@ -2526,6 +2526,8 @@ void Interpreter::nurbs_fanuc_open(Words& w) {
   if (w.on('Q') && (w['Q'] < 1 || w['Q'] > 3 || w['Q'] != std::floor(w['Q'])))
     fail(w.column('Q'), "G6.2 Q (LinuxCNC's interpolation method) must be 1, 2 or 3");
   nurbs_fanuc_line(w);
+  if (nurbs_->points.empty())
+    fail(w.gcol[1], "G06.2 needs its first control point (an X, Y, Z or R word) with the knot K");
   // The first control point is where the tool is.
   const NurbsPoint& p0 = nurbs_->points.front();
   const double tol = 1e-6;
