@@ -132,7 +132,9 @@ void MapReader::finish() const {
   if (!node_ || !node_.IsMap()) return;
   std::set<std::string> seen;
   for (const auto& kv : node_) {
-    const std::string key = kv.first.as<std::string>();
+    // A complex key ("? [a, b]", "? {a: 1}") is no name: as<std::string> would throw yaml-cpp's bad conversion.
+    if (!kv.first.IsScalar()) throw ConfigError(file_, path_, "a key must be a plain name" + mark_of(kv.first));
+    const std::string key = kv.first.Scalar();
     if (!seen.insert(key).second) fail(key, "duplicate key" + mark_of(kv.first));
     if (used_.count(key) == 0) fail(key, "unknown key" + mark_of(kv.first));
   }

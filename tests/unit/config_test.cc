@@ -101,6 +101,14 @@ TEST(MachineConfig, UnknownKeyAtTopLevel) {
   expect_error_at(sim3_text() + "bogus: 1\n", "bogus", "unknown key");
 }
 
+// Found by fuzz_config: a complex key ("? ...") threw yaml-cpp's bad conversion out of the loader.
+TEST(MachineConfig, ComplexKeyIsRefusedWithItsPlace) {
+  expect_error_at(replace_nth(sim3_text(), "timing:\n", "timing:\n  ? [a, b]\n  : 1\n"), "timing",
+                  "a key must be a plain name (line");
+  const std::string top = expect_error(sim3_text() + "? {x: 1}\n: 2\n").what();
+  EXPECT_NE(top.find("(top level): a key must be a plain name"), std::string::npos) << top;
+}
+
 TEST(MachineConfig, UnknownKeyInTiming) {
   expect_error_at(replace_nth(sim3_text(), "timing:\n", "timing:\n  ipo_period: 0.004\n"), "timing.ipo_period",
                   "unknown key");
