@@ -469,8 +469,21 @@ double Interpolator::advance(double ds, bool* reached_stop) {
       return moved;
     }
     const double left = p.length - s_;
-    if (left <= ds - moved + 1e-12) {
-      moved += std::max(0.0, left);
+    // The block's end by its arc-length count, or (on a curve, whose steps are chords
+    // a little shorter than the arc) by distance when the count says it is near.
+    const double step_left = ds - moved;
+    double to_end = 0;
+    for (int a = 0; a < naxes_; ++a) to_end += (p.path.end()[a] - pos_[a]) * (p.path.end()[a] - pos_[a]);
+    to_end = std::sqrt(to_end);
+    // Only into a block the path runs on into: where it stops, its jerk-limited stop
+    // profile ends on the count.
+    const bool runs_on = blocks_.size() > 1 && !blocks_[1].stop_at_start();
+    if (left <= step_left + 1e-12 || (runs_on && left <= 2 * step_left && to_end <= step_left)) {
+      // The distance actually covered to the end point (on a line the same as the
+      // count): the rest of the step goes on along the next block, so the setpoints
+      // keep their spacing across the junction (the count's surplus was a dip in the
+      // speed there, and a jerk spike).
+      moved += std::min(to_end, std::max(0.0, step_left));
       for (int a = 0; a < naxes_; ++a) pos_[a] = p.path.end()[a];
       out_.block_index = p.block.index;
       out_.source_line = p.block.source_line;
