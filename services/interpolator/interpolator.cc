@@ -336,6 +336,7 @@ bool Interpolator::apply_command(const Command& cmd) {
       starved_cycles_ = 0;
       u_ = s_ = v_ = a_ = 0;
       dwell_left_ = -1;
+      rest_next_ = false;
       state_ = RunState::kIdle;
       break;
     case Command::Kind::kStart:
@@ -359,6 +360,7 @@ bool Interpolator::apply_command(const Command& cmd) {
       starved_cycles_ = 0;
       u_ = s_ = v_ = a_ = 0;
       dwell_left_ = -1;
+      rest_next_ = false;
       hold_ = false;
       stopping_ = false;
       state_ = RunState::kIdle;
@@ -634,6 +636,7 @@ bool Interpolator::creep_to_stop() {
   const double moved = advance(d, &at_stop);
   out_.feed_mm_per_min = moved / T * 60.0;
   v_ = a_ = 0;
+  rest_next_ = moved > 0 && !blocks_.empty() && !blocks_.front().stop_block();  // a dwell or event rests anyway
   return true;
 }
 
@@ -686,6 +689,11 @@ const Setpoint& Interpolator::step() {
         state_ = RunState::kStarved;
         ++starved_cycles_;
       }
+    } else if (rest_next_) {
+      // One cycle at rest on the stop point the last cycle ended on (the start from
+      // rest assumes it: without it the axes' jerk ran up to 1.07x the limit there).
+      rest_next_ = false;
+      out_.limit = Limit::kLookahead;
     } else if (!pausing && creep_to_stop()) {
       // A discrete brake ended a hair short of a stop point: step onto it.
       out_.limit = Limit::kLookahead;
@@ -746,6 +754,7 @@ const Setpoint& Interpolator::step() {
       if (at_stop) {
         v_n = 0;
         a_n = 0;
+        rest_next_ = moved > 0 && !blocks_.empty() && !blocks_.front().stop_block();
       }
       out_.feed_mm_per_min = moved / T * 60.0;
       out_.path_accel_mm_s2 = a_n;

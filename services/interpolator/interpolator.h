@@ -209,6 +209,9 @@ class Interpolator {
   double v_ = 0;     // path speed, mm/s
   double a_ = 0;     // path acceleration, mm/s²
   int64_t dwell_left_ = -1;
+  // The path came to rest on a stop point with motion in that cycle: the next cycle
+  // stands still, so the start from rest begins from a rest the setpoints show.
+  bool rest_next_ = false;
 
   std::array<double, program::kMaxAxes> pos_{};
   int64_t cycle_ = 0;
