@@ -64,14 +64,7 @@ stop logger TERM
 # Final positions of the simulated drives against the program end point.
 [ -s "$WORK/final.json" ] || fail "the simulator wrote no final positions"
 note "final positions: $(cat "$WORK/final.json")"
-python3 - "$WORK/final.json" <<'PY' || fail "final positions differ from the end point by more than 1 µm"
-import json, sys
-pos = json.load(open(sys.argv[1]))
-end = {"X": 123.4567, "Y": 45.6789, "Z": -7.0}
-worst = max(abs(pos[a] - end[a]) for a in end)
-print(f"# largest end-point deviation {worst*1000:.4f} µm (tolerance 1 µm)", file=sys.stderr)
-sys.exit(0 if worst <= 1e-3 else 1)
-PY
+final_at "$WORK/final.json" 123.4567 45.6789 -7.0 || fail "final positions differ from the end point by more than 1 µm"
 
 # The log: lcm-logplayer's format, the setpoint stream complete.
 "$BUILD/tools/cnc-logstat" --log "$WORK/run.lcmlog" --summary --require-no-gaps "${TEST_PREFIX}SETPOINTS" >"$WORK/logstat.out" \

@@ -90,3 +90,16 @@ expect_drive_fault() {
   [ "$rc" -eq 5 ] || fail "cnc-ctl exit $rc, expected 5 (drive fault)"
   grep -q "$2" "$WORK/ctl.out" || fail "the bridge did not report '$2'"
 }
+
+# final_at FILE X Y Z: the simulator's final positions (by axis name, from --final-state)
+# within 1 µm of (X, Y, Z); prints the largest deviation.
+final_at() {
+  /usr/bin/python3 - "$@" <<'PY'
+import json, sys
+pos = json.load(open(sys.argv[1]))
+end = dict(zip("XYZ", map(float, sys.argv[2:5])))
+worst = max(abs(pos[a] - end[a]) for a in end)
+print(f"# largest end-point deviation {worst*1000:.4f} µm (tolerance 1 µm)", file=sys.stderr)
+sys.exit(0 if worst <= 1e-3 else 1)
+PY
+}

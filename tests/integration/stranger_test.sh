@@ -77,14 +77,7 @@ for s in interpolator program-server monitor drive-bridge logger; do
   grep -q "key file .* read again: 2 key(s)" "$WORK/$s.log" || { cat "$WORK/$s.log" >&2; fail "$s did not take the rotated key"; }
 done
 
-python3 - "$WORK/final.json" <<'PY' || fail "final positions differ from the end point by more than 1 µm"
-import json, sys
-pos = json.load(open(sys.argv[1]))
-end = {"X": 123.4567, "Y": 45.6789, "Z": -4.0}
-worst = max(abs(pos[a] - end[a]) for a in end)
-print(f"# largest end-point deviation {worst*1000:.4f} µm (tolerance 1 µm)", file=sys.stderr)
-sys.exit(0 if worst <= 1e-3 else 1)
-PY
+final_at "$WORK/final.json" 123.4567 45.6789 -4.0 || fail "final positions differ from the end point by more than 1 µm"
 
 python3 "$SRC/tests/integration/stranger.py" check --log "$WORK/run.lcmlog" --py "$WORK/py" --sent "$WORK/sent.json" \
   --prefix "$TEST_PREFIX" >&2 || fail "the stranger's messages were not all dropped and counted (above)"
