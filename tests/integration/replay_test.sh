@@ -58,11 +58,17 @@ note "changed program: $(head -1 "$WORK/p.out")"
 
 # lcm-logplayer drives a fresh monitor; its reports equal the live monitor's.
 # (An unsigned analysis cell: the signing cell drops a played-back log as a replay.)
+# The played-back monitor must see every message (its reports are compared one by
+# one): it gets a receive buffer like the logger's, and the log plays at the speed it
+# was recorded at. At twice that speed, under the suite's parallel load, a played
+# monitor once reported a cycle without its setpoint (commanded feed 0 vs 2000).
 unsigned_machine "$M" "$WORK/unsigned.yaml"
+sed -e 's#^\( *lcm_url: *"udpm://[^"?]*?[^"]*\)"#\1\&recv_buf_size=8388608"#' "$WORK/unsigned.yaml" >"$WORK/analysis.yaml"
+grep -q 'recv_buf_size=8388608' "$WORK/analysis.yaml" || fail "analysis.yaml: no receive buffer set on the cell's URL"
 start logger2 "$BUILD/services/cnc-logger" --machine "$WORK/unsigned.yaml" --out "$WORK/played"
-start monitor2 "$BUILD/services/cnc-monitor" --machine "$WORK/unsigned.yaml"
+start monitor2 "$BUILD/services/cnc-monitor" --machine "$WORK/analysis.yaml"
 sleep 0.5
-timeout 120 lcm-logplayer --speed 2 --regexp "^${TEST_PREFIX//./\\.}(SETPOINTS|AXIS_STATUS|INTERP_INPUT)\$" \
+timeout 120 lcm-logplayer --speed 1 --regexp "^${TEST_PREFIX//./\\.}(SETPOINTS|AXIS_STATUS|INTERP_INPUT)\$" \
   --lcm-url "udpm://239.255.76.67:${TEST_LCM_PORT}?ttl=0" "$WORK/run.lcmlog" || fail "lcm-logplayer failed"
 sleep 0.5
 stop monitor2 TERM
