@@ -103,3 +103,24 @@ print(f"# largest end-point deviation {worst*1000:.4f} µm (tolerance 1 µm)", f
 sys.exit(0 if worst <= 1e-3 else 1)
 PY
 }
+
+# netns_host NAME [MCAST_DEV]: a network namespace standing for one host, held by a
+# sleeping process (registered like a started process, so cleanup removes it), with
+# its loopback up; with MCAST_DEV "lo", multicast goes out on the loopback (a host
+# with nothing but its own services and, for example, cnc-netem beside it). Sets
+# NETNS_PID[NAME] and HOST[NAME], the prefix that runs a command inside:
+#   start logger ${HOST[h3]} "$BUILD/services/cnc-logger" ...   (nsenter execs it: its pid is the logger's)
+#   ${HOST[h2]} ip addr add 10.77.0.2/24 dev vh2
+declare -A NETNS_PID=() HOST=()
+netns_host() {
+  local name="$1" dev="${2:-}" ready="$WORK/netns-$1.pid"
+  local setup='ip link set lo up'
+  [ "$dev" = lo ] && setup="$setup && ip route add 224.0.0.0/4 dev lo"
+  unshare -n bash -c "$setup"' && echo $$ >"$0" && exec sleep 3600' "$ready" &
+  TEST_PIDS[netns-$name]=$!
+  local i
+  for ((i = 0; i < 500; i++)); do [ -s "$ready" ] && break; sleep 0.01; done
+  [ -s "$ready" ] || fail "network namespace $name was not set up"
+  NETNS_PID[$name]=$(cat "$ready")
+  HOST[$name]="nsenter -t ${NETNS_PID[$name]} -n --"
+}

@@ -1,0 +1,403 @@
+// cnc-netem: a loss-and-delay forwarder for a cell's UDP multicast (this kernel has
+// no netem qdisc). It receives the datagrams of one multicast group and port on one
+// side and sends them again, to the same group and port, on the other, dropping a
+// random share and holding the rest for a random time (impairment.h: loss, delay ±
+// jitter, seeded, order kept or not).
+//
+//   cnc-netem --group ADDR:PORT --from SIDE --to SIDE [--both]
+//             [--loss PCT] [--delay MS] [--jitter MS] [--keep-order] [--seed N]
+//             [--queue N] [--slot-bytes N] [--ttl N] [--realtime-priority N]
+//
+// A SIDE is a network namespace, NETNS[,IFNAME]: a namespace file (/proc/PID/ns/net,
+// /run/netns/NAME) or "." for the forwarder's own, and optionally the interface to
+// join the group and send on (default: the namespace's route for the group). The
+// usual set-up in tests: two namespaces with nothing between them but this
+// forwarder, each with multicast on its loopback (`ip route add 224.0.0.0/4 dev lo`),
+// the cell's services split between them. --both forwards the other way too (the
+// same parameters, the seed + 1). Datagrams the forwarder itself sent are never taken
+// up again (their source port is one of its own in that namespace).
+//
+// One thread: ppoll on the receiving sockets until the next release is due; no
+// allocation per datagram (the queue's slots are allocated at start). At SIGTERM or
+// SIGINT it prints its counters per direction to stderr and exits 0; what is still
+// held is not sent (counted as left in queue). Exit 2 on bad arguments, 1 when a
+// socket or namespace cannot be set up.
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <net/if.h>
+#include <netinet/in.h>
+#include <poll.h>
+#include <sched.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <ctime>
+#include <limits>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "common/util/realtime.h"
+#include "common/util/signals.h"
+#include "tools/netem/impairment.h"
+
+namespace {
+
+using cnc::netem::Counters;
+using cnc::netem::DelayQueue;
+using cnc::netem::Impairment;
+using cnc::netem::Params;
+
+int usage(const std::string& why) {
+  if (!why.empty()) std::fprintf(stderr, "cnc-netem: %s\n", why.c_str());
+  std::fprintf(stderr,
+               "usage: cnc-netem --group ADDR:PORT --from NETNS[,IF] --to NETNS[,IF] [--both]\n"
+               "                 [--loss PCT] [--delay MS] [--jitter MS] [--keep-order] [--seed N]\n"
+               "                 [--queue N] [--slot-bytes N] [--ttl N] [--realtime-priority N]\n"
+               "  NETNS: /proc/PID/ns/net, /run/netns/NAME or . (this process's namespace)\n");
+  return 2;
+}
+
+int64_t now_ns() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+bool parse_double(const std::string& s, double* out) {
+  char* end = nullptr;
+  errno = 0;
+  *out = std::strtod(s.c_str(), &end);
+  return errno == 0 && end != s.c_str() && *end == '\0';
+}
+
+bool parse_u64(const std::string& s, uint64_t* out) {
+  if (s.empty() || s[0] == '-') return false;
+  char* end = nullptr;
+  errno = 0;
+  *out = std::strtoull(s.c_str(), &end, 10);
+  return errno == 0 && end != s.c_str() && *end == '\0';
+}
+
+struct Side {
+  std::string netns;  // "." = own
+  std::string ifname;
+  dev_t dev = 0;
+  ino_t ino = 0;
+};
+
+bool parse_side(const std::string& flag, const std::string& v, Side* s, std::string* err) {
+  const auto comma = v.find(',');
+  s->netns = v.substr(0, comma);
+  s->ifname = comma == std::string::npos ? "" : v.substr(comma + 1);
+  if (s->netns.empty()) {
+    *err = flag + " '" + v + "': no namespace (use . for this process's own)";
+    return false;
+  }
+  const std::string path = s->netns == "." ? "/proc/self/ns/net" : s->netns;
+  struct stat st{};
+  if (stat(path.c_str(), &st) != 0) {
+    *err = flag + " '" + v + "': " + path + ": " + std::strerror(errno);
+    return false;
+  }
+  s->dev = st.st_dev;
+  s->ino = st.st_ino;
+  return true;
+}
+
+// Runs the socket set-up of one side inside its namespace and comes back.
+class NetnsGuard {
+ public:
+  NetnsGuard(int home_fd, const Side& side, std::string* err) : home_(home_fd) {
+    if (side.netns == ".") return;
+    const int fd = open(side.netns.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0 || setns(fd, CLONE_NEWNET) != 0) {
+      *err = "cannot enter the network namespace " + side.netns + ": " + std::strerror(errno);
+      if (fd >= 0) close(fd);
+      return;
+    }
+    close(fd);
+    entered_ = true;
+  }
+  ~NetnsGuard() {
+    if (entered_ && setns(home_, CLONE_NEWNET) != 0) {
+      std::fprintf(stderr, "cnc-netem: cannot return to its own network namespace: %s\n", std::strerror(errno));
+      std::exit(1);
+    }
+  }
+  NetnsGuard(const NetnsGuard&) = delete;
+  NetnsGuard& operator=(const NetnsGuard&) = delete;
+
+ private:
+  int home_;
+  bool entered_ = false;
+};
+
+int interface_index(const Side& side, std::string* err) {
+  if (side.ifname.empty()) return 0;
+  const unsigned idx = if_nametoindex(side.ifname.c_str());
+  if (idx == 0) *err = "no interface '" + side.ifname + "' in " + side.netns + ": " + std::strerror(errno);
+  return static_cast<int>(idx);
+}
+
+// The receiving socket: bound to the group and port, joined on the side's interface,
+// only this socket's memberships (IP_MULTICAST_ALL off), a large buffer.
+int open_rx(const Side& side, in_addr group, uint16_t port, std::string* err) {
+  const int ifindex = interface_index(side, err);
+  if (!err->empty()) return -1;
+  const int fd = socket(AF_INET, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+  if (fd < 0) {
+    *err = std::string("socket: ") + std::strerror(errno);
+    return -1;
+  }
+  const int one = 1, zero = 0, buf = 8 << 20;
+  setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
+  if (setsockopt(fd, SOL_SOCKET, SO_RCVBUFFORCE, &buf, sizeof buf) != 0)
+    setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &buf, sizeof buf);
+  setsockopt(fd, IPPROTO_IP, IP_MULTICAST_ALL, &zero, sizeof zero);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_port = htons(port);
+  a.sin_addr = group;
+  ip_mreqn m{};
+  m.imr_multiaddr = group;
+  m.imr_ifindex = ifindex;
+  if (bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0 ||
+      setsockopt(fd, IPPROTO_IP, IP_ADD_MEMBERSHIP, &m, sizeof m) != 0) {
+    *err = "cannot receive the group in " + side.netns + ": " + std::strerror(errno);
+    close(fd);
+    return -1;
+  }
+  return fd;
+}
+
+// The sending socket: its own port (known, so its datagrams are recognised when
+// they come back), the side's interface, loopback on (receivers may be local).
+int open_tx(const Side& side, int ttl, uint16_t* local_port, std::string* err) {
+  const int ifindex = interface_index(side, err);
+  if (!err->empty()) return -1;
+  const int fd = socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  if (fd < 0) {
+    *err = std::string("socket: ") + std::strerror(errno);
+    return -1;
+  }
+  const int one = 1;
+  setsockopt(fd, IPPROTO_IP, IP_MULTICAST_LOOP, &one, sizeof one);
+  setsockopt(fd, IPPROTO_IP, IP_MULTICAST_TTL, &ttl, sizeof ttl);
+  if (ifindex != 0) {
+    ip_mreqn m{};
+    m.imr_ifindex = ifindex;
+    if (setsockopt(fd, IPPROTO_IP, IP_MULTICAST_IF, &m, sizeof m) != 0) {
+      *err = "cannot send on " + side.ifname + ": " + std::strerror(errno);
+      close(fd);
+      return -1;
+    }
+  }
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  socklen_t len = sizeof a;
+  if (bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0 ||
+      getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) != 0) {
+    *err = "cannot bind the sending socket in " + side.netns + ": " + std::strerror(errno);
+    close(fd);
+    return -1;
+  }
+  *local_port = ntohs(a.sin_port);
+  return fd;
+}
+
+struct Direction {
+  std::string name;
+  int rx = -1, tx = -1;
+  uint16_t tx_port = 0;
+  std::vector<uint16_t> own_ports;  // our sending ports in rx's namespace
+  std::unique_ptr<Impairment> imp;
+  std::unique_ptr<DelayQueue> queue;
+  Counters n;
+  char scratch[65536];
+};
+
+void receive_all(Direction& d) {
+  for (;;) {
+    char* buf = d.queue->reserve();
+    const bool to_scratch = buf == nullptr;
+    if (to_scratch) buf = d.scratch;
+    sockaddr_in from{};
+    socklen_t flen = sizeof from;
+    // MSG_TRUNC: the datagram's real length, to tell one that does not fit.
+    const ssize_t r = recvfrom(d.rx, buf, d.queue->slot_bytes(), MSG_TRUNC,
+                               reinterpret_cast<sockaddr*>(&from), &flen);
+    if (r < 0) return;  // EAGAIN: all read (other errors: read again at the next poll)
+    const int64_t t = now_ns();
+    bool ours = false;
+    for (uint16_t p : d.own_ports) ours = ours || ntohs(from.sin_port) == p;
+    if (ours) continue;
+    ++d.n.received;
+    int64_t release = 0;
+    if (!d.imp->admit(t, &release)) {
+      ++d.n.lost;
+    } else if (static_cast<size_t>(r) > d.queue->slot_bytes()) {
+      ++d.n.too_large;
+    } else if (to_scratch) {
+      ++d.n.queue_full;
+    } else {
+      d.queue->commit(buf, static_cast<size_t>(r), t, release);
+    }
+  }
+}
+
+void send_due(Direction& d, const sockaddr_in& dest) {
+  const int64_t t = now_ns();
+  while (d.queue->size() > 0 && d.queue->next_release_ns() <= t) {
+    const auto& h = d.queue->front();
+    if (sendto(d.tx, h.data, h.bytes, 0, reinterpret_cast<const sockaddr*>(&dest), sizeof dest) < 0)
+      ++d.n.send_errors;
+    else
+      d.n.on_sent(h, t);
+    d.queue->pop();
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string group_arg, from_arg, to_arg;
+  Params p;
+  bool both = false;
+  uint64_t queue_slots = 4096, slot_bytes = 65536, ttl = 1, rt_prio = 0;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto value = [&](std::string* out) {
+      if (i + 1 >= argc) return false;
+      *out = argv[++i];
+      return true;
+    };
+    std::string v;
+    double d = 0;
+    if (a == "--both") {
+      both = true;
+    } else if (a == "--keep-order") {
+      p.keep_order = true;
+    } else if (a == "--help" || a == "-h") {
+      usage("");
+      return 0;
+    } else if (!value(&v)) {
+      return usage(a.rfind("--", 0) == 0 ? a + " needs a value" : "unexpected argument '" + a + "'");
+    } else if (a == "--group") {
+      group_arg = v;
+    } else if (a == "--from") {
+      from_arg = v;
+    } else if (a == "--to") {
+      to_arg = v;
+    } else if (a == "--loss") {
+      if (!parse_double(v, &d)) return usage("--loss '" + v + "' is not a number");
+      p.loss = d / 100.0;
+    } else if (a == "--delay") {
+      if (!parse_double(v, &p.delay_ms)) return usage("--delay '" + v + "' is not a number");
+    } else if (a == "--jitter") {
+      if (!parse_double(v, &p.jitter_ms)) return usage("--jitter '" + v + "' is not a number");
+    } else if (a == "--seed") {
+      if (!parse_u64(v, &p.seed)) return usage("--seed '" + v + "' is not an unsigned integer");
+    } else if (a == "--queue") {
+      if (!parse_u64(v, &queue_slots) || queue_slots < 1 || queue_slots > 65536)
+        return usage("--queue '" + v + "' must be from 1 to 65536 datagrams");
+    } else if (a == "--slot-bytes") {
+      if (!parse_u64(v, &slot_bytes) || slot_bytes < 64 || slot_bytes > 65536)
+        return usage("--slot-bytes '" + v + "' must be from 64 to 65536");
+    } else if (a == "--ttl") {
+      if (!parse_u64(v, &ttl) || ttl > 255) return usage("--ttl '" + v + "' must be from 0 to 255");
+    } else if (a == "--realtime-priority") {
+      if (!parse_u64(v, &rt_prio) || rt_prio > 98) return usage("--realtime-priority '" + v + "' must be 0..98");
+    } else {
+      return usage("unknown flag '" + a + "'");
+    }
+  }
+  if (group_arg.empty() || from_arg.empty() || to_arg.empty()) return usage("--group, --from and --to are required");
+  if (const std::string bad = cnc::netem::validate(p); !bad.empty()) return usage(bad);
+  const auto colon = group_arg.rfind(':');
+  in_addr group{};
+  uint64_t port = 0;
+  if (colon == std::string::npos || inet_pton(AF_INET, group_arg.substr(0, colon).c_str(), &group) != 1 ||
+      !parse_u64(group_arg.substr(colon + 1), &port) || port < 1 || port > 65535 ||
+      !IN_MULTICAST(ntohl(group.s_addr)))
+    return usage("--group '" + group_arg + "' is not a multicast ADDR:PORT (e.g. 239.255.76.67:7667)");
+  Side from, to;
+  std::string err;
+  if (!parse_side("--from", from_arg, &from, &err) || !parse_side("--to", to_arg, &to, &err)) return usage(err);
+
+  const int home = open("/proc/self/ns/net", O_RDONLY | O_CLOEXEC);
+  if (home < 0) {
+    std::fprintf(stderr, "cnc-netem: /proc/self/ns/net: %s\n", std::strerror(errno));
+    return 1;
+  }
+  const size_t ndir = both ? 2 : 1;
+  std::vector<std::unique_ptr<Direction>> dirs;
+  const Side* rx_side[2] = {&from, &to};
+  const Side* tx_side[2] = {&to, &from};
+  for (size_t k = 0; k < ndir; ++k) {
+    auto d = std::make_unique<Direction>();
+    d->name = rx_side[k]->netns + " -> " + tx_side[k]->netns;
+    Params pk = p;
+    pk.seed = p.seed + k;
+    d->imp = std::make_unique<Impairment>(pk);
+    d->queue = std::make_unique<DelayQueue>(queue_slots, slot_bytes);
+    {
+      NetnsGuard g(home, *rx_side[k], &err);
+      if (err.empty()) d->rx = open_rx(*rx_side[k], group, static_cast<uint16_t>(port), &err);
+    }
+    if (err.empty()) {
+      NetnsGuard g(home, *tx_side[k], &err);
+      if (err.empty()) d->tx = open_tx(*tx_side[k], static_cast<int>(ttl), &d->tx_port, &err);
+    }
+    if (!err.empty()) {
+      std::fprintf(stderr, "cnc-netem: %s\n", err.c_str());
+      return 1;
+    }
+    dirs.push_back(std::move(d));
+  }
+  // A direction ignores what any direction sends into its receiving namespace.
+  for (size_t j = 0; j < ndir; ++j)
+    for (size_t k = 0; k < ndir; ++k)
+      if (tx_side[k]->dev == rx_side[j]->dev && tx_side[k]->ino == rx_side[j]->ino)
+        dirs[j]->own_ports.push_back(dirs[k]->tx_port);
+
+  cnc::util::install_stop_handlers();
+  if (rt_prio > 0) cnc::util::apply_realtime("cnc-netem", static_cast<int>(rt_prio), {});
+  for (const auto& d : dirs)
+    std::fprintf(stderr, "cnc-netem: %s: group %s, loss %.2f %%, delay %.3f ± %.3f ms, %s, seed %llu, queue %llu\n",
+                 d->name.c_str(), group_arg.c_str(), p.loss * 100.0, p.delay_ms, p.jitter_ms,
+                 p.keep_order ? "order kept" : "reordering allowed", static_cast<unsigned long long>(d->imp->params().seed),
+                 static_cast<unsigned long long>(queue_slots));
+
+  sockaddr_in dest{};
+  dest.sin_family = AF_INET;
+  dest.sin_port = htons(static_cast<uint16_t>(port));
+  dest.sin_addr = group;
+  pollfd fds[2]{};
+  for (size_t k = 0; k < ndir; ++k) fds[k] = pollfd{dirs[k]->rx, POLLIN, 0};
+  while (!cnc::util::stop_requested()) {
+    int64_t next = std::numeric_limits<int64_t>::max();
+    for (const auto& d : dirs) next = std::min(next, d->queue->next_release_ns());
+    // At most 100 ms: the stop flag is seen soon after a signal.
+    const int64_t wait_ns = std::clamp<int64_t>(next - now_ns(), 0, 100'000'000);
+    const timespec ts{static_cast<time_t>(wait_ns / 1'000'000'000), static_cast<long>(wait_ns % 1'000'000'000)};
+    const int r = ppoll(fds, ndir, &ts, nullptr);
+    if (r < 0 && errno != EINTR) {
+      std::fprintf(stderr, "cnc-netem: ppoll: %s\n", std::strerror(errno));
+      return 1;
+    }
+    for (size_t k = 0; k < ndir; ++k)
+      if (r > 0 && (fds[k].revents & POLLIN)) receive_all(*dirs[k]);
+    for (auto& d : dirs) send_due(*d, dest);
+  }
+  for (auto& d : dirs) {
+    d->n.left_in_queue = static_cast<int64_t>(d->queue->size());
+    std::fprintf(stderr, "cnc-netem: %s\n", d->n.summary(d->name).c_str());
+  }
+  return 0;
+}
