@@ -13,6 +13,8 @@
 #   ./cnc predict slot|wall|zmap|zmap-check|calibrate ...    one model at a time (cnc-predict --help)
 #   ./cnc cam drop --stl MESH --tool ball:D|flat:D|bull:D:r --points XY.csv --out XYZ.csv [--threads N]
 #                                                  offline CAM: drop-cutter CL heights (cnc-cam --help)
+#   ./cnc cam rough --stl MESH --stock box|margin[:MM] --tool SPEC --cusp H --out rough.ngc [--compare T,T] [--png F]
+#                                                  offline CAM: z-level roughing, cusp-limited levels (seed 002)
 #   ./cnc conformance [conformance.py options]     our interpreter against LinuxCNC's rs274
 #   ./cnc bench latency [--load N] [--out DIR]     cycle timing of the demo, idle and with N busy loops
 #   ./cnc key gen|rotate|show [--machine FILE] [--grace S] [--activate-in S]  the cell's signing key
@@ -38,6 +40,7 @@ PACKAGES=(
   mbpoll                                 # reads the simulator's registers (interop test)
   linuxcnc-uspace                        # rs274: LinuxCNC's interpreter, the conformance oracle (tools/conformance)
   libcli11-dev                           # command-line flags of cnc-cam
+  libpolyclipping-dev                    # Clipper: polygon offsets of cnc-cam rough's levels
   libcgal-dev                            # CGAL's AABB tree, the baseline of cnc-cam-index-bench (optional)
   clang libclang-rt-14-dev               # libFuzzer with ASan and UBSan: tests/fuzz/run (optional)
 )

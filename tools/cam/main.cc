@@ -1,6 +1,10 @@
 // cnc-cam: offline CAM on triangle meshes (seeds 002, 003).
 //
 //   cnc-cam drop --stl MESH --tool ball:D|flat:D|bull:D:r --points XY.csv --out XYZ.csv [--threads N]
+//   cnc-cam rough --stl MESH --stock box|margin[:MM] --tool SPEC --cusp H --out rough.ngc
+//                 [--png FILE] [--compare SPEC,SPEC,...] [--stepover F] [--max-stepdown MM]
+//                 [--origin corner|mesh] [--feed F] [--plunge F] [--rapid F] [--spindle S] [--safe-z Z]
+//   cnc-cam part --shape table1-a|table1-b|hemisphere|frustum --out MESH.stl [--cells N]
 //   cnc-cam raster --stl MESH --tool SPEC --pick P --step S [--angle A] --out part.ngc
 //                  [--tol-beta B [--tol-alpha A] [--min-step M] [--compare-fixed]]
 //                  [--origin corner|mesh] [--feed F] [--plunge F] [--spindle S] [--safe-z Z] [--threads N]
@@ -9,6 +13,17 @@
 // (x and y echoed as written, z empty where nothing is touched); prints
 // "points=N seconds=S pts_per_s=R" on stdout (S: the queries only), and on stderr
 // the mesh's load and the index's build, and progress for runs over a second.
+//
+// rough: seed 002's z-level roughing (common/cam/rough.h): levels bottom-up from the
+// smallest slope on each contour and the cusp limit, plus flat areas; per level the
+// tool-offset contour (Clipper) and rings stepping in from the stock by --stepover
+// (a fraction of D, default 0.4), linked at the level or via the clearance plane;
+// G-code through the common writer. Prints one line per level and the totals; with
+// --compare, the same plan for each listed tool: levels, path length and the time of
+// a constant-speed model (feed, plunge, rapid; no acceleration). --png draws the levels
+// (tools/cam/plot_rough.py, Debian's python3 and matplotlib).
+//
+// part: writes an analytic test part as binary STL (common/cam/shapes.h).
 //
 // raster: parallel passes written as G-code (common/cam/gcode_writer.h), with a fixed
 // step, or with --tol-beta seed 003's step control up to --step (common/cam/raster.h);
@@ -25,7 +40,10 @@
 #include <atomic>
 #include <chrono>
 #include <cstdio>
+#include <cmath>
+#include <cstdlib>
 #include <exception>
+#include <sstream>
 #include <string>
 #include <thread>
 
@@ -33,6 +51,8 @@
 #include "common/cam/drop_cutter.h"
 #include "common/cam/gcode_writer.h"
 #include "common/cam/raster.h"
+#include "common/cam/rough.h"
+#include "common/cam/shapes.h"
 #include "common/cam/points_csv.h"
 #include "common/cam/stl.h"
 
@@ -166,6 +186,138 @@ int run_raster(const RasterArgs& a) {
   return 0;
 }
 
+
+struct RoughArgs {
+  std::string stl, stock = "box", tool, out, png, compare, origin = "corner";
+  double cusp = 0, stepover = 0.4, max_stepdown = 0, feed = 1000, plunge = 300, rapid = 15000, spindle = 10000,
+         safe_z = 2;
+};
+
+std::vector<std::string> split_commas(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  std::string item;
+  while (std::getline(ss, item, ','))
+    if (!item.empty()) out.push_back(item);
+  return out;
+}
+
+int run_rough(const RoughArgs& a) {
+  using namespace cnc::cam;
+  if (a.origin != "corner" && a.origin != "mesh") throw std::invalid_argument("--origin must be corner or mesh");
+  const Mesh mesh = read_stl(a.stl);
+  const Bounds b = mesh_bounds(mesh);
+  const Stock stock = parse_stock(a.stock, b);
+  const TimeModel tm{a.feed, a.plunge, a.rapid};
+  const Vec3 zero = a.origin == "corner" ? Vec3{stock.xmin, stock.ymin, stock.zmax} : Vec3{0, 0, 0};
+  const double clear = a.safe_z + (a.origin == "mesh" ? stock.zmax : 0);
+  auto plan_for = [&](const std::string& tool) {
+    RoughSpec spec;
+    spec.cutter = parse_cutter(tool);
+    spec.cusp_mm = a.cusp;
+    spec.stepover_frac = a.stepover;
+    spec.max_stepdown_mm = a.max_stepdown;
+    const auto t0 = Clock::now();
+    bool reported = false;
+    RoughPlan plan = plan_roughing(mesh, stock, spec, [&](std::size_t done, std::size_t total) {
+      const double t = seconds_since(t0);
+      if (t >= 1.0 && done < total) {
+        const double rate = static_cast<double>(done) / t;
+        std::fprintf(stderr, "cnc-cam rough: %s: %zu / %zu levels, %.2f levels/s, %.1f s left\n", tool.c_str(), done,
+                     total, rate, static_cast<double>(total - done) / rate);
+        reported = true;
+      }
+    });
+    if (reported) std::fprintf(stderr, "cnc-cam rough: %s: planned in %.1f s\n", tool.c_str(), seconds_since(t0));
+    return plan;
+  };
+  auto print_plan = [&](const std::string& tool, const RoughPlan& plan) {
+    const PlanTime t = plan_time(plan, clear + zero.z, tm);
+    std::string zs;
+    for (const Level& l : plan.levels) {
+      char buf[32];
+      std::snprintf(buf, sizeof buf, "%s%.2f", zs.empty() ? "" : "/", l.z - b.min.z);
+      zs += buf;
+    }
+    std::printf("tool=%s levels=%zu heights=%s path_mm=%.1f contour_mm=%.1f plunge_mm=%.1f rapid_mm=%.1f "
+                "chains=%zu time_s=%.1f\n",
+                tool.c_str(), plan.levels.size(), zs.c_str(), t.feed_mm, plan.contour_mm, t.plunge_mm, t.rapid_mm,
+                plan.retracts, t.seconds);
+  };
+  const RoughPlan plan = plan_for(a.tool);
+  for (const Level& l : plan.levels)
+    std::fprintf(stderr, "cnc-cam rough: level z=%.3f (%.3f above the base) %s step %.3f smallest slope %.2f deg\n", l.z,
+                 l.z - b.min.z, level_kind_name(l.kind), l.step_mm,
+                 std::isfinite(l.min_slope_rad) ? l.min_slope_rad * 180 / M_PI : -1.0);
+  print_plan(a.tool, plan);
+  GcodeSetup setup;
+  setup.title = "cnc-cam rough " + a.stl + " tool " + a.tool + " cusp " + std::to_string(a.cusp) + " stock " + a.stock +
+                (a.origin == "corner" ? ", zero at the stock's min x, min y, top" : ", mesh coordinates");
+  setup.cutter = parse_cutter(a.tool);
+  setup.feed_mm_per_min = a.feed;
+  setup.plunge_mm_per_min = a.plunge;
+  setup.spindle_rpm = a.spindle;
+  setup.safe_z_mm = clear;
+  const std::string text = rough_gcode(plan, setup, zero);
+  std::FILE* f = std::fopen(a.out.c_str(), "w");
+  if (!f || std::fwrite(text.data(), 1, text.size(), f) != text.size() || std::fclose(f) != 0)
+    throw std::runtime_error(a.out + ": cannot write");
+  if (!a.compare.empty()) {
+    std::vector<std::pair<std::string, RoughPlan>> plans;
+    for (const std::string& tool : split_commas(a.compare)) plans.emplace_back(tool, plan_for(tool));
+    std::printf("compare (feed %g, plunge %g, rapid %g mm/min, constant speeds, no acceleration):\n", a.feed, a.plunge,
+                a.rapid);
+    const double ref = plan_time(plans.front().second, clear + zero.z, tm).feed_mm;
+    const double ref_c = plans.front().second.contour_mm;
+    for (const auto& [tool, p] : plans) {
+      print_plan(tool, p);
+      const PlanTime t = plan_time(p, clear + zero.z, tm);
+      std::printf("  vs %s: path %+.1f %%, contour %+.1f %%\n", plans.front().first.c_str(),
+                  100 * (t.feed_mm / ref - 1), 100 * (p.contour_mm / ref_c - 1));
+    }
+  }
+  if (!a.png.empty()) {
+    const std::string csv = a.png + ".levels.csv";
+    std::FILE* c = std::fopen(csv.c_str(), "w");
+    if (!c) throw std::runtime_error(csv + ": cannot write");
+    std::fprintf(c, "kind,level,z,chain,x,y\n");
+    for (std::size_t i = 0; i < plan.paths.size(); ++i)
+      for (std::size_t k = 0; k < plan.paths[i].chains.size(); ++k)
+        for (const XY& p : plan.paths[i].chains[k])
+          std::fprintf(c, "path,%zu,%.4f,%zu,%.4f,%.4f\n", i, plan.paths[i].z, k, p.x, p.y);
+    const SlopeProfile prof = slope_profile(mesh, 0.01, 0.5 * M_PI / 180);
+    for (std::size_t i = 0; i < prof.min_slope.size(); ++i)
+      if (std::isfinite(prof.min_slope[i]))
+        std::fprintf(c, "slope,%zu,%.4f,0,%.4f,0\n", i, prof.z0 + (static_cast<double>(i) + 0.5) * prof.dz,
+                     prof.min_slope[i] * 180 / M_PI);
+    for (const Level& l : plan.levels) std::fprintf(c, "level,0,%.4f,0,0,0\n", l.z);
+    std::fclose(c);
+    const std::string cmd = std::string("/usr/bin/python3 '") + CNC_SOURCE_DIR + "/tools/cam/plot_rough.py' '" + csv +
+                            "' '" + a.png + "' '" + a.tool + " cusp " + std::to_string(a.cusp) + "'";
+    if (std::system(cmd.c_str()) != 0) throw std::runtime_error("plot_rough.py failed for " + a.png);
+    std::remove(csv.c_str());
+  }
+  return 0;
+}
+
+struct PartArgs {
+  std::string shape, out;
+  int cells = 200;
+};
+
+int run_part(const PartArgs& a) {
+  using namespace cnc::cam;
+  Mesh m;
+  if (a.shape == "table1-a") m = make_table1_part("a", a.cells);
+  else if (a.shape == "table1-b") m = make_table1_part("b", a.cells);
+  else if (a.shape == "hemisphere") m = make_hemisphere(20, a.cells / 4, a.cells);
+  else if (a.shape == "frustum") m = make_frustum(50, 10, 30);
+  else throw std::invalid_argument("--shape must be table1-a, table1-b, hemisphere or frustum, not " + a.shape);
+  write_stl_binary(a.out, m);
+  std::fprintf(stderr, "cnc-cam part: %s: %zu triangles to %s\n", a.shape.c_str(), m.triangles.size(), a.out.c_str());
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -197,10 +349,37 @@ int main(int argc, char** argv) {
   r->add_option("--spindle", raster.spindle, "spindle speed, rpm")->check(CLI::PositiveNumber);
   r->add_option("--safe-z", raster.safe_z, "retract height above the part's top, mm");
   r->add_option("--threads", raster.threads, "worker threads (default: all cores)")->check(CLI::Range(1, 256));
+  RoughArgs rough;
+  CLI::App* g = app.add_subcommand("rough", "z-level roughing with cusp-limited levels (seed 002), as G-code");
+  g->add_option("--stl", rough.stl, "mesh, ASCII or binary STL")->required();
+  g->add_option("--stock", rough.stock, "box (the mesh's bounds) or margin[:MM] (grown by MM in x, y and top; 2)");
+  g->add_option("--tool", rough.tool, "ball:D, flat:D or bull:D:r (mm)")->required();
+  g->add_option("--cusp", rough.cusp, "largest cusp height between levels, normal to the surface, mm")
+      ->required()->check(CLI::PositiveNumber);
+  g->add_option("--out", rough.out, "G-code file to write")->required();
+  g->add_option("--png", rough.png, "picture of the levels to write (matplotlib)");
+  g->add_option("--compare", rough.compare, "tools to compare, e.g. flat:10,bull:10:2,ball:10");
+  g->add_option("--stepover", rough.stepover, "ring spacing as a fraction of the diameter (default 0.4)")
+      ->check(CLI::Range(0.01, 0.9));
+  g->add_option("--max-stepdown", rough.max_stepdown, "largest z-step, mm (default: the flute length)")
+      ->check(CLI::PositiveNumber);
+  g->add_option("--origin", rough.origin, "corner: zero at the stock's min x, min y and top; mesh: as is");
+  g->add_option("--feed", rough.feed, "cutting feed, mm/min")->check(CLI::PositiveNumber);
+  g->add_option("--plunge", rough.plunge, "plunge feed, mm/min")->check(CLI::PositiveNumber);
+  g->add_option("--rapid", rough.rapid, "rapid speed of the time model, mm/min")->check(CLI::PositiveNumber);
+  g->add_option("--spindle", rough.spindle, "spindle speed, rpm")->check(CLI::PositiveNumber);
+  g->add_option("--safe-z", rough.safe_z, "clearance plane above the stock's top, mm")->check(CLI::NonNegativeNumber);
+  PartArgs part;
+  CLI::App* pa = app.add_subcommand("part", "write an analytic test part as binary STL");
+  pa->add_option("--shape", part.shape, "table1-a, table1-b, hemisphere or frustum")->required();
+  pa->add_option("--out", part.out, "STL file to write")->required();
+  pa->add_option("--cells", part.cells, "grid cells per side")->check(CLI::Range(4, 4000));
   CLI11_PARSE(app, argc, argv);
   try {
     if (d->parsed()) return run_drop(drop);
     if (r->parsed()) return run_raster(raster);
+    if (g->parsed()) return run_rough(rough);
+    if (pa->parsed()) return run_part(part);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "cnc-cam: %s\n", e.what());
     return 2;

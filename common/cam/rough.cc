@@ -1,0 +1,359 @@
+#include "common/cam/rough.h"
+
+#include <polyclipping/clipper.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+namespace cnc::cam {
+namespace {
+
+namespace cl = ClipperLib;
+constexpr double kScale = 1e5;  // Clipper integers per mm
+
+cl::cInt to_int(double v) { return static_cast<cl::cInt>(std::llround(v * kScale)); }
+double to_mm(cl::cInt v) { return static_cast<double>(v) / kScale; }
+
+cl::Path to_path(const Loop& loop) {
+  cl::Path p;
+  p.reserve(loop.size());
+  for (const XY& q : loop) p.push_back({to_int(q.x), to_int(q.y)});
+  return p;
+}
+cl::Paths to_paths(const Polygons& polys) {
+  cl::Paths ps;
+  ps.reserve(polys.size());
+  for (const Loop& l : polys) ps.push_back(to_path(l));
+  return ps;
+}
+Loop to_loop(const cl::Path& p) {
+  Loop l;
+  l.reserve(p.size());
+  for (const cl::IntPoint& q : p) l.push_back({to_mm(q.X), to_mm(q.Y)});
+  return l;
+}
+Polygons to_polys(const cl::Paths& ps) {
+  Polygons out;
+  out.reserve(ps.size());
+  for (const cl::Path& p : ps) out.push_back(to_loop(p));
+  return out;
+}
+
+cl::Paths boolean(const cl::Paths& a, const cl::Paths& b, cl::ClipType op, cl::PolyFillType fill) {
+  cl::Clipper c;
+  c.AddPaths(a, cl::ptSubject, true);
+  if (!b.empty()) c.AddPaths(b, cl::ptClip, true);
+  cl::Paths out;
+  c.Execute(op, out, fill, fill);
+  return out;
+}
+
+// Round joins: Clipper rounds a join's step count to the nearest integer, which can make a
+// step 1.5 times the one its arc tolerance asks for and the chord's sagitta 2.25 times the
+// tolerance; asking for a quarter keeps every chord within arc_tol of the true arc.
+cl::Paths offset(const cl::Paths& ps, double delta_mm, double arc_tol_mm) {
+  cl::ClipperOffset co(2.0, 0.25 * arc_tol_mm * kScale);
+  co.AddPaths(ps, cl::jtRound, cl::etClosedPolygon);
+  cl::Paths out;
+  co.Execute(out, delta_mm * kScale);
+  return out;
+}
+
+// Length of the parts of open polyline `line` inside `region`.
+double length_inside(const cl::Path& line, const cl::Paths& region) {
+  if (region.empty()) return 0;
+  cl::Clipper c;
+  c.AddPath(line, cl::ptSubject, false);
+  c.AddPaths(region, cl::ptClip, true);
+  cl::PolyTree tree;
+  c.Execute(cl::ctIntersection, tree, cl::pftNonZero, cl::pftNonZero);
+  cl::Paths open;
+  cl::OpenPathsFromPolyTree(tree, open);
+  double len = 0;
+  for (const cl::Path& p : open)
+    for (std::size_t i = 1; i < p.size(); ++i)
+      len += std::hypot(to_mm(p[i].X - p[i - 1].X), to_mm(p[i].Y - p[i - 1].Y));
+  return len;
+}
+
+double dist2(const XY& a, const XY& b) { return (a.x - b.x) * (a.x - b.x) + (a.y - b.y) * (a.y - b.y); }
+
+}  // namespace
+
+const char* level_kind_name(LevelKind k) {
+  switch (k) {
+    case LevelKind::kSlope: return "slope";
+    case LevelKind::kFlat: return "flat";
+    case LevelKind::kFloor: return "floor";
+    case LevelKind::kFacing: return "facing";
+  }
+  return "?";
+}
+
+Stock parse_stock(const std::string& spec, const Bounds& part) {
+  Stock s{part.min.x, part.min.y, part.min.z, part.max.x, part.max.y, part.max.z};
+  if (spec == "box") return s;
+  double m = 2;
+  if (spec.rfind("margin", 0) == 0 && (spec.size() == 6 || spec[6] == ':')) {
+    if (spec.size() > 6) {
+      std::size_t used = 0;
+      const std::string num = spec.substr(7);
+      try {
+        m = std::stod(num, &used);
+      } catch (const std::exception&) {
+        used = 0;
+      }
+      if (num.empty() || used != num.size() || !std::isfinite(m) || m < 0)
+        throw std::invalid_argument("--stock " + spec + ": the margin must be a number >= 0 (mm)");
+    }
+    s.xmin -= m, s.ymin -= m, s.xmax += m, s.ymax += m, s.zmax += m;
+    return s;
+  }
+  throw std::invalid_argument("--stock " + spec + ": expected box, margin or margin:MM");
+}
+
+std::vector<Level> choose_levels(const SlopeProfile& profile, const Cutter& cutter, double cusp_mm,
+                                 double max_stepdown_mm, double zbot, double ztop, double stock_top) {
+  if (!(cusp_mm > 0)) throw std::invalid_argument("cusp height must be > 0");
+  if (!(max_stepdown_mm > 0)) throw std::invalid_argument("largest step-down must be > 0");
+  const std::size_t bands = profile.min_slope.size();
+  std::vector<double> step(bands);  // the z-step the cusp allows at each band's smallest slope
+  for (std::size_t i = 0; i < bands; ++i) {
+    const double th = profile.min_slope[i];
+    step[i] = std::isfinite(th) ? zstep_for_cusp(cutter, th, cusp_mm, max_stepdown_mm) : max_stepdown_mm;
+  }
+  std::vector<double> flats;
+  for (double f : profile.flat_z)
+    if (f > zbot + 1e-6 && f <= ztop + 1e-9) flats.push_back(f);
+  std::vector<Level> out;
+  const double eps = 1e-9;
+  double z = zbot;
+  for (;;) {
+    double allowed = max_stepdown_mm, slope = std::numeric_limits<double>::infinity();
+    const auto first = static_cast<std::size_t>(std::max(0.0, std::floor((z - profile.z0) / profile.dz + 1e-9)));
+    for (std::size_t i = first; i < bands; ++i) {
+      const double lo = profile.z0 + static_cast<double>(i) * profile.dz;
+      if (lo >= z + allowed) break;
+      if (step[i] < allowed) allowed = step[i];
+      slope = std::min(slope, profile.min_slope[i]);
+    }
+    double next = z + allowed;
+    LevelKind kind = LevelKind::kSlope;
+    const auto f = std::upper_bound(flats.begin(), flats.end(), z + eps);
+    if (f != flats.end() && *f <= next + eps) {
+      next = *f;
+      kind = LevelKind::kFlat;
+    } else if (next >= ztop - eps) {
+      break;  // the cusp limit holds up to the part's top
+    }
+    out.push_back({next, kind, slope, next - z});
+    z = next;
+  }
+  if (stock_top > ztop + 1e-6) {  // stock above the part: a level at the top, then up in steps
+    const double zt = out.empty() ? zbot : out.back().z;
+    if (ztop > zt + eps) out.push_back({ztop, LevelKind::kFacing, std::numeric_limits<double>::infinity(), ztop - zt});
+    const int n = static_cast<int>(std::ceil((stock_top - ztop) / max_stepdown_mm - 1e-9));
+    for (int k = 1; k < n; ++k) {
+      const double zk = ztop + (stock_top - ztop) * k / n;
+      out.push_back({zk, LevelKind::kFacing, std::numeric_limits<double>::infinity(), (stock_top - ztop) / n});
+    }
+  }
+  return out;
+}
+
+Polygons keep_out(const Mesh& mesh, const Cutter& cutter, double z, int corner_samples, double arc_tol_mm) {
+  const double R = cutter.radius(), r = cutter.corner_radius_mm, a = R - r;
+  const int n = r > 0 ? std::max(1, corner_samples) : 1;
+  cl::Paths all;
+  for (int i = 0; i < n; ++i) {
+    // Sub-level i: the part above z + h_i, grown by the radius at h_{i+1}.
+    const double rho_i = a + r * i / n, rho_next = r > 0 ? a + r * (i + 1) / n : R;
+    const double h_i = r > 0 ? r - std::sqrt(std::max(0.0, r * r - (rho_i - a) * (rho_i - a))) : 0;
+    const Slice s = slice_mesh(mesh, z + h_i + 1e-9);
+    if (s.loops.empty()) continue;
+    const cl::Paths region = boolean(to_paths(s.loops), {}, cl::ctUnion, cl::pftEvenOdd);
+    const cl::Paths grown = offset(region, rho_next + arc_tol_mm, arc_tol_mm);
+    all.insert(all.end(), grown.begin(), grown.end());
+  }
+  return to_polys(boolean(all, {}, cl::ctUnion, cl::pftNonZero));
+}
+
+namespace {
+
+cl::Paths stock_outline(const Stock& st, double grow_mm, double arc_tol_mm) {
+  const cl::Path rect{{to_int(st.xmin), to_int(st.ymin)},
+                      {to_int(st.xmax), to_int(st.ymin)},
+                      {to_int(st.xmax), to_int(st.ymax)},
+                      {to_int(st.xmin), to_int(st.ymax)}};
+  if (grow_mm <= 0) return {rect};
+  return offset({rect}, grow_mm, arc_tol_mm);
+}
+
+}  // namespace
+
+std::vector<Ring> pocket_rings(const Polygons& keepout, const Stock& stock, const Cutter& cutter, double stepover_mm,
+                               double arc_tol_mm, Polygons* region_out) {
+  if (!(stepover_mm > 0)) throw std::invalid_argument("stepover must be > 0");
+  const cl::Paths outer = stock_outline(stock, cutter.radius() - stepover_mm, arc_tol_mm);
+  const cl::Paths region = boolean(outer, to_paths(keepout), cl::ctDifference, cl::pftNonZero);
+  if (region_out) *region_out = to_polys(region);
+  std::vector<Ring> rings;
+  const double min_area = 1e-4 * kScale * kScale;  // 0.01 mm x 0.01 mm: slivers of rounding
+  for (int j = 0;; ++j) {
+    const cl::Paths off = j == 0 ? region : offset(region, -j * stepover_mm, arc_tol_mm);
+    bool any = false;
+    for (const cl::Path& p : off) {
+      if (std::fabs(cl::Area(p)) < min_area) continue;
+      any = true;
+      rings.push_back({to_loop(p), j, !cl::Orientation(p)});
+    }
+    if (!any) break;
+  }
+  // Cutting order: outer rings by rising offset, then hole rings by falling offset; within
+  // one offset the nearest ring next, each started at its vertex nearest the tool.
+  std::vector<Ring> ordered;
+  ordered.reserve(rings.size());
+  XY at{stock.xmin - cutter.radius(), stock.ymin - cutter.radius()};
+  auto take_group = [&](bool hole, int j) {
+    std::vector<Ring*> group;
+    for (Ring& rg : rings)
+      if (rg.hole == hole && rg.offset_index == j) group.push_back(&rg);
+    while (!group.empty()) {
+      std::size_t best = 0, best_v = 0;
+      double bd = std::numeric_limits<double>::infinity();
+      for (std::size_t g = 0; g < group.size(); ++g)
+        for (std::size_t v = 0; v < group[g]->points.size(); ++v) {
+          const double d = dist2(group[g]->points[v], at);
+          if (d < bd) bd = d, best = g, best_v = v;
+        }
+      Ring rg = std::move(*group[best]);
+      std::rotate(rg.points.begin(), rg.points.begin() + static_cast<std::ptrdiff_t>(best_v), rg.points.end());
+      at = rg.points.front();
+      ordered.push_back(std::move(rg));
+      group.erase(group.begin() + static_cast<std::ptrdiff_t>(best));
+    }
+  };
+  int jmax = 0;
+  for (const Ring& rg : rings) jmax = std::max(jmax, rg.offset_index);
+  for (int j = 0; j <= jmax; ++j) take_group(false, j);
+  for (int j = jmax; j >= 0; --j) take_group(true, j);
+  return ordered;
+}
+
+RoughPlan plan_roughing(const Mesh& mesh, const Stock& stock, const RoughSpec& spec,
+                        const std::function<void(std::size_t, std::size_t)>& progress) {
+  const Cutter& c = spec.cutter;
+  if (!(spec.stepover_frac > 0 && spec.stepover_frac <= 0.9))
+    throw std::invalid_argument("stepover must be a fraction of the diameter in (0, 0.9]");
+  if (mesh.triangles.empty()) throw std::invalid_argument("the mesh has no triangles");
+  const Bounds b = mesh_bounds(mesh);
+  const double stepdown = spec.max_stepdown_mm > 0 ? spec.max_stepdown_mm : c.flute_length_mm;
+  const double stepover = spec.stepover_frac * c.diameter_mm;
+  RoughPlan plan;
+  plan.stock = stock;
+  const SlopeProfile prof = slope_profile(mesh, spec.band_mm, spec.flat_deg * M_PI / 180);
+  std::vector<Level> levels = choose_levels(prof, c, spec.cusp_mm, stepdown, b.min.z, b.max.z, stock.zmax);
+  // The floor: the part's base level, when the stock reaches beyond the part there.
+  {
+    const Polygons ko = keep_out(mesh, c, b.min.z, spec.corner_samples, spec.arc_tol_mm);
+    Polygons region;
+    pocket_rings(ko, stock, c, stepover, spec.arc_tol_mm, &region);
+    double area = 0;
+    for (const Loop& l : region) area += loop_area(l);
+    if (area > stepover * stepover) levels.insert(levels.begin(), Level{b.min.z, LevelKind::kFloor, 0, 0});
+  }
+  plan.levels = levels;
+  const std::size_t total = levels.size();
+  double above = stock.zmax;
+  for (std::size_t k = levels.size(); k-- > 0;) {
+    const Level& lv = levels[k];
+    if (lv.z >= stock.zmax - 1e-9) {  // a level at the stock's top has nothing above it to cut
+      if (progress) progress(total - k, total);
+      continue;
+    }
+    const Polygons ko = keep_out(mesh, c, lv.z, spec.corner_samples, spec.arc_tol_mm);
+    Polygons region;
+    const std::vector<Ring> rings = pocket_rings(ko, stock, c, stepover, spec.arc_tol_mm, &region);
+    LevelPath lp;
+    lp.z = lv.z;
+    lp.kind = lv.kind;
+    lp.approach_z = std::min(above, stock.zmax) + 1;
+    lp.rings = rings.size();
+    // The tool-offset contour: the keep-out's boundary where the tool may be (inside the
+    // stock's outline grown by R).
+    const cl::Paths reach = stock_outline(stock, c.radius(), spec.arc_tol_mm);
+    for (const Loop& l : ko) {
+      cl::Path p = to_path(l);
+      p.push_back(p.front());
+      lp.contour_mm += length_inside(p, reach);
+    }
+    const cl::Paths ko_paths = to_paths(ko);
+    std::vector<XY> chain;
+    for (const Ring& rg : rings) {
+      if (!chain.empty()) {
+        const XY& from = chain.back();
+        const XY& to = rg.points.front();
+        const double len = std::sqrt(dist2(from, to));
+        const bool ok = len <= 3 * stepover &&
+                        length_inside({{to_int(from.x), to_int(from.y)}, {to_int(to.x), to_int(to.y)}}, ko_paths) < 1e-4;
+        if (!ok) {
+          lp.chains.push_back(std::move(chain));
+          chain.clear();
+        }
+      }
+      chain.insert(chain.end(), rg.points.begin(), rg.points.end());
+      chain.push_back(rg.points.front());  // close the ring
+    }
+    if (!chain.empty()) lp.chains.push_back(std::move(chain));
+    for (const auto& ch : lp.chains)
+      for (std::size_t i = 1; i < ch.size(); ++i) plan.feed_mm += std::sqrt(dist2(ch[i - 1], ch[i]));
+    plan.contour_mm += lp.contour_mm;
+    plan.retracts += lp.chains.size();
+    if (!lp.chains.empty()) {
+      plan.paths.push_back(std::move(lp));
+      above = lv.z;
+    }
+    if (progress) progress(total - k, total);
+  }
+  return plan;
+}
+
+PlanTime plan_time(const RoughPlan& plan, double clear_z, const TimeModel& m) {
+  PlanTime t;
+  bool first = true;
+  XY at{};
+  for (const LevelPath& lp : plan.paths)
+    for (const auto& ch : lp.chains) {
+      const XY& s = ch.front();
+      if (!first) t.rapid_mm += std::sqrt(dist2(at, s));
+      first = false;
+      const double approach = std::min(clear_z, lp.approach_z);
+      t.rapid_mm += (clear_z - approach) + (clear_z - lp.z);  // down to the approach height; up at the end
+      t.plunge_mm += approach - lp.z;
+      for (std::size_t i = 1; i < ch.size(); ++i) t.feed_mm += std::sqrt(dist2(ch[i - 1], ch[i]));
+      at = ch.back();
+    }
+  t.seconds = 60 * (t.feed_mm / m.feed_mm_per_min + t.plunge_mm / m.plunge_mm_per_min + t.rapid_mm / m.rapid_mm_per_min);
+  return t;
+}
+
+std::string rough_gcode(const RoughPlan& plan, const GcodeSetup& setup, const Vec3& zero) {
+  GcodeWriter w(setup);
+  const double clear = setup.safe_z_mm;
+  for (const LevelPath& lp : plan.paths) {
+    const double z = lp.z - zero.z, approach = std::min(clear, lp.approach_z - zero.z);
+    for (const auto& ch : lp.chains) {
+      const XY s{ch.front().x - zero.x, ch.front().y - zero.y};
+      w.rapid({s.x, s.y, clear});
+      if (approach < clear) w.rapid({s.x, s.y, approach});
+      w.feed({s.x, s.y, z}, setup.plunge_mm_per_min);
+      for (std::size_t i = 1; i < ch.size(); ++i) w.feed({ch[i].x - zero.x, ch[i].y - zero.y, z}, setup.feed_mm_per_min);
+      w.rapid({ch.back().x - zero.x, ch.back().y - zero.y, clear});
+    }
+  }
+  return w.finish();
+}
+
+}  // namespace cnc::cam
