@@ -74,17 +74,17 @@ Mesh make_hemisphere(double R, int rings, int segments) {
 }
 
 Mesh make_table1_part(const std::string& which, int n) {
-  double H = 0, A = 0;
+  double H = 0;
   if (which == "a") {
-    H = 43.9, A = 1.25 * H;
+    H = 43.9;
   } else if (which == "b") {
-    H = 32.4, A = 1.1 * H;
+    H = 32.4;
   } else {
     throw std::invalid_argument("Table 1 part must be a or b, not " + which);
   }
   return make_height_field(
-      [=](double x, double y) {
-        return std::min(H, A * std::cos(M_PI * x / 50) * std::cos(M_PI * y / 50));
+      [H](double x, double y) {
+        return std::min(H, 1.25 * H * std::cos(M_PI * x / 50) * std::cos(M_PI * y / 50));
       },
       -25, -25, 25, 25, n, n);
 }

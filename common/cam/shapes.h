@@ -27,9 +27,9 @@ Mesh make_hemisphere(double R, int rings, int segments);
 // Seed 002's Table 1 parts, which the paper shows only as a picture (its figure 6): a
 // symmetric bump on a 50 × 50 square base, centred at the origin, z = 0 on the base's
 // border, with a flat top at the stated height (both tools put their last level there).
-// The profile is z = min(H, A·c(x)·c(y)) with c(t) = cos(π t / 50): "a" (H = 43.9) is the
-// steep one, A = 1.25 H, "b" (H = 32.4) the flatter one, A = 1.1 H (see the README for
-// why these). `n` cells per side.
+// The profile is z = min(H, 1.25 H·c(x)·c(y)) with c(t) = cos(π t / 50), H = 43.9 for "a"
+// and 32.4 for "b" — "b" is "a" lowered, so it has the smaller slopes the paper says it
+// has; the plateau is where c(x)·c(y) >= 0.8. `n` cells per side.
 Mesh make_table1_part(const std::string& which, int n);
 
 }  // namespace cnc::cam
