@@ -2,6 +2,9 @@
 
 #include <cmath>
 #include <cstdio>
+#include <vector>
+
+#include "common/geometry/polyline_fit.h"
 
 namespace cnc::cam {
 namespace {
@@ -91,6 +94,71 @@ void GcodeWriter::cut(const Vec3* points, std::size_t n) {
   feed(points[0], setup_.plunge_mm_per_min);
   for (std::size_t i = 1; i < n; ++i) feed(points[i], setup_.feed_mm_per_min);
   rapid({points[n - 1].x, points[n - 1].y, setup_.safe_z_mm});
+}
+
+double GcodeWriter::cut_nurbs(const Vec3* points, std::size_t n, double tol_mm, std::vector<Vec3>* samples) {
+  if (n < 3) {
+    cut(points, n);
+    return 0;
+  }
+  std::vector<Eigen::Vector3d> pts;
+  pts.reserve(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3d p(points[i].x, points[i].y, points[i].z);
+    if (pts.empty() || (p - pts.back()).norm() > 0) pts.push_back(p);
+  }
+  const geometry::CubicFit fit = pts.size() >= 3 ? geometry::fit_cubic(pts, tol_mm) : geometry::CubicFit{};
+  if (!fit.ok || fit.max_error > tol_mm) {
+    cut(points, n);
+    return 0;
+  }
+  if (known_ && at_.z != setup_.safe_z_mm) rapid({at_.x, at_.y, setup_.safe_z_mm});
+  rapid({points[0].x, points[0].y, setup_.safe_z_mm});
+  feed(points[0], setup_.plunge_mm_per_min);
+  char buf[64];
+  auto knot = [&](double k) {
+    std::snprintf(buf, sizeof buf, "%.9f", k);
+    std::string s(buf);
+    while (s.back() == '0') s.pop_back();
+    if (s.back() == '.') s.pop_back();
+    return s;
+  };
+  for (geometry::CubicPiece pc : geometry::split_cubic(fit.knots, fit.ctrl, 100)) {
+    const double k0 = pc.knots.front();
+    pc.ctrl.front() = Eigen::Vector3d(at_.x, at_.y, at_.z);
+    for (std::size_t i = 0; i < pc.ctrl.size(); ++i) {
+      // The first control point is the tool's position as written before, to the digit.
+      const Vec3 c = i == 0 ? at_ : Vec3{pc.ctrl[i][0], pc.ctrl[i][1], pc.ctrl[i][2]};
+      if (i == 0) {
+        out_ += "G6.2 P4 ";
+      }
+      out_ += 'K' + knot(pc.knots[i] - k0) + " X" + number(c.x) + " Y" + number(c.y) + " Z" + number(c.z) + " R1";
+      if (i == 0) out_ += " F" + number(setup_.feed_mm_per_min);
+      out_ += '\n';
+    }
+    for (std::size_t i = pc.ctrl.size(); i < pc.knots.size(); ++i) out_ += 'K' + knot(pc.knots[i] - k0) + '\n';
+    // Length by 16 chords a span, on the curve as written (control points to 4 decimals).
+    for (Eigen::Vector3d& c : pc.ctrl)
+      for (int k = 0; k < 3; ++k) c[k] = std::stod(number(c[k]));
+    Eigen::Vector3d prev = geometry::cubic_point(pc.knots, pc.ctrl, pc.knots.front());
+    if (samples) samples->push_back({prev[0], prev[1], prev[2]});
+    const std::size_t n_samples = 16 * (pc.ctrl.size() - 3);
+    for (std::size_t k = 1; k <= n_samples; ++k) {
+      const double u = pc.knots.front() + (pc.knots.back() - pc.knots.front()) * static_cast<double>(k) /
+                                              static_cast<double>(n_samples);
+      const Eigen::Vector3d q = geometry::cubic_point(pc.knots, pc.ctrl, u);
+      feed_length_ += (q - prev).norm();
+      prev = q;
+      if (samples) samples->push_back({q[0], q[1], q[2]});
+    }
+    ++nurbs_blocks_;
+    nurbs_ctrl_ += pc.ctrl.size();
+    at_ = {pc.ctrl.back()[0], pc.ctrl.back()[1], pc.ctrl.back()[2]};
+    modal_g_ = -1;  // no motion mode after a G6.2 curve
+    modal_f_ = setup_.feed_mm_per_min;
+  }
+  rapid({at_.x, at_.y, setup_.safe_z_mm});
+  return fit.max_error;
 }
 
 std::string GcodeWriter::finish() {

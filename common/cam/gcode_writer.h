@@ -6,6 +6,7 @@
 // one on each axis.
 #include <cstddef>
 #include <string>
+#include <vector>
 
 #include "common/cam/cutter.h"
 #include "common/cam/mesh.h"
@@ -29,6 +30,16 @@ class GcodeWriter {
   // A cut along CL points: rapid above the first at safe Z, plunge to it, feed
   // through the rest, retract to safe Z.
   void cut(const Vec3* points, std::size_t n);
+  // The same cut with the feed part as cubic NURBS (G6.2 P4, weights 1): the CL points
+  // fitted by geometry::fit_cubic within `tol_mm` of every point and of every segment's
+  // midpoint, cut into curves of at most 100 knot spans. Control points are written to
+  // 4 decimals like every coordinate, which moves the curve by at most 8.7e-5 mm (a
+  // B-spline stays within the largest move of its control points): the written curve is
+  // within tol_mm + 8.7e-5 mm of the CL points. Each curve starts on the point the tool
+  // is at, as written. A cut the fit cannot take (fewer than 3 points, or no fit) is
+  // written as lines. Returns the fit's largest error, 0 for lines. `samples`, if given,
+  // receives points of the written curves (control points as written, 16 a knot span).
+  double cut_nurbs(const Vec3* points, std::size_t n, double tol_mm, std::vector<Vec3>* samples = nullptr);
   void rapid(const Vec3& p);
   void feed(const Vec3& p, double feed_mm_per_min);
 
@@ -36,6 +47,8 @@ class GcodeWriter {
   std::string finish();
 
   std::size_t feed_moves() const { return feed_moves_; }
+  std::size_t nurbs_blocks() const { return nurbs_blocks_; }
+  std::size_t nurbs_control_points() const { return nurbs_ctrl_; }
   double feed_length_mm() const { return feed_length_; }
 
  private:
@@ -48,6 +61,7 @@ class GcodeWriter {
   int modal_g_ = -1;
   double modal_f_ = -1;
   std::size_t feed_moves_ = 0;
+  std::size_t nurbs_blocks_ = 0, nurbs_ctrl_ = 0;
   double feed_length_ = 0;
 };
 

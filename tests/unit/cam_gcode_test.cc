@@ -10,6 +10,7 @@
 #include "common/cam/gcode_writer.h"
 #include "common/cam/raster.h"
 #include "common/cam/terrain.h"
+#include "common/geometry/polyline_fit.h"
 
 namespace cnc::cam {
 namespace {
@@ -111,6 +112,96 @@ TEST(CamGcode, HeaderModalWordsAndRoundTripOfCoordinates) {
             std::string::npos)
       << g;
   EXPECT_EQ(w.feed_moves(), 4u);  // the plunge and three cutting moves
+}
+
+// Two cuts along arcs as G6.2 NURBS: the written blocks are well formed (order 4, knots =
+// control points + 4, clamped, starting on the point the tool is at, as written), and the
+// curves read back from the text stay within tol + 8.7e-5 mm of every CL point.
+TEST(CamGcode, NurbsCutsWithinToleranceOfTheClPoints) {
+  GcodeSetup s;
+  s.cutter = parse_cutter("ball:4");
+  s.feed_mm_per_min = 1200;
+  GcodeWriter w(s);
+  const double tol = 0.002;
+  std::vector<std::vector<Vec3>> cuts(2);
+  for (int i = 0; i <= 400; ++i) {  // 401 and 801 points: the second is cut into several curves
+    const double t = i / 400.0;
+    cuts[0].push_back({40 * t, 5, -3 + 2 * std::sin(3 * t) + 0.5 * std::cos(11 * t)});
+  }
+  for (int i = 0; i <= 800; ++i) {
+    const double t = i / 800.0;
+    cuts[1].push_back({40 - 40 * t, 10 + 3 * t * t, -2 - std::cos(7 * t) + 0.3 * std::sin(150 * t)});
+  }
+  std::vector<Vec3> samples;
+  for (const auto& c : cuts) EXPECT_LE(w.cut_nurbs(c.data(), c.size(), tol, &samples), tol);
+  EXPECT_GE(w.nurbs_blocks(), 3u);
+  EXPECT_LT(w.nurbs_control_points(), 1201u / 3);  // far fewer numbers than points
+  const std::string g = w.finish();
+  // Read the curves back from the text.
+  std::istringstream in(g);
+  std::string line;
+  Vec3 at{};
+  std::vector<std::vector<Eigen::Vector3d>> ctrl;
+  std::vector<std::vector<double>> knots;
+  bool in_curve = false;
+  auto word = [](const std::string& l, char c, double* v) {
+    const auto p = l.find(c);
+    if (p == std::string::npos) return false;
+    *v = std::strtod(l.c_str() + p + 1, nullptr);
+    return true;
+  };
+  while (std::getline(in, line)) {
+    if (line.rfind("G6.2 P4 ", 0) == 0) {
+      in_curve = true;
+      ctrl.emplace_back();
+      knots.emplace_back();
+      EXPECT_NE(line.find(" F1200"), std::string::npos) << line;
+    } else if (in_curve && line.rfind('K', 0) != 0) {
+      in_curve = false;
+    }
+    double x = at.x, y = at.y, z = at.z, k = 0;
+    if (in_curve) {
+      ASSERT_TRUE(word(line, 'K', &k)) << line;
+      knots.back().push_back(k);
+      if (word(line, 'X', &x) && word(line, 'Y', &y) && word(line, 'Z', &z)) {
+        EXPECT_NE(line.find(" R1"), std::string::npos) << line;
+        if (ctrl.back().empty()) {  // the curve starts where the tool is
+          EXPECT_EQ(x, at.x);
+          EXPECT_EQ(y, at.y);
+          EXPECT_EQ(z, at.z);
+        }
+        ctrl.back().emplace_back(x, y, z);
+        at = {x, y, z};
+      }
+      continue;
+    }
+    word(line, 'X', &at.x);
+    word(line, 'Y', &at.y);
+    word(line, 'Z', &at.z);
+  }
+  ASSERT_EQ(ctrl.size(), w.nurbs_blocks());
+  std::vector<Eigen::Vector3d> dense;
+  for (std::size_t c = 0; c < ctrl.size(); ++c) {
+    ASSERT_EQ(knots[c].size(), ctrl[c].size() + 4);
+    for (int k = 1; k < 4; ++k) {
+      EXPECT_EQ(knots[c][k], knots[c][0]);
+      EXPECT_EQ(knots[c][knots[c].size() - 1 - k], knots[c].back());
+    }
+    const double u0 = knots[c].front(), u1 = knots[c].back();
+    for (int i = 0; i <= 20000; ++i) dense.push_back(geometry::cubic_point(knots[c], ctrl[c], u0 + (u1 - u0) * i / 20000));
+  }
+  // Every CL point lies within tol + 8.7e-5 mm of the curves (sampled densely enough that
+  // the sampling adds under 1e-5 mm).
+  double worst = 0;
+  for (const auto& c : cuts)
+    for (const Vec3& p : c) {
+      double best = 1e9;
+      for (const auto& q : dense) best = std::min(best, (q - Eigen::Vector3d(p.x, p.y, p.z)).norm());
+      worst = std::max(worst, best);
+    }
+  std::printf("NURBS: %zu curves, %zu control points for 1202 CL points, worst CL point %.3g mm from the curves\n",
+              w.nurbs_blocks(), w.nurbs_control_points(), worst);
+  EXPECT_LE(worst, tol + 8.7e-5 + 1e-5);
 }
 
 }  // namespace
