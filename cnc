@@ -103,17 +103,18 @@ build() {
   fi
 }
 
-# up --machine FILE [--only a,b] [--log-out BASE] [--sim-final-state FILE]
+# up --machine FILE [--only a,b] [--log-out BASE] [--sim-final-state FILE] [--sim-trace CSV]
 # Runs in the foreground; SIGINT/SIGTERM stop every service in reverse start order.
 # Exit status: 0 when every service exited 0.
 cmd_up() {
-  local machine="" only="" log_out="" final_state=""
+  local machine="" only="" log_out="" final_state="" sim_trace=""
   while [ $# -gt 0 ]; do
     case "$1" in
       --machine) machine="$2"; shift 2 ;;
       --only) only="$2"; shift 2 ;;
       --log-out) log_out="$2"; shift 2 ;;
       --sim-final-state) final_state="$2"; shift 2 ;;
+      --sim-trace) sim_trace="$2"; shift 2 ;;
       *) die "up: unknown argument '$1' (expected --machine FILE [--only SERVICE,...])" ;;
     esac
   done
@@ -154,6 +155,7 @@ cmd_up() {
     local args=(--machine "$machine")
     [ "$s" = logger ] && [ -n "$log_out" ] && args+=(--out "$log_out")
     [ "$s" = servo-sim ] && [ -n "$final_state" ] && args+=(--final-state "$final_state")
+    [ "$s" = servo-sim ] && [ -n "$sim_trace" ] && args+=(--trace "$sim_trace")
     "$BUILD/${EXE[$s]}" "${args[@]}" &
     pids[$s]=$!
     say "started $s (pid ${pids[$s]})"

@@ -118,6 +118,7 @@ netns_host() {
   [ "$dev" = lo ] && setup="$setup && ip route add 224.0.0.0/4 dev lo"
   unshare -n bash -c "$setup"' && echo $$ >"$0" && exec sleep 3600' "$ready" &
   TEST_PIDS[netns-$name]=$!
+  disown "$!"  # killed by cleanup without a job report
   local i
   for ((i = 0; i < 500; i++)); do [ -s "$ready" ] && break; sleep 0.01; done
   [ -s "$ready" ] || fail "network namespace $name was not set up"
