@@ -219,5 +219,6 @@ note "cnc-ctl on h3 exited $ctl_rc: $(grep -v "^ALARM\|^loaded" "$WORK/ctl-cut.o
 # What h3 recorded across the cut: the messages of h2 lost while it was cut off.
 "$BUILD/tools/cnc-logstat" --log "$WORK/h3-cut.lcmlog" >"$WORK/logstat-cut.out" 2>&1 || true
 note "h3's log across the cut: $(awk -v p="$TEST_PREFIX" '$1 == p"AXIS_STATUS" || $1 == p"SETPOINTS" {printf "%s %s events %s gaps; ", $1, $2, $4}' "$WORK/logstat-cut.out")"
-rm -rf "$WORK"
+# CNC_KEEP_WORK=1 keeps the logs, traces and outputs (e.g. to compare with a single-host run).
+if [ -n "${CNC_KEEP_WORK:-}" ]; then cp "$SHM/trace.csv" "$WORK/"; note "kept $WORK"; else rm -rf "$WORK"; fi
 echo "PASS"
