@@ -115,14 +115,16 @@ Stock parse_stock(const std::string& spec, const Bounds& part) {
 }
 
 std::vector<Level> choose_levels(const SlopeProfile& profile, const Cutter& cutter, double cusp_mm,
-                                 double max_stepdown_mm, double zbot, double ztop, double stock_top) {
+                                 double max_stepdown_mm, double zbot, double ztop, double stock_top,
+                                 bool wall_at_base, double slack_mm) {
   if (!(cusp_mm > 0)) throw std::invalid_argument("cusp height must be > 0");
   if (!(max_stepdown_mm > 0)) throw std::invalid_argument("largest step-down must be > 0");
   const std::size_t bands = profile.min_slope.size();
+  auto limit = [&](double th) { return std::max(cusp_mm - slack_mm * std::sin(th), 0.1 * cusp_mm); };
   std::vector<double> step(bands);  // the z-step the cusp allows at each band's smallest slope
   for (std::size_t i = 0; i < bands; ++i) {
     const double th = profile.min_slope[i];
-    step[i] = std::isfinite(th) ? zstep_for_cusp(cutter, th, cusp_mm, max_stepdown_mm) : max_stepdown_mm;
+    step[i] = std::isfinite(th) ? zstep_for_cusp(cutter, th, limit(th), max_stepdown_mm) : max_stepdown_mm;
   }
   std::vector<double> flats;
   for (double f : profile.flat_z)
@@ -133,10 +135,15 @@ std::vector<Level> choose_levels(const SlopeProfile& profile, const Cutter& cutt
   for (;;) {
     double allowed = max_stepdown_mm, slope = std::numeric_limits<double>::infinity();
     const auto first = static_cast<std::size_t>(std::max(0.0, std::floor((z - profile.z0) / profile.dz + 1e-9)));
+    const bool first_band = out.empty() && wall_at_base;
+    const Cutter flat = make_cutter(cutter.diameter_mm, 0, cutter.flute_length_mm);
     for (std::size_t i = first; i < bands; ++i) {
       const double lo = profile.z0 + static_cast<double>(i) * profile.dz;
       if (lo >= z + allowed) break;
-      if (step[i] < allowed) allowed = step[i];
+      double st = step[i];
+      if (first_band && std::isfinite(profile.min_slope[i]))
+        st = std::min(st, zstep_for_cusp(flat, profile.min_slope[i], limit(profile.min_slope[i]), max_stepdown_mm));
+      if (st < allowed) allowed = st;
       slope = std::min(slope, profile.min_slope[i]);
     }
     double next = z + allowed;
@@ -196,9 +203,13 @@ cl::Paths stock_outline(const Stock& st, double grow_mm, double arc_tol_mm) {
 std::vector<Ring> pocket_rings(const Polygons& keepout, const Stock& stock, const Cutter& cutter, double stepover_mm,
                                double arc_tol_mm, Polygons* region_out) {
   if (!(stepover_mm > 0)) throw std::invalid_argument("stepover must be > 0");
-  const cl::Paths outer = stock_outline(stock, cutter.radius() - stepover_mm, arc_tol_mm);
+  const double R = cutter.radius();
+  const cl::Paths outer = stock_outline(stock, R, arc_tol_mm);
   const cl::Paths region = boolean(outer, to_paths(keepout), cl::ctDifference, cl::pftNonZero);
   if (region_out) *region_out = to_polys(region);
+  // Where the tool still cuts: inside the outline grown by R less a hair (offset-0 rings
+  // along the grown outline itself are air).
+  const cl::Paths inner = stock_outline(stock, R - std::min(0.01, 0.5 * stepover_mm), arc_tol_mm);
   std::vector<Ring> rings;
   const double min_area = 1e-4 * kScale * kScale;  // 0.01 mm x 0.01 mm: slivers of rounding
   for (int j = 0;; ++j) {
@@ -207,7 +218,34 @@ std::vector<Ring> pocket_rings(const Polygons& keepout, const Stock& stock, cons
     for (const cl::Path& p : off) {
       if (std::fabs(cl::Area(p)) < min_area) continue;
       any = true;
-      rings.push_back({to_loop(p), j, !cl::Orientation(p)});
+      const bool hole = !cl::Orientation(p);
+      if (j > 0 || hole) {
+        rings.push_back({to_loop(p), j, hole, true});
+        continue;
+      }
+      // An outer ring at offset 0: keep what lies inside `inner`, as open pieces (or the
+      // whole ring if nothing of it is on the grown outline).
+      cl::Path line = p;
+      line.push_back(p.front());
+      cl::Clipper c;
+      c.AddPath(line, cl::ptSubject, false);
+      c.AddPaths(inner, cl::ptClip, true);
+      cl::PolyTree tree;
+      c.Execute(cl::ctIntersection, tree, cl::pftNonZero, cl::pftNonZero);
+      cl::Paths pieces;
+      cl::OpenPathsFromPolyTree(tree, pieces);
+      double kept = 0, whole = 0;
+      for (std::size_t i = 1; i < line.size(); ++i)
+        whole += std::hypot(to_mm(line[i].X - line[i - 1].X), to_mm(line[i].Y - line[i - 1].Y));
+      for (const cl::Path& q : pieces)
+        for (std::size_t i = 1; i < q.size(); ++i)
+          kept += std::hypot(to_mm(q[i].X - q[i - 1].X), to_mm(q[i].Y - q[i - 1].Y));
+      if (kept >= whole - 1e-6) {
+        rings.push_back({to_loop(p), j, false, true});
+        continue;
+      }
+      for (const cl::Path& q : pieces)
+        if (q.size() >= 2) rings.push_back({to_loop(q), j, false, false});
     }
     if (!any) break;
   }
@@ -223,14 +261,21 @@ std::vector<Ring> pocket_rings(const Polygons& keepout, const Stock& stock, cons
     while (!group.empty()) {
       std::size_t best = 0, best_v = 0;
       double bd = std::numeric_limits<double>::infinity();
-      for (std::size_t g = 0; g < group.size(); ++g)
-        for (std::size_t v = 0; v < group[g]->points.size(); ++v) {
-          const double d = dist2(group[g]->points[v], at);
+      for (std::size_t g = 0; g < group.size(); ++g) {
+        const Loop& pts = group[g]->points;
+        for (std::size_t v = 0; v < pts.size(); ++v) {
+          if (!group[g]->closed && v != 0 && v + 1 != pts.size()) continue;  // open pieces start at an end
+          const double d = dist2(pts[v], at);
           if (d < bd) bd = d, best = g, best_v = v;
         }
+      }
       Ring rg = std::move(*group[best]);
-      std::rotate(rg.points.begin(), rg.points.begin() + static_cast<std::ptrdiff_t>(best_v), rg.points.end());
-      at = rg.points.front();
+      if (rg.closed) {
+        std::rotate(rg.points.begin(), rg.points.begin() + static_cast<std::ptrdiff_t>(best_v), rg.points.end());
+      } else if (best_v != 0) {
+        std::reverse(rg.points.begin(), rg.points.end());
+      }
+      at = rg.closed ? rg.points.front() : rg.points.back();
       ordered.push_back(std::move(rg));
       group.erase(group.begin() + static_cast<std::ptrdiff_t>(best));
     }
@@ -254,16 +299,24 @@ RoughPlan plan_roughing(const Mesh& mesh, const Stock& stock, const RoughSpec& s
   RoughPlan plan;
   plan.stock = stock;
   const SlopeProfile prof = slope_profile(mesh, spec.band_mm, spec.flat_deg * M_PI / 180);
-  std::vector<Level> levels = choose_levels(prof, c, spec.cusp_mm, stepdown, b.min.z, b.max.z, stock.zmax);
-  // The floor: the part's base level, when the stock reaches beyond the part there.
+  // The floor: the part's base level, when the stock reaches beyond the part's footprint
+  // there (more than stepover² of it).
+  bool floor = false;
   {
-    const Polygons ko = keep_out(mesh, c, b.min.z, spec.corner_samples, spec.arc_tol_mm);
-    Polygons region;
-    pocket_rings(ko, stock, c, stepover, spec.arc_tol_mm, &region);
+    const Slice base = slice_mesh(mesh, b.min.z + 1e-9);
+    const cl::Paths foot = boolean(to_paths(base.loops), {}, cl::ctUnion, cl::pftEvenOdd);
     double area = 0;
-    for (const Loop& l : region) area += loop_area(l);
-    if (area > stepover * stepover) levels.insert(levels.begin(), Level{b.min.z, LevelKind::kFloor, 0, 0});
+    for (const cl::Path& p : boolean(stock_outline(stock, 0, spec.arc_tol_mm), foot, cl::ctDifference, cl::pftNonZero))
+      area += cl::Area(p) / (kScale * kScale);
+    floor = area > stepover * stepover;
   }
+  const int samples = spec.corner_samples > 0
+                          ? spec.corner_samples
+                          : std::clamp(static_cast<int>(std::ceil(c.corner_radius_mm / (0.02 * spec.cusp_mm))), 16, 64);
+  const double slack = (c.corner_radius_mm > 0 ? c.corner_radius_mm / samples : 0) + spec.arc_tol_mm;
+  std::vector<Level> levels =
+      choose_levels(prof, c, spec.cusp_mm, stepdown, b.min.z, b.max.z, stock.zmax, !floor, slack);
+  if (floor) levels.insert(levels.begin(), Level{b.min.z, LevelKind::kFloor, 0, 0});
   plan.levels = levels;
   const std::size_t total = levels.size();
   double above = stock.zmax;
@@ -273,7 +326,7 @@ RoughPlan plan_roughing(const Mesh& mesh, const Stock& stock, const RoughSpec& s
       if (progress) progress(total - k, total);
       continue;
     }
-    const Polygons ko = keep_out(mesh, c, lv.z, spec.corner_samples, spec.arc_tol_mm);
+    const Polygons ko = keep_out(mesh, c, lv.z, samples, spec.arc_tol_mm);
     Polygons region;
     const std::vector<Ring> rings = pocket_rings(ko, stock, c, stepover, spec.arc_tol_mm, &region);
     LevelPath lp;
@@ -304,7 +357,7 @@ RoughPlan plan_roughing(const Mesh& mesh, const Stock& stock, const RoughSpec& s
         }
       }
       chain.insert(chain.end(), rg.points.begin(), rg.points.end());
-      chain.push_back(rg.points.front());  // close the ring
+      if (rg.closed) chain.push_back(rg.points.front());  // close the ring
     }
     if (!chain.empty()) lp.chains.push_back(std::move(chain));
     for (const auto& ch : lp.chains)

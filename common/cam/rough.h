@@ -16,13 +16,15 @@
 // Clipper's (libpolyclipping), in integers of 1e-5 mm; round joins grown by arc_tol so
 // their chords stay outside the true arc.
 //
-// Pocketing: the tool centres' region is the stock's outline grown by R − stepover
-// (the outermost ring bites `stepover` into the stock) less the keep-out; its inward
-// offsets by 0, stepover, 2·stepover, … give rings, cut from the stock's edge inwards
-// (outer rings by rising offset), then from the middle to the part (hole rings by
-// falling offset), so each level ends on the exact tool-offset contour. Consecutive
-// rings are joined by a feed move at the level when the straight link stays inside
-// the region and is no longer than 3·stepover; otherwise the tool retracts to the
+// Pocketing: the tool centres' region is the stock's outline grown by R (beyond it the
+// tool cuts nothing) less the keep-out; its inward offsets by 0, stepover, 2·stepover, …
+// give rings, cut from the stock's edge inwards (outer rings by rising offset), then
+// from the middle to the part (hole rings by falling offset), so each level ends on the
+// exact tool-offset contour. Rings at offset 0 lose their stretches along the grown
+// outline (air; where the keep-out reaches it, what is left are open pieces of the
+// contour), so the outermost whole ring bites `stepover` into the stock. Consecutive
+// pieces are joined by a feed move at the level when the straight link stays off the
+// keep-out and is no longer than 3·stepover; otherwise the tool retracts to the
 // clearance plane. Levels are cut top-down.
 #include <cstddef>
 #include <functional>
@@ -51,7 +53,7 @@ struct RoughSpec {
   double max_stepdown_mm = 0;   // 0: the cutter's flute length
   double band_mm = 0.01;        // height bands of the slope profile
   double flat_deg = 0.5;        // facets flatter than this are flat areas
-  int corner_samples = 16;      // n, sub-levels of the corner arc
+  int corner_samples = 0;       // n, sub-levels of the corner arc; 0: r / (0.02 cusp), within [16, 64]
   double arc_tol_mm = 0.002;    // Clipper's round joins
 };
 
@@ -69,8 +71,17 @@ struct Level {
 // stock_top: cusp-limited levels and flat areas above zbot (not the part's base itself),
 // then facing levels from ztop up to the stock's top when the stock stands above the
 // part (at most max_stepdown apart). The floor level at zbot is plan_roughing's call.
+// `slack_mm`: how far the contours may stand outside the exact ones (r/n + arc_tol);
+// the tool standing that much farther out raises the cusp by at most slack·sin θ, so the
+// step at slope θ is the one for a cusp of h − slack·sin θ (at least h/10).
+// `wall_at_base`: no level is cut at zbot (the part fills the stock there), so below the
+// first level the cusp is bounded by the stock's side, a vertical line where the part
+// meets its base, not by a cutter's corner: the first step is then at most a flat
+// cutter's (an upper bound of that cusp: equal where the upper cutter's flat bottom
+// reaches the side).
 std::vector<Level> choose_levels(const SlopeProfile& profile, const Cutter& cutter, double cusp_mm,
-                                 double max_stepdown_mm, double zbot, double ztop, double stock_top);
+                                 double max_stepdown_mm, double zbot, double ztop, double stock_top,
+                                 bool wall_at_base = false, double slack_mm = 0);
 
 using Polygons = std::vector<Loop>;  // closed loops, outer counter-clockwise, holes clockwise
 
@@ -81,6 +92,7 @@ struct Ring {
   Loop points;
   int offset_index = 0;  // offset by offset_index·stepover from the region's boundary
   bool hole = false;     // around the part (true) or along the stock (false)
+  bool closed = true;    // false: an open piece of an offset-0 ring (the contour near the stock's edge)
 };
 // The rings of one level, in cutting order.
 std::vector<Ring> pocket_rings(const Polygons& keepout, const Stock& stock, const Cutter& cutter, double stepover_mm,
