@@ -18,6 +18,8 @@ constexpr double kRateSlewPerTick = 0.002;
 // The jitter buffer: the playback trails the newest setpoint by two periods on
 // average, so a setpoint may come 1.5 periods late (plus one bridged) unnoticed.
 constexpr double kLeadCycles = 2.0;
+// The most a stalled link's hold may let the newest setpoint lead the playback.
+constexpr double kMaxHoldLead = 24.0;
 // The limiter's feedback, nested loops (position -> velocity -> acceleration ->
 // jerk). Small errors: linear gains, each loop four times slower than the one
 // inside it (poles near -20, -80 (double) 1/s at T_servo = 1 ms: no overshoot).
@@ -294,6 +296,18 @@ void BridgeCore::limit_step(bool follow) {
     vel_[i] = v_new == 0.0 ? 0.0 : v_fd;
     cmd_[i] = x_new;
   }
+}
+
+bool BridgeCore::hold() {
+  if (mode_ != Mode::kFollowing || last_cycle_ < 0 || braking_) return false;
+  // The newest setpoint may lead τ by at most kMaxHoldLead cycles: the buffer keeps
+  // kPoints, and the lag a hold adds is made up only below the velocity limits.
+  if (static_cast<double>(last_cycle_) - tau_ > kMaxHoldLead) return false;
+  // The watchdog counts on: a stream that stopped is not waited for.
+  if (static_cast<double>(ticks_since_setpoint_ + 1) * servo_s_ > cfg_.setpoint_timeout_s) return false;
+  ++ticks_since_setpoint_;
+  ++held_ticks_;
+  return true;
 }
 
 const AxisArray& BridgeCore::tick() {

@@ -62,6 +62,13 @@ class BridgeCore {
   Verdict on_setpoint(int64_t cycle, const AxisArray& position_mm);
   // One servo tick: the commanded positions for this tick.
   const AxisArray& tick();
+  // Instead of a tick, while the drives' link is stalled (the command of the last
+  // tick has not reached them): the playback stands still, so the drives receive
+  // the commands one tick after another when the link moves again, instead of a
+  // jump over the ticks it missed. Allowed only while following a stream normally
+  // and while the lag it adds keeps the playback within the setpoint buffer;
+  // returns false (and does nothing) otherwise: the caller ticks instead.
+  bool hold();
   // Faults: a controlled stop from the current motion, then kStopped. The first reason stays.
   void fault(const std::string& why);
 
@@ -86,6 +93,8 @@ class BridgeCore {
   int64_t starved_ticks() const { return starved_ticks_; }
   // Times the stream came back while braking and was rejoined.
   int64_t rejoins() const { return rejoins_; }
+  // Ticks the playback stood still for a stalled link.
+  int64_t held_ticks() const { return held_ticks_; }
 
  private:
   struct Point {
@@ -133,6 +142,7 @@ class BridgeCore {
   AxisArray ref_j_{};
   bool ref_fresh_ = true;  // the reference's differences are not known yet (after a reset)
   int64_t rejoins_ = 0;
+  int64_t held_ticks_ = 0;
   int64_t seg_cycle_ = -1;
   AxisArray cmd_{};
   AxisArray vel_{};      // commanded velocity of the last tick, mm/s

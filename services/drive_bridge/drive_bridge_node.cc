@@ -74,6 +74,7 @@ DriveBridgeNode::DriveBridgeNode(const config::MachineConfig& cfg, bus::Bus& bus
     ax.worker->add_axis(static_cast<int>(i), *profile, d.unit_id);
     axes_.push_back(ax);
   }
+  pace_.assign(workers_.size(), LinkPace{});
   bus_.subscribe<cnc::lcmt_setpoint>(cfg.channel(ch::kSetpoints), [this](const auto& m) { on_setpoint(m); });
   bus_.subscribe<cnc::lcmt_drive_command>(cfg.channel(ch::kDriveCmd),
                                           [this](const auto& m) { pending_command_ = m.command; });
@@ -319,7 +320,15 @@ void DriveBridgeNode::servo_tick_inner(double now_s) {
     }
   }
 
-  const AxisArray& cmd = core_.tick();
+  // A link that has not finished the round of the last tick's command is stalled
+  // (the drive, its network or this process's worker did not get to run): the
+  // playback waits for it, so the drive gets the next commands one tick after
+  // another instead of a jump over the ticks it missed (a jump the drive takes
+  // without feed-forward, as a following error of about v x the stall). The lag
+  // is made up by the playback rate afterwards. No post while holding: the same
+  // command written twice would be a standstill in the drive's demand.
+  const bool hold = link_stalled() && core_.hold();
+  const AxisArray& cmd = hold ? core_.commanded() : core_.tick();
   if (core_.faulted() && fault_text_.empty()) {
     fault_text_ = core_.fault_reason();
     spdlog::error("fault: {}", fault_text_);
@@ -350,13 +359,46 @@ void DriveBridgeNode::servo_tick_inner(double now_s) {
     a.cmd.cmd_cycle = core_.segment_cycle();
     a.worker->set_command(a.slot, a.cmd);
   }
-  for (auto& w : workers_) {
+  if (hold) return;
+  for (size_t i = 0; i < workers_.size(); ++i) {
+    auto& w = workers_[i];
     if (opt_.threaded) {
+      if (!pace_[i].outstanding) {
+        pace_[i].outstanding = true;
+        pace_[i].ticks_waiting = 0;
+      }
       w->post();
     } else {
       w->round(now_s);
     }
   }
+}
+
+bool DriveBridgeNode::link_stalled() {
+  if (!opt_.threaded) return false;
+  bool stalled = false;
+  for (size_t i = 0; i < workers_.size(); ++i) {
+    LinkPace& p = pace_[i];
+    const int64_t r = workers_[i]->rounds();
+    if (!p.outstanding) {
+      p.rounds_seen = r;
+      continue;
+    }
+    const int waited = ++p.ticks_waiting;
+    if (r != p.rounds_seen) {
+      // Its usual pace, learnt in every state (the start-up and enabling rounds
+      // too); a stall teaches it only a little.
+      p.usual_ticks += 0.05 * (std::min<double>(waited, 4.0 * p.usual_ticks + 1.0) - p.usual_ticks);
+      p.rounds_seen = r;
+      p.outstanding = false;
+      continue;
+    }
+    // A link that answers within a tick is stalled when a tick passes without an
+    // answer; a slower one (a serial line) when it takes twice its usual.
+    const double allowed = p.usual_ticks <= 1.5 ? 1.0 : std::ceil(2.0 * p.usual_ticks);
+    if (waited >= allowed) stalled = true;
+  }
+  return stalled && state_ == State::kEnabled;
 }
 
 void DriveBridgeNode::publish_status_inner(int64_t overruns) {
@@ -427,8 +469,8 @@ void DriveBridgeNode::publish_status_inner(int64_t overruns) {
 
 void DriveBridgeNode::shut_down() {
   for (auto& w : workers_) w->stop();
-  spdlog::info("setpoint gaps {}, ticks bridged {}, ticks braking without setpoints {}", core_.setpoint_gaps(),
-               core_.bridged_ticks(), core_.starved_ticks());
+  spdlog::info("setpoint gaps {}, ticks bridged {}, ticks braking without setpoints {}, ticks held for a stalled link {}",
+               core_.setpoint_gaps(), core_.bridged_ticks(), core_.starved_ticks(), core_.held_ticks());
   for (size_t i = 0; i < axes_.size(); ++i) {
     Axis& a = axes_[i];
     a.cmd.goal = drive::Goal::kDisable;

@@ -91,6 +91,15 @@ class DriveBridgeNode {
   std::vector<std::unique_ptr<drive::DriveProfile>> profiles_;
   std::vector<std::unique_ptr<drive::Link>> links_;
   std::vector<std::unique_ptr<LinkWorker>> workers_;
+  // Per worker: is its link keeping up with the ticks? (see link_stalled())
+  struct LinkPace {
+    int64_t rounds_seen = -1;
+    bool outstanding = false;  // posted, and no round finished since
+    int ticks_waiting = 0;     // ticks since the first post no round has answered yet
+    double usual_ticks = 1.0;  // its usual ticks from a post to the round's end (serial lines: several)
+  };
+  std::vector<LinkPace> pace_;
+  bool link_stalled();
   std::vector<Axis> axes_;
   std::string ch_status_;
   cnc::lcmt_axis_status status_msg_{};  // reused by every status publish

@@ -624,6 +624,10 @@ int Simulator::run() {
     timeval tv{0, static_cast<suseconds_t>(wait * 1e6)};
     const int n = select(maxfd + 1, &rd, nullptr, nullptr, &tv);
     if (n <= 0) continue;
+    // Before any request is served: a stall of this process inside select() (it
+    // was asleep there when the VM paused it) must pause the simulated world before
+    // a request steps the drives across the lost time.
+    step_dynamics();
     if (control_fd_ >= 0 && FD_ISSET(control_fd_, &rd)) read_control();
     if (listen_fd_ >= 0 && FD_ISSET(listen_fd_, &rd)) {
       int fd = listen_fd_;
