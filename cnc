@@ -35,6 +35,7 @@ PACKAGES=(
   python3 python3-matplotlib             # plots of feed profiles and run reports
   chromium                               # renders the run report headless in its test
   iproute2 util-linux procps             # ip, unshare: private network namespaces in tests
+  nftables                               # random datagram loss on an input chain (loss test)
   socat                                  # pseudo-terminal pairs standing in for RS-485 (Modbus RTU tests)
   python3-pymodbus python3-serial python3-serial-asyncio python3-yaml  # drive emulated with pymodbus (interop test)
   mbpoll                                 # reads the simulator's registers (interop test)

@@ -119,6 +119,20 @@ void DriveBridgeNode::on_setpoint(const cnc::lcmt_setpoint& m) {
                  (now - last_setpoint_s_) * 1e3, static_cast<double>(m.utime - last_setpoint_utime_) * 1e-3);
   last_setpoint_s_ = now;
   last_setpoint_utime_ = m.utime;
+  // Setpoints lost on the way (up to the history this one carries) come back
+  // exactly, oldest first, before it: the path through a burst of loss is the
+  // programmed one, not a line bridging it.
+  const int n = static_cast<int>(axes_.size());
+  const int64_t last = core_.last_cycle();
+  if (last >= 0 && m.cycle - last > 1 && m.num_prev_values > 0 &&
+      static_cast<size_t>(m.num_prev_values) == m.prev_position_mm.size() && m.num_prev_values % n == 0) {
+    const int64_t have = m.num_prev_values / n;
+    for (int64_t j = std::min<int64_t>(have, m.cycle - last - 1); j >= 1; --j) {
+      AxisArray q{};
+      for (int i = 0; i < n; ++i) q[static_cast<size_t>(i)] = m.prev_position_mm[static_cast<size_t>((j - 1) * n + i)];
+      if (core_.on_setpoint(m.cycle - j, q) == BridgeCore::Verdict::kAccepted) ++recovered_setpoints_;
+    }
+  }
   core_.on_setpoint(m.cycle, p);
 }
 
@@ -469,8 +483,10 @@ void DriveBridgeNode::publish_status_inner(int64_t overruns) {
 
 void DriveBridgeNode::shut_down() {
   for (auto& w : workers_) w->stop();
-  spdlog::info("setpoint gaps {}, ticks bridged {}, ticks braking without setpoints {}, ticks held for a stalled link {}",
-               core_.setpoint_gaps(), core_.bridged_ticks(), core_.starved_ticks(), core_.held_ticks());
+  spdlog::info("setpoints lost and recovered from the next one's history {}, setpoint gaps {}, ticks bridged {}, "
+               "ticks braking without setpoints {}, ticks held for a stalled link {}",
+               recovered_setpoints_, core_.setpoint_gaps(), core_.bridged_ticks(), core_.starved_ticks(),
+               core_.held_ticks());
   for (size_t i = 0; i < axes_.size(); ++i) {
     Axis& a = axes_[i];
     a.cmd.goal = drive::Goal::kDisable;

@@ -61,6 +61,8 @@ class DriveBridgeNode {
   const AxisReport& report(size_t axis) const { return axes_[axis].rep; }
   const drive::DriveProfile& profile_of(size_t axis) const { return *axes_[axis].profile; }
   int64_t tick_count() const { return tick_; }
+  // Setpoints lost on the way and taken from a later one's history.
+  int64_t recovered_setpoints() const { return recovered_setpoints_; }
 
  private:
   struct Axis {
@@ -99,6 +101,7 @@ class DriveBridgeNode {
     double usual_ticks = 1.0;  // its usual ticks from a post to the round's end (serial lines: several)
   };
   std::vector<LinkPace> pace_;
+  int64_t recovered_setpoints_ = 0;  // lost, and taken from a later setpoint's history
   bool link_stalled();
   std::vector<Axis> axes_;
   std::string ch_status_;

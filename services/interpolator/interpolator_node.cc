@@ -54,6 +54,8 @@ InterpolatorNode::InterpolatorNode(const config::MachineConfig& cfg, bus::Bus& b
   bus_.subscribe<cnc::lcmt_program_state>(cfg.channel(ch::kProgramState),
                                           [this](const auto& m) { on_program_state(m); });
   bus_.subscribe<cnc::lcmt_program_block>(cfg.channel(ch::kProgramBlocks), [this](const auto& m) { on_block(m); });
+  bus_.subscribe<cnc::lcmt_logger_stats>(cfg.channel("LOGGER_STATS"),
+                                         [this](const cnc::lcmt_logger_stats& m) { on_logger_stats(m); });
   bus_.subscribe<cnc::lcmt_axis_status>(cfg.channel(ch::kAxisStatus), [this](const cnc::lcmt_axis_status& m) {
     if (m.num_axes != static_cast<int32_t>(cfg_.axes.size())) return;
     axis_status_ = m;
@@ -101,7 +103,22 @@ void InterpolatorNode::apply_command(const Command& c, const cnc::lcmt_program_c
   publish_input(in);
 }
 
-void InterpolatorNode::publish_input(const cnc::lcmt_interp_input& in) {
+void InterpolatorNode::publish_input(const cnc::lcmt_interp_input& input) {
+  cnc::lcmt_interp_input in = input;
+  in.index = next_input_index_++;
+  // Kept until the logger confirms it. Bounded: with no logger confirming, the
+  // oldest is given up (the log, if any, can no longer replay the run).
+  constexpr size_t kMaxUnconfirmed = 4096;
+  if (unconfirmed_.size() >= kMaxUnconfirmed) {
+    unconfirmed_.pop_front();
+    if (inputs_unconfirmed_dropped_++ == 0 && logger_seen_) {
+      spdlog::error("the logger has not confirmed {} inputs: the log of this run may not replay", kMaxUnconfirmed);
+      alarm(cnc::lcmt_alarm::WARNING, "inputs_unconfirmed",
+            "the logger has not confirmed " + std::to_string(kMaxUnconfirmed) +
+                " interpolator inputs: the log of this run may not replay");
+    }
+  }
+  unconfirmed_.push_back(Unconfirmed{in, util::monotonic_s()});
   if (unsent_inputs_.empty()) {
     cnc::lcmt_interp_input copy = in;
     if (bus_.publish(ch_input_, copy)) return;
@@ -117,6 +134,37 @@ void InterpolatorNode::flush_inputs() {
   while (!unsent_inputs_.empty()) {
     if (!bus_.publish(ch_input_, unsent_inputs_.front())) return;
     unsent_inputs_.pop_front();
+  }
+}
+
+void InterpolatorNode::on_logger_stats(const cnc::lcmt_logger_stats& m) {
+  const int32_t me = bus_.sender();
+  const int n = std::min<int>(m.num_input_senders, static_cast<int>(std::min(m.input_sender.size(), m.input_next.size())));
+  int64_t next = -1;
+  for (int i = 0; i < n; ++i)
+    if (m.input_sender[static_cast<size_t>(i)] == me) next = m.input_next[static_cast<size_t>(i)];
+  if (next < 0) {
+    // A logger that has none of ours yet: everything a while old goes again.
+    if (!m.closing) next = 0;
+    else return;
+  }
+  logger_seen_ = true;
+  while (!unconfirmed_.empty() && unconfirmed_.front().in.index < next) unconfirmed_.pop_front();
+  // Sent again: what the logger lacks and should have had by now (sent over half a
+  // second before this report). At most 64 a report, oldest first; a new seq each.
+  const double now = util::monotonic_s();
+  int resent = 0;
+  for (auto& u : unconfirmed_) {
+    if (resent >= 64 || now - u.sent_s < 0.5) break;
+    cnc::lcmt_interp_input copy = u.in;
+    if (!bus_.publish(ch_input_, copy)) break;
+    u.sent_s = now;
+    ++resent;
+  }
+  if (resent > 0) {
+    inputs_resent_ += resent;
+    spdlog::info("{} input(s) sent again that the logger did not confirm (from index {}; {} in all)", resent,
+                 unconfirmed_.front().in.index, inputs_resent_);
   }
 }
 
@@ -363,11 +411,28 @@ void InterpolatorNode::run_cycle() {
   request_blocks();
 
   const Setpoint& sp = core_.step();
-  cnc::lcmt_setpoint out{};
+  cnc::lcmt_setpoint& out = setpoint_msg_;
   out.cycle = sp.cycle;
   out.period_s = cfg_.ipo_period_s;
   out.num_axes = sp.num_axes;
   out.position_mm.assign(sp.position_mm.begin(), sp.position_mm.begin() + sp.num_axes);
+  // The setpoints of the cycles just before, newest first, as far as they run
+  // unbroken up to this one: a receiver that lost them gets them back exactly.
+  const int na = std::min(sp.num_axes, 16);
+  int have = 0;
+  out.prev_position_mm.resize(static_cast<size_t>(kSetpointHistory * na));
+  for (int j = 1; j <= kSetpointHistory; ++j) {
+    const PastSetpoint& p = past_[static_cast<size_t>((past_head_ - j + 2 * kSetpointHistory) % kSetpointHistory)];
+    if (p.cycle != sp.cycle - j) break;
+    for (int a = 0; a < na; ++a) out.prev_position_mm[static_cast<size_t>(have * na + a)] = p.pos[static_cast<size_t>(a)];
+    ++have;
+  }
+  out.prev_position_mm.resize(static_cast<size_t>(have * na));
+  out.num_prev_values = have * na;
+  PastSetpoint& cur = past_[static_cast<size_t>(past_head_)];
+  cur.cycle = sp.cycle;
+  for (int a = 0; a < na; ++a) cur.pos[static_cast<size_t>(a)] = sp.position_mm[static_cast<size_t>(a)];
+  past_head_ = (past_head_ + 1) % kSetpointHistory;
   out.feed_mm_per_min = sp.feed_mm_per_min;
   out.program_token = token_;
   out.block_index = sp.block_index;

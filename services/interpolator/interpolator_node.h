@@ -11,6 +11,7 @@
 // RESUME and new programs are refused until RESET. RESET takes the position from
 // the drives (the newest AXIS_STATUS, actual positions) and is recorded with that
 // position as an input, so replay reproduces it.
+#include <array>
 #include <deque>
 #include <map>
 #include <string>
@@ -18,9 +19,11 @@
 
 #include "cnc/lcmt_axis_status.hpp"
 #include "cnc/lcmt_interp_input.hpp"
+#include "cnc/lcmt_logger_stats.hpp"
 #include "cnc/lcmt_program_block.hpp"
 #include "cnc/lcmt_program_command.hpp"
 #include "cnc/lcmt_program_state.hpp"
+#include "cnc/lcmt_setpoint.hpp"
 #include "common/bus/bus.h"
 #include "common/config/machine_config.h"
 #include "common/service/bus_health.h"
@@ -55,6 +58,9 @@ class InterpolatorNode {
   void run_cycle();
   void publish_input(const cnc::lcmt_interp_input& in);
   void flush_inputs();
+  // LOGGER_STATS: the inputs the logger confirms are forgotten, the older ones it
+  // does not are sent again.
+  void on_logger_stats(const cnc::lcmt_logger_stats& m);
   void alarm(int8_t severity, const std::string& code, const std::string& text);
   // "" when RESET can be applied now (and fills `out` with the position), else why not.
   std::string reset_position(cnc::lcmt_program_command* out) const;
@@ -94,6 +100,29 @@ class InterpolatorNode {
   // record of inputs stays complete and contiguous across a bus outage.
   std::deque<cnc::lcmt_interp_input> unsent_inputs_;
   int64_t inputs_dropped_ = 0;  // beyond kMaxUnsent: the run is no longer replayable
+  // Inputs the logger has not confirmed yet (index order), with when they were sent
+  // (monotonic s). A datagram lost on the way to the logger is sent again, so the
+  // log of a run on a lossy network still replays. Bounded: the oldest is given up
+  // (counted, one alarm) when no logger confirms anything.
+  struct Unconfirmed {
+    cnc::lcmt_interp_input in;
+    double sent_s;
+  };
+  std::deque<Unconfirmed> unconfirmed_;
+  int64_t next_input_index_ = 0;
+  int64_t inputs_resent_ = 0;
+  int64_t inputs_unconfirmed_dropped_ = 0;
+  bool logger_seen_ = false;
+  // The last few published setpoints (cycle, positions), newest last, for the
+  // history each setpoint carries.
+  static constexpr int kSetpointHistory = 3;
+  struct PastSetpoint {
+    int64_t cycle = -1;
+    std::array<double, 16> pos{};
+  };
+  std::array<PastSetpoint, kSetpointHistory> past_{};
+  int past_head_ = 0;
+  cnc::lcmt_setpoint setpoint_msg_{};  // reused every cycle
   cnc::lcmt_axis_status axis_status_{};
   double axis_status_s_ = -1e9;  // monotonic time it arrived
   bool drives_seen_enabled_ = false;  // every axis ENABLED in a status since the program started

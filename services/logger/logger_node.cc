@@ -10,6 +10,7 @@
 #include <set>
 #include <sstream>
 
+#include "cnc/lcmt_interp_input.hpp"
 #include "common/util/clock.h"
 
 namespace cnc::logger {
@@ -66,8 +67,29 @@ LoggerNode::LoggerNode(const config::MachineConfig& cfg, bus::Bus& bus, LogWrite
                          const auto hdr = bus::peek_header(data, size);
                          if (hdr && hdr->sender == bus_.sender()) return;
                        }
+                       const int64_t dropped = writer_.dropped();
                        writer_.write(channel, data, size, recv_utime);
+                       if (writer_.dropped() == dropped && channel.size() >= 12 &&
+                           channel.compare(channel.size() - 12, 12, "INTERP_INPUT") == 0)
+                         note_input(data, size);
                      });
+}
+
+void LoggerNode::note_input(const void* data, size_t size) {
+  cnc::lcmt_interp_input in;
+  if (in.decode(data, 0, static_cast<int>(size)) < 0 || in.index < 0) return;
+  InputAcks& a = input_acks_[in.sender];
+  if (in.index < a.next) return;  // a copy of one already written
+  constexpr size_t kMaxAhead = 65536;  // a sender far ahead of its gap: kept bounded
+  if (in.index > a.next) {
+    if (a.above.size() < kMaxAhead) a.above.insert(in.index);
+    return;
+  }
+  ++a.next;
+  while (!a.above.empty() && *a.above.begin() <= a.next) {
+    if (*a.above.begin() == a.next) ++a.next;
+    a.above.erase(a.above.begin());
+  }
 }
 
 void LoggerNode::tick(double now_s) {
@@ -119,6 +141,11 @@ cnc::lcmt_logger_stats LoggerNode::make_stats(bool closing) const {
     m.dropped.push_back(c.dropped + st.handler_errors);
   }
   m.num_channels = static_cast<int32_t>(m.channel.size());
+  for (const auto& [sender, a] : input_acks_) {
+    m.input_sender.push_back(sender);
+    m.input_next.push_back(a.next);
+  }
+  m.num_input_senders = static_cast<int32_t>(m.input_sender.size());
   m.events_dropped = writer_.dropped() + handler_errors;
   return m;
 }

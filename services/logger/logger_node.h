@@ -3,6 +3,8 @@
 // logger's own counts (lcmt_logger_stats) written straight into the log about once
 // a second and once at close, so they are in the file even when multicast loopback
 // does not bring anything back.
+#include <map>
+#include <set>
 #include <string>
 
 #include "cnc/lcmt_logger_stats.hpp"
@@ -55,6 +57,14 @@ class LoggerNode {
   double last_tick_s_ = -1;
   double max_loop_gap_s_ = 0;
   int64_t stats_seq_ = 0;
+  // Per interpolator: the lowest INTERP_INPUT index not yet in the file, and the
+  // ones above it already written (bounded), confirmed in every stats report.
+  struct InputAcks {
+    int64_t next = 0;
+    std::set<int64_t> above;
+  };
+  std::map<int32_t, InputAcks> input_acks_;
+  void note_input(const void* data, size_t size);
   int64_t socket_drops_ = 0;
   std::vector<uint8_t> encode_buf_;
 };

@@ -98,17 +98,28 @@ int main(int argc, char** argv) {
       handling.record_s(cnc::util::monotonic_s() - t_in);
     });
     cnc::service::Heartbeat hb(bus, cfg, "cnc-monitor");
-    std::map<std::string, int64_t> gaps_reported;
+    // Sequence gaps: one alarm per channel and second at most, with the count since
+    // the last one (a lossy network loses a few datagrams a second: a line each
+    // would flood the alarm channel and the operator).
+    struct GapReport {
+      int64_t seen = 0;
+      double last_s = -1e9;
+    };
+    std::map<std::string, GapReport> gaps_reported;
     while (!cnc::util::stop_requested()) {
       bus.handle(20);
+      const double now_s = cnc::util::monotonic_s();
       for (const auto& [channel, st] : bus.stats()) {
-        int64_t& seen = gaps_reported[channel];
-        if (st.seq_gaps > seen) {
+        GapReport& g = gaps_reported[channel];
+        if (st.seq_gaps > g.seen && now_s - g.last_s >= 1.0) {
+          const bool first = g.last_s < -1e8;
           raise("seq_gap",
-                channel + ": " + std::to_string(st.seq_gaps - seen) + " message(s) lost (total " +
-                    std::to_string(st.seq_gaps) + ")",
+                channel + ": " + std::to_string(st.seq_gaps - g.seen) + " message(s) lost" +
+                    (first ? "" : " in the last " + std::to_string(static_cast<int>(std::lround(now_s - g.last_s))) + " s") +
+                    " (total " + std::to_string(st.seq_gaps) + ")",
                 cnc::lcmt_alarm::WARNING);
-          seen = st.seq_gaps;
+          g.seen = st.seq_gaps;
+          g.last_s = now_s;
         }
       }
       hb.tick(cnc::lcmt_heartbeat::RUNNING, 0);

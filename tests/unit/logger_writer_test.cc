@@ -9,10 +9,12 @@
 #include <csignal>
 #include <cstring>
 #include <filesystem>
+#include <map>
 #include <random>
 #include <string>
 #include <vector>
 
+#include "cnc/lcmt_interp_input.hpp"
 #include "cnc/lcmt_logger_stats.hpp"
 #include "cnc/lcmt_setpoint.hpp"
 #include "common/bus/bus.h"
@@ -263,6 +265,58 @@ TEST_F(LoggerWriterTest, NodeWritesItsStatsIntoTheLogAndTheClosingStatsLast) {
     EXPECT_EQ(last.dropped[i], 0);
   }
   EXPECT_TRUE(found);
+}
+
+TEST_F(LoggerWriterTest, StatsConfirmTheInterpolatorInputsWrittenWithoutAGap) {
+  // INTERP_INPUT indices 0, 1, 3, 1 (a copy), 4 from one interpolator, 0 from
+  // another: the first is confirmed up to 2 (2 is missing, 3 and 4 wait above it),
+  // the second up to 1. After 2 comes (sent again), up to 5.
+  cnc::config::MachineConfig cfg;
+  cfg.channel_prefix = "T.";
+  cnc::bus::Bus bus("memq://");
+  LogWriter writer(base_, 1e9);
+  cnc::logger::LoggerNode node(cfg, bus, writer);
+  node.tick(100.0);
+  int64_t seq = 0;
+  auto input = [&](int32_t sender, int64_t index) {
+    cnc::lcmt_interp_input in{};
+    in.seq = seq++;
+    in.sender = sender;
+    in.index = index;
+    in.kind = cnc::lcmt_interp_input::PLAN;
+    in.plans = 1;
+    std::vector<uint8_t> buf(static_cast<size_t>(in.getEncodedSize()));
+    in.encode(buf.data(), 0, static_cast<int>(buf.size()));
+    bus.publish_raw("T.INTERP_INPUT", buf.data(), buf.size());
+    while (bus.handle(0) > 0) {
+    }
+  };
+  cnc::lcmt_logger_stats got{};
+  bool have = false;
+  bus.subscribe<cnc::lcmt_logger_stats>("T.LOGGER_STATS", [&](const cnc::lcmt_logger_stats& m) {
+    got = m;
+    have = true;
+  });
+  auto confirmed = [&](double t) {
+    std::map<int32_t, int64_t> out;
+    have = false;
+    node.tick(t);
+    while (bus.handle(0) > 0) {
+    }
+    EXPECT_TRUE(have);
+    for (int i = 0; i < got.num_input_senders; ++i) out[got.input_sender[i]] = got.input_next[i];
+    return out;
+  };
+  for (int64_t i : {0, 1, 3, 1, 4}) input(7, i);
+  input(8, 0);
+  auto c = confirmed(101.1);
+  EXPECT_EQ(c[7], 2);
+  EXPECT_EQ(c[8], 1);
+  input(7, 2);
+  c = confirmed(102.2);
+  EXPECT_EQ(c[7], 5);
+  EXPECT_EQ(c[8], 1);
+  node.close();
 }
 
 TEST(LoggerReceiveUrl, AddsTheReceiveBufferToUdpmUrlsThatSetNone) {

@@ -149,22 +149,30 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
     std::fprintf(stderr, "cnc-replay: %s holds no interpolator config (INTERP_CONFIG): not a cell log?\n", log.c_str());
     return kExitUnreplayable;
   }
-  // Inputs from the interpolator that sent the config, and none may be missing.
+  // Inputs from the interpolator that sent the config, each index once (an input
+  // the logger did not confirm in time was sent again: the copies are equal), in
+  // index order; none may be missing.
+  std::map<int64_t, cnc::lcmt_interp_input> by_index;
+  int64_t copies = 0;
+  for (auto& in : inputs) {
+    if (in.sender != sender) continue;
+    if (!by_index.emplace(in.index, std::move(in)).second) ++copies;
+  }
   std::vector<cnc::lcmt_interp_input> mine;
-  for (auto& in : inputs)
-    if (in.sender == sender) mine.push_back(std::move(in));
-  for (size_t i = 1; i < mine.size(); ++i) {
-    if (mine[i].seq != mine[i - 1].seq + 1) {
-      std::fprintf(stderr, "cnc-replay: inputs lost: INTERP_INPUT seq %lld..%lld missing; the run cannot be reproduced\n",
-                   static_cast<long long>(mine[i - 1].seq + 1), static_cast<long long>(mine[i].seq - 1));
+  for (auto& [index, in] : by_index) {
+    const int64_t expected = mine.empty() ? 0 : mine.back().index + 1;
+    if (index != expected) {
+      if (mine.empty())
+        std::fprintf(stderr, "cnc-replay: the log starts after the interpolator's first input (index %lld)\n",
+                     static_cast<long long>(index));
+      else
+        std::fprintf(stderr, "cnc-replay: inputs lost: INTERP_INPUT index %lld..%lld missing; the run cannot be reproduced\n",
+                     static_cast<long long>(expected), static_cast<long long>(index - 1));
       return kExitUnreplayable;
     }
+    mine.push_back(std::move(in));
   }
-  if (!mine.empty() && mine.front().seq != 0) {
-    std::fprintf(stderr, "cnc-replay: the log starts after the interpolator's first input (seq %lld)\n",
-                 static_cast<long long>(mine.front().seq));
-    return kExitUnreplayable;
-  }
+  if (copies > 0) std::printf("inputs: %lld sent again after a loss, taken once\n", static_cast<long long>(copies));
   if (setpoints.empty()) {
     std::fprintf(stderr, "cnc-replay: no setpoints of that interpolator in %s\n", log.c_str());
     return kExitUnreplayable;
@@ -221,14 +229,14 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
       }
       const std::string why = cnc::interp::apply_recorded_input(core, in, naxes);
       if (!why.empty()) {
-        std::printf("diverges at cycle %lld: input seq %lld was applied live but is refused now: %s\n",
-                    static_cast<long long>(cycle), static_cast<long long>(in.seq), why.c_str());
+        std::printf("diverges at cycle %lld: input %lld was applied live but is refused now: %s\n",
+                    static_cast<long long>(cycle), static_cast<long long>(in.index), why.c_str());
         return kExitDiverged;
       }
     }
     if (next_input < mine.size() && mine[next_input].cycle < cycle) {
-      std::fprintf(stderr, "cnc-replay: inputs out of cycle order at seq %lld\n",
-                   static_cast<long long>(mine[next_input].seq));
+      std::fprintf(stderr, "cnc-replay: inputs out of cycle order at index %lld\n",
+                   static_cast<long long>(mine[next_input].index));
       return kExitUnreplayable;
     }
     const cnc::interp::Setpoint& sp = core.step();
