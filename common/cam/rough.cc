@@ -3,9 +3,13 @@
 #include <polyclipping/clipper.hpp>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <exception>
 #include <limits>
+#include <mutex>
 #include <stdexcept>
+#include <thread>
 
 namespace cnc::cam {
 namespace {
@@ -171,20 +175,33 @@ std::vector<Level> choose_levels(const SlopeProfile& profile, const Cutter& cutt
 }
 
 Polygons keep_out(const Mesh& mesh, const Cutter& cutter, double z, int corner_samples, double arc_tol_mm) {
+  return keep_out(MeshSlicer(mesh), cutter, z, corner_samples, arc_tol_mm);
+}
+
+Polygons keep_out(const MeshSlicer& slicer, const Cutter& cutter, double z, int corner_samples, double arc_tol_mm) {
   const double R = cutter.radius(), r = cutter.corner_radius_mm, a = R - r;
   const int n = r > 0 ? std::max(1, corner_samples) : 1;
-  cl::Paths all;
+  std::vector<cl::Paths> grown_all;
   for (int i = 0; i < n; ++i) {
     // Sub-level i: the part above z + h_i, grown by the radius at h_{i+1}.
     const double rho_i = a + r * i / n, rho_next = r > 0 ? a + r * (i + 1) / n : R;
     const double h_i = r > 0 ? r - std::sqrt(std::max(0.0, r * r - (rho_i - a) * (rho_i - a))) : 0;
-    const Slice s = slice_mesh(mesh, z + h_i + 1e-9);
+    const Slice s = slicer.slice(z + h_i + 1e-9);
     if (s.loops.empty()) continue;
     const cl::Paths region = boolean(to_paths(s.loops), {}, cl::ctUnion, cl::pftEvenOdd);
-    const cl::Paths grown = offset(region, rho_next + arc_tol_mm, arc_tol_mm);
-    all.insert(all.end(), grown.begin(), grown.end());
+    grown_all.push_back(offset(region, rho_next + arc_tol_mm, arc_tol_mm));
   }
-  return to_polys(boolean(all, {}, cl::ctUnion, cl::pftNonZero));
+  // Union pairwise, neighbours first: neighbouring sub-levels are nearly the same curve,
+  // and merging them early keeps each union's edge count (and crossings) small.
+  while (grown_all.size() > 1) {
+    std::vector<cl::Paths> next;
+    for (std::size_t i = 0; i + 1 < grown_all.size(); i += 2)
+      next.push_back(boolean(grown_all[i], grown_all[i + 1], cl::ctUnion, cl::pftNonZero));
+    if (grown_all.size() % 2) next.push_back(std::move(grown_all.back()));
+    grown_all.swap(next);
+  }
+  if (grown_all.empty()) return {};
+  return to_polys(boolean(grown_all.front(), {}, cl::ctUnion, cl::pftNonZero));
 }
 
 namespace {
@@ -318,21 +335,20 @@ RoughPlan plan_roughing(const Mesh& mesh, const Stock& stock, const RoughSpec& s
       choose_levels(prof, c, spec.cusp_mm, stepdown, b.min.z, b.max.z, stock.zmax, !floor, slack);
   if (floor) levels.insert(levels.begin(), Level{b.min.z, LevelKind::kFloor, 0, 0});
   plan.levels = levels;
+  const MeshSlicer slicer(mesh);
   const std::size_t total = levels.size();
-  double above = stock.zmax;
-  for (std::size_t k = levels.size(); k-- > 0;) {
+  // Each level on its own (the keep-out, the rings, the chains), on `threads` workers
+  // taking levels top-down in turn; then joined in cutting order.
+  std::vector<LevelPath> per_level(total);
+  auto plan_level = [&](std::size_t k) {
     const Level& lv = levels[k];
-    if (lv.z >= stock.zmax - 1e-9) {  // a level at the stock's top has nothing above it to cut
-      if (progress) progress(total - k, total);
-      continue;
-    }
-    const Polygons ko = keep_out(mesh, c, lv.z, samples, spec.arc_tol_mm);
-    Polygons region;
-    const std::vector<Ring> rings = pocket_rings(ko, stock, c, stepover, spec.arc_tol_mm, &region);
-    LevelPath lp;
+    LevelPath& lp = per_level[k];
     lp.z = lv.z;
     lp.kind = lv.kind;
-    lp.approach_z = std::min(above, stock.zmax) + 1;
+    if (lv.z >= stock.zmax - 1e-9) return;  // a level at the stock's top has nothing above it to cut
+    const Polygons ko = keep_out(slicer, c, lv.z, samples, spec.arc_tol_mm);
+    Polygons region;
+    const std::vector<Ring> rings = pocket_rings(ko, stock, c, stepover, spec.arc_tol_mm, &region);
     lp.rings = rings.size();
     // The tool-offset contour: the keep-out's boundary where the tool may be (inside the
     // stock's outline grown by R).
@@ -360,15 +376,43 @@ RoughPlan plan_roughing(const Mesh& mesh, const Stock& stock, const RoughSpec& s
       if (rg.closed) chain.push_back(rg.points.front());  // close the ring
     }
     if (!chain.empty()) lp.chains.push_back(std::move(chain));
+  };
+  std::atomic<std::size_t> next{0}, done{0};
+  std::mutex report;
+  std::exception_ptr failure;
+  auto worker = [&] {
+    for (std::size_t i; (i = next.fetch_add(1)) < total;) {
+      try {
+        plan_level(total - 1 - i);
+      } catch (...) {
+        const std::lock_guard<std::mutex> lock(report);
+        if (!failure) failure = std::current_exception();
+      }
+      const std::size_t d = done.fetch_add(1) + 1;
+      if (progress) {
+        const std::lock_guard<std::mutex> lock(report);
+        progress(d, total);
+      }
+    }
+  };
+  const int nthreads = std::max(1, std::min<int>(spec.threads, static_cast<int>(total)));
+  std::vector<std::thread> pool;
+  for (int t = 1; t < nthreads; ++t) pool.emplace_back(worker);
+  worker();
+  for (std::thread& t : pool) t.join();
+  if (failure) std::rethrow_exception(failure);
+  double above = stock.zmax;
+  for (std::size_t k = total; k-- > 0;) {
+    LevelPath& lp = per_level[k];
+    lp.approach_z = std::min(above, stock.zmax) + 1;
     for (const auto& ch : lp.chains)
       for (std::size_t i = 1; i < ch.size(); ++i) plan.feed_mm += std::sqrt(dist2(ch[i - 1], ch[i]));
     plan.contour_mm += lp.contour_mm;
     plan.retracts += lp.chains.size();
     if (!lp.chains.empty()) {
+      above = lp.z;
       plan.paths.push_back(std::move(lp));
-      above = lv.z;
     }
-    if (progress) progress(total - k, total);
   }
   return plan;
 }

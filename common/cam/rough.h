@@ -55,6 +55,7 @@ struct RoughSpec {
   double flat_deg = 0.5;        // facets flatter than this are flat areas
   int corner_samples = 0;       // n, sub-levels of the corner arc; 0: r / (0.02 cusp), within [16, 64]
   double arc_tol_mm = 0.002;    // Clipper's round joins
+  int threads = 1;              // levels planned side by side (the result does not depend on it)
 };
 
 enum class LevelKind { kSlope, kFlat, kFloor, kFacing };
@@ -87,6 +88,7 @@ using Polygons = std::vector<Loop>;  // closed loops, outer counter-clockwise, h
 
 // The tool centre's keep-out region at level z (see above), oriented.
 Polygons keep_out(const Mesh& mesh, const Cutter& cutter, double z, int corner_samples, double arc_tol_mm);
+Polygons keep_out(const MeshSlicer& slicer, const Cutter& cutter, double z, int corner_samples, double arc_tol_mm);
 
 struct Ring {
   Loop points;
@@ -117,7 +119,7 @@ struct RoughPlan {
   std::size_t retracts = 0;        // chains
 };
 
-// progress(levels done, levels) after each level, if given.
+// progress(levels done, levels) after each level, if given (from one worker at a time).
 RoughPlan plan_roughing(const Mesh& mesh, const Stock& stock, const RoughSpec& spec,
                         const std::function<void(std::size_t, std::size_t)>& progress = {});
 

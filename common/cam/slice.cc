@@ -36,9 +36,13 @@ Key key(const XY& p) { return {std::bit_cast<std::uint64_t>(p.x + 0.0), std::bit
 
 }  // namespace
 
-Slice slice_mesh(const Mesh& mesh, double z) {
+namespace {
+
+// Slices the triangles idx[0..n) of the mesh (all of them when idx is null).
+Slice slice_triangles(const Mesh& mesh, const std::uint32_t* idx, std::size_t n_tris, double z) {
   std::vector<std::array<XY, 2>> segs;
-  for (const Triangle& t : mesh.triangles) {
+  for (std::size_t ti = 0; ti < n_tris; ++ti) {
+    const Triangle& t = mesh.triangles[idx ? idx[ti] : ti];
     int above = 0;
     for (const Vec3& v : t.v) above += v.z > z;
     if (above == 0 || above == 3) continue;
@@ -113,6 +117,42 @@ Slice slice_mesh(const Mesh& mesh, double z) {
     if (fwd.size() >= 3) out.loops.push_back(std::move(fwd));
   }
   return out;
+}
+
+}  // namespace
+
+Slice slice_mesh(const Mesh& mesh, double z) { return slice_triangles(mesh, nullptr, mesh.triangles.size(), z); }
+
+MeshSlicer::MeshSlicer(const Mesh& mesh) : mesh_(mesh) {
+  const Bounds b = mesh_bounds(mesh);
+  const std::size_t n = mesh.triangles.size();
+  const std::size_t bins = std::clamp<std::size_t>(n / 8, 1, 4096);
+  z0_ = b.min.z;
+  dz_ = std::max((b.max.z - b.min.z) / static_cast<double>(bins), 1e-9);
+  auto bin = [&](double z) {
+    return static_cast<std::size_t>(std::clamp((z - z0_) / dz_, 0.0, static_cast<double>(bins - 1)));
+  };
+  std::vector<std::uint32_t> count(bins + 1, 0);
+  for (const Triangle& t : mesh.triangles) {
+    const double lo = std::min({t.v[0].z, t.v[1].z, t.v[2].z}), hi = std::max({t.v[0].z, t.v[1].z, t.v[2].z});
+    for (std::size_t k = bin(lo); k <= bin(hi); ++k) ++count[k + 1];
+  }
+  for (std::size_t k = 0; k < bins; ++k) count[k + 1] += count[k];
+  start_ = count;
+  tris_.resize(count[bins]);
+  for (std::uint32_t i = 0; i < n; ++i) {
+    const Triangle& t = mesh.triangles[i];
+    const double lo = std::min({t.v[0].z, t.v[1].z, t.v[2].z}), hi = std::max({t.v[0].z, t.v[1].z, t.v[2].z});
+    for (std::size_t k = bin(lo); k <= bin(hi); ++k) tris_[count[k]++] = i;
+  }
+}
+
+Slice MeshSlicer::slice(double z) const {
+  const std::size_t bins = start_.size() - 1;
+  const double f = (z - z0_) / dz_;
+  if (!(f >= -1e-9) || f > static_cast<double>(bins) + 1e-9) return {};
+  const auto k = static_cast<std::size_t>(std::clamp(f, 0.0, static_cast<double>(bins - 1)));
+  return slice_triangles(mesh_, tris_.data() + start_[k], start_[k + 1] - start_[k], z);
 }
 
 double loop_area(const Loop& loop) {

@@ -10,6 +10,7 @@
 // is even-odd, so the mesh's winding does not matter. Chains that do not close (an open
 // mesh cut across its border) are closed by their chord and counted.
 #include <cstddef>
+#include <cstdint>
 #include <vector>
 
 #include "common/cam/drop_cutter.h"
@@ -26,6 +27,20 @@ struct Slice {
 };
 
 Slice slice_mesh(const Mesh& mesh, double z);
+
+// The same, many times over one mesh: triangles binned by height (each in every bin its
+// z range meets), so a slice reads only the triangles of one bin. Keeps a reference to
+// the mesh.
+class MeshSlicer {
+ public:
+  explicit MeshSlicer(const Mesh& mesh);
+  Slice slice(double z) const;
+
+ private:
+  const Mesh& mesh_;
+  double z0_ = 0, dz_ = 1;
+  std::vector<std::uint32_t> start_, tris_;  // bin b holds tris_[start_[b] .. start_[b + 1])
+};
 
 // Signed area (counter-clockwise positive) and length of a closed loop.
 double loop_area(const Loop& loop);

@@ -216,6 +216,7 @@ struct RoughArgs {
   std::string stl, stock = "box", tool, out, png, compare, origin = "corner";
   double cusp = 0, stepover = 0.4, max_stepdown = 0, feed = 1000, plunge = 300, rapid = 15000, spindle = 10000,
          safe_z = 2;
+  int threads = 0;
 };
 
 std::vector<std::string> split_commas(const std::string& s) {
@@ -242,6 +243,7 @@ int run_rough(const RoughArgs& a) {
     spec.cusp_mm = a.cusp;
     spec.stepover_frac = a.stepover;
     spec.max_stepdown_mm = a.max_stepdown;
+    spec.threads = a.threads > 0 ? a.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
     const auto t0 = Clock::now();
     bool reported = false;
     RoughPlan plan = plan_roughing(mesh, stock, spec, [&](std::size_t done, std::size_t total) {
@@ -396,6 +398,7 @@ int main(int argc, char** argv) {
   g->add_option("--rapid", rough.rapid, "rapid speed of the time model, mm/min")->check(CLI::PositiveNumber);
   g->add_option("--spindle", rough.spindle, "spindle speed, rpm")->check(CLI::PositiveNumber);
   g->add_option("--safe-z", rough.safe_z, "clearance plane above the stock's top, mm")->check(CLI::NonNegativeNumber);
+  g->add_option("--threads", rough.threads, "levels planned side by side (default: all cores)")->check(CLI::Range(1, 256));
   PartArgs part;
   CLI::App* pa = app.add_subcommand("part", "write an analytic test part as binary STL");
   pa->add_option("--shape", part.shape, "table1-a, table1-b, hemisphere or frustum")->required();
