@@ -219,6 +219,12 @@ struct RoughArgs {
   int threads = 0;
 };
 
+std::string fmt_g(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", v);
+  return buf;
+}
+
 std::vector<std::string> split_commas(const std::string& s) {
   std::vector<std::string> out;
   std::stringstream ss(s);
@@ -278,7 +284,7 @@ int run_rough(const RoughArgs& a) {
                  std::isfinite(l.min_slope_rad) ? l.min_slope_rad * 180 / M_PI : -1.0);
   print_plan(a.tool, plan);
   GcodeSetup setup;
-  setup.title = "cnc-cam rough " + a.stl + " tool " + a.tool + " cusp " + std::to_string(a.cusp) + " stock " + a.stock +
+  setup.title = "cnc-cam rough " + a.stl + " tool " + a.tool + " cusp " + fmt_g(a.cusp) + " stock " + a.stock +
                 (a.origin == "corner" ? ", zero at the stock's min x, min y, top" : ", mesh coordinates");
   setup.cutter = parse_cutter(a.tool);
   setup.feed_mm_per_min = a.feed;
@@ -304,6 +310,8 @@ int run_rough(const RoughArgs& a) {
     }
   }
   if (!a.png.empty()) {
+    for (const std::string* arg : {&a.png, &a.tool})
+      if (arg->find('\'') != std::string::npos) throw std::invalid_argument("--png: no quote (') in " + *arg + ", please");
     const std::string csv = a.png + ".levels.csv";
     std::FILE* c = std::fopen(csv.c_str(), "w");
     if (!c) throw std::runtime_error(csv + ": cannot write");
@@ -320,7 +328,7 @@ int run_rough(const RoughArgs& a) {
     for (const Level& l : plan.levels) std::fprintf(c, "level,0,%.4f,0,0,0\n", l.z);
     std::fclose(c);
     const std::string cmd = std::string("/usr/bin/python3 '") + CNC_SOURCE_DIR + "/tools/cam/plot_rough.py' '" + csv +
-                            "' '" + a.png + "' '" + a.tool + " cusp " + std::to_string(a.cusp) + "'";
+                            "' '" + a.png + "' '" + a.tool + " cusp " + fmt_g(a.cusp) + "'";
     if (std::system(cmd.c_str()) != 0) throw std::runtime_error("plot_rough.py failed for " + a.png);
     std::remove(csv.c_str());
   }
