@@ -360,6 +360,7 @@ RoughPlan plan_roughing(const Mesh& mesh, const Stock& stock, const RoughSpec& s
     }
     const cl::Paths ko_paths = to_paths(ko);
     std::vector<XY> chain;
+    std::size_t first_end = 0;
     for (const Ring& rg : rings) {
       if (!chain.empty()) {
         const XY& from = chain.back();
@@ -369,13 +370,19 @@ RoughPlan plan_roughing(const Mesh& mesh, const Stock& stock, const RoughSpec& s
                         length_inside({{to_int(from.x), to_int(from.y)}, {to_int(to.x), to_int(to.y)}}, ko_paths) < 1e-4;
         if (!ok) {
           lp.chains.push_back(std::move(chain));
+          lp.ring_end.push_back(first_end);
           chain.clear();
         }
       }
+      const bool starts = chain.empty();
       chain.insert(chain.end(), rg.points.begin(), rg.points.end());
       if (rg.closed) chain.push_back(rg.points.front());  // close the ring
+      if (starts) first_end = rg.closed ? chain.size() - 1 : 0;
     }
-    if (!chain.empty()) lp.chains.push_back(std::move(chain));
+    if (!chain.empty()) {
+      lp.chains.push_back(std::move(chain));
+      lp.ring_end.push_back(first_end);
+    }
   };
   std::atomic<std::size_t> next{0}, done{0};
   std::mutex report;
@@ -417,35 +424,89 @@ RoughPlan plan_roughing(const Mesh& mesh, const Stock& stock, const RoughSpec& s
   return plan;
 }
 
-PlanTime plan_time(const RoughPlan& plan, double clear_z, const TimeModel& m) {
+std::vector<Vec3> ramp_into(const std::vector<XY>& chain, std::size_t ring_end, double z_from, double z_to,
+                            double ramp_rad) {
+  if (!(ramp_rad > 0) || ring_end < 3 || ring_end >= chain.size() || !(z_from > z_to)) return {};
+  double perimeter = 0;
+  for (std::size_t i = 1; i <= ring_end; ++i) perimeter += std::sqrt(dist2(chain[i - 1], chain[i]));
+  const double need = (z_from - z_to) / std::tan(ramp_rad);
+  if (!(perimeter > 1e-3) || need > 20 * perimeter) return {};
+  // Backwards from chain[0] = chain[ring_end]: chain[ring_end − 1], …, chain[0], wrapping.
+  std::vector<XY> back{chain[0]};
+  double walked = 0;
+  std::size_t i = ring_end;
+  while (walked < need) {
+    const XY& p = chain[i];
+    const XY& q = chain[i - 1];
+    const double seg = std::sqrt(dist2(p, q));
+    if (walked + seg >= need) {
+      const double f = seg > 0 ? (need - walked) / seg : 0;
+      back.push_back({p.x + f * (q.x - p.x), p.y + f * (q.y - p.y)});
+      walked = need;
+      break;
+    }
+    walked += seg;
+    back.push_back(q);
+    i = i - 1 == 0 ? ring_end : i - 1;
+  }
+  std::vector<Vec3> out;
+  out.reserve(back.size());
+  double s = walked;  // arc length still to go to the chain's start, from the far end
+  for (std::size_t k = back.size(); k-- > 0;) {
+    out.push_back({back[k].x, back[k].y, z_to + (z_from - z_to) * (need > 0 ? s / need : 0)});
+    if (k > 0) s -= std::sqrt(dist2(back[k], back[k - 1]));
+  }
+  out.back().z = z_to;
+  return out;
+}
+
+PlanTime plan_time(const RoughPlan& plan, double clear_z, const TimeModel& m, double ramp_deg) {
   PlanTime t;
   bool first = true;
   XY at{};
   for (const LevelPath& lp : plan.paths)
-    for (const auto& ch : lp.chains) {
-      const XY& s = ch.front();
+    for (std::size_t c = 0; c < lp.chains.size(); ++c) {
+      const auto& ch = lp.chains[c];
+      const double approach = std::min(clear_z, lp.approach_z);
+      const std::vector<Vec3> ramp =
+          ramp_into(ch, c < lp.ring_end.size() ? lp.ring_end[c] : 0, approach, lp.z, ramp_deg * M_PI / 180);
+      const XY s = ramp.empty() ? ch.front() : XY{ramp.front().x, ramp.front().y};
       if (!first) t.rapid_mm += std::sqrt(dist2(at, s));
       first = false;
-      const double approach = std::min(clear_z, lp.approach_z);
       t.rapid_mm += (clear_z - approach) + (clear_z - lp.z);  // down to the approach height; up at the end
-      t.plunge_mm += approach - lp.z;
+      if (ramp.empty()) {
+        t.plunge_mm += approach - lp.z;
+      } else {
+        for (std::size_t i = 1; i < ramp.size(); ++i)
+          t.ramp_mm += std::sqrt(dist2({ramp[i - 1].x, ramp[i - 1].y}, {ramp[i].x, ramp[i].y}) +
+                                 (ramp[i].z - ramp[i - 1].z) * (ramp[i].z - ramp[i - 1].z));
+      }
       for (std::size_t i = 1; i < ch.size(); ++i) t.feed_mm += std::sqrt(dist2(ch[i - 1], ch[i]));
       at = ch.back();
     }
-  t.seconds = 60 * (t.feed_mm / m.feed_mm_per_min + t.plunge_mm / m.plunge_mm_per_min + t.rapid_mm / m.rapid_mm_per_min);
+  t.seconds = 60 * ((t.feed_mm + t.ramp_mm) / m.feed_mm_per_min + t.plunge_mm / m.plunge_mm_per_min +
+                    t.rapid_mm / m.rapid_mm_per_min);
   return t;
 }
 
-std::string rough_gcode(const RoughPlan& plan, const GcodeSetup& setup, const Vec3& zero) {
+std::string rough_gcode(const RoughPlan& plan, const GcodeSetup& setup, const Vec3& zero, double ramp_deg) {
   GcodeWriter w(setup);
   const double clear = setup.safe_z_mm;
   for (const LevelPath& lp : plan.paths) {
     const double z = lp.z - zero.z, approach = std::min(clear, lp.approach_z - zero.z);
-    for (const auto& ch : lp.chains) {
-      const XY s{ch.front().x - zero.x, ch.front().y - zero.y};
+    for (std::size_t c = 0; c < lp.chains.size(); ++c) {
+      const auto& ch = lp.chains[c];
+      std::vector<Vec3> ramp =
+          ramp_into(ch, c < lp.ring_end.size() ? lp.ring_end[c] : 0, approach + zero.z, lp.z, ramp_deg * M_PI / 180);
+      for (Vec3& p : ramp) p = {p.x - zero.x, p.y - zero.y, p.z - zero.z};
+      const XY s = ramp.empty() ? XY{ch.front().x - zero.x, ch.front().y - zero.y} : XY{ramp.front().x, ramp.front().y};
       w.rapid({s.x, s.y, clear});
       if (approach < clear) w.rapid({s.x, s.y, approach});
-      w.feed({s.x, s.y, z}, setup.plunge_mm_per_min);
+      if (ramp.empty()) {
+        w.feed({s.x, s.y, z}, setup.plunge_mm_per_min);
+      } else {
+        for (std::size_t i = 1; i < ramp.size(); ++i) w.feed(ramp[i], setup.feed_mm_per_min);
+      }
       for (std::size_t i = 1; i < ch.size(); ++i) w.feed({ch[i].x - zero.x, ch[i].y - zero.y, z}, setup.feed_mm_per_min);
       w.rapid({ch.back().x - zero.x, ch.back().y - zero.y, clear});
     }

@@ -105,6 +105,8 @@ struct LevelPath {
   double approach_z = 0;  // rapids come down to here (1 mm above the level cut before), then plunge
   LevelKind kind = LevelKind::kSlope;
   std::vector<std::vector<XY>> chains;  // each cut at the level without a retract
+  std::vector<std::size_t> ring_end;    // per chain: chain[ring_end] closes its first ring
+                                        // (== chain[0]); 0 when it starts with an open piece
   std::size_t rings = 0;
   double contour_mm = 0;  // length of the exact tool-offset contour (the offset-0 hole rings)
 };
@@ -123,10 +125,21 @@ struct RoughPlan {
 RoughPlan plan_roughing(const Mesh& mesh, const Stock& stock, const RoughSpec& spec,
                         const std::function<void(std::size_t, std::size_t)>& progress = {});
 
+// A ramp into a chain that starts with a closed ring: the ring walked backwards from its
+// start for the length a descent of z_from − z_to needs at `ramp_rad` (around it again
+// if it is short, at most 20 times), returned forwards: from its first point at z_from
+// down the ring's own path to the chain's start at z_to. The ring is off the keep-out at
+// z_to, so it is at every height above (sections shrink upwards). Empty when the chain
+// starts with an open piece, the ring is too short, or ramp_rad <= 0.
+std::vector<Vec3> ramp_into(const std::vector<XY>& chain, std::size_t ring_end, double z_from, double z_to,
+                            double ramp_rad);
+
 // The plan as G-code through GcodeWriter (setup.safe_z_mm is the clearance plane): per
-// chain a rapid at the clearance plane, a rapid down to its approach height, a plunge at
-// the plunge feed, the chain at the cutting feed, a rapid back up. Coordinates minus `zero`.
-std::string rough_gcode(const RoughPlan& plan, const GcodeSetup& setup, const Vec3& zero);
+// chain a rapid at the clearance plane, a rapid down to its approach height, then either
+// a ramp down the chain's first ring at `ramp_deg` (> 0, where there is a ring) at the
+// cutting feed or a plunge at the plunge feed, the chain at the cutting feed, a rapid
+// back up. Coordinates minus `zero`.
+std::string rough_gcode(const RoughPlan& plan, const GcodeSetup& setup, const Vec3& zero, double ramp_deg = 0);
 
 // The machining time of a plan under a constant-speed model: feed at the levels,
 // plunges from `approach_mm` above the level, rapids at `rapid_mm_per_min` between
@@ -135,8 +148,8 @@ struct TimeModel {
   double feed_mm_per_min = 1000, plunge_mm_per_min = 300, rapid_mm_per_min = 15000;
 };
 struct PlanTime {
-  double feed_mm = 0, plunge_mm = 0, rapid_mm = 0, seconds = 0;
+  double feed_mm = 0, ramp_mm = 0, plunge_mm = 0, rapid_mm = 0, seconds = 0;  // ramps at the cutting feed
 };
-PlanTime plan_time(const RoughPlan& plan, double clear_z, const TimeModel& model);
+PlanTime plan_time(const RoughPlan& plan, double clear_z, const TimeModel& model, double ramp_deg = 0);
 
 }  // namespace cnc::cam

@@ -2,7 +2,7 @@
 # cnc-cam rough's G-code through the project's own dry run (issue 15, items 5 and 6): seed
 # 002's Table 1 part "b" (generated, 7,200 triangles) roughed with a flat and a filleted
 # D10 at cusp 5 in its box stock, and a frustum with a 3 mm margin and a ball D6 at cusp
-# 1, each accepted by cnc-plan on sim3, every setpoint of a G1 move within 1 um of that
+# 1 entering down 3° ramps, each accepted by cnc-plan on sim3, every setpoint of a G1 move within 1 um of that
 # move's segment (tools/cam/check_plan.py), every axis within its limits (1 %); --compare
 # and --png work.
 set -euo pipefail
@@ -38,7 +38,7 @@ PY
 
 run b_flat "$WORK/b.stl" box flat:10 5
 run b_bull "$WORK/b.stl" box bull:10:2 5 --compare flat:10,bull:10:2,ball:10 --png "$WORK/b.png"
-run f_ball "$WORK/f.stl" margin:3 ball:6 1
+run f_ball "$WORK/f.stl" margin:3 ball:6 1 --ramp 3
 grep -q '^compare' "$WORK/b_bull.cam" || fail "--compare printed no comparison"
 [ "$(grep -c '^tool=' "$WORK/b_bull.cam")" = 4 ] || fail "--compare did not print one line per tool"
 [ -s "$WORK/b.png" ] || fail "--png wrote no picture"

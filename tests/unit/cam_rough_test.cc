@@ -292,6 +292,27 @@ TEST(CamRough, PlanStaysInsideTheStockAndOffThePart) {
           EXPECT_LE(dc.drop(mid.x, mid.y).z, lp.z + 1e-4);
         }
       }
+  // Ramps down the first ring of each chain at 3°: off the part, ending on the chain's
+  // start at the level, as steep as asked.
+  std::size_t ramps = 0;
+  for (const LevelPath& lp : plan.paths)
+    for (std::size_t c = 0; c < lp.chains.size(); ++c) {
+      const std::vector<Vec3> r = ramp_into(lp.chains[c], lp.ring_end[c], lp.approach_z, lp.z, 3 * kDeg);
+      if (r.empty()) continue;
+      ++ramps;
+      EXPECT_NEAR(r.front().z, lp.approach_z, 1e-9);
+      EXPECT_EQ(r.back().z, lp.z);
+      EXPECT_EQ(r.back().x, lp.chains[c].front().x);
+      EXPECT_EQ(r.back().y, lp.chains[c].front().y);
+      double len = 0;
+      for (std::size_t i = 1; i < r.size(); ++i) {
+        len += std::hypot(r[i].x - r[i - 1].x, r[i].y - r[i - 1].y);
+        EXPECT_LE(dc.drop(r[i].x, r[i].y).z, r[i].z + 1e-4);
+        EXPECT_LE(r[i].z, r[i - 1].z);
+      }
+      EXPECT_NEAR((lp.approach_z - lp.z) / len, std::tan(3 * kDeg), 1e-9);
+    }
+  EXPECT_GT(ramps, 3u);
   EXPECT_THROW(parse_stock("margin:x", mesh_bounds(m)), std::invalid_argument);
   EXPECT_THROW(parse_stock("cube", mesh_bounds(m)), std::invalid_argument);
 }

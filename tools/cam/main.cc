@@ -4,6 +4,7 @@
 //   cnc-cam rough --stl MESH --stock box|margin[:MM] --tool SPEC --cusp H --out rough.ngc
 //                 [--png FILE] [--compare SPEC,SPEC,...] [--stepover F] [--max-stepdown MM]
 //                 [--origin corner|mesh] [--feed F] [--plunge F] [--rapid F] [--spindle S] [--safe-z Z]
+//                 [--ramp DEG] [--threads N]
 //   cnc-cam part --shape table1-a|table1-b|hemisphere|frustum --out MESH.stl [--cells N]
 //   cnc-cam raster --stl MESH --tool SPEC --pick P --step S [--angle A] --out part.ngc
 //                  [--tol-beta B [--tol-alpha A] [--min-step M] [--compare-fixed]]
@@ -215,7 +216,7 @@ int run_raster(const RasterArgs& a) {
 struct RoughArgs {
   std::string stl, stock = "box", tool, out, png, compare, origin = "corner";
   double cusp = 0, stepover = 0.4, max_stepdown = 0, feed = 1000, plunge = 300, rapid = 15000, spindle = 10000,
-         safe_z = 2;
+         safe_z = 2, ramp = 0;
   int threads = 0;
 };
 
@@ -265,17 +266,17 @@ int run_rough(const RoughArgs& a) {
     return plan;
   };
   auto print_plan = [&](const std::string& tool, const RoughPlan& plan) {
-    const PlanTime t = plan_time(plan, clear + zero.z, tm);
+    const PlanTime t = plan_time(plan, clear + zero.z, tm, a.ramp);
     std::string zs;
     for (const Level& l : plan.levels) {
       char buf[32];
       std::snprintf(buf, sizeof buf, "%s%.2f", zs.empty() ? "" : "/", l.z - b.min.z);
       zs += buf;
     }
-    std::printf("tool=%s levels=%zu heights=%s path_mm=%.1f contour_mm=%.1f plunge_mm=%.1f rapid_mm=%.1f "
-                "chains=%zu time_s=%.1f\n",
-                tool.c_str(), plan.levels.size(), zs.c_str(), t.feed_mm, plan.contour_mm, t.plunge_mm, t.rapid_mm,
-                plan.retracts, t.seconds);
+    std::printf("tool=%s levels=%zu heights=%s path_mm=%.1f contour_mm=%.1f ramp_mm=%.1f plunge_mm=%.1f "
+                "rapid_mm=%.1f chains=%zu time_s=%.1f\n",
+                tool.c_str(), plan.levels.size(), zs.c_str(), t.feed_mm, plan.contour_mm, t.ramp_mm, t.plunge_mm,
+                t.rapid_mm, plan.retracts, t.seconds);
   };
   const RoughPlan plan = plan_for(a.tool);
   for (const Level& l : plan.levels)
@@ -291,7 +292,7 @@ int run_rough(const RoughArgs& a) {
   setup.plunge_mm_per_min = a.plunge;
   setup.spindle_rpm = a.spindle;
   setup.safe_z_mm = clear;
-  const std::string text = rough_gcode(plan, setup, zero);
+  const std::string text = rough_gcode(plan, setup, zero, a.ramp);
   std::FILE* f = std::fopen(a.out.c_str(), "w");
   if (!f || std::fwrite(text.data(), 1, text.size(), f) != text.size() || std::fclose(f) != 0)
     throw std::runtime_error(a.out + ": cannot write");
@@ -300,11 +301,11 @@ int run_rough(const RoughArgs& a) {
     for (const std::string& tool : split_commas(a.compare)) plans.emplace_back(tool, plan_for(tool));
     std::printf("compare (feed %g, plunge %g, rapid %g mm/min, constant speeds, no acceleration):\n", a.feed, a.plunge,
                 a.rapid);
-    const double ref = plan_time(plans.front().second, clear + zero.z, tm).feed_mm;
+    const double ref = plan_time(plans.front().second, clear + zero.z, tm, a.ramp).feed_mm;
     const double ref_c = plans.front().second.contour_mm;
     for (const auto& [tool, p] : plans) {
       print_plan(tool, p);
-      const PlanTime t = plan_time(p, clear + zero.z, tm);
+      const PlanTime t = plan_time(p, clear + zero.z, tm, a.ramp);
       std::printf("  vs %s: path %+.1f %%, contour %+.1f %%\n", plans.front().first.c_str(),
                   100 * (t.feed_mm / ref - 1), 100 * (p.contour_mm / ref_c - 1));
     }
@@ -406,6 +407,8 @@ int main(int argc, char** argv) {
   g->add_option("--rapid", rough.rapid, "rapid speed of the time model, mm/min")->check(CLI::PositiveNumber);
   g->add_option("--spindle", rough.spindle, "spindle speed, rpm")->check(CLI::PositiveNumber);
   g->add_option("--safe-z", rough.safe_z, "clearance plane above the stock's top, mm")->check(CLI::NonNegativeNumber);
+  g->add_option("--ramp", rough.ramp, "enter each chain down its first ring at this angle, degrees (0: plunge)")
+      ->check(CLI::Range(0.0, 90.0));
   g->add_option("--threads", rough.threads, "levels planned side by side (default: all cores)")->check(CLI::Range(1, 256));
   PartArgs part;
   CLI::App* pa = app.add_subcommand("part", "write an analytic test part as binary STL");
