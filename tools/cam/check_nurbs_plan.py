@@ -6,17 +6,16 @@
 LINES.ngc: the same cnc-cam program written with G1 lines (its G1 end points are the CL
 points; its G1 segments the CL polyline); NURBS.ngc: the one written with --nurbs;
 PLAN.csv: `./cnc plan NURBS.ngc --csv PLAN.csv`. Prints
-  cl_points, max_cl_to_plan_mm: every CL point's distance to the dry run's path (the
-      polyline through its setpoints);
+  cl_points, max_cl_to_plan_mm: every CL point's distance to the dry run's path along
+      the curves (the polyline through their setpoints);
   setpoints, max_plan_to_cl_mm: every setpoint of a G6.2 curve's distance to the CL
       polyline.
-Needs numpy and scipy (Debian's python3-numpy, python3-scipy)."""
+Needs numpy (Debian's python3-numpy, which python3-matplotlib brings)."""
 import csv
 import re
 import sys
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 
 def g1_moves(path):
@@ -48,22 +47,19 @@ def curve_lines(path):
     return out
 
 
-def seg_dist(p, a, b):
-    ab, ap = b - a, p - a
+def dist_to_polyline(points, a, b, chunk=128):
+    """Distance of each point to the nearest of segments a[i]-b[i] (all of them, in chunks)."""
+    ab = b - a
     n = np.einsum("ij,ij->i", ab, ab)
-    t = np.where(n > 0, np.clip(np.einsum("ij,ij->i", ab, ap) / np.where(n > 0, n, 1), 0, 1), 0)
-    return np.linalg.norm(a + t[:, None] * ab - p, axis=1)
-
-
-def dist_to_polyline(points, a, b, k=8):
-    """Distance of each point to the nearest of segments a[i]-b[i] (via their midpoints' k nearest)."""
-    tree = cKDTree((a + b) / 2)
-    _, idx = tree.query(points, k=min(k, len(a)))
-    idx = np.atleast_2d(idx)
-    best = np.full(len(points), np.inf)
-    for j in range(idx.shape[1]):
-        best = np.minimum(best, seg_dist(points, a[idx[:, j]], b[idx[:, j]]))
-    return best
+    safe = np.where(n > 0, n, 1)
+    out = np.empty(len(points))
+    for lo in range(0, len(points), chunk):
+        p = points[lo:lo + chunk, None, :]                       # (c, 1, 3)
+        t = np.clip(np.einsum("cij,ij->ci", p - a[None], ab) / safe, 0, 1)
+        t = np.where(n > 0, t, 0)
+        d = np.linalg.norm(a[None] + t[..., None] * ab[None] - p, axis=2)
+        out[lo:lo + chunk] = d.min(axis=1)
+    return out
 
 
 def main():
@@ -75,10 +71,10 @@ def main():
     sp = np.array([[float(r["x_mm"]), float(r["y_mm"]), float(r["z_mm"])] for r in rows])
     curves = curve_lines(sys.argv[2])
     on_curve = np.array([int(r["line"]) in curves for r in rows])
-    # The dry run's path: consecutive distinct setpoints.
-    keep = np.concatenate([[True], np.any(np.diff(sp, axis=0) != 0, axis=1)])
-    path = sp[keep]
-    d_cl = dist_to_polyline(cl, path[:-1], path[1:])
+    # The dry run's path along the curves: segments between consecutive setpoints both on
+    # G6.2 lines (the CL points all lie on the curves; rapids and plunges are left out).
+    both = on_curve[:-1] & on_curve[1:]
+    d_cl = dist_to_polyline(cl, sp[:-1][both], sp[1:][both])
     d_sp = dist_to_polyline(sp[on_curve], a, b)
     print(f"cl_points={len(cl)} max_cl_to_plan_mm={d_cl.max():.3g} setpoints={int(on_curve.sum())} "
           f"max_plan_to_cl_mm={d_sp.max():.3g}")
