@@ -215,13 +215,37 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
                                                {"stop", lcmt_program_command::STOP},
                                                {"override", lcmt_program_command::OVERRIDE}};
   if (auto it = plain.find(what); it != plain.end()) {
-    wait_for(bus, 0.5, [&] { return view.have_program; });  // the server's state first: it answers a refusal
+    wait_for(bus, 0.5, [&] { return view.have_program && view.have_interp; });  // the states first
     const double value = what == "override" ? std::stod(args.option("value", "1.0")) : 1.0;
-    if (const std::string why = send_checked(it->second, 0.5, "", value); !why.empty()) {
-      std::fprintf(stderr, "cnc-ctl: %s\n", why.c_str());
-      return kExitRefused;
+    // Sent again until the interpolator's state shows its effect (a datagram lost on
+    // the way, or the state report that answered it): a hold that was never seen is
+    // not reported as done. Each command is idempotent in the state it asks for.
+    const int8_t cmd = it->second;
+    auto effect_seen = [&] {
+      if (!view.have_interp) return false;
+      const int8_t st = view.interp.state;
+      const bool active = st == cnc::lcmt_setpoint::RUNNING || st == cnc::lcmt_setpoint::HELD ||
+                          st == cnc::lcmt_setpoint::STARVED;
+      switch (cmd) {
+        case lcmt_program_command::HOLD: return !active || st == cnc::lcmt_setpoint::HELD;
+        case lcmt_program_command::RESUME: return st != cnc::lcmt_setpoint::HELD;
+        case lcmt_program_command::STOP: return !active;
+        case lcmt_program_command::OVERRIDE: return std::fabs(view.interp.feed_override - value) < 1e-9;
+        default: return true;  // START: answered by a refusal or by the run state
+      }
+    };
+    for (int attempt = 0; attempt < 5; ++attempt) {
+      const std::string why = send_checked(cmd, attempt == 0 ? 0.5 : 0.3, "", value);
+      if (!why.empty()) {
+        // A copy sent again after a lost answer may be refused for what the first did.
+        if (attempt > 0 && wait_for(bus, 0.3, effect_seen)) return 0;
+        std::fprintf(stderr, "cnc-ctl: %s\n", why.c_str());
+        return kExitRefused;
+      }
+      if (wait_for(bus, 0.7, effect_seen)) return 0;
     }
-    return 0;
+    std::fprintf(stderr, "cnc-ctl: --do %s was sent 5 times and the interpolator does not show it\n", what.c_str());
+    return kExitTimeout;
   }
   if (what != "run" && what != "load") {
     std::fprintf(stderr, "cnc-ctl: --do must be one of run load start hold resume stop override reset enable disable fault-reset\n");
