@@ -115,6 +115,44 @@ MachineConfig read_machine(MapReader top) {
     c.process.spindle_rpm = r.get_double("spindle_rpm", 0.0, 0.0, 200000.0);
     r.finish();
   }
+  if (top.has("cutting")) {
+    MapReader r = top.map("cutting");
+    CuttingConfig& k = c.cutting;
+    k.enabled = true;
+    const std::string base = std::filesystem::path(top.file()).parent_path().string();
+    const auto file = [&](const char* key) {
+      std::string v = r.require_string(key);
+      if (!v.empty() && v[0] != '/') v = (std::filesystem::path(base) / v).lexically_normal().string();
+      if (!std::filesystem::is_regular_file(v)) r.fail(key, "'" + v + "' is not a file");
+      return v;
+    };
+    k.tool_file = file("tool");
+    k.material_file = file("material");
+    k.model = r.get_choice("model", "", {"", "linear_edge", "chip_thickness_law"});
+    MapReader s = r.map("stock");
+    k.stock_x_min_mm = s.require_double("x_min_mm", -1e5, 1e5);
+    k.stock_y_min_mm = s.require_double("y_min_mm", -1e5, 1e5);
+    k.stock_x_max_mm = s.require_double("x_max_mm", -1e5, 1e5);
+    k.stock_y_max_mm = s.require_double("y_max_mm", -1e5, 1e5);
+    k.stock_top_z_mm = s.require_double("top_z_mm", -1e5, 1e5);
+    k.stock_pitch_mm = s.get_double("pitch_mm", k.stock_pitch_mm, 0.001, 10.0);
+    if (!(k.stock_x_max_mm > k.stock_x_min_mm)) s.fail("x_max_mm", "must be greater than x_min_mm");
+    if (!(k.stock_y_max_mm > k.stock_y_min_mm)) s.fail("y_max_mm", "must be greater than y_min_mm");
+    // The monitor and the planner each hold the stock: at most 2^24 columns (64 MB).
+    const double cells = std::ceil((k.stock_x_max_mm - k.stock_x_min_mm) / k.stock_pitch_mm) *
+                         std::ceil((k.stock_y_max_mm - k.stock_y_min_mm) / k.stock_pitch_mm);
+    if (cells > 16777216.0)
+      s.fail("pitch_mm", "the stock would have " + std::to_string(static_cast<long long>(cells)) +
+                             " columns, more than 16777216: a coarser pitch or a smaller box");
+    s.finish();
+    k.deflection_tolerance_mm = r.require_double("deflection_tolerance_mm", 1e-6, 100.0);
+    k.max_force_n = r.get_double("max_force_n", 0.0, 0.0, 1e7);
+    k.feed_limit = r.get_bool("feed_limit", k.feed_limit);
+    k.station_mm = r.get_double("station_mm", k.station_mm, 0.001, 10.0);
+    k.disc_height_mm = r.get_double("disc_height_mm", k.disc_height_mm, 0.001, 10.0);
+    k.angles_per_tooth = static_cast<int>(r.get_int("angles_per_tooth", k.angles_per_tooth, 1, 360));
+    r.finish();
+  }
   {
     MapReader r = top.map("program");
     ProgramConfig& p = c.program;

@@ -60,6 +60,28 @@ struct ProcessConfig {
   double spindle_rpm = 0;
 };
 
+// The cutting-force model live (section `cutting:`, optional; issue 16 item 6):
+// the monitor predicts force and tool deflection per setpoint and alarms over the
+// tolerance, and with feed_limit the interpolator's planner limits the feed so the
+// predicted deflection (and force, when max_force_n is set) stays within them. The
+// engagement is estimated from a Z-map stock (a box) that the tool's envelope is
+// removed from as it moves. Paths are relative to the config file's folder.
+struct CuttingConfig {
+  bool enabled = false;           // the section is present
+  std::string tool_file;          // config/tools/*.yaml (a flat end mill)
+  std::string material_file;      // config/materials/*.yaml
+  std::string model;              // "" = the material file's law; linear_edge | chip_thickness_law
+  double stock_x_min_mm = 0, stock_y_min_mm = 0, stock_x_max_mm = 0, stock_y_max_mm = 0;
+  double stock_top_z_mm = 0;
+  double stock_pitch_mm = 0.05;
+  double deflection_tolerance_mm = 0;  // tool-tip deflection (peak over a tooth period)
+  double max_force_n = 0;              // peak |F| in XY; 0 = no force limit
+  bool feed_limit = false;             // the interpolator limits the feed (limit = force)
+  double station_mm = 0.1;             // the planner's engagement stations along a cutting block
+  double disc_height_mm = 0.1;         // the force model's axial discs
+  int angles_per_tooth = 16;           // rotation angles per tooth period for the peaks
+};
+
 // The part-program language's machine-dependent settings (LinuxCNC's [RS274NGC]
 // section and tool/var files). Paths are relative to the config file's folder.
 struct ProgramConfig {
@@ -125,6 +147,7 @@ struct MachineConfig {
   std::string param_update = "corrected";
 
   ProcessConfig process;
+  CuttingConfig cutting;
   ProgramConfig program;
 
   DriveBridgeConfig drive_bridge;

@@ -35,11 +35,20 @@ double EngagementProfile::arc_exit() const {
 EngagementProfile engagement_from_stock(const ZMap& stock, const Eigen::Vector3d& tip, const Eigen::Vector2d& feed_dir,
                                         double radius, double flute_length, int bins, double feed_per_tooth) {
   EngagementProfile p;
+  engagement_from_stock(stock, tip, feed_dir, radius, flute_length, bins, feed_per_tooth, &p);
+  return p;
+}
+
+void engagement_from_stock(const ZMap& stock, const Eigen::Vector3d& tip, const Eigen::Vector2d& feed_dir,
+                           double radius, double flute_length, int bins, double feed_per_tooth, EngagementProfile* out) {
+  EngagementProfile& p = *out;
   bins = std::max(2, bins);
   const Eigen::Vector2d f = feed_dir.norm() > 0 ? Eigen::Vector2d(feed_dir.normalized()) : Eigen::Vector2d(1.0, 0.0);
   const Eigen::Vector2d n(-f.y(), f.x());
   p.feed_dir = f;
   p.feed_per_tooth_mm = feed_per_tooth;
+  p.phi.resize(static_cast<size_t>(bins));
+  p.depth.resize(static_cast<size_t>(bins));
   // One cell outside the periphery: a column there is never one this step or the
   // previous ones removed (in the front half the periphery is outside every earlier
   // position of the tool), so it holds material exactly where the edge meets stock.
@@ -52,10 +61,9 @@ EngagementProfile engagement_from_stock(const ZMap& stock, const Eigen::Vector3d
     const Eigen::Vector2d q = tip.head<2>() + rs * (std::sin(phi) * f + std::cos(phi) * n);
     const double zs = stock.sample(q.x(), q.y());
     const double d = std::isnan(zs) ? 0.0 : std::clamp(zs - tip.z(), 0.0, flute_length);
-    p.phi.push_back(phi);
-    p.depth.push_back(d);
+    p.phi[static_cast<size_t>(b)] = phi;
+    p.depth[static_cast<size_t>(b)] = d;
   }
-  return p;
 }
 
 void remove_flat_envelope(ZMap& stock, const Eigen::Vector3d& tip0, const Eigen::Vector3d& tip1, double radius) {

@@ -33,6 +33,10 @@ struct EngagementProfile {
 EngagementProfile engagement_from_stock(const ZMap& stock, const Eigen::Vector3d& tip, const Eigen::Vector2d& feed_dir,
                                         double radius, double flute_length, int bins, double feed_per_tooth);
 
+// The same into *out, its vectors reused (no allocation once they hold `bins`).
+void engagement_from_stock(const ZMap& stock, const Eigen::Vector3d& tip, const Eigen::Vector2d& feed_dir,
+                           double radius, double flute_length, int bins, double feed_per_tooth, EngagementProfile* out);
+
 // Lowers the stock to the envelope of a flat end mill (radius, tip heights
 // interpolated) moving from tip0 to tip1.
 void remove_flat_envelope(ZMap& stock, const Eigen::Vector3d& tip0, const Eigen::Vector3d& tip1, double radius);

@@ -246,6 +246,11 @@ double ZMap::sample(double px, double py) const {
   return z(static_cast<int>(fi), static_cast<int>(fj));
 }
 
+void ZMap::reset(double z) {
+  tiles_valid_ = false;
+  std::fill(z_.begin(), z_.end(), static_cast<float>(z));
+}
+
 void ZMap::fill(const std::function<double(double, double)>& z_of_xy) {
   tiles_valid_ = false;
   for (int j = 0; j < ny_; ++j) {

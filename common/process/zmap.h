@@ -52,6 +52,8 @@ class ZMap {
   ZMap(double x0, double y0, double pitch, int nx, int ny, double z_init);
   // Initial stock z(x, y) per cell centre.
   void fill(const std::function<double(double, double)>& z_of_xy);
+  // Every column back to z (no allocation).
+  void reset(double z);
 
   ZMapStats cut(const BallCutter& tool, const std::vector<ToolSample>& path, const ZMapCutOptions& opt);
 

@@ -81,6 +81,7 @@ const char* to_string(Limit limit) {
     case Limit::kAxisVelocity: return "axis_velocity";
     case Limit::kCurvatureAccel: return "curvature_accel";
     case Limit::kLookahead: return "lookahead";
+    case Limit::kForce: return "force";
   }
   return "?";
 }

@@ -89,11 +89,81 @@ bool Planned::stop_block() const {
 }
 
 Planner::Planner(const config::MachineConfig& cfg)
-    : cfg_(cfg), period_s_(cfg.ipo_period_s), naxes_(static_cast<int>(cfg.axes.size())) {}
+    : cfg_(cfg), period_s_(cfg.ipo_period_s), naxes_(static_cast<int>(cfg.axes.size())) {
+  if (cfg.cutting.enabled && cfg.cutting.feed_limit && naxes_ >= 3)
+    force_ = std::make_unique<process::LiveForce>(process::load_cutting_setup(cfg), cfg.cutting);
+}
+
+void Planner::reset_stock() {
+  if (force_ && force_dirty_) force_->reset();
+  force_dirty_ = false;
+  force_prev_valid_ = false;
+}
+
+void Planner::force_limits(const Planned& p, std::vector<double>* us, std::vector<double>* v_force) {
+  const program::Block& b = p.block;
+  auto tip_at = [&](double u) {
+    const AxisVec q = p.path.point(u);
+    return Eigen::Vector3d(q[0], q[1], q[2]);
+  };
+  const bool cutting = b.kind != program::BlockKind::kRapid && b.spindle_rpm > 0 && !p.path.degenerate();
+  if (!cutting) {
+    // Not cut out of the stock (a rapid through material would be a crash, not a cut).
+    if (!p.path.degenerate()) {
+      force_prev_ = tip_at(p.path.u_end());
+      force_prev_valid_ = true;
+    }
+    return;
+  }
+  // Stations at most cutting.station_mm apart (by the samples' polyline length).
+  const double u0 = p.path.u_begin(), u1 = p.path.u_end();
+  double len = 0;
+  Eigen::Vector3d q = tip_at(us->front());
+  for (size_t i = 1; i < us->size(); ++i) {
+    const Eigen::Vector3d r = tip_at((*us)[i]);
+    len += (r - q).norm();
+    q = r;
+  }
+  const int n = std::max(1, static_cast<int>(std::ceil(len / cfg_.cutting.station_mm)));
+  std::vector<double> st(static_cast<size_t>(n) + 1);
+  for (int i = 0; i <= n; ++i) st[static_cast<size_t>(i)] = u0 + (u1 - u0) * i / n;
+  st.back() = u1;
+  std::vector<double> merged;
+  merged.reserve(us->size() + st.size());
+  std::merge(us->begin(), us->end(), st.begin(), st.end(), std::back_inserter(merged));
+  merged.erase(std::unique(merged.begin(), merged.end()), merged.end());
+  *us = std::move(merged);
+
+  // Per station: the engagement before the step that reaches it is cut, the feed per
+  // tooth (in XY) the deflection allows, as a path speed.
+  v_force->assign(us->size(), kInf);
+  const double flutes = force_->tool().flutes;
+  const double v_top = 1.5 * p.v_prog;  // the most an override can ask
+  if (!force_prev_valid_) force_prev_ = tip_at(u0);
+  for (size_t i = 0; i < us->size(); ++i) {
+    AxisVec P{}, d1{}, d2{};
+    p.path.eval((*us)[i], &P, &d1, &d2);
+    const Eigen::Vector3d tip(P[0], P[1], P[2]);
+    const double sp = norm(d1, naxes_);
+    const double txy = sp > 0 ? std::hypot(d1[0], d1[1]) / sp : 0.0;
+    if (txy > 1e-9) force_dir_ = Eigen::Vector2d(d1[0], d1[1]).normalized();
+    if (txy > 1e-3) {
+      force_->engage(tip, force_dir_);
+      const double c_top = v_top * txy * 60.0 / (flutes * b.spindle_rpm);
+      bool binding = false;
+      const double c = force_->limit_feed_per_tooth(c_top, &binding);
+      if (binding) (*v_force)[i] = c * flutes * b.spindle_rpm / 60.0 / txy;
+    }
+    force_->remove(force_prev_, tip);
+    force_prev_ = tip;
+  }
+  force_prev_valid_ = true;
+  force_dirty_ = true;
+}
 
 Planner::~Planner() = default;
 
-void Planner::plan_block(Planned& p) const {
+void Planner::plan_block(Planned& p) {
   const program::Block& b = p.block;
   // A rapid has no programmed feed: it goes as fast as its axes allow, a finite
   // speed set below from the same samples as its axis-velocity limit (so feed hold,
@@ -158,6 +228,9 @@ void Planner::plan_block(Planned& p) const {
     }
     us.push_back(u1);
   }
+  // cutting.feed_limit: more samples (stations) and a force limit at each.
+  std::vector<double> v_force;
+  if (force_) force_limits(p, &us, &v_force);
 
   // Per sample: speed limits from the local geometry.
   const size_t n = us.size();
@@ -233,6 +306,17 @@ void Planner::plan_block(Planned& p) const {
     if (v < p.samples[i].v_geo) {
       p.samples[i].v_geo = v;
       p.samples[i].limit = Limit::kChord;
+    }
+  }
+  // The force limit, like the chord limit, holds between samples: each sample takes
+  // the least of its neighbours' (the limit is interpolated linearly in between).
+  for (size_t i = 0; i < v_force.size(); ++i) {
+    double v = v_force[i];
+    if (i > 0) v = std::min(v, v_force[i - 1]);
+    if (i + 1 < v_force.size()) v = std::min(v, v_force[i + 1]);
+    if (v < p.samples[i].v_geo) {
+      p.samples[i].v_geo = v;
+      p.samples[i].limit = Limit::kForce;
     }
   }
   // Arc length by 3-point Gauss–Legendre per sample interval (on top of dense samples).
@@ -408,6 +492,7 @@ PlanUpdate* Planner::process(const PlanRequest& r) {
     case PlanRequest::Kind::kClear:
       list_.clear();
       epoch_ = r.epoch;
+      reset_stock();
       return nullptr;
     case PlanRequest::Kind::kOverride: {
       override_ = r.feed_override;
@@ -421,6 +506,7 @@ PlanUpdate* Planner::process(const PlanRequest& r) {
   if (r.epoch != epoch_) {  // a block of a program already dropped (cannot happen in order; kept safe)
     list_.clear();
     epoch_ = r.epoch;
+    reset_stock();
   }
   PlanUpdate* u = fresh_update();
   try {

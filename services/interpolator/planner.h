@@ -16,13 +16,15 @@
 
 #include "common/config/machine_config.h"
 #include "common/motion/path_segment.h"
+#include "common/process/live_force.h"
 #include "common/program/block.h"
 
 namespace cnc::interp {
 
 // Which constraint set the commanded feed (values match lcmt_setpoint's LIMIT_*).
 enum class Limit : int8_t {
-  kNone = 0, kProgram = 1, kChord = 2, kRoughness = 3, kAxisVelocity = 4, kCurvatureAccel = 5, kLookahead = 6
+  kNone = 0, kProgram = 1, kChord = 2, kRoughness = 3, kAxisVelocity = 4, kCurvatureAccel = 5, kLookahead = 6,
+  kForce = 7
 };
 
 struct Sample {
@@ -107,7 +109,11 @@ class Planner {
     std::unique_ptr<Planned> p;
     std::vector<double> v_bw;  // the planner's own look-ahead values
   };
-  void plan_block(Planned& p) const;
+  void plan_block(Planned& p);
+  // The force feed limit (cutting.feed_limit): adds stations to *us and returns the
+  // speed limit per station (∞ where none binds), cutting the block out of the stock.
+  void force_limits(const Planned& p, std::vector<double>* us, std::vector<double>* v_force);
+  void reset_stock();
   void plan_junction(const Planned& prev, Planned& next) const;
   // The speed at which the path may turn from tangent t0 to t1 within one cycle;
   // *stop when turning the path acceleration a_path alone would break the jerk limit.
@@ -126,6 +132,13 @@ class Planner {
   std::deque<Entry> list_;  // this epoch's blocks not yet retired, and always the newest
   std::vector<std::unique_ptr<PlanUpdate>> pool_;  // recycled updates
   std::vector<std::unique_ptr<PlanUpdate>> live_;  // handed out (owned here until recycled)
+  // cutting.feed_limit: seed 004's deflection along the path, from a stock the planned
+  // blocks are cut out of in planning order (reset with each epoch: a new program run).
+  std::unique_ptr<process::LiveForce> force_;
+  bool force_dirty_ = false;
+  bool force_prev_valid_ = false;
+  Eigen::Vector3d force_prev_ = Eigen::Vector3d::Zero();
+  Eigen::Vector2d force_dir_{1.0, 0.0};
 };
 
 // How the cyclic core reaches its planner: inline (SyncPlanLink: dry run, replay,

@@ -1,6 +1,7 @@
 // cnc-monitor: live feed, chord error against the exact block geometry, predicted
-// R_max (seed 000) and following error; alarms on R_max over target, chord error
-// over ε, and sequence gaps in any stream it reads.
+// R_max (seed 000), following error and, with `cutting:`, cutting force and tool
+// deflection (seed 004); alarms on R_max over target, chord error over ε, deflection
+// over its tolerance, and sequence gaps in any stream it reads.
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -93,6 +94,12 @@ int main(int argc, char** argv) {
       r.chord_tolerance_mm = cfg.chord_tolerance_mm;
       r.block_index = s.block_index;
       r.source_line = s.source_line;
+      r.force_x_n = s.force_x_n;
+      r.force_y_n = s.force_y_n;
+      r.force_z_n = s.force_z_n;
+      r.force_peak_n = s.force_peak_n;
+      r.deflection_mm = s.deflection_mm;
+      r.deflection_tolerance_mm = s.deflection_tolerance_mm;
       bus.publish(ch_report, r);
       for (const auto& a : alarms) raise(a.code, a.text, cnc::lcmt_alarm::WARNING);
       handling.record_s(cnc::util::monotonic_s() - t_in);

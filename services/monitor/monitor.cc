@@ -15,7 +15,48 @@ constexpr size_t kMaxSetpoints = 2048;
 }  // namespace
 
 Monitor::Monitor(const config::MachineConfig& cfg)
-    : cfg_(cfg), naxes_(static_cast<int>(cfg.axes.size())), cycles_(kMaxSetpoints) {}
+    : cfg_(cfg), naxes_(static_cast<int>(cfg.axes.size())), cycles_(kMaxSetpoints) {
+  if (cfg.cutting.enabled && naxes_ >= 3)
+    force_ = std::make_unique<process::LiveForce>(process::load_cutting_setup(cfg), cfg.cutting);
+}
+
+Monitor::ForceSlot Monitor::cutting_force(const SetpointIn& sp) {
+  // A new program cuts a new part: the stock is the uncut box again.
+  if (sp.program_token != cut_token_) {
+    if (cut_stock_dirty_) force_->reset();
+    cut_stock_dirty_ = false;
+    cut_prev_valid_ = false;
+    cut_token_ = sp.program_token;
+  }
+  ForceSlot out;
+  const Known* k = find(sp.program_token, sp.block_index);
+  const Eigen::Vector3d tip(sp.position_mm[0], sp.position_mm[1], sp.position_mm[2]);
+  // A setpoint that does not move (or the first: no step) cuts nothing (dwells, program
+  // stops, the end: blocks without geometry, which the monitor does not keep); a move
+  // of an unknown block is unknown.
+  const bool still = !cut_prev_valid_ || tip == Eigen::Vector3d(cut_prev_.position_mm[0], cut_prev_.position_mm[1],
+                                                               cut_prev_.position_mm[2]);
+  const bool known = k != nullptr || sp.block_index < 0 || still;
+  const bool cutting = k != nullptr && k->block.kind != program::BlockKind::kRapid && k->block.spindle_rpm > 0;
+  if (!known) out = {kNaN, kNaN, kNaN, kNaN, kNaN};
+  if (cutting && cut_prev_valid_ && sp.cycle > cut_prev_.cycle) {
+    const Eigen::Vector3d prev(cut_prev_.position_mm[0], cut_prev_.position_mm[1], cut_prev_.position_mm[2]);
+    const Eigen::Vector2d dxy = (tip - prev).head<2>();
+    const double dist = dxy.norm();
+    if (dist > 1e-9) cut_dir_ = dxy / dist;
+    // The feed per tooth in XY from the commanded step (cycles apart when setpoints were lost).
+    const double v_xy = dist / (static_cast<double>(sp.cycle - cut_prev_.cycle) * cfg_.ipo_period_s);
+    const double c = v_xy * 60.0 / (force_->tool().flutes * k->block.spindle_rpm);
+    force_->engage(tip, cut_dir_);
+    const process::ForceEstimate e = force_->estimate(c);
+    out = {e.mean_force.x(), e.mean_force.y(), e.mean_force.z(), e.peak_force_n, e.peak_deflection_mm};
+    force_->remove(prev, tip);
+    cut_stock_dirty_ = true;
+  }
+  cut_prev_ = sp;
+  cut_prev_valid_ = true;
+  return out;
+}
 
 Monitor::CycleSlot* Monitor::slot(int64_t cycle) {
   return &cycles_[static_cast<size_t>(cycle < 0 ? -cycle : cycle) % cycles_.size()];
@@ -92,6 +133,7 @@ void Monitor::on_setpoint(const SetpointIn& sp) {
   s->cycle = sp.cycle;
   s->sp = sp;
   s->chord_mm = e;
+  if (force_) s->force = cutting_force(sp);
 }
 
 Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double>& actual,
@@ -101,6 +143,8 @@ Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double
   r.chord_error_mm = kNaN;
   r.predicted_rmax_um = kNaN;
   r.target_rmax_um = kNaN;
+  r.force_x_n = r.force_y_n = r.force_z_n = r.force_peak_n = r.deflection_mm = kNaN;
+  r.deflection_tolerance_mm = force_ ? cfg_.cutting.deflection_tolerance_mm : kNaN;
   // R_max is predicted from the commanded path (the setpoints: feed and inclination at
   // the window's middle) corrected by how the axes actually followed it: the ratio of
   // the actual positions' displacement to the commanded one over the same window of at
@@ -164,6 +208,14 @@ Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double
   r.block_index = sp.block_index;
   r.source_line = sp.source_line;
   r.chord_error_mm = slot(cycle)->chord_mm;
+  if (force_) {
+    const ForceSlot& f = slot(cycle)->force;
+    r.force_x_n = f.fx;
+    r.force_y_n = f.fy;
+    r.force_z_n = f.fz;
+    r.force_peak_n = f.peak;
+    r.deflection_mm = f.deflection;
+  }
 
   // Feed and inclination where the commanded path was in the middle of the window.
   const int64_t window_cycles = recent_n_ >= 2 ? cycle - recent(0).cycle : 0;
@@ -203,6 +255,25 @@ Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double
     alarms->push_back({"chord_error", os.str()});
   }
   chord_alarm_ = chord_bad;
+  const bool deflection_bad =
+      std::isfinite(r.deflection_mm) && r.deflection_mm > cfg_.cutting.deflection_tolerance_mm * (1 + 1e-6);
+  if (deflection_bad && !deflection_alarm_) {
+    std::ostringstream os;
+    os << "cycle " << cycle << " line " << r.source_line << ": predicted tool deflection " << r.deflection_mm * 1e3
+       << " um over the tolerance " << cfg_.cutting.deflection_tolerance_mm * 1e3 << " um (force " << r.force_peak_n
+       << " N)";
+    alarms->push_back({"deflection", os.str()});
+  }
+  deflection_alarm_ = deflection_bad;
+  const bool force_bad = cfg_.cutting.max_force_n > 0 && std::isfinite(r.force_peak_n) &&
+                         r.force_peak_n > cfg_.cutting.max_force_n * (1 + 1e-6);
+  if (force_bad && !force_alarm_) {
+    std::ostringstream os;
+    os << "cycle " << cycle << " line " << r.source_line << ": predicted cutting force " << r.force_peak_n
+       << " N over the limit " << cfg_.cutting.max_force_n << " N";
+    alarms->push_back({"force", os.str()});
+  }
+  force_alarm_ = force_bad;
   return r;
 }
 

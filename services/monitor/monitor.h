@@ -9,6 +9,10 @@
 //   * the R_max that seed 000's extended model predicts from the actual feed, the
 //     feed inclination angle and the block's process parameters,
 //   * the following error per axis,
+//   * with the machine config's `cutting:` section, seed 004's cutting force and
+//     tool deflection per setpoint (common/process/live_force.h): the engagement from
+//     a Z-map stock that every cutting step's envelope is removed from, the feed per
+//     tooth from the commanded step in XY and the block's spindle speed,
 // and alarm conditions. Pure: no LCM, no clock. A report depends only on the
 // messages and their order, so a log played back gives the same reports. The actual
 // feed is taken over the last two statuses (8 ms at 4 ms) to average out jitter,
@@ -23,6 +27,7 @@
 
 #include "common/config/machine_config.h"
 #include "common/motion/path_segment.h"
+#include "common/process/live_force.h"
 #include "common/program/block.h"
 
 namespace cnc::monitor {
@@ -48,10 +53,15 @@ struct Report {
   double max_following_error_mm = 0;  // the largest |following error| of the status's axes
   int64_t block_index = -1;
   int32_t source_line = 0;
+  // Seed 004 (NaN without `cutting:` or where the setpoint's block is unknown; 0 off the stock or not cutting).
+  double force_x_n = 0, force_y_n = 0, force_z_n = 0;  // mean over a tooth period
+  double force_peak_n = 0;                             // largest |F| in XY over it
+  double deflection_mm = 0;                            // largest tool-tip deflection over it
+  double deflection_tolerance_mm = 0;                  // NaN without `cutting:`
 };
 
 struct Alarm {
-  std::string code;  // "rmax", "chord_error"
+  std::string code;  // "rmax", "chord_error", "deflection", "force"
   std::string text;
 };
 
@@ -69,7 +79,10 @@ class Monitor {
   void on_setpoint(const SetpointIn& sp);
   // A RESET the interpolator applied: its path jumps to where the drives stand, so
   // the next setpoint is no step of the machine (no chord error across it).
-  void on_reset() { last_sp_.reset(); }
+  void on_reset() {
+    last_sp_.reset();
+    cut_prev_valid_ = false;
+  }
   // An axis status (utime: when the bridge read the actual positions); returns the
   // report and appends raised alarms to *alarms.
   Report on_status(int64_t utime, int64_t setpoint_cycle, const std::vector<double>& actual_mm,
@@ -89,13 +102,25 @@ class Monitor {
   config::MachineConfig cfg_;
   int naxes_;
   std::map<std::pair<int64_t, int64_t>, Known> blocks_;  // (token, index), bounded
+  // Seed 004 per setpoint (NaN: unknown).
+  struct ForceSlot {
+    double fx = 0, fy = 0, fz = 0, peak = 0, deflection = 0;
+  };
   // The last setpoints by cycle, in a ring (slot = cycle mod its size) allocated
   // once: per cycle the monitor allocates nothing.
   struct CycleSlot {
     int64_t cycle = -1;  // -1: empty
     SetpointIn sp;
     double chord_mm = std::numeric_limits<double>::quiet_NaN();  // of the step ending at this cycle
+    ForceSlot force;
   };
+  ForceSlot cutting_force(const SetpointIn& sp);
+  std::unique_ptr<process::LiveForce> force_;  // null without `cutting:`
+  int64_t cut_token_ = 0;                      // the program the stock was cut by
+  bool cut_stock_dirty_ = false;
+  bool cut_prev_valid_ = false;
+  SetpointIn cut_prev_;
+  Eigen::Vector2d cut_dir_{1.0, 0.0};
   std::vector<CycleSlot> cycles_;
   CycleSlot* slot(int64_t cycle);
   const SetpointIn* setpoint_at(int64_t cycle) const;
@@ -120,6 +145,8 @@ class Monitor {
   double largest_chord_ = 0;
   bool rmax_alarm_ = false;
   bool chord_alarm_ = false;
+  bool deflection_alarm_ = false;
+  bool force_alarm_ = false;
 };
 
 }  // namespace cnc::monitor

@@ -21,6 +21,7 @@ const char* limit_name(int8_t limit) {
     case cnc::lcmt_setpoint::LIMIT_AXIS_VELOCITY: return "axis_velocity";
     case cnc::lcmt_setpoint::LIMIT_CURVATURE_ACCEL: return "curvature_accel";
     case cnc::lcmt_setpoint::LIMIT_LOOKAHEAD: return "lookahead";
+    case cnc::lcmt_setpoint::LIMIT_FORCE: return "force";
     default: return "none";
   }
 }

@@ -75,7 +75,8 @@ std::string report_diff(const cnc::lcmt_monitor_report& a, const cnc::lcmt_monit
                                d("chord_error", a.chord_error_mm, b.chord_error_mm),
                                d("predicted_rmax", a.predicted_rmax_um, b.predicted_rmax_um),
                                d("target_rmax", a.target_rmax_um, b.target_rmax_um),
-                               d("max_following_error", a.max_following_error_mm, b.max_following_error_mm)})
+                               d("max_following_error", a.max_following_error_mm, b.max_following_error_mm),
+                               d("deflection", a.deflection_mm, b.deflection_mm)})
     if (!s.empty()) return s;
   if (a.block_index != b.block_index) return "block_index";
   return "";

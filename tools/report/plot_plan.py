@@ -22,6 +22,7 @@ COLOURS = {
     "axis_velocity": "#9467bd",
     "curvature_accel": "#ff7f0e",
     "lookahead": "#7f7f7f",
+    "force": "#8c564b",
     "none": "#cccccc",
 }
 
