@@ -29,6 +29,8 @@ Monitor::ForceSlot Monitor::cutting_force(const SetpointIn& sp) {
     cut_token_ = sp.program_token;
   }
   ForceSlot out;
+  // A setpoint older than the last one (a repeat, out of order) is no step of the tool.
+  if (cut_prev_valid_ && sp.cycle <= cut_prev_.cycle) return {kNaN, kNaN, kNaN, kNaN, kNaN};
   const Known* k = find(sp.program_token, sp.block_index);
   const Eigen::Vector3d tip(sp.position_mm[0], sp.position_mm[1], sp.position_mm[2]);
   // A setpoint that does not move (or the first: no step) cuts nothing (dwells, program
@@ -130,10 +132,14 @@ void Monitor::on_setpoint(const SetpointIn& sp) {
   }
   last_sp_ = sp;
   CycleSlot* s = slot(sp.cycle);
+  const bool again = s->cycle == sp.cycle;
   s->cycle = sp.cycle;
   s->sp = sp;
   s->chord_mm = e;
-  if (force_) s->force = cutting_force(sp);
+  if (force_) {
+    const ForceSlot f = cutting_force(sp);
+    if (!again || !std::isnan(f.deflection)) s->force = f;  // a repeated cycle keeps its estimate
+  }
 }
 
 Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double>& actual,
