@@ -188,7 +188,7 @@ Polygons keep_out(const MeshSlicer& slicer, const Cutter& cutter, double z, int 
     const double h_i = r > 0 ? r - std::sqrt(std::max(0.0, r * r - (rho_i - a) * (rho_i - a))) : 0;
     const Slice s = slicer.slice(z + h_i + 1e-9);
     if (s.loops.empty()) continue;
-    const cl::Paths region = boolean(to_paths(s.loops), {}, cl::ctUnion, cl::pftEvenOdd);
+    const cl::Paths region = boolean(to_paths(s.loops), {}, cl::ctUnion, cl::pftNonZero);
     grown_all.push_back(offset(region, rho_next + arc_tol_mm, arc_tol_mm));
   }
   // Union pairwise, neighbours first: neighbouring sub-levels are nearly the same curve,
@@ -321,7 +321,7 @@ RoughPlan plan_roughing(const Mesh& mesh, const Stock& stock, const RoughSpec& s
   bool floor = false;
   {
     const Slice base = slice_mesh(mesh, b.min.z + 1e-9);
-    const cl::Paths foot = boolean(to_paths(base.loops), {}, cl::ctUnion, cl::pftEvenOdd);
+    const cl::Paths foot = boolean(to_paths(base.loops), {}, cl::ctUnion, cl::pftNonZero);
     double area = 0;
     for (const cl::Path& p : boolean(stock_outline(stock, 0, spec.arc_tol_mm), foot, cl::ctDifference, cl::pftNonZero))
       area += cl::Area(p) / (kScale * kScale);

@@ -38,7 +38,9 @@ Key key(const XY& p) { return {std::bit_cast<std::uint64_t>(p.x + 0.0), std::bit
 
 namespace {
 
-// Slices the triangles idx[0..n) of the mesh (all of them when idx is null).
+// Slices the triangles idx[0..n) of the mesh (all of them when idx is null). Each segment
+// is directed so that the part (the side its triangle's outward normal points away from)
+// lies on its left: t = (−n_y, n_x).
 Slice slice_triangles(const Mesh& mesh, const std::uint32_t* idx, std::size_t n_tris, double z) {
   std::vector<std::array<XY, 2>> segs;
   for (std::size_t ti = 0; ti < n_tris; ++ti) {
@@ -52,78 +54,113 @@ Slice slice_triangles(const Mesh& mesh, const std::uint32_t* idx, std::size_t n_
       const Vec3 &p = t.v[k], &q = t.v[(k + 1) % 3];
       if ((p.z > z) != (q.z > z)) ends[n++] = crossing(p, q, z);
     }
-    if (n == 2 && (ends[0].x != ends[1].x || ends[0].y != ends[1].y)) segs.push_back({ends[0], ends[1]});
+    if (n != 2 || (ends[0].x == ends[1].x && ends[0].y == ends[1].y)) continue;
+    const Vec3 &a = t.v[0], &b = t.v[1], &c = t.v[2];
+    const double nx = (b.y - a.y) * (c.z - a.z) - (b.z - a.z) * (c.y - a.y);
+    const double ny = (b.z - a.z) * (c.x - a.x) - (b.x - a.x) * (c.z - a.z);
+    if ((ends[1].x - ends[0].x) * -ny + (ends[1].y - ends[0].y) * nx < 0) std::swap(ends[0], ends[1]);
+    segs.push_back({ends[0], ends[1]});
   }
   Slice out;
   out.segments = segs.size();
-  // Each point joins (normally) two segments; chain them.
-  std::unordered_map<Key, std::vector<std::uint32_t>, KeyHash> at;
-  at.reserve(2 * segs.size());
-  for (std::uint32_t i = 0; i < segs.size(); ++i) {
-    at[key(segs[i][0])].push_back(i);
-    at[key(segs[i][1])].push_back(i);
-  }
+  // Chain head to tail: each point is normally the end of one segment and the start of one.
+  std::unordered_map<Key, std::vector<std::uint32_t>, KeyHash> starts;
+  starts.reserve(2 * segs.size());
+  for (std::uint32_t i = 0; i < segs.size(); ++i) starts[key(segs[i][0])].push_back(i);
   std::vector<bool> used(segs.size(), false);
-  auto next_seg = [&](const XY& p, std::uint32_t from) -> std::int64_t {
-    const auto it = at.find(key(p));
-    if (it == at.end()) return -1;
+  auto next_from = [&](const XY& p) -> std::int64_t {
+    const auto it = starts.find(key(p));
+    if (it == starts.end()) return -1;
     for (std::uint32_t s : it->second)
-      if (s != from && !used[s]) return s;
+      if (!used[s]) return s;
     return -1;
   };
-  for (std::uint32_t i = 0; i < segs.size(); ++i) {
-    if (used[i]) continue;
+  // Open chains first from their true beginnings (points no segment ends at), then loops.
+  std::unordered_map<Key, int, KeyHash> ends_at;
+  ends_at.reserve(segs.size());
+  for (const auto& sg : segs) ++ends_at[key(sg[1])];
+  auto walk = [&](std::uint32_t i) {
     used[i] = true;
-    Loop fwd{segs[i][0], segs[i][1]};
-    std::uint32_t cur = i;
+    Loop chain{segs[i][0], segs[i][1]};
     bool closed = false;
-    for (;;) {  // forward from the second end
-      const XY& p = fwd.back();
-      const std::int64_t s = next_seg(p, cur);
-      if (s < 0) {
-        const XY& q = fwd.front();
-        closed = p.x == q.x && p.y == q.y;
-        break;
-      }
-      used[s] = true;
-      cur = static_cast<std::uint32_t>(s);
-      const auto& sg = segs[cur];
-      const XY nxt = (key(sg[0]) == key(p)) ? sg[1] : sg[0];
-      const XY& q = fwd.front();
-      if (nxt.x == q.x && nxt.y == q.y) {
+    for (;;) {
+      const XY p = chain.back();
+      const XY& q = chain.front();
+      if (p.x == q.x && p.y == q.y) {
+        chain.pop_back();
         closed = true;
         break;
       }
-      fwd.push_back(nxt);
+      const std::int64_t s = next_from(p);
+      if (s < 0) break;
+      used[s] = true;
+      chain.push_back(segs[s][1]);
     }
-    if (!closed) {  // backward from the first end
-      std::vector<XY> back;
-      XY p = fwd.front();
-      cur = i;
-      for (;;) {
-        const std::int64_t s = next_seg(p, cur);
-        if (s < 0) break;
-        used[s] = true;
-        cur = static_cast<std::uint32_t>(s);
-        const auto& sg = segs[cur];
-        p = (key(sg[0]) == key(p)) ? sg[1] : sg[0];
-        back.push_back(p);
-      }
-      std::reverse(back.begin(), back.end());
-      back.insert(back.end(), fwd.begin(), fwd.end());
-      fwd.swap(back);
-      ++out.open_chains;
+    if (!closed) ++out.open_chains;
+    if (chain.size() >= 3) out.loops.push_back(std::move(chain));
+  };
+  for (std::uint32_t i = 0; i < segs.size(); ++i)
+    if (!used[i] && ends_at.find(key(segs[i][0])) == ends_at.end()) walk(i);
+  for (std::uint32_t i = 0; i < segs.size(); ++i)
+    if (!used[i]) walk(i);
+  return out;
+}
+
+// The mesh with a skirt: every boundary edge (used by one triangle only) gets a vertical
+// wall down to 1 mm under the mesh, wound so that its normal points away from the
+// triangle, so an open surface slices into closed loops like a solid standing on it.
+Mesh with_skirt(const Mesh& mesh) {
+  struct EdgeKey {
+    std::uint64_t a[3], b[3];
+    bool operator==(const EdgeKey& o) const {
+      for (int k = 0; k < 3; ++k)
+        if (a[k] != o.a[k] || b[k] != o.b[k]) return false;
+      return true;
     }
-    if (fwd.size() >= 3) out.loops.push_back(std::move(fwd));
-  }
+  };
+  struct EdgeHash {
+    std::size_t operator()(const EdgeKey& e) const {
+      std::uint64_t h = 1469598103934665603ull;
+      for (int k = 0; k < 3; ++k) h = (h ^ e.a[k]) * 1099511628211ull, h = (h ^ e.b[k]) * 1099511628211ull;
+      return static_cast<std::size_t>(h);
+    }
+  };
+  auto bits = [](const Vec3& v, std::uint64_t* out) {
+    out[0] = std::bit_cast<std::uint64_t>(v.x + 0.0);
+    out[1] = std::bit_cast<std::uint64_t>(v.y + 0.0);
+    out[2] = std::bit_cast<std::uint64_t>(v.z + 0.0);
+  };
+  auto edge_key = [&](const Vec3& p, const Vec3& q) {
+    EdgeKey e{};
+    const bool swap = less_xyz(q, p);
+    bits(swap ? q : p, e.a);
+    bits(swap ? p : q, e.b);
+    return e;
+  };
+  std::unordered_map<EdgeKey, int, EdgeHash> count;
+  count.reserve(3 * mesh.triangles.size());
+  for (const Triangle& t : mesh.triangles)
+    for (int k = 0; k < 3; ++k) ++count[edge_key(t.v[k], t.v[(k + 1) % 3])];
+  Mesh out = mesh;
+  const double low = mesh_bounds(mesh).min.z - 1;
+  for (const Triangle& t : mesh.triangles)
+    for (int k = 0; k < 3; ++k) {
+      const Vec3 &u = t.v[k], &v = t.v[(k + 1) % 3];
+      if (count[edge_key(u, v)] != 1) continue;
+      const Vec3 ul{u.x, u.y, low}, vl{v.x, v.y, low};
+      if (u.x == v.x && u.y == v.y) continue;  // a vertical boundary edge: no wall to add
+      out.triangles.push_back({{v, u, ul}});
+      out.triangles.push_back({{v, ul, vl}});
+    }
   return out;
 }
 
 }  // namespace
 
-Slice slice_mesh(const Mesh& mesh, double z) { return slice_triangles(mesh, nullptr, mesh.triangles.size(), z); }
+Slice slice_mesh(const Mesh& mesh, double z) { return MeshSlicer(mesh).slice(z); }
 
-MeshSlicer::MeshSlicer(const Mesh& mesh) : mesh_(mesh) {
+MeshSlicer::MeshSlicer(const Mesh& part) : mesh_(with_skirt(part)) {
+  const Mesh& mesh = mesh_;
   const Bounds b = mesh_bounds(mesh);
   const std::size_t n = mesh.triangles.size();
   const std::size_t bins = std::clamp<std::size_t>(n / 8, 1, 4096);

@@ -5,10 +5,13 @@
 // (a vertex at h counts as below, so a horizontal facet at h is not part of the slice
 // at h: the tool's level may sit on it) into a segment whose ends are computed from the
 // edge's vertices in a canonical order, so the two triangles of an edge give the same
-// point bit for bit; segments are chained through those points into loops. The loops
-// bound the region where the part is above h; the fill rule that reads them as a region
-// is even-odd, so the mesh's winding does not matter. Chains that do not close (an open
-// mesh cut across its border) are closed by their chord and counted.
+// point bit for bit; each segment is directed by its triangle's outward normal (the
+// STL's winding, counter-clockwise seen from outside) so that the part lies on its left,
+// and segments are chained head to tail into loops: outer loops counter-clockwise, holes
+// (a dip in the part) clockwise, read with the non-zero rule. An open surface (a height
+// field, a shell) is first given a skirt: a vertical wall under each boundary edge down to
+// 1 mm below the mesh, so it slices like the solid standing on it. Chains that still do
+// not close are closed by their chord and counted.
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -29,15 +32,14 @@ struct Slice {
 Slice slice_mesh(const Mesh& mesh, double z);
 
 // The same, many times over one mesh: triangles binned by height (each in every bin its
-// z range meets), so a slice reads only the triangles of one bin. Keeps a reference to
-// the mesh.
+// z range meets), so a slice reads only the triangles of one bin.
 class MeshSlicer {
  public:
-  explicit MeshSlicer(const Mesh& mesh);
+  explicit MeshSlicer(const Mesh& mesh);  // copies the mesh, with its skirt
   Slice slice(double z) const;
 
  private:
-  const Mesh& mesh_;
+  Mesh mesh_;
   double z0_ = 0, dz_ = 1;
   std::vector<std::uint32_t> start_, tris_;  // bin b holds tris_[start_[b] .. start_[b + 1])
 };

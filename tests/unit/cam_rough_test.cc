@@ -14,6 +14,7 @@
 #include "common/cam/rough.h"
 #include "common/cam/shapes.h"
 #include "common/cam/slice.h"
+#include "common/cam/terrain.h"
 
 namespace cnc::cam {
 namespace {
@@ -374,6 +375,44 @@ TEST(CamRough, ZMapOfThePathsLeavesTheCuspOnTheFaces) {
     EXPECT_LE(face, 1 + 1e-3) << tool;
     EXPECT_GE(face, 0.9) << tool;
     EXPECT_LE(ridge, 1.15) << tool;
+  }
+}
+
+// An open height field with hills and dips (a terrain, 4,800 triangles): the slices are
+// oriented by the facets' normals and closed by the skirt, so a dip is a hole in the
+// part's section, not the section itself (read even-odd, a level just above the deepest
+// dip took the dip for the part and ran the tool through the hills: 12.4 mm deep on this
+// terrain, 33 mm on a larger one). Every path point and the quarter points of every move
+// stay off the part (drop-cutter).
+TEST(CamRough, TerrainWithDipsIsNotGouged) {
+  TerrainSpec ts;
+  ts.cols = 60, ts.rows = 40, ts.step_mm = 0.5, ts.bumps = 12, ts.height_mm = 8, ts.seed = 3;
+  const Mesh m = make_terrain(ts);
+  const Bounds b = mesh_bounds(m);
+  ASSERT_LT(b.min.z, -0.5);  // the deepest point is a dip's bottom, inside the part's border
+  for (const char* tool : {"flat:6", "bull:6:1"}) {
+    RoughSpec spec;
+    spec.cutter = parse_cutter(tool);
+    spec.cusp_mm = 0.5;
+    spec.threads = 2;
+    const RoughPlan plan = plan_roughing(m, parse_stock("box", b), spec);
+    const DropCutter dc(m, spec.cutter);
+    std::size_t checked = 0;
+    double worst = -1e9;
+    for (const LevelPath& lp : plan.paths)
+      for (const auto& ch : lp.chains)
+        for (std::size_t i = 0; i < ch.size(); ++i)
+          for (int f = 0; f < 4; ++f) {
+            if (i == 0 && f > 0) continue;
+            const XY p = f == 0 ? ch[i]
+                                : XY{ch[i - 1].x + (ch[i].x - ch[i - 1].x) * f / 4, ch[i - 1].y + (ch[i].y - ch[i - 1].y) * f / 4};
+            worst = std::max(worst, dc.drop(p.x, p.y).z - lp.z);
+            ++checked;
+          }
+    std::printf("%s: %zu levels, %zu points checked, highest drop-cutter z above the level %.2g mm\n", tool,
+                plan.levels.size(), checked, worst);
+    EXPECT_GT(checked, 10000u);
+    EXPECT_LE(worst, 1e-4) << tool;
   }
 }
 
