@@ -11,8 +11,9 @@
 // grown by R; for a corner radius r, the union over n sub-levels 0 = h_0 < … < h_n = r
 // (equal steps r/n in ρ) of the slice at z + h_i grown by ρ(h_{i+1}). That union holds
 // the exact keep-out (the part above z + h_i holds all of it above z + h for h >= h_i,
-// for a part whose cross-sections shrink upwards, as every part a 3-axis cutter reaches
-// from above does) and lies at most r/n + arc_tol outside it. Polygons and offsets are
+// for a part whose cross-sections shrink upwards; an overhang, whose material sticks out
+// beyond the sections under it, is not kept out and would be cut) and lies at most
+// r/n + arc_tol outside it. Polygons and offsets are
 // Clipper's (libpolyclipping), in integers of 1e-5 mm; round joins grown by arc_tol so
 // their chords stay outside the true arc.
 //
