@@ -244,7 +244,8 @@ void LogExport::write(const std::string& dir, const std::vector<std::string>& lo
     head << "setpoint_cycle" << "t_s" << "commanded_feed_mm_min" << "actual_feed_mm_min" << "chord_error_mm"
          << "chord_tolerance_mm" << "predicted_rmax_um" << "target_rmax_um" << "spindle_rpm" << "max_following_error_mm";
     for (const auto& n : names) head << "fe_" + n + "_mm";
-    f.line(head << "block" << "line");
+    // Seed 004 live (machine config `cutting:`; NaN without it).
+    f.line(head << "block" << "line" << "force_peak_n" << "deflection_mm" << "deflection_tolerance_mm");
     for (const auto& m : monitor_) {
       if (std::isfinite(m.chord_error_mm))
         max_chord = std::isnan(max_chord) ? m.chord_error_mm : std::max(max_chord, m.chord_error_mm);
@@ -257,7 +258,7 @@ void LogExport::write(const std::string& dir, const std::vector<std::string>& lo
           << m.chord_error_mm << m.chord_tolerance_mm << m.predicted_rmax_um << m.target_rmax_um << m.spindle_rpm
           << m.max_following_error_mm;
       for (size_t a = 0; a < naxes; ++a) row << (a < m.following_error_mm.size() ? m.following_error_mm[a] : kNaN);
-      f.line(row << m.block_index << m.source_line);
+      f.line(row << m.block_index << m.source_line << m.force_peak_n << m.deflection_mm << m.deflection_tolerance_mm);
     }
   }
 

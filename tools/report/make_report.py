@@ -155,6 +155,25 @@ def plot_rmax(rep, mon, target_um, target_note):
     rep.save(fig, "rmax.png", title)
 
 
+def plot_deflection(rep, mon):
+    """Seed 004 live: only when the monitor predicted a deflection (machine config `cutting:`)."""
+    t, d = column(mon, "t_s"), [v * 1000 for v in column(mon, "deflection_mm")]
+    if not finite(d):
+        return
+    title = "(c2) predicted tool-tip deflection against time (seed 004, from the stock)"
+    fig, ax = plt.subplots(figsize=(11, 3.5), constrained_layout=True)
+    ax.plot(t, d, ".", ms=2, color="#8c564b", label="predicted deflection (peak per tooth period)")
+    tol = [v * 1000 for v in column(mon, "deflection_tolerance_mm")]
+    if finite(tol):
+        ax.step(t, tol, where="post", color="#333333", ls="--", label="tolerance (monitor)")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("deflection [µm]")
+    ax.set_title(title)
+    ax.legend(fontsize=8, loc="best")
+    ax.grid(alpha=0.3)
+    rep.save(fig, "deflection.png", title)
+
+
 def plot_following_error(rep, axis_rows, mon, axes):
     title = "(d) following error per axis"
     source, rows, key = "axis status", axis_rows, "{}_following_error_mm"
@@ -248,6 +267,7 @@ def main():
     plot_feed(rep, sp, mon)
     plot_chord(rep, mon, tolerance_um, tolerance_note)
     plot_rmax(rep, mon, target_um, target_note)
+    plot_deflection(rep, mon)
     plot_following_error(rep, axis_rows, mon, axes)
     plot_path(rep, sp, axes)
 
