@@ -89,7 +89,11 @@ def main():
               % (name, r["time_s"], r["finish_s"], r["max_deflection_mm"] * 1e3, r["max_surface_error_mm"] * 1e3,
                  r["limits"].get("force", 0)))
 
-    fig, ax = plt.subplots(2, 1, figsize=(11, 7), sharex=True)
+    fig = plt.figure(figsize=(11, 10))
+    gs = fig.add_gridspec(3, 1, height_ratios=[1, 1, 1.1])
+    ax = [fig.add_subplot(gs[0])]
+    ax.append(fig.add_subplot(gs[1], sharex=ax[0]))
+    zoom = fig.add_subplot(gs[2])
     colours = {"without the limit": "#d62728", "with the force limit": "#1f77b4"}
     for name, r in runs.items():
         t = [float(s["t_s"]) for s in r["sps"]]
@@ -110,6 +114,25 @@ def main():
     ax[1].legend(loc="upper right", fontsize=8)
     ax[0].set_title("pocket_corner.ngc: roughing slots and a finishing contour with four inside corners "
                     "(cnc-plan, deflection by cnc-predict)", fontsize=9)
+    # The finishing contour (four walls, four inside corners) from its start, both runs.
+    zoom_d = zoom.twinx()
+    for name, r in runs.items():
+        fin = [s for s in r["sps"] if int(s["line"]) in FINISH_LINES]
+        t0 = float(fin[0]["t_s"])
+        zoom.plot([float(s["t_s"]) - t0 for s in fin], [float(s["feed_mm_min"]) for s in fin], color=colours[name],
+                  lw=0.9, label="feed, " + name)
+        pf = [s for s in r["pred"] if int(s["line"]) in FINISH_LINES]
+        zoom_d.plot([float(s["t_s"]) - t0 for s in pf], [float(s["deflection_peak_mm"]) * 1e3 for s in pf],
+                    color=colours[name], lw=0.9, ls=":", label="deflection, " + name)
+    zoom_d.axhline(tol * 1e3, color="k", ls="--", lw=0.8)
+    zoom.set_ylim(0, 120)
+    zoom_d.set_ylim(0, 120)
+    zoom.set_xlabel("time from the start of the finishing contour, s")
+    zoom.set_ylabel("feed, mm/min (solid)")
+    zoom_d.set_ylabel("deflection, um (dotted)")
+    zoom.set_title("the finishing contour: the corners are taken slower, the walls at the programmed feed", fontsize=9)
+    zoom.legend(loc="lower left", fontsize=8)
+    zoom_d.legend(loc="lower right", fontsize=8)
     fig.tight_layout()
     os.makedirs(os.path.dirname(a.png), exist_ok=True)
     fig.savefig(a.png, dpi=110)
