@@ -157,16 +157,33 @@ cmd_up() {
     [ "$s" = logger ] && [ -n "$log_out" ] && args+=(--out "$log_out")
     [ "$s" = servo-sim ] && [ -n "$final_state" ] && args+=(--final-state "$final_state")
     [ "$s" = servo-sim ] && [ -n "$sim_trace" ] && args+=(--trace "$sim_trace")
+    # The loaded program survives a restart of the program server (README, Killed
+    # processes): its state file in $CNC_STATE_DIR (default runs/).
+    if [ "$s" = program-server ]; then
+      local sdir="${CNC_STATE_DIR:-$ROOT/runs}"
+      mkdir -p "$sdir" && args+=(--state "$sdir/$(basename "$machine" .yaml).program-server.state")
+    fi
     "$BUILD/${EXE[$s]}" "${args[@]}" &
     pids[$s]=$!
     say "started $s (pid ${pids[$s]})"
     sleep 0.1
   done
-  # A service that ends on its own ends the cell.
-  local code=0
-  wait -n "${pids[@]}" || code=$?
-  say "a service ended by itself (status $code): stopping the cell"
-  stop_all
+  # A service that ends on its own does not end the others: stopping them would take
+  # the axes down with it (the drive bridge disables the drives on SIGTERM). The
+  # services that depend on it raise a peer_lost ALARM naming it, the drive bridge
+  # stops the axes when setpoints stop; restart it (./cnc up --only NAME), or stop
+  # the cell with SIGINT/SIGTERM. When the last one has ended, exit 1.
+  while [ ${#pids[@]} -gt 0 ]; do
+    local code=0 ended=""
+    wait -n -p ended "${pids[@]}" || code=$?
+    [ -n "$ended" ] || continue
+    for s in "${!pids[@]}"; do
+      if [ "${pids[$s]}" = "$ended" ]; then
+        unset "pids[$s]"
+        say "$s ended by itself (status $code): the rest of the cell goes on; restart it with ./cnc up --machine $machine --only $s"
+      fi
+    done
+  done
   exit 1
 }
 

@@ -52,6 +52,8 @@ AxisConfig read_axis(MapReader r) {
   a.sim.bandwidth_hz = s.get_double("bandwidth_hz", a.sim.bandwidth_hz, 0.1, 1000);
   a.sim.damping = s.get_double("damping", a.sim.damping, 0.05, 10);
   a.sim.max_velocity_mm_s = s.get_double("max_velocity_mm_s", 0.0, 0.0, 1e4);
+  a.sim.comm_timeout_s = s.get_double("comm_timeout_s", 0.0, 0.0, 60.0);
+  a.sim.comm_stop_decel_mm_s2 = s.get_double("comm_stop_decel_mm_s2", 0.0, 0.0, 1e6);
   s.finish();
   r.finish();
   return a;
@@ -77,6 +79,7 @@ MachineConfig read_machine(MapReader top) {
     c.setpoint_timeout_s = r.get_double("setpoint_timeout_s", c.setpoint_timeout_s, 2 * c.ipo_period_s, 10.0);
     c.stop_decel_mm_s2 = r.get_double("stop_decel_mm_s2", c.stop_decel_mm_s2, 1.0, 1e6);
     c.heartbeat_period_s = r.get_double("heartbeat_period_s", c.heartbeat_period_s, 0.05, 60.0);
+    c.heartbeat_timeout_s = r.get_double("heartbeat_timeout_s", 4 * c.heartbeat_period_s, 2 * c.heartbeat_period_s, 600.0);
     c.realtime_priority = static_cast<int>(r.get_int("realtime_priority", 0, 0, 98));
     const YAML::Node cpus = r.sequence("realtime_cpus");
     for (size_t i = 0; i < cpus.size(); ++i) {

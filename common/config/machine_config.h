@@ -36,6 +36,11 @@ struct ServoSimAxisConfig {
   double bandwidth_hz = 40.0;  // closed position loop bandwidth
   double damping = 1.0;
   double max_velocity_mm_s = 0;  // 0: the axis's max_velocity_mm_s
+  // The drive's communication watchdog (0: off): enabled and no Modbus request for
+  // comm_timeout_s, it brakes at comm_stop_decel_mm_s2 (0: the axis's max_accel_mm_s2)
+  // and faults, as a real drive's communication-loss reaction does.
+  double comm_timeout_s = 0;
+  double comm_stop_decel_mm_s2 = 0;
 };
 
 struct AxisConfig {
@@ -124,6 +129,9 @@ struct MachineConfig {
   double setpoint_timeout_s = 0.05;
   double stop_decel_mm_s2 = 1000.0;
   double heartbeat_period_s = 1.0;
+  // A peer whose heartbeat is missing this long is lost: the services that depend on
+  // it raise an ALARM naming it (common/service/peer_watch.h). Default: 4 periods.
+  double heartbeat_timeout_s = 4.0;
   int realtime_priority = 0;  // SCHED_FIFO priority of the cyclic services; 0 = normal scheduling
   // CPUs the cyclic threads (interpolator, drive bridge servo loop, servo simulator)
   // are pinned to, with the threads they start; empty = no pinning.

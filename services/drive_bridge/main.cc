@@ -5,6 +5,7 @@
 
 #include "cnc/lcmt_heartbeat.hpp"
 #include "common/service/heartbeat.h"
+#include "common/service/peer_watch.h"
 #include "common/service/service.h"
 #include "common/util/clock.h"
 #include "common/util/realtime.h"
@@ -25,6 +26,9 @@ int main(int argc, char** argv) {
     cnc::bus::Bus bus(cfg.lcm_url, 0, 1000, cnc::service::bus_security(cfg, "cnc-drive-bridge"));
     cnc::bridge::DriveBridgeNode node(cfg, bus);
     cnc::service::Heartbeat hb(bus, cfg, "cnc-drive-bridge");
+    // The interpolator's heartbeat: an ALARM naming it when it is lost (the setpoint
+    // watchdog has stopped the axes long before: timing.setpoint_timeout_s).
+    cnc::service::PeerWatch peers(bus, cfg, "cnc-drive-bridge", {"cnc-interpolator"});
     node.start();
     cnc::util::PeriodicTimer timer(cfg.servo_period_s);
     while (!cnc::util::stop_requested()) {
@@ -34,6 +38,7 @@ int main(int argc, char** argv) {
       node.publish_status(timer.overruns());
       hb.tick(node.ready() ? cnc::lcmt_heartbeat::RUNNING : cnc::lcmt_heartbeat::STARTING, timer.overruns(),
               node.detail());
+      peers.check(cnc::util::monotonic_s());
     }
     node.shut_down();
     hb.tick(cnc::lcmt_heartbeat::STOPPING, timer.overruns(), node.detail(), true);

@@ -25,6 +25,11 @@ namespace {
 constexpr size_t kMaxUnsent = 4096;
 // An AXIS_STATUS older than this does not tell where the drives are now.
 constexpr double kStatusFresh_s = 0.5;
+// The bridge publishes AXIS_STATUS every T_ipo: silent this long while a program
+// runs, the drives are not being driven (the bridge is gone or its host is).
+constexpr double kStatusLost_s = 0.25;
+constexpr size_t kPeerBridge = 0;
+// [1]: the program server, watched for its ALARM only.
 
 const char* drive_state_name(int8_t s) {
   switch (s) {
@@ -48,7 +53,8 @@ InterpolatorNode::InterpolatorNode(const config::MachineConfig& cfg, bus::Bus& b
       config_period_cycles_(std::max<int64_t>(1, std::llround(1.0 / cfg.ipo_period_s))),
       // Re-request after ~100 ms without the block (a lost request or block).
       resend_cycles_(std::max<int64_t>(2, std::llround(0.1 / cfg.ipo_period_s))),
-      health_(bus, cfg.channel(ch::kAlarm), "cnc-interpolator", cnc::lcmt_alarm::FAULT) {
+      health_(bus, cfg.channel(ch::kAlarm), "cnc-interpolator", cnc::lcmt_alarm::FAULT),
+      peers_(bus, cfg, "cnc-interpolator", {"cnc-drive-bridge", "cnc-program-server"}) {
   bus_.subscribe<cnc::lcmt_program_command>(cfg.channel(ch::kProgramCmd),
                                             [this](const auto& m) { on_command(m); });
   bus_.subscribe<cnc::lcmt_program_state>(cfg.channel(ch::kProgramState),
@@ -217,9 +223,27 @@ std::string InterpolatorNode::reset_position(cnc::lcmt_program_command* out) con
 }
 
 void InterpolatorNode::watch_drives() {
+  const double now = util::monotonic_s();
+  peers_.check(now);
+  if (!active(core_.state()) || fault_) {
+    drives_seen_enabled_ = false;
+    return;
+  }
+  // The drive bridge gone: its heartbeat missing, or its status silent since the
+  // program ran with it. Setpoints nobody follows are not streamed on.
+  if (peers_.lost(kPeerBridge)) {
+    fault(std::string("the drive bridge is lost: ") + peers_.last_lost_text());
+    return;
+  }
+  if (drives_seen_enabled_ && now - axis_status_s_ > kStatusLost_s) {
+    fault("no AXIS_STATUS from cnc-drive-bridge for " + std::to_string(now - axis_status_s_) +
+          " s while the program runs: the drive bridge (or its host) is gone");
+    return;
+  }
   // A drive that leaves the enabled state while a program runs: the program cannot
   // go on where the machine is not following it.
-  if (!active(core_.state()) || fault_ || util::monotonic_s() - axis_status_s_ > kStatusFresh_s) return;
+  if (now - axis_status_s_ > kStatusFresh_s) return;
+  drives_seen_enabled_ = true;
   for (size_t i = 0; i < cfg_.axes.size(); ++i) {
     if (axis_status_.drive_state[i] == cnc::lcmt_axis_status::ENABLED) continue;
     const std::string& text = axis_status_.fault[i];
@@ -322,6 +346,12 @@ void InterpolatorNode::run_cycle() {
     if (fault_ && (c.kind == Command::Kind::kStart || c.kind == Command::Kind::kResume)) {
       spdlog::warn("{} refused: in FAULT ({}); RESET first", c.kind == Command::Kind::kStart ? "START" : "RESUME",
                    fault_cause_);
+      continue;
+    }
+    if (c.kind == Command::Kind::kStart && peers_.lost(kPeerBridge)) {
+      spdlog::warn("START refused: the drive bridge is lost ({})", peers_.last_lost_text());
+      alarm(cnc::lcmt_alarm::WARNING, "start_refused",
+            std::string("START refused: the drive bridge is lost: ") + peers_.last_lost_text());
       continue;
     }
     if (c.kind == Command::Kind::kStart && util::monotonic_s() - axis_status_s_ <= kStatusFresh_s) {

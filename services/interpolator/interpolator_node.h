@@ -11,6 +11,14 @@
 // RESUME and new programs are refused until RESET. RESET takes the position from
 // the drives (the newest AXIS_STATUS, actual positions) and is recorded with that
 // position as an input, so replay reproduces it.
+//
+// Peers (service::PeerWatch on HEARTBEAT): the drive bridge lost (no heartbeat for
+// timing.heartbeat_timeout_s), or its AXIS_STATUS silent for kStatusLost_s while a
+// program runs, is a fault as above: nothing is streamed to axes nobody drives, and
+// START is refused while it is lost. The program server lost is an ALARM only: the
+// path runs out the blocks it has and stops at their end (the planner never plans
+// past the last block it holds), and goes on when the server is back and answers
+// the block requests again (the server reloads its program: --state).
 #include <array>
 #include <deque>
 #include <map>
@@ -27,6 +35,7 @@
 #include "common/bus/bus.h"
 #include "common/config/machine_config.h"
 #include "common/service/bus_health.h"
+#include "common/service/peer_watch.h"
 #include "services/interpolator/feed_policy.h"
 #include "services/interpolator/interpolator.h"
 #include "services/interpolator/planner_thread.h"
@@ -126,6 +135,7 @@ class InterpolatorNode {
   cnc::lcmt_axis_status axis_status_{};
   double axis_status_s_ = -1e9;  // monotonic time it arrived
   bool drives_seen_enabled_ = false;  // every axis ENABLED in a status since the program started
+  service::PeerWatch peers_;  // [0] the drive bridge, [1] the program server
 };
 
 }  // namespace cnc::interp

@@ -34,6 +34,10 @@ LogWriter::LogWriter(std::string base_path, double rotate_bytes, size_t buffer_b
     : base_(std::move(base_path)), rotate_bytes_(rotate_bytes), buffer_bytes_(buffer_bytes) {
   buf_.reserve(buffer_bytes_ + 1024);
   pending_.reserve(1024);
+  // Never over an earlier file (a logger restarted after a crash, two in one second):
+  // NAME.lcmlog taken -> NAME-2.lcmlog, NAME-3.lcmlog, ...
+  const std::string wanted = base_;
+  for (int n = 2; ::access(part_path(0).c_str(), F_OK) == 0; ++n) base_ = wanted + "-" + std::to_string(n);
   if (!open_part(0)) throw std::runtime_error("cannot create log file " + part_path(0) + ": " + std::strerror(errno));
 }
 
@@ -45,7 +49,8 @@ std::string LogWriter::part_path(int part) const {
 
 bool LogWriter::open_part(int part) {
   const std::string path = part_path(part);
-  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_APPEND | O_CLOEXEC, 0644);
+  // O_EXCL: a file that appeared meanwhile is never truncated (the open fails instead).
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_APPEND | O_CLOEXEC, 0644);
   if (fd < 0) return false;
   close_file();
   fd_ = fd;

@@ -26,7 +26,8 @@ class LogWriter {
 
   static constexpr size_t kDefaultBufferBytes = 64 * 1024;
 
-  // base_path: "DIR/NAME" — files are DIR/NAME.lcmlog, then DIR/NAME.1.lcmlog, ...
+  // base_path: "DIR/NAME" — files are DIR/NAME.lcmlog, then DIR/NAME.1.lcmlog, ...; when
+  // DIR/NAME.lcmlog exists already, NAME-2 (-3, ...) instead: an earlier file is never overwritten.
   // A file is closed and the next one started before an event would take it past
   // rotate_bytes (a file holds at least one event, however large).
   LogWriter(std::string base_path, double rotate_bytes, size_t buffer_bytes = kDefaultBufferBytes);

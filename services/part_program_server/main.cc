@@ -1,22 +1,30 @@
 // cnc-program-server: parses part programs and serves their blocks on request.
 #include "cnc/lcmt_heartbeat.hpp"
 #include "common/service/heartbeat.h"
+#include "common/service/peer_watch.h"
 #include "common/service/service.h"
 #include "common/util/clock.h"
 #include "common/util/signals.h"
 #include "services/part_program_server/program_server_node.h"
 
 int main(int argc, char** argv) {
-  cnc::service::Spec spec{"cnc-program-server", "parses part programs and serves their blocks", {}, {}};
-  return cnc::service::run(spec, argc, argv, [](const cnc::config::MachineConfig& cfg, const cnc::service::Args&) {
+  // --state FILE: the loaded program's path, token and start, so that a restarted
+  // server serves the same blocks to the interpolator that still runs them.
+  cnc::service::Spec spec{"cnc-program-server", "parses part programs and serves their blocks", {"state"}, {}};
+  return cnc::service::run(spec, argc, argv, [](const cnc::config::MachineConfig& cfg, const cnc::service::Args& args) {
     cnc::bus::Bus bus(cfg.lcm_url, 0, 1000, cnc::service::bus_security(cfg, "cnc-program-server"));
     cnc::pps::ProgramServerNode node(cfg, bus);
+    node.use_state_file(args.option("state"));
     cnc::service::Heartbeat hb(bus, cfg, "cnc-program-server");
+    // The interpolator requests the blocks: an ALARM naming it when it is lost.
+    cnc::service::PeerWatch peers(bus, cfg, "cnc-program-server", {"cnc-interpolator"});
     while (!cnc::util::stop_requested()) {
-      bus.handle(20);
+      if (bus.handle(20) > 0) bus.drain();  // all that is queued before the peers are judged
       node.publish_state(false);
       node.poll(cnc::util::monotonic_s());
       hb.tick(cnc::lcmt_heartbeat::RUNNING, 0);
+      peers.check(cnc::util::monotonic_s());
+      if (peers.lost(0)) node.interpolator_lost();
     }
     hb.tick(cnc::lcmt_heartbeat::STOPPING, 0, "", true);
     return cnc::service::kExitOk;

@@ -3,7 +3,12 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
 #include <iterator>
+#include <sstream>
 
 #include "cnc/lcmt_alarm.hpp"
 #include "cnc/lcmt_interp_state.hpp"
@@ -51,7 +56,16 @@ void ProgramServerNode::on_interp_state(const cnc::lcmt_interp_state& m) {
     }
     publish_state(true);
   }
+  if (restored_ && !fault && core_.loaded() && m.program_token != core_.token() &&
+      (state_ == S::RUNNING || state_ == S::HELD)) {
+    // Reloaded after a restart, but the interpolator runs another program or none.
+    spdlog::info("the program loaded again from the state file is not running: stopped");
+    restored_ = false;
+    state_ = S::STOPPED;
+    publish_state(true);
+  }
   if (fault || !core_.loaded() || m.program_token != core_.token()) return;
+  if (m.state != P::IDLE) restored_ = false;
   int8_t next = state_;
   if (m.state == P::RUNNING || m.state == P::STARVED) {
     if (state_ == S::RUNNING || state_ == S::HELD) next = S::RUNNING;
@@ -141,6 +155,8 @@ void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {
         last_refusal_ = LoadResult{};
         sent_.clear();
         blocks_sent_ = blocks_resent_ = 0;
+        restored_ = false;
+        write_state_file();
       } else {
         spdlog::error("program refused: {}", r.error);
         last_refusal_ = r;
@@ -173,6 +189,77 @@ void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {
       break;
     default: break;
   }
+}
+
+void ProgramServerNode::interpolator_lost() {
+  using S = cnc::lcmt_program_state;
+  if (state_ != S::RUNNING && state_ != S::HELD) return;
+  spdlog::warn("the interpolator is lost: program {} is not running any more (stopped)", core_.path());
+  state_ = S::STOPPED;
+  restored_ = false;
+  publish_state(true);
+}
+
+void ProgramServerNode::write_state_file() const {
+  if (state_file_.empty()) return;
+  const std::string tmp = state_file_ + ".tmp";
+  std::FILE* f = std::fopen(tmp.c_str(), "w");
+  bool ok = f != nullptr;
+  if (ok) {
+    ok = std::fprintf(f, "cnc-program-server state 1\ntoken %lld\nstart %zu", static_cast<long long>(core_.token()),
+                      machine_position_.size()) > 0;
+    for (double x : machine_position_) ok = ok && std::fprintf(f, " %a", x) > 0;  // exact (hex float)
+    ok = ok && std::fprintf(f, "\npath %s\n", core_.path().c_str()) > 0;
+    ok = (std::fclose(f) == 0) && ok;
+  }
+  if (!ok || std::rename(tmp.c_str(), state_file_.c_str()) != 0)
+    spdlog::warn("cannot write the state file {}: {} (a restart will not resume this program)", state_file_,
+                 std::strerror(errno));
+}
+
+void ProgramServerNode::use_state_file(const std::string& path) {
+  state_file_ = path;
+  if (path.empty()) return;
+  std::ifstream in(path);
+  if (!in) return;  // nothing recorded yet
+  std::string magic, line;
+  std::getline(in, magic);
+  long long token = 0;
+  size_t n = 0;
+  std::vector<double> start;
+  std::string program;
+  bool ok = magic == "cnc-program-server state 1";
+  if (ok && std::getline(in, line)) ok = std::sscanf(line.c_str(), "token %lld", &token) == 1 && token > 0;
+  if (ok && std::getline(in, line)) {
+    std::istringstream ls(line);
+    std::string word;
+    ok = static_cast<bool>(ls >> word >> n) && word == "start" && n <= 64;
+    for (size_t i = 0; ok && i < n; ++i) {
+      std::string v;
+      ok = static_cast<bool>(ls >> v);
+      if (ok) start.push_back(std::strtod(v.c_str(), nullptr));
+    }
+  }
+  if (ok && std::getline(in, line)) {
+    ok = line.rfind("path ", 0) == 0;
+    program = line.substr(5);
+  }
+  if (!ok || program.empty()) {
+    spdlog::warn("state file {} is malformed: ignored", path);
+    return;
+  }
+  const LoadResult r = core_.load(program, token, start);
+  if (!r.ok) {
+    spdlog::warn("state file {}: program {} no longer loads ({}): not resumed", path, program, r.error);
+    return;
+  }
+  machine_position_ = start;
+  state_ = cnc::lcmt_program_state::RUNNING;  // until INTERP_STATE says otherwise
+  program_ready_ = false;
+  restored_ = true;
+  start_s_ = util::monotonic_s();
+  spdlog::info("resumed {} from the state file {}: {} blocks (token {}), served to the interpolator that runs it",
+               program, path, core_.num_blocks(), token);
 }
 
 void ProgramServerNode::on_request(const cnc::lcmt_block_request& m) {

@@ -22,14 +22,27 @@ namespace cnc::pps {
 // reason and the refused command's sender and seq, the state stays as it was. The
 // state follows the interpolator (INTERP_STATE: running, held, done, fault) and the
 // drives (AXIS_STATUS). A failed publish here puts the server in FAULT until RESET.
+//
+// Restarts (a killed server): with a state file, every accepted LOAD writes the
+// program's path, token and start position there (atomically: a new file renamed
+// over the old), and a server that starts with that file loads the same program
+// again under the same token from the same start: the same blocks, served to the
+// interpolator that still runs it and asks for the blocks it lacks. It counts as
+// running until INTERP_STATE says otherwise (another program, or none: stopped).
 class ProgramServerNode {
  public:
   ProgramServerNode(const config::MachineConfig& cfg, bus::Bus& bus);
+  // The state file ("" = none). Call before the first message is handled: a program
+  // recorded there is loaded again (an unreadable or malformed file is ignored with a warning).
+  void use_state_file(const std::string& path);
   // Publishes the program state when it changed or every `period_s`.
   void publish_state(bool force);
   // Once per loop: watches this node's publishes (FAULT on a failure, ALARM once the bus works).
   void poll(double now_s);
   int8_t state() const { return state_; }
+  // The interpolator is lost (service::PeerWatch): a program it ran is not running
+  // any more (STOPPED); a new one needs the cell reset (the drives stopped in FAULT).
+  void interpolator_lost();
   // The interlock's view of the cell now.
   CellView view(double now_s) const;
 
@@ -70,6 +83,9 @@ class ProgramServerNode {
   int64_t refused_seq_ = -1;
   int64_t refusals_ = 0;
   service::BusHealth health_;
+  std::string state_file_;
+  bool restored_ = false;  // loaded again from the state file; not yet seen running
+  void write_state_file() const;
 };
 
 }  // namespace cnc::pps

@@ -45,6 +45,8 @@ constexpr int kExitFault = 5;
 
 struct CellView {
   std::map<std::string, cnc::lcmt_heartbeat> heartbeats;
+  std::map<std::string, double> heartbeat_s;  // monotonic time each service's last heartbeat arrived
+  double axes_s = -1e9;                       // ... and the last AXIS_STATUS
   cnc::lcmt_program_state program{};
   bool have_program = false;
   cnc::lcmt_interp_state interp{};
@@ -60,7 +62,9 @@ bool wait_for(cnc::bus::Bus& bus, double timeout_s, Pred done) {
   const double end = cnc::util::monotonic_s() + timeout_s;
   while (!done()) {
     if (cnc::util::stop_requested() || cnc::util::monotonic_s() > end) return false;
-    bus.handle(10);
+    // Everything queued before the predicate looks again: after a stall of this
+    // process, the heartbeats waiting in the queue are news, not a silence.
+    if (bus.handle(10) > 0) bus.drain();
   }
   return true;
 }
@@ -71,7 +75,10 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
   cnc::bus::Bus bus(cfg.lcm_url, 0, 1000, cnc::service::bus_security(cfg, "cnc-ctl"));
   CellView view;
   bus.subscribe<cnc::lcmt_heartbeat>(cfg.channel(ch::kHeartbeat),
-                                     [&](const auto& m) { view.heartbeats[m.service] = m; });
+                                     [&](const auto& m) {
+                                       view.heartbeats[m.service] = m;
+                                       view.heartbeat_s[m.service] = cnc::util::monotonic_s();
+                                     });
   bus.subscribe<cnc::lcmt_program_state>(cfg.channel(ch::kProgramState), [&](const auto& m) {
     view.program = m;
     view.have_program = true;
@@ -85,6 +92,7 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
   bus.subscribe<cnc::lcmt_axis_status>(cfg.channel(ch::kAxisStatus), [&](const auto& m) {
     view.axes = m;
     view.have_axes = true;
+    view.axes_s = cnc::util::monotonic_s();
     for (int i = 0; i < m.num_axes; ++i) {
       if (std::fabs(m.following_error_mm[i]) > largest_fe) {
         largest_fe = std::fabs(m.following_error_mm[i]);
@@ -342,8 +350,39 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
     return (view.interp.program_token == token || view.interp.program_token == 0) &&
            view.interp.state == cnc::lcmt_setpoint::FAULT;
   };
+  // A peer the run cannot go on without: its heartbeat missing for the cell's
+  // heartbeat_timeout_s, or its last one said it stopped. The program server may be
+  // away for a while: the interpolator stops at the end of the blocks it has and
+  // goes on when the server is back (warned once, bounded by --timeout).
+  std::string lost;
+  bool server_warned = false;
+  auto peer_lost = [&] {
+    const double now = cnc::util::monotonic_s();
+    for (const char* s : {"cnc-interpolator", "cnc-drive-bridge", "cnc-program-server"}) {
+      const auto it = view.heartbeats.find(s);
+      if (it == view.heartbeats.end()) continue;
+      const double silent = now - view.heartbeat_s[s];
+      const bool stopped = it->second.state == cnc::lcmt_heartbeat::STOPPING;
+      if (!stopped && silent <= cfg.heartbeat_timeout_s) continue;
+      char why[256];
+      if (stopped) {
+        std::snprintf(why, sizeof why, "%s stopped (its last heartbeat said STOPPING)", s);
+      } else {
+        std::snprintf(why, sizeof why, "%s is lost: no heartbeat for %.1f s (timeout %.1f s)", s, silent,
+                      cfg.heartbeat_timeout_s);
+      }
+      if (std::string(s) == "cnc-program-server" && !stopped) {
+        if (!server_warned) std::fprintf(stderr, "cnc-ctl: %s; waiting for it to come back\n", why);
+        server_warned = true;
+        continue;
+      }
+      lost = why;
+      return true;
+    }
+    return false;
+  };
   const bool done = wait_for(bus, timeout_s, [&] {
-    return bridge_fault() || block_refused() || cell_fault() ||
+    return bridge_fault() || block_refused() || cell_fault() || peer_lost() ||
            (view.interp.program_token == token && view.interp.state == 3 /* done */);
   });
   if (block_refused()) {
@@ -361,6 +400,10 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
     std::fprintf(stderr, "cnc-ctl: drive fault: %s\n", view.axes.fault.empty() ? "" : view.axes.fault[0].c_str());
     return kExitFault;
   }
+  if (!lost.empty()) {
+    std::fprintf(stderr, "cnc-ctl: the program did not reach its end: %s\n", lost.c_str());
+    return kExitFault;
+  }
   if (!done) {
     std::fprintf(stderr, "cnc-ctl: program did not finish within %.0f s\n", timeout_s);
     return kExitTimeout;
@@ -373,6 +416,31 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
     return true;
   };
   const bool is_settled = wait_for(bus, 3.0, settled);
+  // Done means the axes are at the program's end: the bridge still reports, and
+  // every axis stands within 0.01 mm of where the interpolator ended.
+  auto at_end = [&] {
+    if (!view.have_axes || cnc::util::monotonic_s() - view.axes_s > 0.5) return false;
+    if (view.interp.num_axes != view.axes.num_axes) return false;
+    for (int i = 0; i < view.axes.num_axes; ++i)
+      if (!(std::fabs(view.interp.position_mm[static_cast<size_t>(i)] - view.axes.actual_mm[static_cast<size_t>(i)]) <=
+            0.01))
+        return false;
+    return true;
+  };
+  if (!wait_for(bus, 1.0, at_end)) {
+    if (!view.have_axes || cnc::util::monotonic_s() - view.axes_s > 0.5) {
+      std::fprintf(stderr, "cnc-ctl: the interpolator ended the program, but the drive bridge reports nothing "
+                           "(no AXIS_STATUS for 0.5 s): the axes did not follow it to its end\n");
+    } else {
+      std::fprintf(stderr, "cnc-ctl: the interpolator ended the program, but the axes stand away from its end:");
+      for (int i = 0; i < view.axes.num_axes; ++i)
+        std::fprintf(stderr, " %s %.4f (end %.4f)", view.axes.axis_name[static_cast<size_t>(i)].c_str(),
+                     view.axes.actual_mm[static_cast<size_t>(i)],
+                     i < view.interp.num_axes ? view.interp.position_mm[static_cast<size_t>(i)] : 0.0);
+      std::fprintf(stderr, "\n");
+    }
+    return kExitFault;
+  }
   std::printf("program done: %.3f s program time (%.1f s wall), %lld blocks, largest following error %.4f mm (%s)%s\n",
               view.interp.program_time_s, cnc::util::monotonic_s() - t0, static_cast<long long>(view.interp.blocks_done),
               largest_fe, largest_fe_axis.c_str(), is_settled ? "" : ", axes not settled within 3 s");

@@ -293,6 +293,7 @@ class Simulator {
   double next_trace_s_ = 0;
   double next_persist_s_ = 0;
   double dt_;
+  std::vector<std::pair<int64_t, bool>> comm_seen_;  // per drive: watchdog trips and faults logged
   int64_t stalls_ = 0;     // process stalls the simulated world paused for
   double stalled_s_ = 0;
   double next_step_s_;
@@ -530,6 +531,24 @@ void Simulator::read_control() {
 
 void Simulator::housekeeping(double now) {
   injector_.poll(now);
+  comm_seen_.resize(all_.size());
+  for (size_t i = 0; i < all_.size(); ++i) {
+    const SimDrive& d = *all_[i];
+    auto& seen = comm_seen_[i];
+    if (d.comm_trips() != seen.first) {
+      seen.first = d.comm_trips();
+      spdlog::warn("cnc-servo-sim: axis {}: communication watchdog: no request for {:.3f} s: quick stop from "
+                   "{:.3f} mm at {:.1f} mm/s, {:g} mm/s^2",
+                   d.name(), d.comm_timeout_s(), d.comm_stop_x0(), d.comm_stop_v0(), d.comm_decel());
+    }
+    if (d.comm_faulted() != seen.second) {
+      seen.second = d.comm_faulted();
+      if (seen.second)
+        spdlog::warn("cnc-servo-sim: axis {}: stopped at {:.3f} mm: fault 0x{:04x} (communication lost); a fault "
+                     "reset and enable move it again",
+                     d.name(), d.position_mm(), SimDrive::kCommFaultCode);
+    }
+  }
   if (tcp_ctx_ != nullptr) {
     if (injector_.dropped(now) && listen_fd_ >= 0) {
       spdlog::warn("cnc-servo-sim: dropping every connection");

@@ -13,7 +13,9 @@ SimDrive::SimDrive(std::string name, int unit, const drive::DriveProfile& profil
                    const config::ServoSimAxisConfig& sim, double max_velocity_mm_s, double start_mm,
                    double max_accel_mm_s2)
     : name_(std::move(name)), unit_(unit), emu_(profile, start_mm), model_(sim, max_velocity_mm_s, start_mm),
-      vmax_ff_(model_.max_velocity_mm_s()), amax_ff_(2.0 * max_accel_mm_s2) {
+      vmax_ff_(model_.max_velocity_mm_s()), amax_ff_(2.0 * max_accel_mm_s2), comm_timeout_s_(sim.comm_timeout_s),
+      comm_decel_(sim.comm_stop_decel_mm_s2 > 0 ? sim.comm_stop_decel_mm_s2
+                                                : (max_accel_mm_s2 > 0 ? max_accel_mm_s2 : 1000.0)) {
   pts_[0] = {0.0, start_mm};
   n_pts_ = 1;
 }
@@ -32,18 +34,50 @@ int SimDrive::segment_at(double t_s) const {
   return -1;
 }
 
+double SimDrive::extrapolation_slope() const {
+  if (comm_timeout_s_ <= 0 || n_pts_ < 2) return 0.0;
+  const double v = slope(n_pts_ - 2);
+  return std::isfinite(v) && std::fabs(v) <= vmax_ff_ ? v : 0.0;
+}
+
+void SimDrive::quick_stop_at(double t_s, double* x, double* v, double* a) const {
+  const double dir = stop_v0_ < 0 ? -1.0 : 1.0;
+  const double t_end = std::fabs(stop_v0_) / comm_decel_;
+  const double tau = std::clamp(t_s - stop_t0_, 0.0, t_end);
+  *x = stop_x0_ + stop_v0_ * tau - 0.5 * dir * comm_decel_ * tau * tau;
+  *v = stop_v0_ - dir * comm_decel_ * tau;
+  *a = t_s - stop_t0_ < t_end ? -dir * comm_decel_ : 0.0;
+}
+
 double SimDrive::demand_mm(double now_s) const {
+  if (comm_ == Comm::kStopping) {
+    double x, v, a;
+    quick_stop_at(now_s, &x, &v, &a);
+    return x;
+  }
   if (now_s < pts_[0].t_s) return pts_[0].mm;
   const int i = segment_at(now_s);
-  if (i < 0) return pts_[n_pts_ - 1].mm;  // past the last target: holds it
+  if (i < 0) {
+    // Past the last target: holds it, or (watchdog on) goes on at the last slope.
+    const Point& last = pts_[n_pts_ - 1];
+    return now_s > last.t_s ? last.mm + extrapolation_slope() * (now_s - last.t_s) : last.mm;
+  }
   const double f = (now_s - pts_[i].t_s) / (pts_[i + 1].t_s - pts_[i].t_s);
   return pts_[i].mm + (pts_[i + 1].mm - pts_[i].mm) * f;
 }
 
 void SimDrive::feed_forward(double t_s, double* v_ff, double* a_ff) const {
   *v_ff = *a_ff = 0;
+  if (comm_ == Comm::kStopping) {
+    double x;
+    quick_stop_at(t_s, &x, v_ff, a_ff);
+    return;
+  }
   const int i = segment_at(t_s);
-  if (i < 0) return;
+  if (i < 0) {
+    if (n_pts_ > 0 && t_s > pts_[n_pts_ - 1].t_s) *v_ff = extrapolation_slope();
+    return;
+  }
   // The slopes belong to the segments' midpoints; between two midpoints the
   // velocity ramps from one to the other (the acceleration is that ramp's slope).
   const double mid = 0.5 * (pts_[i].t_s + pts_[i + 1].t_s);
@@ -68,10 +102,20 @@ void SimDrive::shift_time(double dt_s) {
   for (int i = 0; i < n_pts_; ++i) pts_[i].t_s += dt_s;
   if (t_s_ >= 0) t_s_ += dt_s;
   if (last_write_s_ >= 0) last_write_s_ += dt_s;
+  if (last_request_s_ >= 0) last_request_s_ += dt_s;
+  stop_t0_ += dt_s;
   stream_start_s_ += dt_s;
 }
 
 void SimDrive::after_request(double now_s) {
+  last_request_s_ = now_s;
+  if (comm_ != Comm::kOk) {
+    // Stopping or faulted by the watchdog: targets are not followed until a fault
+    // reset and enable (then the stream restarts from where the axis stands).
+    writes_seen_ = emu_.target_writes();
+    last_write_s_ = -1;
+    return;
+  }
   if (emu_.target_writes() == writes_seen_) return;
   step_to(now_s);  // the dynamics up to the write, on the demand in force until now
   writes_seen_ = emu_.target_writes();
@@ -117,6 +161,31 @@ void SimDrive::step_to(double now_s) {
   const double dt = now_s - t_s_;
   const double mid_s = t_s_ + 0.5 * dt;
   t_s_ = now_s;
+  if (comm_ == Comm::kFaulted && emu_.follows()) comm_ = Comm::kOk;  // reset and enabled again
+  if (comm_ == Comm::kOk && comm_timeout_s_ > 0 && emu_.follows() && last_request_s_ >= 0 &&
+      now_s - last_request_s_ > comm_timeout_s_) {
+    // No request for the timeout: the drive's own quick stop, from its demand's motion.
+    double v = 0, a = 0;
+    feed_forward(now_s, &v, &a);
+    stop_x0_ = demand_mm(now_s);
+    stop_v0_ = v;
+    stop_t0_ = now_s;
+    comm_ = Comm::kStopping;
+    ++comm_trips_;
+  }
+  if (comm_ == Comm::kStopping && emu_.follows()) {
+    double x, v, a;
+    quick_stop_at(now_s, &x, &v, &a);
+    // At rest (the ramp ended and the axis settled on it, or half a second more):
+    // the fault, as a drive reports its communication loss.
+    if (now_s - stop_t0_ > std::fabs(stop_v0_) / comm_decel_ &&
+        (std::fabs(model_.velocity_mm_s()) < 0.01 || now_s - stop_t0_ > std::fabs(stop_v0_) / comm_decel_ + 0.5)) {
+      emu_.inject_fault(kCommFaultCode);
+      comm_ = Comm::kFaulted;
+    }
+  } else if (comm_ == Comm::kStopping) {
+    comm_ = Comm::kFaulted;  // disabled meanwhile
+  }
   if (!emu_.follows()) {
     // Disabled: the demand restarts from wherever the axis comes to rest.
     n_pts_ = 0;

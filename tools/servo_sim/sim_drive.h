@@ -11,6 +11,15 @@
 // the moment of every reply (the dynamics are stepped to that moment), and where
 // the profile maps it the drive reports its own following error: the position
 // demand minus the actual position.
+//
+// Communication watchdog (axes[].sim.comm_timeout_s > 0, as real drives have one):
+// while enabled, a gap in the targets is bridged by extrapolating the last segment's
+// velocity (a drive's interpolation buffer underflow), and with no Modbus request at
+// all for comm_timeout_s the drive makes its own quick stop from that motion at
+// comm_stop_decel_mm_s2 (0: the axis's max_accel_mm_s2) and then faults with error
+// code kCommFaultCode (CiA-402 0x8130, "heartbeat / life guard error"); it moves
+// again only after a fault reset and enable from a master. Off (0), a gap holds the
+// last target, as before.
 #include <algorithm>
 #include <string>
 
@@ -28,6 +37,7 @@ class SimDrive {
   // test's measured stop decelerations broke their +25 % bound in 3 of 4 loaded
   // suite runs, and it is not kept until that is understood.)
   static double buffer_delay_s(double interval_s) { return 1.5 * interval_s; }
+  static constexpr uint16_t kCommFaultCode = 0x8130;
   SimDrive(std::string name, int unit, const drive::DriveProfile& profile, const config::ServoSimAxisConfig& sim,
            double max_velocity_mm_s, double start_mm, double max_accel_mm_s2 = 0);
   // After a Modbus request that may have written registers.
@@ -47,6 +57,13 @@ class SimDrive {
   void shift_time(double dt_s);
   // Position demand at time now_s (the ramp between the last two targets).
   double demand_mm(double now_s) const;
+  // Communication watchdog: quick stops begun, and the speed and place each began at.
+  int64_t comm_trips() const { return comm_trips_; }
+  bool comm_faulted() const { return comm_ == Comm::kFaulted; }
+  double comm_stop_v0() const { return stop_v0_; }
+  double comm_stop_x0() const { return stop_x0_; }
+  double comm_timeout_s() const { return comm_timeout_s_; }
+  double comm_decel() const { return comm_decel_; }
 
  private:
   std::string name_;
@@ -74,6 +91,19 @@ class SimDrive {
   int segment_at(double t_s) const;
   double slope(int i) const { return (pts_[i + 1].mm - pts_[i].mm) / (pts_[i + 1].t_s - pts_[i].t_s); }
   void feed_forward(double t_s, double* v_ff, double* a_ff) const;
+
+  // Communication watchdog.
+  enum class Comm { kOk, kStopping, kFaulted };
+  double comm_timeout_s_;
+  double comm_decel_;
+  double last_request_s_ = -1;
+  Comm comm_ = Comm::kOk;
+  int64_t comm_trips_ = 0;
+  double stop_t0_ = 0, stop_x0_ = 0, stop_v0_ = 0;
+  // Past the last target with the watchdog on: the last segment's slope, else 0.
+  double extrapolation_slope() const;
+  // The quick stop's demand, velocity and acceleration at t.
+  void quick_stop_at(double t_s, double* x, double* v, double* a) const;
 };
 
 }  // namespace cnc::servo_sim
