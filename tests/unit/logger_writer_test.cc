@@ -163,6 +163,29 @@ TEST_F(LoggerWriterTest, WhileOpenTheFileHoldsEveryFlushedEventAndEndsOnAWholeEv
   }
 }
 
+TEST_F(LoggerWriterTest, ARestartedLoggerWritesANewFileAndLeavesTheOldOne) {
+  // A logger killed and started again with the same base (or twice in one second):
+  // NAME.lcmlog is kept as it is, the new one writes NAME-2.lcmlog, then NAME-3.
+  {
+    LogWriter w(base_, 1e9, 4096);
+    for (int64_t i = 0; i < 10; ++i) {
+      const auto p = payload(i, 64);
+      w.write("T.SETPOINTS", p.data(), p.size(), i);
+    }
+  }
+  const auto before = fs::file_size(base_ + ".lcmlog");
+  for (int n = 2; n <= 3; ++n) {
+    LogWriter w(base_, 1e9, 4096);
+    EXPECT_EQ(w.current_path(), base_ + "-" + std::to_string(n) + ".lcmlog");
+    const auto p = payload(100, 64);
+    w.write("T.SETPOINTS", p.data(), p.size(), 100);
+  }
+  EXPECT_EQ(fs::file_size(base_ + ".lcmlog"), before);
+  EXPECT_EQ(read_log(base_ + ".lcmlog").size(), 10u);
+  EXPECT_EQ(read_log(base_ + "-2.lcmlog").size(), 1u);
+  EXPECT_EQ(read_log(base_ + "-3.lcmlog").size(), 1u);
+}
+
 TEST_F(LoggerWriterTest, AFailedWriteIsCutBackToAWholeEventAndCountedPerChannel) {
   // RLIMIT_FSIZE makes write(2) short and then fail with EFBIG, like a full disk.
   constexpr rlim_t kLimit = 20000;

@@ -149,3 +149,92 @@ TEST(SimDrive, AfterAStallOfAMasterThatPicksUpWhereItStoppedTheDemandResumes) {
 
 }  // namespace
 }  // namespace cnc::servo_sim
+
+namespace cnc::servo_sim {
+namespace {
+
+// The communication watchdog: a master streaming at 150 mm/s goes silent. The drive
+// carries on at the stream's speed for comm_timeout_s, brakes at its configured
+// rate (never harder, measured by finite differences of its demand and its actual
+// velocity), comes to rest within v*timeout + v^2/(2a), and then faults with the
+// communication-loss code; the targets of a master that comes back are not followed
+// until a fault reset and enable.
+TEST(SimDrive, CommunicationWatchdogBrakesAtItsRateThenFaults) {
+  const drive::DriveProfile profile = sim_profile();
+  config::ServoSimAxisConfig sim;
+  sim.comm_timeout_s = 0.1;
+  sim.comm_stop_decel_mm_s2 = 2000;
+  SimDrive d("X", 1, profile, sim, 250.0, 0.0, 3000.0);
+  double now = 100.0;
+  d.step_to(now);
+  write_field(d, drive::Role::kControlword, 1);
+  d.after_request(now);
+  ASSERT_TRUE(d.follows());
+  const double v = 150.0, period = 0.001;
+  // A ramp up to 150 mm/s (1500 mm/s^2), then cruising; 0.3 s in all.
+  double x = 0, speed = 0;
+  for (int k = 1; k <= 300; ++k) {
+    now += period;
+    speed = std::min(v, speed + 1500 * period);
+    x += speed * period;
+    d.step_to(now);
+    write_field(d, drive::Role::kTargetPosition, x);
+    d.after_request(now);
+  }
+  const double silent_at = now;
+  const double x_silent = d.position_mm();
+  double prev_v = d.velocity_mm_s(), prev_demand = d.demand_mm(now), prev_demand_v = v;
+  double hardest = 0, hardest_demand = 0;
+  bool faulted = false;
+  double rest_at = 0;
+  for (int k = 1; k <= 2000 && !faulted; ++k) {
+    now += period;
+    d.step_to(now);
+    hardest = std::max(hardest, std::fabs(d.velocity_mm_s() - prev_v) / period);
+    const double dv = (d.demand_mm(now) - prev_demand) / period;
+    if (k > 1) hardest_demand = std::max(hardest_demand, std::fabs(dv - prev_demand_v) / period);
+    prev_v = d.velocity_mm_s();
+    prev_demand = d.demand_mm(now);
+    prev_demand_v = dv;
+    faulted = !d.follows();
+    if (faulted) rest_at = now;
+  }
+  ASSERT_TRUE(faulted) << "no fault after the quick stop";
+  EXPECT_TRUE(d.comm_faulted());
+  EXPECT_EQ(d.comm_trips(), 1);
+  EXPECT_NEAR(d.comm_stop_v0(), v, 1.0);
+  const double dist = d.position_mm() - x_silent;
+  const double bound = v * sim.comm_timeout_s + v * v / (2 * sim.comm_stop_decel_mm_s2);
+  EXPECT_GT(dist, 0.9 * bound);
+  EXPECT_LE(dist, bound + 0.05) << "stop distance against v*timeout + v^2/(2a)";
+  EXPECT_LE(hardest_demand, 2000 * 1.001) << "the demand brakes at the configured rate";
+  EXPECT_LE(hardest, 2000 * 1.15) << "the axis follows it (servo lag)";
+  EXPECT_LT(rest_at - silent_at, sim.comm_timeout_s + v / 2000 + 0.6);
+  EXPECT_EQ(d.emulator().state().error_code, SimDrive::kCommFaultCode);
+  // A master's target after the fault is not followed.
+  const double stood = d.position_mm();
+  write_field(d, drive::Role::kTargetPosition, stood + 50);
+  d.after_request(now);
+  for (int k = 1; k <= 200; ++k) d.step_to(now + k * period);
+  EXPECT_NEAR(d.position_mm(), stood, 1e-6);
+}
+
+// Off (the default): a silent master leaves the drive holding its last target, enabled.
+TEST(SimDrive, WithoutTheWatchdogASilentMasterOnlyStopsTheStream) {
+  const drive::DriveProfile profile = sim_profile();
+  config::ServoSimAxisConfig sim;
+  SimDrive d("X", 1, profile, sim, 250.0, 0.0, 3000.0);
+  double now = 100.0;
+  d.step_to(now);
+  write_field(d, drive::Role::kControlword, 1);
+  d.after_request(now);
+  write_field(d, drive::Role::kTargetPosition, 1.0);
+  d.after_request(now + 0.001);
+  for (int k = 1; k <= 3000; ++k) d.step_to(now + k * 0.001);
+  EXPECT_TRUE(d.follows());
+  EXPECT_EQ(d.comm_trips(), 0);
+  EXPECT_NEAR(d.position_mm(), 1.0, 1e-3);
+}
+
+}  // namespace
+}  // namespace cnc::servo_sim
