@@ -297,6 +297,7 @@ logger)
   "$CTL" --machine "$M" --do run --program "$WORK/many.ngc" --timeout 60 >"$WORK/ctl.out" 2>&1 &
   ctl_pid=$!
   wait_for "X past 60 mm (first row)" 30 x_over 60
+  wait_for "the logger's first LOGGER_STATS in its file" 10 grep -qa LOGGER_STATS "$WORK/cell.lcmlog"
   kill_hard logger
   log="$WORK/cell.lcmlog"
   sum_before=$(sha256sum <"$log")

@@ -56,7 +56,7 @@ TEST(PeerWatch, LostOnceBackOnceRestartedAndCleanStopsSilent) {
   ASSERT_EQ(a.size(), 1u);
   EXPECT_EQ(a[0].code, "peer_lost");
   EXPECT_EQ(a[0].source, "cnc-test");
-  EXPECT_EQ(a[0].severity, cnc::lcmt_alarm::WARNING);
+  EXPECT_EQ(a[0].severity, int8_t{cnc::lcmt_alarm::WARNING});
   EXPECT_NE(a[0].text.find("no heartbeat from cnc-a (pid 10"), std::string::npos) << a[0].text;
   EXPECT_TRUE(f.watch.lost(0));
   EXPECT_FALSE(f.watch.lost(1));
@@ -69,7 +69,7 @@ TEST(PeerWatch, LostOnceBackOnceRestartedAndCleanStopsSilent) {
   a = f.take();
   ASSERT_EQ(a.size(), 1u);
   EXPECT_EQ(a[0].code, "peer_back");
-  EXPECT_EQ(a[0].severity, cnc::lcmt_alarm::INFO);
+  EXPECT_EQ(a[0].severity, int8_t{cnc::lcmt_alarm::INFO});
   EXPECT_FALSE(f.watch.lost(0));
   // A new pid within the timeout: it restarted.
   f.watch.on_heartbeat(heartbeat("cnc-a", 11, cnc::lcmt_heartbeat::RUNNING), 5.9);

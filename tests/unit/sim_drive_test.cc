@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <random>
 
 #include "common/drive/drive_profile.h"
@@ -205,6 +206,9 @@ TEST(SimDrive, CommunicationWatchdogBrakesAtItsRateThenFaults) {
   EXPECT_NEAR(d.comm_stop_v0(), v, 1.0);
   const double dist = d.position_mm() - x_silent;
   const double bound = v * sim.comm_timeout_s + v * v / (2 * sim.comm_stop_decel_mm_s2);
+  std::printf("# communication watchdog: %.3f mm from the last request (bound %.3f), demand braking %.1f mm/s^2, "
+              "axis %.1f mm/s^2, fault %.3f s after the last request\n",
+              dist, bound, hardest_demand, hardest, rest_at - silent_at);
   EXPECT_GT(dist, 0.9 * bound);
   EXPECT_LE(dist, bound + 0.05) << "stop distance against v*timeout + v^2/(2a)";
   EXPECT_LE(hardest_demand, 2000 * 1.001) << "the demand brakes at the configured rate";
@@ -216,7 +220,7 @@ TEST(SimDrive, CommunicationWatchdogBrakesAtItsRateThenFaults) {
   write_field(d, drive::Role::kTargetPosition, stood + 50);
   d.after_request(now);
   for (int k = 1; k <= 200; ++k) d.step_to(now + k * period);
-  EXPECT_NEAR(d.position_mm(), stood, 1e-6);
+  EXPECT_NEAR(d.position_mm(), stood, 1e-4);  // the last of the braking (under 0.01 mm/s) only
 }
 
 // Off (the default): a silent master leaves the drive holding its last target, enabled.
