@@ -56,16 +56,16 @@ void ProgramServerNode::on_interp_state(const cnc::lcmt_interp_state& m) {
     }
     publish_state(true);
   }
-  if (restored_ && !fault && core_.loaded() && m.program_token != core_.token() &&
-      (state_ == S::RUNNING || state_ == S::HELD)) {
-    // Reloaded after a restart, but the interpolator runs another program or none.
-    spdlog::info("the program loaded again from the state file is not running: stopped");
+  if (restored_ && !fault && core_.loaded() && m.program_token == core_.token() &&
+      (m.state == P::RUNNING || m.state == P::STARVED || m.state == P::HELD)) {
+    // Reloaded after a restart, and the interpolator still runs it: it is running.
+    spdlog::info("the interpolator runs the program loaded again from the state file: serving it");
     restored_ = false;
-    state_ = S::STOPPED;
+    state_ = m.state == P::HELD ? S::HELD : S::RUNNING;
+    start_s_ = -1e9;
     publish_state(true);
   }
   if (fault || !core_.loaded() || m.program_token != core_.token()) return;
-  if (m.state != P::IDLE) restored_ = false;
   int8_t next = state_;
   if (m.state == P::RUNNING || m.state == P::STARVED) {
     if (state_ == S::RUNNING || state_ == S::HELD) next = S::RUNNING;
@@ -254,11 +254,12 @@ void ProgramServerNode::use_state_file(const std::string& path) {
     return;
   }
   machine_position_ = start;
-  state_ = cnc::lcmt_program_state::RUNNING;  // until INTERP_STATE says otherwise
+  // Idle (a LOAD replaces it) until INTERP_STATE says the interpolator runs it; its
+  // blocks are served meanwhile (only an interpolator that runs it asks for them).
+  state_ = cnc::lcmt_program_state::IDLE;
   program_ready_ = false;
   restored_ = true;
-  start_s_ = util::monotonic_s();
-  spdlog::info("resumed {} from the state file {}: {} blocks (token {}), served to the interpolator that runs it",
+  spdlog::info("resumed {} from the state file {}: {} blocks (token {}), served to an interpolator that runs it",
                program, path, core_.num_blocks(), token);
 }
 

@@ -27,8 +27,8 @@ namespace cnc::pps {
 // program's path, token and start position there (atomically: a new file renamed
 // over the old), and a server that starts with that file loads the same program
 // again under the same token from the same start: the same blocks, served to the
-// interpolator that still runs it and asks for the blocks it lacks. It counts as
-// running until INTERP_STATE says otherwise (another program, or none: stopped).
+// interpolator that still runs it and asks for the blocks it lacks. The cell counts
+// as idle until INTERP_STATE says the interpolator runs it (then running).
 class ProgramServerNode {
  public:
   ProgramServerNode(const config::MachineConfig& cfg, bus::Bus& bus);
@@ -84,7 +84,7 @@ class ProgramServerNode {
   int64_t refusals_ = 0;
   service::BusHealth health_;
   std::string state_file_;
-  bool restored_ = false;  // loaded again from the state file; not yet seen running
+  bool restored_ = false;  // loaded again from the state file; not yet seen running (until a LOAD)
   void write_state_file() const;
 };
 

@@ -20,7 +20,9 @@
 #include "cnc/lcmt_block_request.hpp"
 #include "cnc/lcmt_program_block.hpp"
 #include "cnc/lcmt_program_command.hpp"
+#include "cnc/lcmt_interp_state.hpp"
 #include "cnc/lcmt_program_state.hpp"
+#include "cnc/lcmt_setpoint.hpp"
 #include "common/bus/bus.h"
 #include "common/config/machine_config.h"
 #include "common/program/block_msg.h"
@@ -516,6 +518,75 @@ TEST_F(NodeTest, AFileChangedUnderTheServerIsWithdrawn) {
   blocks_.clear();
   request(loaded.program_token, 0, 32);
   EXPECT_TRUE(blocks_.empty());
+}
+
+}  // namespace
+}  // namespace cnc::pps
+
+namespace cnc::pps {
+namespace {
+
+// A killed server restarted with the same state file: the same program under the
+// same token from the same start, the same blocks byte for byte; idle until the
+// interpolator says it runs it, and a LOAD replaces it.
+TEST_F(NodeTest, ARestartedServerServesTheSameBlocksFromItsStateFile) {
+  TempDir dir;
+  const fs::path file = dir / "p.ngc";
+  write(file, mixed_program(4));
+  const std::string state = (dir / "pps.state").string();
+  std::vector<cnc::lcmt_program_block> first;
+  int64_t token = 0;
+  {
+    ProgramServerNode node(cfg_, bus_);
+    node.use_state_file(state);
+    cnc::lcmt_interp_state at{};  // the machine stands off home: the start of the program
+    at.num_axes = 3;
+    at.position_mm = {12.5, -1.25, -3.0};
+    at.program_token = 0;
+    bus_.publish(cfg_.channel(config::channels::kInterpState), at);
+    pump();
+    command(cnc::lcmt_program_command::LOAD, file.string());
+    ASSERT_EQ(states_.back().state, int8_t{cnc::lcmt_program_state::LOADED}) << states_.back().error;
+    token = states_.back().program_token;
+    request(token, 0, 32);
+    first = blocks_;
+    ASSERT_EQ(first.size(), 32u);
+  }
+  ASSERT_TRUE(fs::exists(state));
+  blocks_.clear();
+  states_.clear();
+  ProgramServerNode again(cfg_, bus_);
+  again.use_state_file(state);
+  again.publish_state(true);
+  pump();
+  ASSERT_FALSE(states_.empty());
+  EXPECT_EQ(states_.back().program_token, token);
+  EXPECT_EQ(states_.back().state, int8_t{cnc::lcmt_program_state::IDLE}) << "idle until the interpolator runs it";
+  request(token, 0, 32);
+  ASSERT_EQ(blocks_.size(), first.size());
+  for (size_t k = 0; k < first.size(); ++k) {
+    auto a = first[k], b = blocks_[k];
+    a.utime = b.utime = 0;
+    a.seq = b.seq = 0;
+    a.sender = b.sender = 0;
+    std::vector<uint8_t> ea(static_cast<size_t>(a.getEncodedSize())), eb(static_cast<size_t>(b.getEncodedSize()));
+    a.encode(ea.data(), 0, static_cast<int>(ea.size()));
+    b.encode(eb.data(), 0, static_cast<int>(eb.size()));
+    EXPECT_EQ(ea, eb) << "block " << k;
+  }
+  // The interpolator reports it running: so is the cell.
+  cnc::lcmt_interp_state run{};
+  run.num_axes = 3;
+  run.position_mm = {12.5, -1.25, -3.0};
+  run.program_token = token;
+  run.state = cnc::lcmt_setpoint::STARVED;
+  bus_.publish(cfg_.channel(config::channels::kInterpState), run);
+  pump();
+  EXPECT_EQ(states_.back().state, int8_t{cnc::lcmt_program_state::RUNNING});
+  // A malformed state file is ignored.
+  write(fs::path(state), "nonsense\n");
+  ProgramServerNode third(cfg_, bus_);
+  third.use_state_file(state);
 }
 
 }  // namespace
