@@ -18,8 +18,13 @@ constexpr double kRateSlewPerTick = 0.002;
 // The jitter buffer: the playback trails the newest setpoint by two periods on
 // average, so a setpoint may come 1.5 periods late (plus one bridged) unnoticed.
 constexpr double kLeadCycles = 2.0;
-// The most a stalled link's hold may let the newest setpoint lead the playback.
-constexpr double kMaxHoldLead = 24.0;
+// The most a stalled link's hold may let the newest setpoint lead the playback:
+// 4 cycles over the usual lead (16 ms at T_ipo = 4 ms). The lag a hold adds is made
+// up only at the playback's 5 % over real time (and not at all at an axis's velocity
+// limit); a link that is slow again and again (a drive emulated in Python) would
+// otherwise pile up lag until the end of a program came 100 ms late, and a stop of
+// the interpolator right after it ended the path short of its end point.
+constexpr double kMaxHoldLead = kLeadCycles + 4.0;
 // The limiter's feedback, nested loops (position -> velocity -> acceleration ->
 // jerk). Small errors: linear gains, each loop four times slower than the one
 // inside it (poles near -20, -80 (double) 1/s at T_servo = 1 ms: no overshoot).

@@ -66,7 +66,8 @@ class BridgeCore {
   // tick has not reached them): the playback stands still, so the drives receive
   // the commands one tick after another when the link moves again, instead of a
   // jump over the ticks it missed. Allowed only while following a stream normally
-  // and while the lag it adds keeps the playback within the setpoint buffer;
+  // and while the newest setpoint leads the playback by at most 4 cycles over the
+  // usual lead (the lag it adds must be made up);
   // returns false (and does nothing) otherwise: the caller ticks instead.
   bool hold();
   // Faults: a controlled stop from the current motion, then kStopped. The first reason stays.
