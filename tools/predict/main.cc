@@ -201,6 +201,7 @@ int cmd_zmap_check(const Args& a) {
     if (std::abs(z - model) > std::abs(worst_case)) worst_case = z - model;
     if (k.alpha == 0.0 && k.ft == fp) write_surface(dir + "/surface_alpha0.csv", m, 0.0, std::max(1, m.nx() / 400));
     if (k.alpha == 10.0) write_surface(dir + "/surface_alpha10.csv", m, k.alpha * kDeg, std::max(1, m.nx() / 400));
+    if (k.alpha == ac) write_surface(dir + "/surface_alphac.csv", m, k.alpha * kDeg, std::max(1, m.nx() / 400));
   }
   const double amax = a.num("grid-alpha-max", 20.0), astep = a.num("grid-alpha-step", 1.0);
   for (double al = 0.0; al <= amax + 1e-9; al += astep) {

@@ -2,8 +2,11 @@
 """Plots of `cnc-predict zmap-check --out DIR` (seed 000's Z-map check).
 
   plot_zmap.py DIR   ->  DIR/zmap_vs_model.png   R_max over α: Z-map points, extended model lines,
-                                                 and the difference map over (α, f_t)
-                         DIR/zmap_surfaces.png   the simulated surfaces at α = 0° and 10° (f_t = f_p)
+                                                 the difference map over (α, f_t), and (when
+                                                 DIR/converge.txt holds `cnc-predict-bench
+                                                 zmap-converge`'s output) the α_c case's
+                                                 difference against the grid pitch
+                         DIR/zmap_surfaces.png   the simulated surfaces at α = 0°, α_c and 10° (f_t = f_p)
 """
 import csv
 import math
@@ -54,7 +57,17 @@ def main():
     grid = read_grid(d / "rmax_grid.csv")
     cases = list(csv.DictReader(open(d / "rmax_cases.csv")))
     fts = sorted({r["ft_mm"] for r in grid})
-    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(14, 5.5))
+    conv = d / "converge.txt"
+    conv_rows = []
+    if conv.exists():
+        for line in open(conv):
+            if "step_deg=0.50 pitch_um=" in line:
+                kv = dict(w.split("=") for w in line.split() if "=" in w)
+                conv_rows.append((float(kv["pitch_um"]), float(kv["diff_um"])))
+    if conv_rows:
+        fig, (ax, ax2, ax3) = plt.subplots(1, 3, figsize=(19, 5.5), gridspec_kw={"width_ratios": [1.2, 1.2, 0.8]})
+    else:
+        fig, (ax, ax2) = plt.subplots(1, 2, figsize=(14, 5.5))
     cmap = plt.get_cmap("viridis")
     for n, ft in enumerate(fts):
         pts = sorted((r["alpha_deg"], r["zmap_um"], r["model_um"]) for r in grid if r["ft_mm"] == ft)
@@ -83,12 +96,22 @@ def main():
     ax2.set_xlabel("α [deg]")
     ax2.set_ylabel("f_t [mm]")
     ax2.set_title(f"difference map, largest |Δ| = {vmax:.2f} µm (paper: 1.8 µm)")
+    if conv_rows:
+        conv_rows.sort()
+        ax3.semilogx([p for p, _ in conv_rows], [v for _, v in conv_rows], "o-", color="C3")
+        ax3.axhline(1.8, color="k", ls="--", lw=1, label="paper's largest error, 1.8 µm")
+        ax3.set_xlabel("Z-map pitch [µm]")
+        ax3.set_ylabel("Z-map − model at α = 4.34° ≈ α_c, f_t = f_p [µm]")
+        ax3.set_title("the α_c case against the grid pitch\n(edge rotation step 0.1–2°: same to 0.001 µm)")
+        ax3.grid(alpha=0.3, which="both")
+        ax3.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(d / "zmap_vs_model.png", dpi=110)
 
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5.5))
+    fig, axes = plt.subplots(1, 3, figsize=(19, 5.5))
     for ax, name, title in ((axes[0], "surface_alpha0.csv", "α = 0°, f_t = f_p (tip's cutting remains)"),
-                            (axes[1], "surface_alpha10.csv", "α = 10°, f_t = f_p (feed marks and cusps)")):
+                            (axes[1], "surface_alphac.csv", "α = α_c = 4.34°, f_t = f_p (model 10.7 µm)"),
+                            (axes[2], "surface_alpha10.csv", "α = 10°, f_t = f_p (feed marks and cusps)")):
         p = d / name
         if not p.exists():
             continue
@@ -98,6 +121,11 @@ def main():
         fig.colorbar(im, ax=ax, label="deviation from the nominal plane [µm]")
         flat = [v for row in m for v in row]
         ax.set_title(f"{title}\nR_max = {max(flat) - min(flat):.2f} µm")
+        hi = max(range(len(flat)), key=flat.__getitem__)
+        ax.plot((hi % nx + 0.5) * pitch, (hi // nx + 0.5) * pitch, "r^", ms=9, label="highest point")
+        for yp in (0.0, 0.5, 1.0):
+            ax.axhline(yp, color="w", lw=0.6, ls=":")
+        ax.legend(fontsize=7, loc="upper right")
         ax.set_xlabel("x (feed) [mm]")
         ax.set_ylabel("y (pick) [mm]")
     fig.tight_layout()
