@@ -98,7 +98,7 @@ int bench_zmap_converge() {
     k.pitch_mm = pitch_um * 1e-3;
     double z = 0;
     const double d = diff(k, &z);
-    std::printf("zmap-converge: alpha=4.34 step_deg=0.50 pitch_um=%6.2f zmap_um=%.3f diff_um=%.3f\n", pitch_um, z, d);
+    std::printf("zmap-converge: alpha=4.34 step_deg=0.50 pitch_um=%.2f zmap_um=%.3f diff_um=%.3f\n", pitch_um, z, d);
   }
   for (double step_deg : {2.0, 1.0, 0.5, 0.25, 0.1}) {
     InclinedPlaneCase k = c;
