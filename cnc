@@ -158,9 +158,10 @@ cmd_up() {
     [ "$s" = servo-sim ] && [ -n "$final_state" ] && args+=(--final-state "$final_state")
     [ "$s" = servo-sim ] && [ -n "$sim_trace" ] && args+=(--trace "$sim_trace")
     # The loaded program survives a restart of the program server (README, Killed
-    # processes): its state file in $CNC_STATE_DIR (default runs/).
+    # processes): its state file beside the machine config (like its key; git-ignored),
+    # or in $CNC_STATE_DIR.
     if [ "$s" = program-server ]; then
-      local sdir="${CNC_STATE_DIR:-$ROOT/runs}"
+      local sdir="${CNC_STATE_DIR:-$(dirname "$machine")}"
       mkdir -p "$sdir" && args+=(--state "$sdir/$(basename "$machine" .yaml).program-server.state")
     fi
     "$BUILD/${EXE[$s]}" "${args[@]}" &
