@@ -74,17 +74,18 @@ def main():
         fig.savefig(d / "deflection.png", dpi=100)
         imgs.append(("Deflection, surface error and engagement from the stock", "deflection.png"))
     m, meta = read_matrix(d / "stock.csv")
-    fig, ax = plt.subplots(figsize=(9, 7))
     p = meta.get("pitch_mm", 1.0)
     x0, y0 = meta.get("x0", 0.0), meta.get("y0", 0.0)
     ny, nx = len(m), len(m[0])
+    # the figure's height follows the stock's aspect, so the colour bars span the map, not a tall empty frame
+    fig, ax = plt.subplots(figsize=(11, min(9.0, max(3.5, 7.5 * ny / nx + 1.0))))
     im = ax.imshow(m, origin="lower", extent=(x0, x0 + nx * p, y0, y0 + ny * p), cmap="gray", aspect="equal")
-    fig.colorbar(im, ax=ax, label="stock z [mm]")
+    fig.colorbar(im, ax=ax, label="stock z [mm]", fraction=0.04, pad=0.1)
     if flat:
         fr = [r for r in rows if r["final_wall"] == "1"]
         sc = ax.scatter([float(r["x_mm"]) for r in fr], [float(r["y_mm"]) for r in fr], s=3,
                         c=[1e3 * float(r["surface_error_mm"]) for r in fr], cmap="coolwarm")
-        fig.colorbar(sc, ax=ax, label="surface error [µm]")
+        fig.colorbar(sc, ax=ax, label="surface error [µm]", fraction=0.04, pad=0.02)
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("y [mm]")
     fig.tight_layout()
