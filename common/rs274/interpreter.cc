@@ -563,6 +563,7 @@ void Interpreter::skip_to(const std::string& name, uint32_t kinds) {
   const bool defining = kinds == kbit(OKind::kEndsub);
   for (;;) {
     if (!read_line()) fail(0, "o<" + name + "> opened at line " + std::to_string(from_line) + " has no matching end");
+    ++lines_executed_;  // a skipped line is read and lexed too: it counts against the caller's bound
     try {
       lex_line(text_, line_);
     } catch (const Error&) {

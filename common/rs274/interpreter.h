@@ -65,6 +65,8 @@ class Interpreter {
   bool execute_next();
 
   bool ended() const { return ended_; }
+  // Lines read so far, executed or skipped (a loop that skips over a long block
+  // every iteration costs that block each time: the bound on this number bounds the work).
   int64_t lines_executed() const { return lines_executed_; }
   const std::vector<std::string>& file_names() const { return file_names_; }
   const Parameters& parameters() const { return params_; }
