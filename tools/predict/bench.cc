@@ -7,7 +7,8 @@
 //                             time, and the load average (other work on the machine)
 //   cnc-predict-bench zmap-converge  seed 000's α_c case (f_t = f_p = 0.5 mm, r 5, 2 flutes, 1×1 mm):
 //                             Z-map − model by grid pitch, by the edge's rotation step, and by α
-//                             around α_c (why the paper's 1.8 µm is not met there)
+//                             around α_c, and by the spindle phase between passes (why the
+//                             paper's 1.8 µm is not met there)
 //   cnc-predict-bench deflection  the wall's largest surface error over the paper's Table 2
 //                             ranges (RDC 0.5-2 mm, ADC 2-6 mm, 0.01-0.02 mm/tooth), its Al and S41C
 //   cnc-predict-bench calibration  coefficients recovered from synthetic noisy histories
@@ -106,6 +107,18 @@ int bench_zmap_converge() {
     double z = 0;
     const double d = diff(k, &z);
     std::printf("zmap-converge: alpha=4.34 pitch_um=2.50 step_deg=%.2f zmap_um=%.3f diff_um=%.3f\n", step_deg, z, d);
+  }
+  // The case's definition: the spindle phase from one pass to the next (the paper states none;
+  // 0 = every pass starts with the same phase; 180° repeats 0 with two flutes).
+  for (double a : {4.34, 10.0}) {
+    for (double phase = 0; phase < 180; phase += 15) {
+      InclinedPlaneCase k = c;
+      k.alpha_rad = a * kDeg;
+      k.pass_phase_rad = phase * kDeg;
+      double z = 0;
+      const double d = diff(k, &z);
+      std::printf("zmap-converge: pitch_um=2.50 alpha=%5.2f pass_phase_deg=%5.1f zmap_um=%.3f diff_um=%.3f\n", a, phase, z, d);
+    }
   }
   for (double a : {3.0, 3.5, 3.8, 4.0, 4.1, 4.2, 4.3, 4.34, 4.36, 4.4, 4.5, 4.6, 4.8, 5.0, 5.5, 6.0}) {
     InclinedPlaneCase k = c;

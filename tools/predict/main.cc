@@ -52,7 +52,7 @@ constexpr const char* kUsage =
     "--feed-per-tooth C [--discs M] [--model linear_edge|chip_thickness_law]\n"
     "       cnc-predict wall --tool FILE --material FILE --radial-depth AE --axial-depth A --feed-per-tooth C "
     "[--mode up|down] [--points N]\n"
-    "       cnc-predict zmap --alpha DEG --feed-per-tooth C [--pick-feed P] [--radius R] [--flutes N] [--window MM] "
+    "       cnc-predict zmap --alpha DEG --feed-per-tooth C [--pick-feed P] [--radius R] [--flutes N] [--pass-phase-deg D] [--window MM] "
     "[--pitch MM] [--threads N] [--out DIR]\n"
     "       cnc-predict zmap-check --out DIR [--pitch MM] [--threads N]\n"
     "       cnc-predict program --csv SETPOINTS --tool FILE [--material FILE] --out DIR [--program NGC] "
@@ -119,6 +119,7 @@ InclinedPlaneCase zmap_case(const Args& a) {
   c.window_x_mm = c.window_y_mm = a.num("window", 1.0);
   c.pitch_mm = a.num("pitch", 0.0025);
   c.max_step_rad = a.num("step-deg", 0.5) * kDeg;
+  c.pass_phase_rad = a.num("pass-phase-deg", 0.0) * kDeg;  // spindle phase added from one pass to the next
   c.threads = a.integer("threads", 2);
   if (!(c.radius_mm > 0) || c.flutes < 1 || !(c.pick_feed_mm > 0) || !(c.feed_per_tooth_mm > 0) || !(c.pitch_mm > 0) ||
       !(c.window_x_mm > 0))
