@@ -7,7 +7,7 @@
 //                             time, and the load average (other work on the machine)
 //   cnc-predict-bench zmap-converge  seed 000's α_c case (f_t = f_p = 0.5 mm, r 5, 2 flutes, 1×1 mm):
 //                             Z-map − model by grid pitch, by the edge's rotation step, and by α
-//                             around α_c, and by the spindle phase between passes (why the
+//                             around α_c, by window size, and by the spindle phase between passes (why the
 //                             paper's 1.8 µm is not met there)
 //   cnc-predict-bench deflection  the wall's largest surface error over the paper's Table 2
 //                             ranges (RDC 0.5-2 mm, ADC 2-6 mm, 0.01-0.02 mm/tooth), its Al and S41C
@@ -107,6 +107,13 @@ int bench_zmap_converge() {
     double z = 0;
     const double d = diff(k, &z);
     std::printf("zmap-converge: alpha=4.34 pitch_um=2.50 step_deg=%.2f zmap_um=%.3f diff_um=%.3f\n", step_deg, z, d);
+  }
+  for (double window_mm : {0.5, 1.0, 2.0, 3.0}) {  // the window's edges: the cut runs r beyond it anyway
+    InclinedPlaneCase k = c;
+    k.window_x_mm = k.window_y_mm = window_mm;
+    double z = 0;
+    const double d = diff(k, &z);
+    std::printf("zmap-converge: alpha=4.34 pitch_um=2.50 window_mm=%.1f zmap_um=%.3f diff_um=%.3f\n", window_mm, z, d);
   }
   // The case's definition: the spindle phase from one pass to the next (the paper states none;
   // 0 = every pass starts with the same phase; 180° repeats 0 with two flutes).
