@@ -222,6 +222,7 @@ MachineConfig read_machine(MapReader top) {
     b.link_loss_timeout_s = r.get_double("link_loss_timeout_s", b.link_loss_timeout_s, 0.001, 60.0);
     b.reconnect_min_s = r.get_double("reconnect_min_s", b.reconnect_min_s, 0.001, 60.0);
     b.reconnect_max_s = r.get_double("reconnect_max_s", b.reconnect_max_s, b.reconnect_min_s, 600.0);
+    b.lead_cycles = r.get_double("lead_cycles", b.lead_cycles, 1.5, 16.0);
     for (const auto& a : c.axes) {
       if (b.link_loss_timeout_s < a.drive.response_timeout_s)
         r.fail("link_loss_timeout_s", "must not be shorter than axis " + a.name + "'s drive.response_timeout_s");

@@ -30,6 +30,11 @@ struct DriveBridgeConfig {
   double link_loss_timeout_s = 0.25;  // a drive that answers nothing for this long has lost its link
   double reconnect_min_s = 0.1;       // back-off between attempts to reopen a lost link, doubling up to max
   double reconnect_max_s = 2.0;
+  // How many coarse cycles the fine interpolation plays behind the newest setpoint
+  // (the jitter buffer). 2 on a clean network; a lossy one with jitter wants 4: a run
+  // of three setpoints lost comes back with the next (each carries the three before
+  // it) before the playback needs them.
+  double lead_cycles = 2.0;
 };
 
 struct ServoSimAxisConfig {

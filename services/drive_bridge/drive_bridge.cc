@@ -17,14 +17,13 @@ constexpr double kRateMax = 1.05;
 constexpr double kRateSlewPerTick = 0.002;
 // The jitter buffer: the playback trails the newest setpoint by two periods on
 // average, so a setpoint may come 1.5 periods late (plus one bridged) unnoticed.
-constexpr double kLeadCycles = 2.0;
 // The most a stalled link's hold may let the newest setpoint lead the playback:
 // 4 cycles over the usual lead (16 ms at T_ipo = 4 ms). The lag a hold adds is made
 // up only at the playback's 5 % over real time (and not at all at an axis's velocity
 // limit); a link that is slow again and again (a drive emulated in Python) would
 // otherwise pile up lag until the end of a program came 100 ms late, and a stop of
 // the interpolator right after it ended the path short of its end point.
-constexpr double kMaxHoldLead = kLeadCycles + 4.0;
+constexpr double kMaxHoldOverLead = 4.0;
 // The limiter's feedback, nested loops (position -> velocity -> acceleration ->
 // jerk). Small errors: linear gains, each loop four times slower than the one
 // inside it (poles near -20, -80 (double) 1/s at T_servo = 1 ms: no overshoot).
@@ -51,7 +50,8 @@ std::string fmt(const char* f, auto... args) {
 BridgeCore::BridgeCore(const config::MachineConfig& cfg)
     : cfg_(cfg), n_(static_cast<int>(std::lround(cfg.ipo_period_s / cfg.servo_period_s))),
       servo_s_(cfg.servo_period_s), ipo_s_(cfg.ipo_period_s), naxes_(static_cast<int>(cfg.axes.size())),
-      lead_window_(std::min(n_, 128)), window_(std::clamp(n_, 1, kMaxWindow)) {}
+      lead_window_(std::min(n_, 128)), window_(std::clamp(n_, 1, kMaxWindow)),
+      lead_cycles_(cfg.drive_bridge.lead_cycles) {}
 
 void BridgeCore::engage(const AxisArray& hold_mm) {
   mode_ = Mode::kFollowing;
@@ -143,9 +143,9 @@ BridgeCore::Verdict BridgeCore::on_setpoint(int64_t cycle, const AxisArray& p) {
     // The axes' standstill is the stream's virtual previous point; playback
     // starts with the lead it keeps.
     push(Point{cycle - 1, cmd_, AxisArray{}});
-    tau_ = static_cast<double>(cycle) - kLeadCycles - 0.5;
-    lead_ring_.fill(kLeadCycles);
-    lead_sum_ = kLeadCycles * lead_window_;
+    tau_ = static_cast<double>(cycle) - lead_cycles_ - 0.5;
+    lead_ring_.fill(lead_cycles_);
+    lead_sum_ = lead_cycles_ * lead_window_;
     lead_i_ = 0;
   }
   push(Point{cycle, p, v});
@@ -155,9 +155,9 @@ BridgeCore::Verdict BridgeCore::on_setpoint(int64_t cycle, const AxisArray& p) {
     // takes the command from where the brake left it onto it within the limits.
     braking_ = false;
     ++rejoins_;
-    tau_ = static_cast<double>(cycle) - kLeadCycles;
-    lead_ring_.fill(kLeadCycles);
-    lead_sum_ = kLeadCycles * lead_window_;
+    tau_ = static_cast<double>(cycle) - lead_cycles_;
+    lead_ring_.fill(lead_cycles_);
+    lead_sum_ = lead_cycles_ * lead_window_;
     AxisArray on_path{};
     path_at(tau_, on_path);
     reset_smoothing(on_path);
@@ -305,9 +305,9 @@ void BridgeCore::limit_step(bool follow) {
 
 bool BridgeCore::hold() {
   if (mode_ != Mode::kFollowing || last_cycle_ < 0 || braking_) return false;
-  // The newest setpoint may lead τ by at most kMaxHoldLead cycles: the buffer keeps
+  // The newest setpoint may lead τ by at most kMaxHoldOverLead cycles over the usual lead: the buffer keeps
   // kPoints, and the lag a hold adds is made up only below the velocity limits.
-  if (static_cast<double>(last_cycle_) - tau_ > kMaxHoldLead) return false;
+  if (static_cast<double>(last_cycle_) - tau_ > (lead_cycles_ + kMaxHoldOverLead)) return false;
   // The watchdog counts on: a stream that stopped is not waited for.
   if (static_cast<double>(ticks_since_setpoint_ + 1) * servo_s_ > cfg_.setpoint_timeout_s) return false;
   ++ticks_since_setpoint_;
@@ -349,14 +349,14 @@ const AxisArray& BridgeCore::tick() {
     return cmd_;
   }
   // Playback rate from the buffer: the newest setpoint should lead τ by
-  // kLeadCycles on average (half a period more just after it arrives, half less
+  // lead_cycles_ on average (half a period more just after it arrives, half less
   // just before the next).
   const double lead = static_cast<double>(last_cycle_) - tau_;
   lead_sum_ += lead - lead_ring_[static_cast<size_t>(lead_i_)];
   lead_ring_[static_cast<size_t>(lead_i_)] = lead;
   lead_i_ = (lead_i_ + 1) % lead_window_;
   const double lead_avg = lead_sum_ / lead_window_;
-  double want = std::clamp(1.0 + 0.1 * (lead_avg - kLeadCycles), kRateMin, kRateMax);
+  double want = std::clamp(1.0 + 0.1 * (lead_avg - lead_cycles_), kRateMin, kRateMax);
   if (want > 1.0) {
     // Never faster than an axis's velocity limit.
     for (int a = 0; a < naxes_; ++a) {

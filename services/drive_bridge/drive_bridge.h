@@ -4,7 +4,7 @@
 // Modbus, no LCM, no clock, no allocation per tick; driven by servo ticks.
 //
 // The fine interpolation plays the coarse stream back on a clock of its own,
-// τ (in coarse cycles), 1.5 to 2.5 periods behind the newest setpoint: the
+// τ (in coarse cycles), drive_bridge.lead_cycles (2) ± 0.5 periods behind the newest setpoint: the
 // reference at τ is the straight line between the received setpoints around it, so
 // a missed setpoint (a gap in the cycle index) is bridged by the line between its
 // neighbours. The playback rate follows the buffer (0.90..1.05, slewed gently and
@@ -121,6 +121,7 @@ class BridgeCore {
   int naxes_;
   int lead_window_;  // ticks the lead is averaged over: one coarse period (at most 128)
   int window_;       // ticks of each moving average: one coarse period (at most 128)
+  double lead_cycles_;  // drive_bridge.lead_cycles: the usual lead of the newest setpoint over τ
   Mode mode_ = Mode::kIdle;
   std::array<Point, kPoints> points_{};
   int p_head_ = 0;

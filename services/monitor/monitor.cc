@@ -161,28 +161,38 @@ Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double
   constexpr int64_t kFeedWindowUs = 40'000;
   constexpr size_t kMaxFeedSamples = 64;
   const int n_axes = static_cast<int>(std::min(actual.size(), static_cast<size_t>(program::kMaxAxes)));
+  // A status older than the newest one (reordered on the network) is no new sample:
+  // the window keeps its samples and the feed its value. A jump back of more than a
+  // second (another sender, a clock set back) starts the window again.
+  bool reordered = false;
   if (recent_n_ > 0) {
     const Sample& last = recent(recent_n_ - 1);
-    if (utime <= last.utime || last.naxes != n_axes) recent_n_ = 0;
+    if (last.naxes != n_axes || utime < last.utime - 1'000'000) {
+      recent_n_ = 0;
+    } else if (utime <= last.utime) {
+      reordered = true;
+    }
   }
-  if (recent_n_ == kRecent) {  // full: the oldest goes
-    recent_head_ = (recent_head_ + 1) % kRecent;
-    --recent_n_;
+  if (!reordered) {
+    if (recent_n_ == kRecent) {  // full: the oldest goes
+      recent_head_ = (recent_head_ + 1) % kRecent;
+      --recent_n_;
+    }
+    {
+      Sample& s = recent_[(recent_head_ + recent_n_) % kRecent];
+      s.utime = utime;
+      s.cycle = cycle;
+      s.naxes = n_axes;
+      for (int i = 0; i < n_axes; ++i) s.pos[i] = actual[static_cast<size_t>(i)];
+      ++recent_n_;
+    }
+    while (recent_n_ > 2 && (recent_n_ > kMaxFeedSamples || utime - recent(1).utime >= kFeedWindowUs)) {
+      recent_head_ = (recent_head_ + 1) % kRecent;
+      --recent_n_;
+    }
+    tracking_ratio_ = 1.0;
   }
-  {
-    Sample& s = recent_[(recent_head_ + recent_n_) % kRecent];
-    s.utime = utime;
-    s.cycle = cycle;
-    s.naxes = n_axes;
-    for (int i = 0; i < n_axes; ++i) s.pos[i] = actual[static_cast<size_t>(i)];
-    ++recent_n_;
-  }
-  while (recent_n_ > 2 && (recent_n_ > kMaxFeedSamples || utime - recent(1).utime >= kFeedWindowUs)) {
-    recent_head_ = (recent_head_ + 1) % kRecent;
-    --recent_n_;
-  }
-  tracking_ratio_ = 1.0;
-  if (recent_n_ >= 2) {
+  if (!reordered && recent_n_ >= 2) {
     const Sample& a = recent(0);
     double d2 = 0;
     for (int i = 0; i < n_axes; ++i) d2 += (actual[static_cast<size_t>(i)] - a.pos[i]) * (actual[static_cast<size_t>(i)] - a.pos[i]);
@@ -225,7 +235,11 @@ Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double
 
   // Feed and inclination where the commanded path was in the middle of the window.
   const int64_t window_cycles = recent_n_ >= 2 ? cycle - recent(0).cycle : 0;
-  const SetpointIn* mid_p = setpoint_at(cycle - window_cycles / 2);
+  // A setpoint lost on the way: the nearest one received (within two cycles).
+  const SetpointIn* mid_p = nullptr;
+  for (int64_t d : {0, -1, 1, -2, 2}) {
+    if ((mid_p = setpoint_at(cycle - window_cycles / 2 + d)) != nullptr) break;
+  }
   const SetpointIn& mid = mid_p != nullptr ? *mid_p : sp;
   const Known* k = find(mid.program_token, mid.block_index);
   if (k != nullptr) {

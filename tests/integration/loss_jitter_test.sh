@@ -21,6 +21,10 @@ WORK="$(mktemp -d /tmp/cnc-loss-jitter.XXXXXX)"
 trap 'cleanup' EXIT
 M="$WORK/machine.yaml"
 make_machine "$SRC/config/machines/sim3.yaml" "$M"
+# A lossy network with jitter: the bridge plays LEAD_CYCLES (default 4) behind the
+# newest setpoint, so a run of three lost comes back before the playback needs it.
+sed -i "s/^drive_bridge:/drive_bridge:\n  lead_cycles: ${LEAD_CYCLES:-4}/" "$M"
+grep -q "^  lead_cycles: " "$M" || fail "no drive_bridge section in $M"
 # End point: X 61.2345 Y 32.1 Z -1.5 (loss_test.sh's program).
 cat >"$WORK/loss.ngc" <<'NGC'
 G21 G90 G17
