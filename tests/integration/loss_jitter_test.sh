@@ -25,23 +25,8 @@ make_machine "$SRC/config/machines/sim3.yaml" "$M"
 # newest setpoint, so a run of three lost comes back before the playback needs it.
 sed -i "s/^drive_bridge:/drive_bridge:\n  lead_cycles: ${LEAD_CYCLES:-4}/" "$M"
 grep -q "^  lead_cycles: " "$M" || fail "no drive_bridge section in $M"
-# End point: X 61.2345 Y 32.1 Z -1.5 (loss_test.sh's program).
-cat >"$WORK/loss.ngc" <<'NGC'
-G21 G90 G17
-G0 X10 Y10 Z2
-G1 Z-1 F900
-G1 X60 Y10 F3000
-G3 X60 Y40 R15
-G2 X40 Y40 Z-1.5 I-10 J0 F2400
-G1 X20 Y30
-G5.2 X30 Y20 P1 L4 F2000
-X40 Y35 P1
-X50 Y20 P1
-X61.2345 Y32.1 P1
-G5.3
-G4 P0.05
-M30
-NGC
+# Lines, arcs (one a helix) and a cubic NURBS. End point: X 61.2345 Y 32.1 Z -1.5
+cp "$SRC/tests/integration/loss_program.ngc" "$WORK/loss.ngc"
 
 netns_host a lo
 netns_host b lo
