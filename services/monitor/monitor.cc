@@ -162,15 +162,21 @@ Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double
   constexpr size_t kMaxFeedSamples = 64;
   const int n_axes = static_cast<int>(std::min(actual.size(), static_cast<size_t>(program::kMaxAxes)));
   // A status older than the newest one (reordered on the network) is no new sample:
-  // the window keeps its samples and the feed its value. A jump back of more than a
-  // second (another sender, a clock set back) starts the window again.
+  // the window keeps its samples and the feed its value. One whose setpoint cycle has
+  // not advanced (the bridge's playback held or slowed) updates the actual feed but
+  // keeps the tracking ratio: the commanded stretch would stay while the actual one
+  // grows, and their ratio read as overspeed. A jump back of more than a second
+  // (another sender, a clock set back) starts the window again.
   bool reordered = false;
+  bool cycle_stood = false;  // a new sample for the actual feed, but no new tracking ratio
   if (recent_n_ > 0) {
     const Sample& last = recent(recent_n_ - 1);
     if (last.naxes != n_axes || utime < last.utime - 1'000'000) {
       recent_n_ = 0;
     } else if (utime <= last.utime) {
       reordered = true;
+    } else if (cycle <= last.cycle) {
+      cycle_stood = true;
     }
   }
   if (!reordered) {
@@ -190,7 +196,7 @@ Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double
       recent_head_ = (recent_head_ + 1) % kRecent;
       --recent_n_;
     }
-    tracking_ratio_ = 1.0;
+    if (!cycle_stood) tracking_ratio_ = 1.0;
   }
   if (!reordered && recent_n_ >= 2) {
     const Sample& a = recent(0);
@@ -203,7 +209,7 @@ Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double
     // The lag may be a fraction of a cycle: the commanded position between two
     // setpoints, linearly.
     motion::AxisVec q0{}, q1{};
-    if (commanded_at(static_cast<double>(a.cycle) - lag_cycles_, n_axes, &q0) &&
+    if (!cycle_stood && commanded_at(static_cast<double>(a.cycle) - lag_cycles_, n_axes, &q0) &&
         commanded_at(static_cast<double>(cycle) - lag_cycles_, n_axes, &q1)) {
       double c2 = 0;
       for (int i = 0; i < n_axes; ++i) {
