@@ -15,8 +15,9 @@ constexpr double kAccelTolerance = 1.05;
 constexpr double kRateMin = 0.90;
 constexpr double kRateMax = 1.05;
 constexpr double kRateSlewPerTick = 0.002;
-// The jitter buffer: the playback trails the newest setpoint by two periods on
-// average, so a setpoint may come 1.5 periods late (plus one bridged) unnoticed.
+// The jitter buffer is drive_bridge.lead_cycles (default 2): the playback trails the
+// newest setpoint by that many periods on average, so a setpoint may come up to that
+// less half a period late (plus one bridged) unnoticed.
 // The most a stalled link's hold may let the newest setpoint lead the playback:
 // 4 cycles over the usual lead (16 ms at T_ipo = 4 ms). The lag a hold adds is made
 // up only at the playback's 5 % over real time (and not at all at an axis's velocity

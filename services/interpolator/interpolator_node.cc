@@ -448,7 +448,7 @@ void InterpolatorNode::run_cycle() {
   out.position_mm.assign(sp.position_mm.begin(), sp.position_mm.begin() + sp.num_axes);
   // The setpoints of the cycles just before, newest first, as far as they run
   // unbroken up to this one: a receiver that lost them gets them back exactly.
-  const int na = std::min(sp.num_axes, 16);
+  const int na = std::min(sp.num_axes, program::kMaxAxes);
   int have = 0;
   out.prev_position_mm.resize(static_cast<size_t>(kSetpointHistory * na));
   for (int j = 1; j <= kSetpointHistory; ++j) {

@@ -127,7 +127,7 @@ class InterpolatorNode {
   static constexpr int kSetpointHistory = 3;
   struct PastSetpoint {
     int64_t cycle = -1;
-    std::array<double, 16> pos{};
+    std::array<double, program::kMaxAxes> pos{};
   };
   std::array<PastSetpoint, kSetpointHistory> past_{};
   int past_head_ = 0;

@@ -69,8 +69,7 @@ LoggerNode::LoggerNode(const config::MachineConfig& cfg, bus::Bus& bus, LogWrite
                        }
                        const int64_t dropped = writer_.dropped();
                        writer_.write(channel, data, size, recv_utime);
-                       if (writer_.dropped() == dropped && channel.size() >= 12 &&
-                           channel.compare(channel.size() - 12, 12, "INTERP_INPUT") == 0)
+                       if (writer_.dropped() == dropped && channel.ends_with("INTERP_INPUT"))
                          note_input(data, size);
                      });
 }

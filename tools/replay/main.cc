@@ -124,7 +124,7 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
     while (bus.handle(1000) > 0) {
     }
     for (const auto& [ch, st] : bus.stats()) {
-      if (ch.size() >= 12 && ch.compare(ch.size() - 12, 12, "INTERP_INPUT") == 0 && st.decode_failures > 0) {
+      if (ch.ends_with("INTERP_INPUT") && st.decode_failures > 0) {
         std::fprintf(stderr, "cnc-replay: %lld undecodable inputs on %s\n", static_cast<long long>(st.decode_failures),
                      ch.c_str());
         return kExitUnreplayable;
