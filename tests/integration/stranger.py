@@ -67,6 +67,9 @@ def attack(a):
     rx.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP,
                   socket.inet_aton(a.group) + socket.inet_aton("0.0.0.0"))
     rx.settimeout(0.05)
+    # The test starts the program only after this line: a START sent before the
+    # group was joined would never be seen (Python's start-up is slow on a loaded VM).
+    print("stranger: listening", flush=True)
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM, socket.IPPROTO_UDP)
     tx.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
     tx.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)

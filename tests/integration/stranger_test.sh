@@ -56,7 +56,8 @@ sleep 0.5
 python3 "$SRC/tests/integration/stranger.py" attack --port "$TEST_LCM_PORT" --prefix "$TEST_PREFIX" --py "$WORK/py" \
   --out "$WORK/sent.json" >"$WORK/stranger.out" 2>&1 &
 stranger=$!
-sleep 0.3
+for ((i = 0; i < 200; i++)); do grep -q "^stranger: listening" "$WORK/stranger.out" 2>/dev/null && break; sleep 0.05; done
+grep -q "^stranger: listening" "$WORK/stranger.out" || { cat "$WORK/stranger.out" >&2; fail "the stranger did not start listening within 10 s"; }
 "$BUILD/tools/cnc-ctl" --machine "$M" --do run --program "$WORK/part.ngc" --timeout 60 >"$WORK/ctl.out" 2>&1 &
 ctl=$!
 rc=0; wait "$stranger" || rc=$?
