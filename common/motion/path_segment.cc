@@ -57,8 +57,15 @@ PathSegment::PathSegment(const program::Block& b, int num_axes) : kind_(b.kind),
       break;
     }
     case program::BlockKind::kNurbs: {
+      // Control points relative to the first one: the derivatives (A4.2 subtracts
+      // terms of the size of the coordinates) then lose digits to the curve's size,
+      // not to the machine's (near a vanishing tangent, hundreds of mm of cancellation
+      // left a tangent of 1e-14 mm and a curvature of 1e60 at a doubled end point).
+      if (!b.nurbs.control_points.empty())
+        for (int a = 0; a < 3; ++a) origin_[a] = b.nurbs.control_points.front()[static_cast<size_t>(a)];
       std::vector<geometry::Vec3> ctrl;
-      for (const auto& c : b.nurbs.control_points) ctrl.emplace_back(c[0], c[1], c[2]);
+      for (const auto& c : b.nurbs.control_points)
+        ctrl.emplace_back(c[0] - origin_[0], c[1] - origin_[1], c[2] - origin_[2]);
       nurbs_ = std::make_unique<geometry::NurbsCurve>(b.nurbs.order, b.nurbs.knots, ctrl, b.nurbs.weights);
       u0_ = nurbs_->u_min();
       u1_ = nurbs_->u_max();
@@ -104,7 +111,7 @@ void PathSegment::eval(double u, AxisVec* p, AxisVec* d1, AxisVec* d2) const {
         (*d2)[a] = 0;
       }
       for (int a = 0; a < 3; ++a) {
-        (*p)[a] = d[0][a];
+        (*p)[a] = origin_[a] + d[0][a];
         (*d1)[a] = d[1][a];
         (*d2)[a] = d[2][a];
       }

@@ -54,7 +54,8 @@ class PathSegment {
   double cx_ = 0, cy_ = 0, radius_ = 0, theta0_ = 0, sweep_ = 0;
   double dradius_ = 0;  // end radius minus start radius: a spiral when not 0
   // NURBS: X Y Z from the curve (the first three axes), other axes held.
-  std::unique_ptr<geometry::NurbsCurve> nurbs_;
+  std::unique_ptr<geometry::NurbsCurve> nurbs_;  // control points relative to origin_
+  std::array<double, 3> origin_{};
 };
 
 }  // namespace cnc::motion

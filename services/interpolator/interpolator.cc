@@ -557,7 +557,17 @@ double Interpolator::advance(double ds, bool* reached_stop) {
         return std::sqrt(L2);
       };
       const double tol = 1e-9 * std::max(1.0, step);
-      if (!converged && !(std::fabs(chord(u) - step) <= tol)) {
+      // A chord of the step's length far along the curve (past a sharp turn or a
+      // near-cusp, where the curve comes back near where it was) is not the step:
+      // the arc length between the two, by the planner's table, must not exceed
+      // the step by more than the table's resolution. Else the first u forward is
+      // sought by bracketing as below.
+      bool past_turn = false;
+      if (converged && p.path.curved()) {
+        const double arc = s_on_table(p, u) - s_on_table(p, u_);
+        past_turn = arc > 1.5 * step + 1e-9;
+      }
+      if (past_turn || (!converged && !(std::fabs(chord(u) - step) <= tol))) {
         const double u_end = p.path.u_end();
         double lo = u_, h = std::max(du_table, 1e-12 * (u_end - p.path.u_begin()));
         double hi = std::min(u_ + h, u_end);
@@ -599,6 +609,19 @@ double Interpolator::advance(double ds, bool* reached_stop) {
     return ds;
   }
   return moved;
+}
+
+double Interpolator::s_on_table(const Planned& p, double u) {
+  // The inverse of u_on_table: arc length at u, linear between the samples around it.
+  const auto& sm = p.samples;
+  if (sm.empty()) return 0;
+  const auto hi = std::partition_point(sm.begin(), sm.end(), [&](const Sample& x) { return x.u < u; });
+  if (hi == sm.begin()) return sm.front().s;
+  if (hi == sm.end()) return sm.back().s;
+  const Sample& b = *hi;
+  const Sample& a = *(hi - 1);
+  const double f = b.u > a.u ? (u - a.u) / (b.u - a.u) : 1.0;
+  return a.s + (b.s - a.s) * f;
 }
 
 double Interpolator::u_on_table(const Planned& p, double s, double* du) {

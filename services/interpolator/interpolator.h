@@ -170,6 +170,8 @@ class Interpolator {
   double advance(double ds, bool* reached_stop);
   // u at arc length s from the planner's samples; *du: the u spacing of the two around s.
   static double u_on_table(const Planned& p, double s, double* du);
+  // Arc length at u from the planner's samples.
+  static double s_on_table(const Planned& p, double u);
   bool creep_to_stop();
 
   config::MachineConfig cfg_;

@@ -21,26 +21,70 @@ constexpr double kArcSamplesPerRad = 24.0;
 
 using motion::AxisVec;
 
-// Appends u0 and the points that refine (u0, u1) until the local speed limit v(u)
-// (chord error, roughness) changes by at most 0.5 % between neighbours, so that
-// interpolating it linearly between samples never overestimates it by more than
-// that. Limits above v_top cannot bind and are not refined. At most 8 levels.
-template <class Limit>
-void refine(double u0, double v0, double u1, double v1, const Limit& vlim, double v_top, int depth,
-            std::vector<double>* out) {
-  const double lo = std::min(v0, v1);
-  if (depth >= 8 || lo >= v_top) {
-    out->push_back(u0);
-    return;
-  }
+// What the refinement looks at in one parameter value: the local speed limit
+// (chord error, roughness), the point, the unit tangent and |P'|.
+struct Probe {
+  double v = 0;
+  double sp = 0;  // |P'|; 0 (or negligible) at a singular point, where t is unset
+  AxisVec p{}, t{};
+};
+
+// Appends u0 and the points that refine (u0, u1) until
+//   * the local speed limit v(u) changes by at most 0.5 % between neighbours, so
+//     that interpolating it linearly between samples never overestimates it by more
+//     than that (limits above v_top cannot bind and are not refined; at most 8
+//     levels), and
+//   * the curve is resolved: between neighbours the tangent turns by at most
+//     kMaxTurn and |P'| changes by at most a factor kMaxSpeedRatio (so a sharp turn
+//     or a near-cusp between two samples on straight stretches is not missed, and
+//     the arc length's quadrature holds where extreme weights crowd the curve into a
+//     small part of the parameter range), down to a chord of kMinChord mm or
+//     kMaxGeoDepth levels.
+constexpr double kMaxTurnCos = 0.984807753012208;  // cos 10°
+constexpr double kCornerTurnCos = 0.939692620785908;  // cos 20°: a turn left unresolved
+constexpr double kMaxSpeedRatio = 1.5;
+constexpr double kMinChord = 1e-7;
+constexpr int kMaxGeoDepth = 48;
+
+template <class ProbeFn>
+void refine(double u0, const Probe& a, double u1, const Probe& b, const ProbeFn& probe, double v_top, int n,
+            int depth, std::vector<double>* out) {
   const double um = 0.5 * (u0 + u1);
-  const double vm = vlim(um);
-  if (std::fabs(v1 - v0) <= 0.005 * lo && vm >= 0.995 * lo) {
+  if (!(um > u0 && um < u1)) {
     out->push_back(u0);
     return;
   }
-  refine(u0, v0, um, vm, vlim, v_top, depth + 1, out);
-  refine(um, vm, u1, v1, vlim, v_top, depth + 1, out);
+  const double lo = std::min(a.v, b.v);
+  bool need = false;
+  Probe m;
+  bool have_m = false;
+  if (depth < 8 && lo < v_top) {
+    m = probe(um);
+    have_m = true;
+    need = !(std::fabs(b.v - a.v) <= 0.005 * lo && m.v >= 0.995 * lo);
+  }
+  if (!need && depth < kMaxGeoDepth) {
+    double chord2 = 0;
+    for (int i = 0; i < n; ++i) chord2 += (b.p[i] - a.p[i]) * (b.p[i] - a.p[i]);
+    if (chord2 > kMinChord * kMinChord) {
+      if (!have_m) m = probe(um);
+      have_m = true;
+      auto turned = [n](const Probe& x, const Probe& y) {
+        if (!(x.sp > 0) || !(y.sp > 0)) return true;
+        double dot = 0;
+        for (int i = 0; i < n; ++i) dot += x.t[i] * y.t[i];
+        return dot < kMaxTurnCos;
+      };
+      const double sp_hi = std::max({a.sp, b.sp, m.sp}), sp_lo = std::min({a.sp, b.sp, m.sp});
+      need = turned(a, b) || turned(a, m) || turned(m, b) || !(sp_hi <= kMaxSpeedRatio * sp_lo);
+    }
+  }
+  if (!need) {
+    out->push_back(u0);
+    return;
+  }
+  refine(u0, a, um, m, probe, v_top, n, depth + 1, out);
+  refine(um, m, u1, b, probe, v_top, n, depth + 1, out);
 }
 
 double norm(const AxisVec& v, int n) {
@@ -192,6 +236,7 @@ void Planner::plan_block(Planned& p) {
   // then refined where the chord or roughness limit changes quickly.
   std::vector<double> us;
   const double u0 = p.path.u_begin(), u1 = p.path.u_end();
+  double sp_floor = 0;
   if (!curved) {
     us = {u0, u1};
   } else {
@@ -205,26 +250,40 @@ void Planner::plan_block(Planned& p) {
       for (int i = 0; i < n; ++i) grid.push_back(u0 + (u1 - u0) * i / n);
     }
     grid.push_back(u1);
-    auto vlim = [&](double u) {
-      AxisVec P{}, d1{}, d2{}, t{}, k{};
+    // |P'| under which a point counts as singular (a vanishing tangent): against
+    // the largest |P'| on the grid, far below any real variation of the speed.
+    for (double u : grid) {
+      AxisVec P{}, d1{}, d2{};
       p.path.eval(u, &P, &d1, &d2);
-      if (local_frame(d1, d2, naxes_, &t, &k) <= 0) return kInf;
+      sp_floor = std::max(sp_floor, norm(d1, naxes_));
+    }
+    sp_floor *= 1e-12;
+    auto probe = [&](double u) {
+      Probe r;
+      AxisVec d1{}, d2{}, k{};
+      p.path.eval(u, &r.p, &d1, &d2);
+      r.v = kInf;
+      r.sp = local_frame(d1, d2, naxes_, &r.t, &k);
+      if (r.sp <= sp_floor) {
+        r.sp = 0;
+        return r;
+      }
       const double kappa = norm(k, naxes_);
-      double v = kappa > 1e-12 ? geometry::chord_step_length(1.0 / kappa, eps) / period_s_ : kInf;
+      r.v = kappa > 1e-12 ? geometry::chord_step_length(1.0 / kappa, eps) / period_s_ : kInf;
       if (rough && naxes_ >= 3)
-        v = std::min(v, law.feed_mm_per_min(b.spindle_rpm,
-                                            process::feed_inclination_angle(Eigen::Vector3d(t[0], t[1], t[2]))) /
-                            60.0);
-      return v;
+        r.v = std::min(r.v, law.feed_mm_per_min(b.spindle_rpm, process::feed_inclination_angle(
+                                                                    Eigen::Vector3d(r.t[0], r.t[1], r.t[2]))) /
+                                60.0);
+      return r;
     };
     // Nothing above the fastest the block can go (1.5 × override) needs refining.
     double v_top = 1.5 * p.v_prog;
     for (int a = 0; a < naxes_; ++a) v_top = std::min(v_top, std::sqrt(3.0) * cfg_.axes[a].max_velocity_mm_s);
-    double va = vlim(grid[0]);
+    Probe pa = probe(grid[0]);
     for (size_t k = 0; k + 1 < grid.size(); ++k) {
-      const double vb = vlim(grid[k + 1]);
-      refine(grid[k], va, grid[k + 1], vb, vlim, v_top, 0, &us);
-      va = vb;
+      const Probe pb = probe(grid[k + 1]);
+      refine(grid[k], pa, grid[k + 1], pb, probe, v_top, naxes_, 0, &us);
+      pa = pb;
     }
     us.push_back(u1);
   }
@@ -236,6 +295,7 @@ void Planner::plan_block(Planned& p) {
   const size_t n = us.size();
   p.samples.assign(n, Sample{0, 0, kInf, Limit::kNone});
   std::vector<AxisVec> kvec(n);  // curvature vector d²P/ds²
+  std::vector<AxisVec> tvec(n);  // unit tangent (zero at a singular point)
   std::vector<double> v_chord(n, kInf);
   double v_rapid = p.v_prog;  // a rapid's speed: the least axis-velocity limit of its samples
   for (size_t i = 0; i < n; ++i) {
@@ -244,7 +304,11 @@ void Planner::plan_block(Planned& p) {
     AxisVec t{};
     Sample& smp = p.samples[i];
     smp.u = us[i];
-    if (local_frame(d1, d2, naxes_, &t, &kvec[i]) <= 0) continue;
+    if (local_frame(d1, d2, naxes_, &t, &kvec[i]) <= sp_floor) {
+      kvec[i] = AxisVec{};
+      continue;
+    }
+    tvec[i] = t;
     const double kappa = norm(kvec[i], naxes_);
     auto take = [&smp](double v, Limit why) {
       if (v < smp.v_geo) {
@@ -296,6 +360,24 @@ void Planner::plan_block(Planned& p) {
         smp.limit = Limit::kCurvatureAccel;
       }
     }
+  }
+  // A turn the refinement could not resolve (it stopped at its chord or depth floor:
+  // a near-cusp narrower than kMinChord) is taken like a corner between blocks.
+  for (size_t i = 0; curved && i + 1 < n; ++i) {
+    double dot = 0, n0 = 0, n1 = 0;
+    for (int a = 0; a < naxes_; ++a) {
+      dot += tvec[i][a] * tvec[i + 1][a];
+      n0 += tvec[i][a] * tvec[i][a];
+      n1 += tvec[i + 1][a] * tvec[i + 1][a];
+    }
+    if (!(n0 > 0 && n1 > 0) || dot >= kCornerTurnCos) continue;
+    bool stop = false;
+    const double v = std::max(corner_speed(tvec[i], tvec[i + 1], p.accel, &stop), 1e-3);
+    for (size_t k : {i, i + 1})
+      if (v < p.samples[k].v_geo) {
+        p.samples[k].v_geo = v;
+        p.samples[k].limit = Limit::kCurvatureAccel;
+      }
   }
   // The chord limit holds over a whole step, and the curvature may peak between
   // samples: each sample takes the least of its neighbours' chord limits.
@@ -360,25 +442,46 @@ void Planner::plan_junction(const Planned& prev, Planned& next) const {
   prev.path.eval(prev.path.u_end(), &P, &t0, &d2);
   next.path.eval(next.path.u_begin(), &P, &t1, &d2);
   // Where a curve's tangent vanishes at its end (a doubled first or last control
-  // point), its direction there is that of the curve just inside: a short chord.
+  // point, a degree-1 piece of no length), its direction there is that of the chord
+  // to where the curve is first a small distance away from the end.
   auto direction = [&](const motion::PathSegment& path, bool at_start, AxisVec* t) {
+    const double ua = at_start ? path.u_begin() : path.u_end();
     const double span = path.u_end() - path.u_begin();
     AxisVec q{}, e{}, f{};
-    path.eval(at_start ? path.u_begin() : path.u_end(), &q, &e, &f);
+    path.eval(ua, &q, &e, &f);
     const double speed = norm(e, naxes_);
-    AxisVec far{};
-    far = path.point(at_start ? path.u_begin() + 0.5 * span : path.u_end() - 0.5 * span);
-    double chord = 0;
-    for (int a = 0; a < naxes_; ++a) chord += (far[a] - q[a]) * (far[a] - q[a]);
-    if (speed * 0.5 * span > 1e-6 * std::sqrt(chord)) return;  // a proper tangent
-    const AxisVec in = path.point(at_start ? path.u_begin() + 1e-6 * span : path.u_end() - 1e-6 * span);
+    auto dist = [&](double u) {
+      const AxisVec x = path.point(u);
+      double sq = 0;
+      for (int a = 0; a < naxes_; ++a) sq += (x[a] - q[a]) * (x[a] - q[a]);
+      return std::sqrt(sq);
+    };
+    // A point away from the end (a curve may stand still over a part of its range).
+    double far_u = ua, chord = 0;
+    for (double frac : {0.5, 1.0, 0.25, 0.75}) {
+      far_u = at_start ? path.u_begin() + frac * span : path.u_end() - frac * span;
+      chord = dist(far_u);
+      if (chord > 0) break;
+    }
+    if (speed * 0.5 * span > 1e-6 * chord) return;  // a proper tangent
+    // The first u (from the end) at which the curve is delta away: bisection.
+    const double delta = 1e-6 * chord;
+    double lo = ua, hi = far_u;
+    if (!(dist(hi) >= delta) || !(delta > 0)) return;
+    for (int it = 0; it < 80; ++it) {
+      const double mid = 0.5 * (lo + hi);
+      if (mid == lo || mid == hi) break;
+      (dist(mid) >= delta ? hi : lo) = mid;
+    }
+    const AxisVec in = path.point(hi);
     for (int a = 0; a < naxes_; ++a) (*t)[a] = at_start ? in[a] - q[a] : q[a] - in[a];
   };
   direction(prev.path, false, &t0);
   direction(next.path, true, &t1);
   bool stop = false;
   const double v = corner_speed(t0, t1, std::min(prev.accel, next.accel), &stop);
-  next.v_entry = stop ? 0 : v;
+  // No direction found (a block that does not move away from its end): a stop.
+  next.v_entry = stop || !(norm(t0, naxes_) > 0 && norm(t1, naxes_) > 0) || std::isnan(v) ? 0 : v;
 }
 
 double Planner::corner_speed(const AxisVec& t0, const AxisVec& t1, double a_path, bool* stop) const {
