@@ -4,6 +4,7 @@
 #include <cmath>
 #include <functional>
 
+#include "common/geometry/nurbs.h"
 #include "common/geometry/polyline_fit.h"
 #include "common/program/block_check.h"
 
@@ -345,6 +346,147 @@ void BlockBuilder::arc_feed(const SourceRef& ref, double, double, double first_a
 
 namespace {
 
+// Cusps of a NURBS: parameters inside it where its tangent vanishes and reverses
+// (control points in a line that turn back, as on a face of the travel): the curve
+// comes to a point and goes back the way it came. Found where the tangent of two
+// neighbouring samples (64 per knot span) points apart, located by bisection on the
+// tangent's component along the direction before, and kept where the tangent
+// there is nil against the span's (a smooth tight turn keeps its tangent).
+std::vector<double> find_cusps(const program::NurbsGeometry& g) {
+  std::vector<double> out;
+  std::vector<geometry::Vec3> ctrl;
+  for (const auto& c : g.control_points)
+    ctrl.emplace_back(c[0] - g.control_points.front()[0], c[1] - g.control_points.front()[1],
+                      c[2] - g.control_points.front()[2]);
+  const geometry::NurbsCurve curve(g.order, g.knots, ctrl, g.weights);
+  const std::vector<double> bp = curve.breakpoints();
+  const double u_lo = curve.u_min(), u_hi = curve.u_max();
+  auto tangent = [&](double u) {
+    geometry::Vec3 d[2];
+    curve.derivatives(u, 1, d);
+    return d[1];
+  };
+  constexpr int kPerSpan = 64;
+  for (size_t k = 0; k + 1 < bp.size(); ++k) {
+    const double a = bp[k], b = bp[k + 1];
+    // Inside the span (a knot is a corner's place: split_at_corners' business).
+    geometry::Vec3 t0 = tangent(a + 1e-9 * (b - a));
+    double u0 = a, top = t0.norm();
+    for (int i = 1; i <= kPerSpan; ++i) {
+      const double u1 = i == kPerSpan ? b - 1e-9 * (b - a) : a + (b - a) * i / kPerSpan;
+      const geometry::Vec3 t1 = tangent(u1);
+      top = std::max(top, t1.norm());
+      if (t0.norm() > 0 && t1.norm() > 0 && t0.dot(t1) < 0) {
+        const geometry::Vec3 dir = t0.normalized();
+        double lo = u0, hi = u1;
+        for (int it = 0; it < 200; ++it) {
+          const double mid = 0.5 * (lo + hi);
+          if (mid <= lo || mid >= hi) break;
+          (tangent(mid).dot(dir) > 0 ? lo : hi) = mid;
+        }
+        const double uc = 0.5 * (lo + hi);
+        const double near_end = 1e-9 * (u_hi - u_lo);
+        if (tangent(uc).norm() <= 1e-6 * std::max(top, tangent(u0).norm()) && uc > u_lo + near_end &&
+            uc < u_hi - near_end && (out.empty() || uc > out.back()))
+          out.push_back(uc);
+      }
+      t0 = t1;
+      u0 = u1;
+    }
+  }
+  return out;
+}
+
+// Knot u inserted into g until its multiplicity is the degree (Boehm's insertion on
+// the homogeneous control points, The NURBS Book A5.1, one knot at a time): the
+// same curve, passing through a control point at u. Returns the index of u's first
+// copy in the knot vector.
+int insert_knot_to_degree(program::NurbsGeometry* g, double u) {
+  const int p = g->order - 1;
+  for (;;) {
+    std::vector<double>& U = g->knots;
+    const int n = static_cast<int>(g->control_points.size());
+    const int first = static_cast<int>(std::lower_bound(U.begin(), U.end(), u) - U.begin());
+    int mult = 0;
+    while (first + mult < static_cast<int>(U.size()) && U[static_cast<size_t>(first + mult)] == u) ++mult;
+    if (mult >= p) return first;
+    const int k = first - 1;  // U[k] < u < U[k+1] (or u == U[k+1..]: the span before its copies)
+    std::vector<std::array<double, 4>> q(static_cast<size_t>(n + 1));
+    auto pw = [&](int i) {
+      const auto& c = g->control_points[static_cast<size_t>(i)];
+      const double w = g->weights[static_cast<size_t>(i)];
+      return std::array<double, 4>{c[0] * w, c[1] * w, c[2] * w, w};
+    };
+    for (int i = 0; i <= n; ++i) {
+      if (i <= k - p) {
+        q[static_cast<size_t>(i)] = pw(i);
+      } else if (i > k) {
+        q[static_cast<size_t>(i)] = pw(i - 1);
+      } else {
+        const double alpha =
+            (u - U[static_cast<size_t>(i)]) / (U[static_cast<size_t>(i + p)] - U[static_cast<size_t>(i)]);
+        const auto A = pw(i), B = pw(i - 1);
+        for (int c = 0; c < 4; ++c) q[static_cast<size_t>(i)][static_cast<size_t>(c)] = alpha * A[c] + (1 - alpha) * B[c];
+      }
+    }
+    const std::vector<std::array<double, 3>> old_pts = g->control_points;
+    U.insert(U.begin() + first, u);
+    g->control_points.resize(static_cast<size_t>(n + 1));
+    g->weights.resize(static_cast<size_t>(n + 1));
+    for (int i = 0; i <= n; ++i) {
+      const auto& h = q[static_cast<size_t>(i)];
+      g->weights[static_cast<size_t>(i)] = h[3];
+      auto& c = g->control_points[static_cast<size_t>(i)];
+      c = {h[0] / h[3], h[1] / h[3], h[2] / h[3]};
+      // A coordinate both blended points share stays exact (a plane's normal axis,
+      // points on a face: no rounding noise for the curvature to see).
+      if (i > k - p && i <= k)
+        for (int a = 0; a < 3; ++a)
+          if (old_pts[static_cast<size_t>(i)][static_cast<size_t>(a)] == old_pts[static_cast<size_t>(i - 1)][static_cast<size_t>(a)])
+            c[static_cast<size_t>(a)] = old_pts[static_cast<size_t>(i)][static_cast<size_t>(a)];
+    }
+  }
+}
+
+// The curve in two at knot index i whose value has multiplicity = degree (the
+// curve passes through control point i - 1 there): both pieces clamped.
+void cut_at_knot(const program::NurbsGeometry& g, int cut_i, program::NurbsGeometry* left,
+                 program::NurbsGeometry* right) {
+  const int order = g.order, p = order - 1;
+  const auto& U = g.knots;
+  const int j = cut_i - 1;
+  const double ub = U[static_cast<size_t>(cut_i)];
+  left->order = right->order = order;
+  left->knots.assign(U.begin(), U.begin() + cut_i + p);
+  left->knots.push_back(ub);
+  left->control_points.assign(g.control_points.begin(), g.control_points.begin() + j + 1);
+  left->weights.assign(g.weights.begin(), g.weights.begin() + j + 1);
+  right->knots.clear();
+  right->knots.push_back(ub);
+  right->knots.insert(right->knots.end(), U.begin() + cut_i, U.end());
+  right->control_points.assign(g.control_points.begin() + j, g.control_points.end());
+  right->weights.assign(g.weights.begin() + j, g.weights.end());
+}
+
+// A NURBS in pieces at its cusps (each cusp the end of one piece and the start of
+// the next: a junction that turns back, which the planner takes as a stop).
+std::vector<program::NurbsGeometry> split_at_cusps(const program::NurbsGeometry& g) {
+  std::vector<program::NurbsGeometry> parts;
+  if (g.order < 2) return {g};
+  const std::vector<double> cusps = find_cusps(g);
+  if (cusps.empty()) return {g};
+  program::NurbsGeometry rest = g;
+  for (double uc : cusps) {
+    const int cut_i = insert_knot_to_degree(&rest, uc);
+    program::NurbsGeometry left, right;
+    cut_at_knot(rest, cut_i, &left, &right);
+    parts.push_back(std::move(left));
+    rest = std::move(right);
+  }
+  parts.push_back(std::move(rest));
+  return parts;
+}
+
 // A NURBS with a sharp corner inside (a knot of multiplicity >= its degree where
 // the control polygon turns: the curve passes through that control point with the
 // tangent of the leg before it, and leaves along the leg after it) in pieces at
@@ -449,7 +591,9 @@ void BlockBuilder::nurbs_feed(const SourceRef& ref, int order, const std::vector
     --next_index_;
     throw Error(ref.column, "NURBS: " + why);
   }
-  std::vector<program::NurbsGeometry> parts = split_at_corners(b.nurbs);
+  std::vector<program::NurbsGeometry> parts;
+  for (const program::NurbsGeometry& piece : split_at_cusps(b.nurbs))
+    for (program::NurbsGeometry& q : split_at_corners(piece)) parts.push_back(std::move(q));
   if (parts.size() > 1) {
     out_.pop_back();
     --next_index_;

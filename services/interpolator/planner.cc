@@ -250,14 +250,16 @@ void Planner::plan_block(Planned& p) {
       for (int i = 0; i < n; ++i) grid.push_back(u0 + (u1 - u0) * i / n);
     }
     grid.push_back(u1);
-    // |P'| under which a point counts as singular (a vanishing tangent): against
-    // the largest |P'| on the grid, far below any real variation of the speed.
+    // |P'| under which a point counts as singular (a vanishing tangent, where the
+    // curvature's rounding error grows as 1/|P'|²): against the largest |P'| on the
+    // grid, far below any real variation of the speed; its neighbours carry the
+    // curvature limits.
     for (double u : grid) {
       AxisVec P{}, d1{}, d2{};
       p.path.eval(u, &P, &d1, &d2);
       sp_floor = std::max(sp_floor, norm(d1, naxes_));
     }
-    sp_floor *= 1e-12;
+    sp_floor *= 1e-9;
     auto probe = [&](double u) {
       Probe r;
       AxisVec d1{}, d2{}, k{};

@@ -93,5 +93,50 @@ TEST(InterpolatorPaths, AnArcEndingOffItsRadiusIsASpiralWithinTheLimits) {
   EXPECT_NEAR(u.end[0], 89.981, 1e-9);
 }
 
+// Found by cnc-path-property (issue 13): control points in a line (clamped onto Y 0)
+// with weights 0.1-20, so the curve turns back on itself twice (cusps, P' = 0 inside).
+// Before: the path stopped at the second cusp for good (an interior curvature of
+// 1e24 from rounding at a vanishing tangent), or crossed a cusp at speed (jerk 188x).
+// The block builder now ends a piece at each cusp, a junction that stops.
+TEST(InterpolatorPaths, ANurbsWithCuspsStopsAtEachAndRunsToItsEnd) {
+  const Use u = run_text(
+      "G21 G90 G17\nG0 X68.563832 Y0 Z-47.500509\nF5523\nG5.2 X74.847881 Y0 P20 L3\nX44.525233 Y0 P20\n"
+      "X60.393030 Y0 P0.099233\nX45.249800 Y0 P4.240332\nG5.3\nM2\n");
+  EXPECT_TRUE(u.finite);
+  EXPECT_LE(u.a, 1.01);
+  EXPECT_LE(u.j, 1.01);
+  EXPECT_NEAR(u.end[0], 45.2498, 1e-9);
+}
+
+// A degree-1 G6.2 whose first span has no length (the first control point doubled):
+// the curve stands still over u 0..0.47. Its direction at the junction with the G0
+// is where it then goes (59 degrees off the G0: a stop), not "none" (taken at full
+// feed before: jerk 71x).
+TEST(InterpolatorPaths, ADegreeOneNurbsThatStandsStillAtItsStartTurnsTheCorner) {
+  const Use u = run_text(
+      "G21 G90 G17\nG0 X0 Y144.204233 Z-51.685071\n"
+      "G6.2 P2 K0 X0 Y144.204233 Z-51.685071 R1 F5239\nK0 X0 Y144.204233 Z-51.685071 R1\n"
+      "K0.469439 X0 Y166.375478 Z-33.652321 R1\nK0.799001 X0 Y159.495506 Z-25.851762 R1\nK1\nK1\nM2\n");
+  EXPECT_TRUE(u.finite);
+  EXPECT_LE(u.a, 1.01);
+  EXPECT_LE(u.j, 1.01);
+  EXPECT_NEAR(u.end[1], 159.495506, 1e-9);
+}
+
+// A doubled first control point with weights 0.07 / 0.14 / 2.7: the derivatives'
+// rounding (about the machine's coordinates) left a tangent of 1e-14 mm at u = 0
+// and a speed limit of 4e-28 mm/s there: the path never left the start.
+TEST(InterpolatorPaths, ADoubledStartWithExtremeWeightsLeavesTheStart) {
+  const Use u = run_text(
+      "G21 G90 G17\nG0 X101.318188 Y223.030657 Z-115.210513\n"
+      "G6.2 P3 K0 X101.318188 Y223.030657 Z-115.210513 R0.067415 F178\n"
+      "K0 X101.318188 Y223.030657 Z-115.210513 R0.139525\nK0 X65.459104 Y194.655982 Z-110.884415 R2.715873\n"
+      "K1\nK1\nK1\nM2\n");
+  EXPECT_TRUE(u.finite);
+  EXPECT_LE(u.a, 1.01);
+  EXPECT_LE(u.j, 1.01);
+  EXPECT_NEAR(u.end[0], 65.459104, 1e-9);
+}
+
 }  // namespace
 }  // namespace cnc::interp
