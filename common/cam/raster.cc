@@ -37,12 +37,14 @@ std::vector<std::vector<XY>> raster_passes(const Bounds& b, const RasterSpec& sp
   return passes;
 }
 
-RasterPath raster_fixed_step(const DropCutter& dc, const Bounds& bounds, const RasterSpec& spec, int threads) {
+RasterPath raster_fixed_step(const DropCutter& dc, const Bounds& bounds, const RasterSpec& spec, int threads,
+                             RasterProgress* progress) {
   const std::vector<std::vector<XY>> passes = raster_passes(bounds, spec);
   std::vector<XY> all;
   for (const auto& p : passes) all.insert(all.end(), p.begin(), p.end());
   std::vector<ClPoint> cl(all.size());
-  dc.drop_batch(all, cl, threads);
+  dc.drop_batch(all, cl, threads, progress ? &progress->points : nullptr);
+  if (progress) progress->passes = passes.size();
   RasterPath path;
   path.passes = passes.size();
   path.points_dropped = all.size();
@@ -109,7 +111,66 @@ struct PassWalker {
     return {u_on, z_on};
   }
 
-  void walk(std::vector<std::vector<Vec3>>& cuts, std::size_t& dropped) const {
+  // Seed 003's concave corner inside the step (ua, za) - (ub, zb), where the CL surface
+  // has a crease: the CL surface's slopes along the pass at the step's two ends, taken
+  // inwards over d = L/4096, give two tangents; the corner is sought only if they meet
+  // inside the step, the slope rises across it (the CL surface, an upper envelope, only
+  // creases upwards) and the CL surface where they meet lies nearer the tangents than the
+  // chord (a crease: a smooth valley lies halfway, as the chord's sag equals the
+  // tangents' on a parabola). Then bisection: at the middle m of [a, b], the one-sided
+  // slopes over e = (b - a)/64 on either side of m, against the mean of the two
+  // tangents' slopes, say on which side of m the crease lies (or that it lies within e
+  // of m), to corner_tol_mm. Accepted if the slopes just outside the final bracket still
+  // differ by half the tangents' difference (a crease, not a bend); the corner point is
+  // the bracket's middle with its exact CL height.
+  bool corner(double ua, double za, double ub, double zb, double& uc_out, ClPoint& cc_out, std::size_t& dropped) const {
+    const double L = ub - ua;
+    const double d = L / 4096;
+    if (!(d > 0)) return false;
+    auto z_at = [&](double v, double& z) {
+      const ClPoint q = drop(v);
+      ++dropped;
+      z = q.z;
+      return q.touched();
+    };
+    double za_in = 0, zb_in = 0;
+    if (!z_at(ua + d, za_in) || !z_at(ub - d, zb_in)) return false;
+    const double sa = (za_in - za) / d, sb = (zb - zb_in) / d;
+    if (!(sb > sa)) return false;
+    const double ut = (zb - za - sb * ub + sa * ua) / (sa - sb);
+    if (!(ut > ua + d && ut < ub - d)) return false;
+    double zt = 0;
+    if (!z_at(ut, zt)) return false;
+    const double tangent = za + sa * (ut - ua), chord = za + (zb - za) * (ut - ua) / L;
+    if (!(chord - tangent > 0) || zt - tangent > 0.25 * (chord - tangent)) return false;
+    const double mid = 0.5 * (sa + sb);
+    double lo = ua, hi = ub;
+    while (hi - lo > ad.corner_tol_mm) {
+      const double m = 0.5 * (lo + hi), e = (hi - lo) / 64;
+      double zm = 0, zl = 0, zr = 0;
+      if (!z_at(m, zm) || !z_at(m - e, zl) || !z_at(m + e, zr)) return false;
+      const double sl = (zm - zl) / e, sr = (zr - zm) / e;
+      if (sl >= mid) {
+        hi = m;  // [m - e, m] already climbs the second piece: the crease is before m
+      } else if (sr <= mid) {
+        lo = m;  // [m, m + e] still on the first piece
+      } else {
+        lo = m - e, hi = m + e;
+      }
+    }
+    double zl = 0, zr = 0, z0 = 0, z1 = 0;
+    const double v = std::max(ad.corner_tol_mm, d);
+    if (!z_at(lo - v, zl) || !z_at(lo, z0) || !z_at(hi, z1) || !z_at(hi + v, zr)) return false;
+    if (!((zr - z1) / v - (z0 - zl) / v >= 0.5 * (sb - sa))) return false;
+    const double uc = 0.5 * (lo + hi);
+    if (!(uc > ua + ad.min_step_mm * 0.5 && uc < ub)) return false;
+    cc_out = drop(uc);
+    ++dropped;
+    uc_out = uc;
+    return cc_out.touched();
+  }
+
+  void walk(std::vector<std::vector<Vec3>>& cuts, std::size_t& dropped, std::size_t& corners) const {
     double u = 0;
     ClPoint c = drop(0);
     ++dropped;
@@ -150,7 +211,7 @@ struct PassWalker {
       double u1 = std::min(len, u + step);
       ClPoint c1 = drop(u1);
       ++dropped;
-      bool off_edge = false;
+      bool off_edge = false, corner_tried = false, corner_end = false;
       while (true) {
         if (!c1.touched()) {  // the surface ends inside this step
           const auto [ue, ze] = edge(u1, u, c.z);
@@ -180,6 +241,7 @@ struct PassWalker {
           return std::hypot(wu - s * L, wz - s * dz);
         };
         bool within = cm.touched() && off_chord(0.5, cm.z) <= limit;
+        bool below = cm.touched() && cm.z < c.z + 0.5 * dz;  // the failing probe under the chord
         const int n = 2 * static_cast<int>(std::clamp(std::ceil(8 * std::sqrt(len2) / L), 8.0, 256.0));
         for (int k = 1; k < n && within; ++k) {
           if (2 * k == n) continue;
@@ -187,8 +249,23 @@ struct PassWalker {
           const ClPoint cq = drop(u + t * L);
           ++dropped;
           within = cq.touched() && off_chord(t, cq.z) <= limit;
+          below = cq.touched() && cq.z < c.z + t * dz;
         }
         if (within) break;
+        // The CL surface dips under the chord: a concave corner (a crease where two CL
+        // surface pieces meet) inside the step is sought once and, if found, becomes the
+        // step's end; the chord up to it is checked like any other.
+        if (ad.corner_search && below && !corner_tried) {
+          corner_tried = true;
+          double uc = 0;
+          ClPoint cc;
+          if (corner(u, c.z, u1, c1.z, uc, cc, dropped)) {
+            u1 = uc, c1 = cc, corner_end = true;
+            ++corners;
+            continue;
+          }
+        }
+        corner_end = false;
         u1 = um, c1 = cm;  // halve: the middle becomes the end
       }
       if (off_edge) {
@@ -204,6 +281,10 @@ struct PassWalker {
       h = u1 - u;
       pu[0] = pu[1], pz[0] = pz[1], pu[1] = u, pz[1] = c.z;
       history = std::min(history + 1, 2);
+      if (corner_end) {  // from the corner on, the next piece at the normal step
+        history = 0;
+        h = spec.step_mm;
+      }
       u = u1, c = c1;
       cut.push_back(cl(u, c.z));
     }
@@ -214,29 +295,34 @@ struct PassWalker {
 }  // namespace
 
 RasterPath raster_adaptive(const DropCutter& dc, const Bounds& bounds, const RasterSpec& spec,
-                           const AdaptiveSpec& adaptive, int threads) {
-  if (!(adaptive.beta_mm > 0) || !(adaptive.min_step_mm > 0))
-    throw std::invalid_argument("raster: beta and the smallest step must be > 0");
+                           const AdaptiveSpec& adaptive, int threads, RasterProgress* progress) {
+  if (!(adaptive.beta_mm > 0) || !(adaptive.min_step_mm > 0) || !(adaptive.corner_tol_mm > 0))
+    throw std::invalid_argument("raster: beta, the smallest step and the corner tolerance must be > 0");
   const std::vector<std::vector<XY>> passes = raster_passes(bounds, spec);
   std::vector<std::vector<std::vector<Vec3>>> per_pass(passes.size());
-  std::vector<std::size_t> dropped(passes.size(), 0);
+  std::vector<std::size_t> dropped(passes.size(), 0), corners(passes.size(), 0);
   parallel_for(passes.size(), std::max(1, threads), [&](std::size_t k) {
     const XY a = passes[k].front(), b = passes[k].back();
     const double len = std::hypot(b.x - a.x, b.y - a.y);
-    if (len == 0) return;
-    PassWalker{dc, a, b, len, spec, adaptive}.walk(per_pass[k], dropped[k]);
+    if (len > 0) PassWalker{dc, a, b, len, spec, adaptive}.walk(per_pass[k], dropped[k], corners[k]);
+    if (progress) {
+      progress->points.fetch_add(dropped[k], std::memory_order_relaxed);
+      progress->passes.fetch_add(1, std::memory_order_relaxed);
+    }
   });
   RasterPath path;
   path.passes = passes.size();
   for (std::size_t k = 0; k < passes.size(); ++k) {
     path.points_dropped += dropped[k];
+    path.corners += corners[k];
     for (auto& cut : per_pass[k])
       if (!cut.empty()) path.cuts.push_back(std::move(cut));
   }
   return path;
 }
 
-double path_deviation(const DropCutter& dc, const RasterPath& path, int samples, int threads) {
+double path_deviation(const DropCutter& dc, const RasterPath& path, int samples, int threads,
+                      RasterProgress* progress) {
   std::vector<double> worst(path.cuts.size(), 0);
   parallel_for(path.cuts.size(), std::max(1, threads), [&](std::size_t k) {
     const std::vector<Vec3>& cut = path.cuts[k];
@@ -254,6 +340,11 @@ double path_deviation(const DropCutter& dc, const RasterPath& path, int samples,
         const double s = e2 > 0 ? std::clamp((wx * ex + wy * ey + wz * ez) / e2, 0.0, 1.0) : 0;
         worst[k] = std::max(worst[k], std::hypot(wx - s * ex, wy - s * ey, wz - s * ez));
       }
+    }
+    if (progress) {
+      progress->points.fetch_add((cut.size() > 0 ? cut.size() - 1 : 0) * static_cast<std::size_t>(std::max(samples, 0)),
+                                 std::memory_order_relaxed);
+      progress->passes.fetch_add(1, std::memory_order_relaxed);
     }
   });
   return worst.empty() ? 0 : *std::max_element(worst.begin(), worst.end());

@@ -93,6 +93,90 @@ TEST(CamRaster, StepControlHoldsBetaWithFewerPointsThanAFixedStep) {
   }
 }
 
+// A V-groove along y with its bottom at x = 7.3, walls rising at 35 deg (left) and
+// 50 deg (right), over [0, 20] x [0, 10].
+Mesh v_groove(double x0, double t1, double t2) {
+  const double zl = x0 * t1, zr = (20 - x0) * t2;
+  Mesh m;
+  m.triangles.push_back({{Vec3{0, 0, zl}, Vec3{x0, 0, 0}, Vec3{x0, 10, 0}}});
+  m.triangles.push_back({{Vec3{0, 0, zl}, Vec3{x0, 10, 0}, Vec3{0, 10, zl}}});
+  m.triangles.push_back({{Vec3{x0, 0, 0}, Vec3{20, 0, zr}, Vec3{20, 10, zr}}});
+  m.triangles.push_back({{Vec3{x0, 0, 0}, Vec3{20, 10, zr}, Vec3{x0, 10, 0}}});
+  return m;
+}
+
+// Seed 003's concave corner: a cutter in the V-groove sits where its corner arc (a
+// circle of radius r whose centre is a from the axis, r above the tip; ball: a = 0,
+// r = R; flat: r = 0) is r from both walls, two linear equations in the tip's x and z
+// (x' = x - x0): x' sin θ1 + z cos θ1 = r (1 - cos θ1) + a sin θ1 (left wall, the arc's
+// centre at x - a) and -x' sin θ2 + z cos θ2 = r (1 - cos θ2) + a sin θ2 (right wall).
+// With the corner search every pass has a CL point there within 1e-6 mm in x and z
+// (the search's tolerance along the pass is 1e-7 mm); with the halving alone the
+// nearest CL point stays farther off, the path hangs over the crease, and it takes
+// more CL points and more drops.
+TEST(CamRaster, ConcaveCornerFoundByBisectionSitsTheToolInTheVGroove) {
+  const double x0 = 7.3, th1 = 35 * M_PI / 180, th2 = 50 * M_PI / 180;
+  const double s1 = std::sin(th1), c1 = std::cos(th1), s2 = std::sin(th2), c2 = std::cos(th2);
+  const Mesh m = v_groove(x0, s1 / c1, s2 / c2);
+  const double beta = 0.005;
+  for (const char* tool : {"ball:4", "bull:6:1", "flat:6"}) {
+    const Cutter cutter = parse_cutter(tool);
+    const double r = cutter.corner_radius_mm, a = cutter.ring_radius();
+    const double e1 = r * (1 - c1) + a * s1, e2 = r * (1 - c2) + a * s2;
+    const double det = s1 * c2 + s2 * c1;
+    const double xs = x0 + (e1 * c2 - e2 * c1) / det, zs = (s1 * e2 + s2 * e1) / det;
+    const DropCutter dc(m, cutter);
+    EXPECT_NEAR(dc.drop(xs, 5).z, zs, 1e-12) << tool;  // the closed form is the drop-cutter's crease
+    struct Run {
+      std::size_t points = 0, dropped = 0, corners = 0;
+      double nearest = 0, deviation = 0, hang = 0;  // hang: the path's height over the corner
+    };
+    auto run = [&](bool search) {
+      AdaptiveSpec ad{beta, 1e-3};
+      ad.corner_search = search;
+      const RasterPath p = raster_adaptive(dc, mesh_bounds(m), RasterSpec{2.5, 2, 0}, ad, 2);
+      Run res;
+      res.dropped = p.points_dropped;
+      res.corners = p.corners;
+      res.deviation = path_deviation(dc, p, 32, 2);
+      std::size_t passes_checked = 0;
+      for (const auto& cut : p.cuts) {
+        res.points += cut.size();
+        if (cut.front().y < 2 || cut.front().y > 8) continue;
+        double nearest = 1e300;
+        for (const Vec3& q : cut) nearest = std::min(nearest, std::max(std::abs(q.x - xs), std::abs(q.z - zs)));
+        res.nearest = std::max(res.nearest, nearest);
+        if (search) {
+          EXPECT_LE(nearest, 1e-6) << tool << ", pass at y " << cut.front().y;
+        }
+        for (std::size_t i = 1; i < cut.size(); ++i) {
+          const double lo = std::min(cut[i - 1].x, cut[i].x), hi = std::max(cut[i - 1].x, cut[i].x);
+          if (xs < lo || xs > hi || hi == lo) continue;
+          const double z = cut[i - 1].z + (cut[i].z - cut[i - 1].z) * (xs - cut[i - 1].x) / (cut[i].x - cut[i - 1].x);
+          res.hang = std::max(res.hang, z - zs);
+        }
+        ++passes_checked;
+      }
+      EXPECT_EQ(passes_checked, 3u) << tool;
+      EXPECT_LE(res.deviation, beta) << tool;
+      return res;
+    };
+    const Run with = run(true), halving = run(false);
+    std::printf("V-groove 35/50 deg, %s, beta 5 um, 5 passes: corner search %zu CL points (%zu drops, %zu corners, "
+                "deviation %.3g mm, CL point %.2g mm from the corner, path %.2g mm over it); halving %zu CL points "
+                "(%zu drops, deviation %.3g mm, nearest CL point %.3g mm from the corner, path %.3g mm over it)\n",
+                tool, with.points, with.dropped, with.corners, with.deviation, with.nearest, with.hang, halving.points,
+                halving.dropped, halving.deviation, halving.nearest, halving.hang);
+    EXPECT_EQ(with.corners, 5u) << tool;
+    EXPECT_EQ(halving.corners, 0u) << tool;
+    EXPECT_GT(halving.nearest, 1e-4) << tool;
+    EXPECT_LT(with.points, halving.points) << tool;
+    EXPECT_LT(with.dropped, halving.dropped) << tool;
+    EXPECT_LT(with.hang, 1e-6) << tool;  // the path passes through the corner
+    EXPECT_GT(halving.hang, 0.1 * beta) << tool;
+  }
+}
+
 TEST(CamGcode, HeaderModalWordsAndRoundTripOfCoordinates) {
   GcodeSetup s;
   s.title = "part (test)";
