@@ -1,20 +1,27 @@
 // cnc-cam: offline CAM on triangle meshes (seeds 002, 003).
 //
 //   cnc-cam drop --stl MESH --tool ball:D|flat:D|bull:D:r --points XY.csv --out XYZ.csv [--threads N]
+//                [--png FILE]
 //   cnc-cam rough --stl MESH --stock box|margin[:MM] --tool SPEC --cusp H --out rough.ngc
 //                 [--png FILE] [--compare SPEC,SPEC,...] [--stepover F] [--max-stepdown MM]
 //                 [--origin corner|mesh] [--feed F] [--plunge F] [--rapid F] [--spindle S] [--safe-z Z]
 //                 [--ramp DEG] [--threads N]
 //   cnc-cam part --shape table1-a|table1-b|hemisphere|frustum --out MESH.stl [--cells N]
 //   cnc-cam raster --stl MESH --tool SPEC --pick P --step S [--angle A] --out part.ngc
-//                  [--tol-beta B [--tol-alpha A] [--min-step M] [--compare-fixed]]
+//                  [--tol-beta B [--tol-alpha A] [--min-step M] [--compare-fixed] [--no-corner-search]]
 //                  [--origin corner|mesh] [--feed F] [--plunge F] [--spindle S] [--safe-z Z] [--threads N]
-//                  [--nurbs TOL]
+//                  [--nurbs TOL] [--png FILE [--png-cells N]]
+//
+// Every command reports progress on stderr when it runs over a second (what is done,
+// the rate, the time left; every half second), never on stdout, whose figures lines
+// stay parseable. --png runs a matplotlib script of tools/cam with Debian's
+// /usr/bin/python3 (run_plot; its own output goes to stderr too).
 //
 // drop: the drop-cutter's CL height for each point of XY.csv, in order, into XYZ.csv
 // (x and y echoed as written, z empty where nothing is touched); prints
 // "points=N seconds=S pts_per_s=R" on stdout (S: the queries only), and on stderr
-// the mesh's load and the index's build, and progress for runs over a second.
+// the mesh's load and the index's build. --png: the CL surface (tools/cam/plot_cam.py;
+// a shaded height map when the points form a grid, coloured dots otherwise).
 //
 // rough: seed 002's z-level roughing (common/cam/rough.h): levels bottom-up from the
 // smallest slope on each contour and the cusp limit, plus flat areas; per level the
@@ -23,12 +30,13 @@
 // G-code through the common writer. Prints one line per level and the totals; with
 // --compare, the same plan for each listed tool: levels, path length and the time of
 // a constant-speed model (feed, plunge, rapid; no acceleration). --png draws the levels
-// (tools/cam/plot_rough.py, Debian's python3 and matplotlib).
+// (tools/cam/plot_rough.py).
 //
 // part: writes an analytic test part as binary STL (common/cam/shapes.h).
 //
 // raster: parallel passes written as G-code (common/cam/gcode_writer.h), with a fixed
-// step, or with --tol-beta seed 003's step control up to --step (common/cam/raster.h);
+// step, or with --tol-beta seed 003's step control up to --step (common/cam/raster.h),
+// concave corners found by its bisection unless --no-corner-search;
 // then the path's measured deviation from the exact CL surface (32 CL points inside
 // every segment) is printed, and with --compare-fixed the point count of the largest
 // fixed step (--step halved until it holds) that is as accurate. --tol-alpha is the
@@ -37,18 +45,26 @@
 // the mesh's lowest x and y and its highest z (the part's top), so cuts are at Z <= 0;
 // --origin mesh keeps the mesh's coordinates. --nurbs TOL writes each cut as G6.2 cubic
 // NURBS fitted to its CL points within TOL (GcodeWriter::cut_nurbs), not as G1 lines.
+// --png: the CL surface on a grid of --png-cells (200) over the mesh's bounds as a
+// shaded height map with the cuts and their CL points, in the mesh's coordinates.
 #include <CLI/CLI.hpp>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <condition_variable>
 #include <cstdio>
 #include <cmath>
 #include <cstdlib>
 #include <exception>
+#include <functional>
+#include <mutex>
 #include <sstream>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "common/cam/cutter.h"
 #include "common/cam/drop_cutter.h"
@@ -64,8 +80,95 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
+// Progress on stderr for runs over a second: a thread of its own reads the counters
+// the work updates (`poll`) one second after the start and every half second after,
+// and prints what is done, the rate and the time left; stdout is left alone. Stops and
+// joins when destroyed.
+struct ProgressCounts {
+  std::size_t done = 0, total = 0;  // in `unit`s; total 0: not known yet
+  std::size_t points = 0;           // CL points computed, if the unit is not points
+};
+class Progress {
+ public:
+  Progress(std::string label, std::string unit, std::function<ProgressCounts()> poll)
+      : label_(std::move(label)), unit_(std::move(unit)), poll_(std::move(poll)), t0_(Clock::now()),
+        thread_([this] { loop(); }) {}
+  ~Progress() {
+    {
+      std::lock_guard<std::mutex> lk(m_);
+      stop_ = true;
+    }
+    cv_.notify_one();
+    thread_.join();
+  }
+  Progress(const Progress&) = delete;
+  Progress& operator=(const Progress&) = delete;
+  bool reported() const { return reported_.load(); }
+
+ private:
+  void loop() {
+    std::unique_lock<std::mutex> lk(m_);
+    auto next = t0_ + std::chrono::seconds(1);
+    while (!cv_.wait_until(lk, next, [this] { return stop_; })) {
+      const ProgressCounts c = poll_();
+      const double t = seconds_since(t0_);
+      const double rate = static_cast<double>(c.done) / t;
+      char left[48] = "";
+      if (c.total > 0 && c.done > 0 && c.done <= c.total)
+        std::snprintf(left, sizeof left, ", %.1f s left", static_cast<double>(c.total - c.done) / rate);
+      if (c.points > 0) {
+        std::fprintf(stderr, "%s: %zu / %zu %s, %zu CL points, %.0f pts/s%s\n", label_.c_str(), c.done, c.total,
+                     unit_.c_str(), c.points, static_cast<double>(c.points) / t, left);
+      } else {
+        std::fprintf(stderr, "%s: %zu / %zu %s, %.*f %s/s%s\n", label_.c_str(), c.done, c.total, unit_.c_str(),
+                     rate < 10 ? 2 : 0, rate, unit_.c_str(), left);
+      }
+      reported_ = true;
+      next += std::chrono::milliseconds(500);
+    }
+  }
+  std::string label_, unit_;
+  std::function<ProgressCounts()> poll_;
+  Clock::time_point t0_;
+  std::mutex m_;
+  std::condition_variable cv_;
+  bool stop_ = false;
+  std::atomic<bool> reported_{false};
+  std::thread thread_;  // last: starts once the members above exist
+};
+
+std::string fmt_g(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", v);
+  return buf;
+}
+
+// One of tools/cam's matplotlib scripts on Debian's python3 (which has matplotlib),
+// with its arguments passed as they are (no shell); an error if it fails.
+void run_plot(const std::string& script, const std::vector<std::string>& args) {
+  const std::string path = std::string(CNC_SOURCE_DIR) + "/tools/cam/" + script;
+  std::vector<std::string> all{"/usr/bin/python3", path};
+  all.insert(all.end(), args.begin(), args.end());
+  std::vector<char*> argv;
+  for (std::string& s : all) argv.push_back(s.data());
+  argv.push_back(nullptr);
+  std::fflush(stdout);
+  std::fflush(stderr);
+  const pid_t pid = fork();
+  if (pid < 0) throw std::runtime_error(script + ": cannot start /usr/bin/python3");
+  if (pid == 0) {
+    dup2(STDERR_FILENO, STDOUT_FILENO);  // the script's words on stderr: stdout stays the tool's figures
+    execv(argv[0], argv.data());
+    std::fprintf(stderr, "cnc-cam: cannot run /usr/bin/python3 %s\n", path.c_str());
+    _exit(127);
+  }
+  int status = 0;
+  if (waitpid(pid, &status, 0) != pid || !WIFEXITED(status) || WEXITSTATUS(status) != 0)
+    throw std::runtime_error(path + " failed (Debian's python3-matplotlib is needed for --png)");
+}
+
 struct DropArgs {
-  std::string stl, tool, points, out;
+  std::string stl, tool, points, out, png;
   int threads = 0;
 };
 
@@ -88,44 +191,80 @@ int run_drop(const DropArgs& a) {
   const int threads = a.threads > 0 ? a.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   std::vector<ClPoint> out(pts.points.size());
   std::atomic<std::size_t> done{0};
-  t0 = Clock::now();
-  Clock::time_point t1;  // the worker's own end: the progress loop below polls only every 50 ms
-  std::thread worker([&] {
+  double s = 0;
+  {
+    const Progress progress("cnc-cam drop", "points", [&] { return ProgressCounts{done.load(), pts.points.size(), 0}; });
+    t0 = Clock::now();
     dc.drop_batch(pts.points, out, threads, &done);
-    t1 = Clock::now();
-  });
-  double next_report = 1.0;
-  while (done.load() < pts.points.size()) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    const double t = seconds_since(t0);
-    if (t >= next_report) {
-      const auto n = done.load();
-      const double rate = static_cast<double>(n) / t;
-      std::fprintf(stderr, "cnc-cam drop: %zu / %zu points, %.0f pts/s, %.1f s left\n", n, pts.points.size(), rate,
-                   rate > 0 ? static_cast<double>(pts.points.size() - n) / rate : 0.0);
-      next_report += 1.0;
-    }
+    s = seconds_since(t0);
   }
-  worker.join();
-  const double s = std::chrono::duration<double>(t1 - t0).count();
   write_xyz_csv(a.out, pts, out);
   std::printf("points=%zu seconds=%.6f pts_per_s=%.0f\n", pts.points.size(), s,
               s > 0 ? static_cast<double>(pts.points.size()) / s : 0.0);
+  if (!a.png.empty())
+    run_plot("plot_cam.py", {"--xyz", a.out, "--out", a.png, "--title", a.stl + ", " + a.tool + ": CL surface (drop)"});
   return 0;
 }
 
 struct RasterArgs {
-  std::string stl, tool, out, origin = "corner";
+  std::string stl, tool, out, origin = "corner", png;
   double pick = 1, step = 0.1, angle = 0, feed = 1000, plunge = 300, spindle = 10000, safe_z = 2;
   double beta = 0, alpha = 0, min_step = 1e-3, nurbs = 0;
-  bool compare_fixed = false;
-  int threads = 0;
+  bool compare_fixed = false, no_corner_search = false;
+  int threads = 0, png_cells = 200;
 };
 
 std::size_t cl_point_count(const cnc::cam::RasterPath& p) {
   std::size_t n = 0;
   for (const auto& c : p.cuts) n += c.size();
   return n;
+}
+
+// raster --png: the CL surface on a grid of --png-cells over the mesh's bounds (drop-
+// cutter, the same tool) as a shaded height map, with the cuts drawn over it, in the
+// mesh's coordinates (tools/cam/plot_cam.py).
+void write_raster_png(const RasterArgs& a, const cnc::cam::DropCutter& dc, const cnc::cam::Bounds& b,
+                      const cnc::cam::RasterPath& path, int threads) {
+  using namespace cnc::cam;
+  const double w = b.max.x - b.min.x, h = b.max.y - b.min.y;
+  const double cell = std::max(w, h) / a.png_cells;
+  const auto nx = static_cast<std::size_t>(std::ceil(w / cell)) + 1, ny = static_cast<std::size_t>(std::ceil(h / cell)) + 1;
+  PointsCsv grid;
+  for (std::size_t j = 0; j < ny; ++j)
+    for (std::size_t i = 0; i < nx; ++i) {
+      const double x = std::min(b.max.x, b.min.x + static_cast<double>(i) * cell);
+      const double y = std::min(b.max.y, b.min.y + static_cast<double>(j) * cell);
+      char bx[32], by[32];
+      std::snprintf(bx, sizeof bx, "%.6f", x);
+      std::snprintf(by, sizeof by, "%.6f", y);
+      grid.points.push_back({x, y});
+      grid.x_text.emplace_back(bx);
+      grid.y_text.emplace_back(by);
+    }
+  std::vector<ClPoint> z(grid.points.size());
+  {
+    std::atomic<std::size_t> done{0};
+    const Progress progress("cnc-cam raster: picture's CL surface", "points",
+                            [&] { return ProgressCounts{done.load(), grid.points.size(), 0}; });
+    dc.drop_batch(grid.points, z, threads, &done);
+  }
+  const std::string xyz = a.png + ".cl.csv", cuts = a.png + ".cuts.csv";
+  write_xyz_csv(xyz, grid, z);
+  std::FILE* f = std::fopen(cuts.c_str(), "w");
+  if (!f) throw std::runtime_error(cuts + ": cannot write");
+  std::fprintf(f, "cut,x,y,z\n");
+  for (std::size_t k = 0; k < path.cuts.size(); ++k)
+    for (const Vec3& p : path.cuts[k]) std::fprintf(f, "%zu,%.6f,%.6f,%.6f\n", k, p.x, p.y, p.z);
+  if (std::fclose(f) != 0) throw std::runtime_error(cuts + ": cannot write");
+  std::size_t n = 0;
+  for (const auto& c : path.cuts) n += c.size();
+  char title[256];
+  std::snprintf(title, sizeof title, "%s, %s, pick %g, %s: %zu CL points in %zu cuts", a.stl.c_str(), a.tool.c_str(),
+                a.pick, a.beta > 0 ? ("beta " + fmt_g(a.beta) + " mm").c_str() : ("step " + fmt_g(a.step) + " mm").c_str(),
+                n, path.cuts.size());
+  run_plot("plot_cam.py", {"--xyz", xyz, "--paths", cuts, "--out", a.png, "--title", title});
+  std::remove(xyz.c_str());
+  std::remove(cuts.c_str());
 }
 
 int run_raster(const RasterArgs& a) {
@@ -136,21 +275,52 @@ int run_raster(const RasterArgs& a) {
   const Bounds b = mesh_bounds(mesh);
   const DropCutter dc(mesh, cutter);
   const int threads = a.threads > 0 ? a.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-  const auto t0 = Clock::now();
   const RasterSpec spec{a.pick, a.step, a.angle};
-  RasterPath path = a.beta > 0 ? raster_adaptive(dc, b, spec, AdaptiveSpec{a.beta, a.min_step}, threads)
-                               : raster_fixed_step(dc, b, spec, threads);
-  const double s = seconds_since(t0);
-  const double deviation = path_deviation(dc, path, 32, threads);
+  const std::size_t n_passes = raster_passes(b, spec).size();
+  AdaptiveSpec ad{a.beta, a.min_step};
+  ad.corner_search = !a.no_corner_search;
+  RasterProgress rp;
+  double s = 0;
+  RasterPath path;
+  {
+    const Progress progress(a.beta > 0 ? "cnc-cam raster: step control" : "cnc-cam raster: fixed step", "passes",
+                            [&] { return ProgressCounts{rp.passes.load(), n_passes, rp.points.load()}; });
+    const auto t0 = Clock::now();
+    path = a.beta > 0 ? raster_adaptive(dc, b, spec, ad, threads, &rp) : raster_fixed_step(dc, b, spec, threads, &rp);
+    s = seconds_since(t0);
+  }
+  // The deviation, measured at 32 CL points inside every segment (`n` segments).
+  auto deviation_of = [&](const RasterPath& p, const char* what) {
+    std::size_t segments = 0;
+    for (const auto& c : p.cuts) segments += c.empty() ? 0 : c.size() - 1;
+    RasterProgress dp;
+    const Progress progress(std::string("cnc-cam raster: deviation of the ") + what, "CL points",
+                            [&] { return ProgressCounts{dp.points.load(), 32 * segments, 0}; });
+    return path_deviation(dc, p, 32, threads, &dp);
+  };
+  const double deviation = deviation_of(path, a.beta > 0 ? "step control" : "fixed step");
   std::fprintf(stderr, "cnc-cam raster: %s: %zu CL points, largest deviation from the CL surface %.3g mm%s\n",
                a.beta > 0 ? "step control" : "fixed step", cl_point_count(path), deviation,
                a.beta > 0 ? (" (beta " + std::to_string(a.beta) + ", alpha + beta " + std::to_string(a.alpha + a.beta) +
-                             ")").c_str()
+                             ", " + std::to_string(path.corners) + " concave corners found" +
+                             (ad.corner_search ? "" : ": search off") + ")")
+                                .c_str()
                           : "");
   if (a.compare_fixed && a.beta > 0) {
     for (double st = a.step; st >= a.min_step; st *= 0.5) {
-      const RasterPath fixed = raster_fixed_step(dc, b, RasterSpec{a.pick, st, a.angle}, threads);
-      const double dev = path_deviation(dc, fixed, 32, threads);
+      RasterPath fixed;
+      {
+        RasterProgress fp;
+        const std::size_t total = [&] {
+          std::size_t n = 0;
+          for (const auto& p : raster_passes(b, RasterSpec{a.pick, st, a.angle})) n += p.size();
+          return n;
+        }();
+        const Progress progress("cnc-cam raster: fixed step " + fmt_g(st) + " mm", "CL points",
+                                [&] { return ProgressCounts{fp.points.load(), total, 0}; });
+        fixed = raster_fixed_step(dc, b, RasterSpec{a.pick, st, a.angle}, threads, &fp);
+      }
+      const double dev = deviation_of(fixed, "fixed step");
       std::fprintf(stderr, "cnc-cam raster: fixed step %.4g mm: %zu CL points, deviation %.3g mm\n", st,
                    cl_point_count(fixed), dev);
       if (dev <= a.beta) {
@@ -171,6 +341,7 @@ int run_raster(const RasterArgs& a) {
   setup.plunge_mm_per_min = a.plunge;
   setup.spindle_rpm = a.spindle;
   setup.safe_z_mm = a.safe_z + (a.origin == "mesh" ? b.max.z : 0);
+  if (!a.png.empty()) write_raster_png(a, dc, b, path, threads);
   GcodeWriter w(setup);
   std::size_t cl_points = 0;
   double fit_error = 0;
@@ -220,12 +391,6 @@ struct RoughArgs {
   int threads = 0;
 };
 
-std::string fmt_g(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%g", v);
-  return buf;
-}
-
 std::vector<std::string> split_commas(const std::string& s) {
   std::vector<std::string> out;
   std::stringstream ss(s);
@@ -251,17 +416,18 @@ int run_rough(const RoughArgs& a) {
     spec.stepover_frac = a.stepover;
     spec.max_stepdown_mm = a.max_stepdown;
     spec.threads = a.threads > 0 ? a.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+    std::atomic<std::size_t> done{0}, total{0};
     const auto t0 = Clock::now();
     bool reported = false;
-    RoughPlan plan = plan_roughing(mesh, stock, spec, [&](std::size_t done, std::size_t total) {
-      const double t = seconds_since(t0);
-      if (t >= 1.0 && done < total) {
-        const double rate = static_cast<double>(done) / t;
-        std::fprintf(stderr, "cnc-cam rough: %s: %zu / %zu levels, %.2f levels/s, %.1f s left\n", tool.c_str(), done,
-                     total, rate, static_cast<double>(total - done) / rate);
-        reported = true;
-      }
-    });
+    RoughPlan plan;
+    {
+      const Progress progress("cnc-cam rough: " + tool, "levels", [&] { return ProgressCounts{done.load(), total.load(), 0}; });
+      plan = plan_roughing(mesh, stock, spec, [&](std::size_t d, std::size_t n) {
+        total = n;
+        done = d;
+      });
+      reported = progress.reported();
+    }
     if (reported) std::fprintf(stderr, "cnc-cam rough: %s: planned in %.1f s\n", tool.c_str(), seconds_since(t0));
     return plan;
   };
@@ -311,8 +477,6 @@ int run_rough(const RoughArgs& a) {
     }
   }
   if (!a.png.empty()) {
-    for (const std::string* arg : {&a.png, &a.tool})
-      if (arg->find('\'') != std::string::npos) throw std::invalid_argument("--png: no quote (') in " + *arg + ", please");
     const std::string csv = a.png + ".levels.csv";
     std::FILE* c = std::fopen(csv.c_str(), "w");
     if (!c) throw std::runtime_error(csv + ": cannot write");
@@ -328,9 +492,7 @@ int run_rough(const RoughArgs& a) {
                      prof.min_slope[i] * 180 / M_PI);
     for (const Level& l : plan.levels) std::fprintf(c, "level,0,%.4f,0,0,0\n", l.z);
     std::fclose(c);
-    const std::string cmd = std::string("/usr/bin/python3 '") + CNC_SOURCE_DIR + "/tools/cam/plot_rough.py' '" + csv +
-                            "' '" + a.png + "' '" + a.tool + " cusp " + fmt_g(a.cusp) + "'";
-    if (std::system(cmd.c_str()) != 0) throw std::runtime_error("plot_rough.py failed for " + a.png);
+    run_plot("plot_rough.py", {csv, a.png, a.tool + " cusp " + fmt_g(a.cusp)});
     std::remove(csv.c_str());
   }
   return 0;
@@ -366,6 +528,7 @@ int main(int argc, char** argv) {
   d->add_option("--points", drop.points, "CSV with header x,y")->required();
   d->add_option("--out", drop.out, "CSV x,y,z to write")->required();
   d->add_option("--threads", drop.threads, "worker threads (default: all cores)")->check(CLI::Range(1, 256));
+  d->add_option("--png", drop.png, "picture of the CL surface to write (matplotlib; a grid of points: shaded height map)");
   RasterArgs raster;
   CLI::App* r = app.add_subcommand("raster", "parallel finishing passes with a fixed step, as G-code");
   r->add_option("--stl", raster.stl, "mesh, ASCII or binary STL")->required();
@@ -379,6 +542,11 @@ int main(int argc, char** argv) {
   r->add_option("--tol-alpha", raster.alpha, "the mesh's tolerance against the design surface, mm (reported)");
   r->add_option("--min-step", raster.min_step, "smallest step of the step control, mm")->check(CLI::PositiveNumber);
   r->add_flag("--compare-fixed", raster.compare_fixed, "also find the fixed step that is as accurate");
+  r->add_flag("--no-corner-search", raster.no_corner_search,
+              "step control without seed 003's concave corner search (the halving alone closes in on corners)");
+  r->add_option("--png", raster.png, "picture of the CL surface and the cuts to write (matplotlib)");
+  r->add_option("--png-cells", raster.png_cells, "the picture's CL grid: cells along the longer side")
+      ->check(CLI::Range(10, 2000));
   r->add_option("--nurbs", raster.nurbs, "write each cut as G6.2 cubic NURBS fitted within this tolerance, mm")
       ->check(CLI::PositiveNumber);
   r->add_option("--origin", raster.origin, "corner: zero at the mesh's min x, min y, max z; mesh: as is");
