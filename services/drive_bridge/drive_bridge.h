@@ -87,6 +87,8 @@ class BridgeCore {
   // Cycle of the setpoint the current command heads for; -1 when none.
   int64_t segment_cycle() const { return seg_cycle_; }
   double playback_rate() const { return rate_; }
+  // The playback's position on the stream, in coarse cycles (fractional).
+  double playback_cycle() const { return tau_; }
   int64_t setpoint_gaps() const { return gaps_; }
   // Ticks past the newest setpoint, on its velocity (bridging a late one).
   int64_t bridged_ticks() const { return bridged_ticks_; }

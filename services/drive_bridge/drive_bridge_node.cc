@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <map>
 
@@ -75,6 +76,11 @@ DriveBridgeNode::DriveBridgeNode(const config::MachineConfig& cfg, bus::Bus& bus
     axes_.push_back(ax);
   }
   pace_.assign(workers_.size(), LinkPace{});
+  if (const char* f = std::getenv("CNC_BRIDGE_DEBUG_TRACE")) {
+    dbg_file_ = f;
+    dbg_ticks_.reserve(400000);
+    dbg_sp_.reserve(200000);
+  }
   bus_.subscribe<cnc::lcmt_setpoint>(cfg.channel(ch::kSetpoints), [this](const auto& m) { on_setpoint(m); });
   bus_.subscribe<cnc::lcmt_drive_command>(cfg.channel(ch::kDriveCmd),
                                           [this](const auto& m) { pending_command_ = m.command; });
@@ -114,6 +120,7 @@ void DriveBridgeNode::on_setpoint(const cnc::lcmt_setpoint& m) {
   for (size_t i = 0; i < axes_.size(); ++i) p[i] = m.position_mm[i];
   // A late arrival is worth a line in the log: it explains a later watchdog stop.
   const double now = util::monotonic_s();
+  if (!dbg_file_.empty() && dbg_sp_.size() < dbg_sp_.capacity()) dbg_sp_.push_back({now, m.cycle});
   if (last_setpoint_s_ > 0 && now - last_setpoint_s_ > 3 * cfg_.ipo_period_s)
     spdlog::warn("setpoint cycle {} arrived {:.1f} ms after the one before (published {:.1f} ms after it)", m.cycle,
                  (now - last_setpoint_s_) * 1e3, static_cast<double>(m.utime - last_setpoint_utime_) * 1e-3);
@@ -373,6 +380,19 @@ void DriveBridgeNode::servo_tick_inner(double now_s) {
     a.cmd.cmd_cycle = core_.segment_cycle();
     a.worker->set_command(a.slot, a.cmd);
   }
+  if (!dbg_file_.empty() && dbg_ticks_.size() < dbg_ticks_.capacity()) {
+    DbgTick t{};
+    t.mono = now_s;
+    t.tau = core_.playback_cycle();
+    t.last_cycle = core_.last_cycle();
+    t.held = hold ? 1 : 0;
+    for (size_t i = 0; i < axes_.size() && i < 3; ++i) {
+      t.cmd[i] = cmd[i];
+      t.fe[i] = axes_[i].rep.fe_mm;
+      t.act[i] = axes_[i].rep.actual_mm;
+    }
+    dbg_ticks_.push_back(t);
+  }
   if (hold) return;
   for (size_t i = 0; i < workers_.size(); ++i) {
     auto& w = workers_[i];
@@ -443,6 +463,7 @@ void DriveBridgeNode::publish_status_inner(int64_t overruns) {
     }
   }
   s.setpoint_cycle = core_.last_cycle();
+  s.playback_cycle = core_.mode() == BridgeCore::Mode::kFollowing && core_.last_cycle() >= 0 ? core_.playback_cycle() : -1.0;
   for (size_t i = 0; i < n; ++i) {
     const Axis& a = axes_[i];
     s.commanded_mm[i] = core_.commanded()[i];
@@ -518,6 +539,21 @@ void DriveBridgeNode::shut_down() {
   }
   for (auto& l : links_) l->close(util::monotonic_s());
   state_ = State::kDisabled;
+  if (!dbg_file_.empty()) {
+    if (FILE* f = std::fopen(dbg_file_.c_str(), "w")) {
+      std::fprintf(f, "mono,tau,last_cycle,held,cmd0,cmd1,cmd2,fe0,fe1,fe2,act0,act1,act2\n");
+      for (const auto& t : dbg_ticks_)
+        std::fprintf(f, "%.6f,%.4f,%lld,%d,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f\n", t.mono, t.tau,
+                     static_cast<long long>(t.last_cycle), t.held, t.cmd[0], t.cmd[1], t.cmd[2], t.fe[0], t.fe[1],
+                     t.fe[2], t.act[0], t.act[1], t.act[2]);
+      std::fclose(f);
+    }
+    if (FILE* f = std::fopen((dbg_file_ + ".setpoints").c_str(), "w")) {
+      std::fprintf(f, "mono,cycle\n");
+      for (const auto& t : dbg_sp_) std::fprintf(f, "%.6f,%lld\n", t.mono, static_cast<long long>(t.cycle));
+      std::fclose(f);
+    }
+  }
 }
 
 }  // namespace cnc::bridge

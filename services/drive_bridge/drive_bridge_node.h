@@ -121,6 +121,20 @@ class DriveBridgeNode {
   std::string detail_ = "starting";
   State detail_state_ = State::kStarting;
   service::BusHealth health_;
+  // Diagnostics (CNC_BRIDGE_DEBUG_TRACE=FILE): every tick, allocated up front, written at shut-down.
+  struct DbgTick {
+    double mono, tau;
+    int64_t last_cycle;
+    int held;
+    double cmd[3], fe[3], act[3];
+  };
+  struct DbgSetpoint {
+    double mono;
+    int64_t cycle;
+  };
+  std::vector<DbgTick> dbg_ticks_;
+  std::vector<DbgSetpoint> dbg_sp_;
+  std::string dbg_file_;
 };
 
 const char* state_name(DriveBridgeNode::State s);

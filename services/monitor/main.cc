@@ -79,7 +79,8 @@ int main(int argc, char** argv) {
       delivery.record_ns((cnc::util::wall_utime() - m.utime) * 1000);
       const double t_in = cnc::util::monotonic_s();
       alarms.clear();
-      const auto s = core.on_status(m.utime, m.setpoint_cycle, m.actual_mm, m.following_error_mm, &alarms);
+      const auto s =
+          core.on_status(m.utime, m.setpoint_cycle, m.actual_mm, m.following_error_mm, &alarms, m.playback_cycle);
       r.setpoint_cycle = s.setpoint_cycle;
       r.commanded_feed_mm_per_min = s.commanded_feed_mm_per_min;
       r.actual_feed_mm_per_min = s.actual_feed_mm_per_min;

@@ -143,7 +143,7 @@ void Monitor::on_setpoint(const SetpointIn& sp) {
 }
 
 Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double>& actual,
-                          const std::vector<double>& fe, std::vector<Alarm>* alarms) {
+                          const std::vector<double>& fe, std::vector<Alarm>* alarms, double playback) {
   Report r;
   r.setpoint_cycle = cycle;
   r.chord_error_mm = kNaN;
@@ -161,12 +161,19 @@ Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double
   constexpr int64_t kFeedWindowUs = 40'000;
   constexpr size_t kMaxFeedSamples = 64;
   const int n_axes = static_cast<int>(std::min(actual.size(), static_cast<size_t>(program::kMaxAxes)));
+  // The commanded stretch is read between the bridge's playback positions at the
+  // window's ends (AXIS_STATUS playback_cycle): the path the drives were sent over
+  // the same 40 ms as the actual positions moved, whatever the lead, the loss and
+  // the jitter of the setpoints did to the newest cycle received, and standing
+  // where the playback stood (the bridge held for a stalled link). Without it (an
+  // older bridge), the newest setpoint cycle stands in, tracking_lag_cycles behind:
+  // it advances in whole cycles as setpoints arrive, by two or none at a time on a
+  // jittery network, so a status whose cycle has not advanced keeps the ratio.
   // A status older than the newest one (reordered on the network) is no new sample:
-  // the window keeps its samples and the feed its value. One whose setpoint cycle has
-  // not advanced (the bridge's playback held or slowed) updates the actual feed but
-  // keeps the tracking ratio: the commanded stretch would stay while the actual one
-  // grows, and their ratio read as overspeed. A jump back of more than a second
-  // (another sender, a clock set back) starts the window again.
+  // the window keeps its samples and the feed its value. A jump back of more than a
+  // second (another sender, a clock set back) starts the window again.
+  const bool have_playback = std::isfinite(playback) && playback >= 0;
+  if (!have_playback) playback = -1;
   bool reordered = false;
   bool cycle_stood = false;  // a new sample for the actual feed, but no new tracking ratio
   if (recent_n_ > 0) {
@@ -175,7 +182,7 @@ Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double
       recent_n_ = 0;
     } else if (utime <= last.utime) {
       reordered = true;
-    } else if (cycle <= last.cycle) {
+    } else if (!have_playback && cycle <= last.cycle) {
       cycle_stood = true;
     }
   }
@@ -188,6 +195,7 @@ Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double
       Sample& s = recent_[(recent_head_ + recent_n_) % kRecent];
       s.utime = utime;
       s.cycle = cycle;
+      s.playback = playback;
       s.naxes = n_axes;
       for (int i = 0; i < n_axes; ++i) s.pos[i] = actual[static_cast<size_t>(i)];
       ++recent_n_;
@@ -209,8 +217,10 @@ Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double
     // The lag may be a fraction of a cycle: the commanded position between two
     // setpoints, linearly.
     motion::AxisVec q0{}, q1{};
-    if (!cycle_stood && commanded_at(static_cast<double>(a.cycle) - lag_cycles_, n_axes, &q0) &&
-        commanded_at(static_cast<double>(cycle) - lag_cycles_, n_axes, &q1)) {
+    const bool by_playback = have_playback && a.playback >= 0;
+    const double c0 = by_playback ? a.playback - playback_lag_cycles_ : static_cast<double>(a.cycle) - lag_cycles_;
+    const double c1 = by_playback ? playback - playback_lag_cycles_ : static_cast<double>(cycle) - lag_cycles_;
+    if (!cycle_stood && commanded_at(c0, n_axes, &q0) && commanded_at(c1, n_axes, &q1)) {
       double c2 = 0;
       for (int i = 0; i < n_axes; ++i) {
         const double d = q1[i] - q0[i];
@@ -241,10 +251,14 @@ Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double
 
   // Feed and inclination where the commanded path was in the middle of the window.
   const int64_t window_cycles = recent_n_ >= 2 ? cycle - recent(0).cycle : 0;
+  const int64_t mid_cycle =
+      recent_n_ >= 2 && have_playback && recent(0).playback >= 0
+          ? static_cast<int64_t>(std::llround(0.5 * (recent(0).playback + playback) - playback_lag_cycles_))
+          : cycle - window_cycles / 2;
   // A setpoint lost on the way: the nearest one received (within two cycles).
   const SetpointIn* mid_p = nullptr;
   for (int64_t d : {0, -1, 1, -2, 2}) {
-    if ((mid_p = setpoint_at(cycle - window_cycles / 2 + d)) != nullptr) break;
+    if ((mid_p = setpoint_at(mid_cycle + d)) != nullptr) break;
   }
   const SetpointIn& mid = mid_p != nullptr ? *mid_p : sp;
   const Known* k = find(mid.program_token, mid.block_index);

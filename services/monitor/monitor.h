@@ -73,6 +73,12 @@ class Monitor {
   // 1.5 ms interpolation buffer): 3 on the cell; 0 where the actual positions are
   // the setpoints themselves (tests).
   void set_tracking_lag_cycles(double n) { lag_cycles_ = n; }
+  // The axes' lag behind the bridge's playback position (AXIS_STATUS playback_cycle),
+  // in coarse cycles: its fine interpolation's two moving averages of one period
+  // ((n-1) ticks), the drives' interpolation buffer (1.5 servo periods) and the age of
+  // the actual positions a status carries (about one servo period): 1.25 on the cell
+  // (T_ipo = 4 T_servo); 0 where the actual positions are the setpoints (tests).
+  void set_playback_lag_cycles(double n) { playback_lag_cycles_ = n; }
 
   // A block the interpolator applied (INTERP_INPUT), of program `token`.
   void on_block(const program::Block& b, int64_t token);
@@ -84,9 +90,12 @@ class Monitor {
     cut_prev_valid_ = false;
   }
   // An axis status (utime: when the bridge read the actual positions); returns the
-  // report and appends raised alarms to *alarms.
+  // report and appends raised alarms to *alarms. playback_cycle: the bridge's playback
+  // position on the setpoint stream (fractional cycles; < 0 unknown: the newest
+  // setpoint cycle stands in for it, tracking_lag_cycles behind).
   Report on_status(int64_t utime, int64_t setpoint_cycle, const std::vector<double>& actual_mm,
-                   const std::vector<double>& following_error_mm, std::vector<Alarm>* alarms);
+                   const std::vector<double>& following_error_mm, std::vector<Alarm>* alarms,
+                   double playback_cycle = -1.0);
 
   double largest_following_error_mm() const { return largest_fe_; }
   double largest_chord_error_mm() const { return largest_chord_; }
@@ -131,6 +140,7 @@ class Monitor {
   struct Sample {
     int64_t utime = 0;
     int64_t cycle = 0;
+    double playback = -1;  // the bridge's playback position, cycles (< 0: unknown)
     int naxes = 0;
     motion::AxisVec pos{};
   };
@@ -140,6 +150,7 @@ class Monitor {
   const Sample& recent(size_t i) const { return recent_[(recent_head_ + i) % kRecent]; }
   double tracking_ratio_ = 1.0;  // actual / commanded distance over the window
   double lag_cycles_ = 3.0;       // how many coarse cycles the axes follow the setpoints late
+  double playback_lag_cycles_ = 1.25;  // ... and the bridge's playback position
   double actual_feed_ = 0;
   double largest_fe_ = 0;
   double largest_chord_ = 0;

@@ -99,6 +99,13 @@ import csv, sys
 rows = [r for r in csv.DictReader(open(sys.argv[1])) if None not in r.values()]
 cut, decel = float(sys.argv[2]), float(sys.argv[3])
 t = [float(r["wall_s"]) for r in rows]
+# The simulated world's own time (wall time less the stalls it stood through: the
+# simulator's process stalled, or its master's stream ran dry): the axes' motion is
+# smooth on it, where a stall would be a flat step on the wall clock.
+world = lambda r: float(r.get("world_s") or r["wall_s"])
+rows = [r for k, r in enumerate(rows) if k == 0 or world(r) > world(rows[k - 1])]  # rows in a stall: one
+t = [float(r["wall_s"]) for r in rows]
+tw = [world(r) for r in rows]
 x = [float(r["X_mm"]) for r in rows]
 def decel_fit(t, x, v, vmax, lo=0, hi=None):
     # Least-squares parabola x(t) over the braking phase (speed from 90 % down to 10 %
@@ -119,12 +126,12 @@ def decel_fit(t, x, v, vmax, lo=0, hi=None):
         q[r] = (b[r] - sum(A[r][j] * q[j] for j in range(r + 1, 3))) / A[r][r]
     return -2 * q[2], n
 # Speeds from the positions (the trace's velocity column is a noisy instantaneous one).
-v = [(x[k + 1] - x[k]) / (t[k + 1] - t[k]) for k in range(len(t) - 1)]
+v = [(x[k + 1] - x[k]) / (tw[k + 1] - tw[k]) for k in range(len(t) - 1)]
 i = max(k for k in range(len(t) - 1) if t[k] <= cut) - 1
 rest = next(k for k in range(i, len(t)) if all(abs(x[j] - x[k]) < 1e-3 for j in range(k, min(len(t), k + 30))))
-fitted, n = decel_fit(t, x, v, v[i], i, rest)
+fitted, n = decel_fit(tw, x, v, v[i], i, rest)
 # Single 50 ms windows: the samples' time stamps jitter by about a millisecond.
-worst = max((v[k] - v[k + 5]) / (t[k + 5] - t[k]) for k in range(i, max(i + 1, rest - 5)))
+worst = max((v[k] - v[k + 5]) / (tw[k + 5] - tw[k]) for k in range(i, max(i + 1, rest - 5)))
 dist = x[rest] - x[i]
 # The bridge's stop is jerk-limited (X: 60000 mm/s^3, config/machines/sim3.yaml): it
 # reaches the full deceleration after a/j and releases it over a/j, which adds v*a/j.

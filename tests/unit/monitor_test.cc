@@ -3,7 +3,11 @@
 // inverts), alarms, and reports that depend only on the messages.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <random>
+#include <vector>
 
 #include "common/config/machine_config.h"
 #include "services/interpolator/interpolator.h"
@@ -138,6 +142,87 @@ TEST(Monitor, ReportsDependOnlyOnTheMessages) {
     }
     ASSERT_EQ(x.actual_feed_mm_per_min, y.actual_feed_mm_per_min);
   }
+}
+
+// The cell as the monitor sees it on a lossy, jittery network: the bridge plays the
+// setpoints back a few cycles behind the newest (lead 4) and the axes follow that
+// playback 1.25 cycles late, smoothly; but the newest setpoint cycle a status carries
+// jumps with the arrivals (stands, or advances by two: 5 % loss, 2 +- 1 ms of jitter).
+// The valley under the feed law holds R_max at its target, so any error in the
+// tracking ratio reads as roughness. Returns the R_max alarms and the largest
+// predicted / target ratio (feeds over 100 mm/min).
+struct LossyOutcome {
+  int rmax_alarms = 0;
+  double max_rmax_ratio = 0;
+  int points = 0;
+};
+LossyOutcome run_lossy(bool with_playback) {
+  const auto cfg = config::load_machine_config(std::string(CNC_SOURCE_DIR) + "/config/machines/sim3.yaml");
+  pps::ProgramServer server(cfg);
+  EXPECT_TRUE(server.load(std::string(CNC_SOURCE_DIR) + "/config/programs/fig11_valley.ngc", 7).ok);
+  interp::Interpolator ip(cfg);
+  Monitor mon(cfg);
+  ip.apply_command({interp::Command::Kind::kStart, 1.0});
+  for (int64_t i = 0; i < server.num_blocks(); ++i) {
+    EXPECT_TRUE(ip.apply_block(*server.block(i)));
+    mon.on_block(*server.block(i), 7);
+  }
+  std::vector<interp::Setpoint> sps;
+  for (int k = 0; k < 200000 && ip.state() != interp::RunState::kDone; ++k) sps.push_back(ip.step());
+  const int n = static_cast<int>(cfg.axes.size());
+  const double lead = 4.0, lag = 1.25;
+  auto at = [&](double cycle) {  // the commanded path at a fractional cycle
+    const double c = std::clamp(cycle - static_cast<double>(sps[0].cycle), 0.0, static_cast<double>(sps.size() - 1));
+    const auto i = static_cast<size_t>(std::floor(c));
+    const size_t j = std::min(i + 1, sps.size() - 1);
+    const double f = c - std::floor(c);
+    std::vector<double> p(static_cast<size_t>(n));
+    for (int a = 0; a < n; ++a) p[static_cast<size_t>(a)] = sps[i].position_mm[a] + (sps[j].position_mm[a] - sps[i].position_mm[a]) * f;
+    return p;
+  };
+  std::mt19937 rng(3);
+  std::uniform_int_distribution<int> arrival(-1, 1);  // the newest cycle received: one early, on time, one late
+  LossyOutcome r;
+  int64_t newest = -1;
+  for (size_t k = 0; k < sps.size(); ++k) {
+    const interp::Setpoint& sp = sps[k];
+    SetpointIn in;
+    in.cycle = sp.cycle;
+    in.program_token = 7;
+    in.block_index = sp.block_index;
+    in.source_line = sp.source_line;
+    in.u = sp.u;
+    in.feed_mm_per_min = sp.feed_mm_per_min;
+    in.position_mm = sp.position_mm;
+    mon.on_setpoint(in);
+    newest = std::max<int64_t>(newest, std::min<int64_t>(sp.cycle, sp.cycle - 1 + arrival(rng)));
+    const double playback = static_cast<double>(sp.cycle) - lead;
+    if (playback < 0) continue;
+    const std::vector<double> actual = at(playback - lag), fe(static_cast<size_t>(n), 0.0);
+    std::vector<Alarm> alarms;
+    const int64_t utime = std::llround(static_cast<double>(sp.cycle) * cfg.ipo_period_s * 1e6);
+    const Report rep = mon.on_status(utime, newest, actual, fe, &alarms, with_playback ? playback : -1.0);
+    for (const auto& a : alarms) r.rmax_alarms += a.code == "rmax";
+    if (std::isfinite(rep.predicted_rmax_um) && rep.actual_feed_mm_per_min > 100) {
+      r.max_rmax_ratio = std::max(r.max_rmax_ratio, rep.predicted_rmax_um / rep.target_rmax_um);
+      ++r.points;
+    }
+  }
+  return r;
+}
+
+TEST(Monitor, TrackingByThePlaybackPositionRaisesNoFalseRoughnessAlarmOnAJitteryStream) {
+  const LossyOutcome by_playback = run_lossy(true);
+  const LossyOutcome by_cycle = run_lossy(false);
+  std::printf("R_max alarms: %d by the playback position (largest predicted/target %.4f), %d by the newest "
+              "setpoint cycle (%.4f)\n",
+              by_playback.rmax_alarms, by_playback.max_rmax_ratio, by_cycle.rmax_alarms, by_cycle.max_rmax_ratio);
+  EXPECT_GT(by_playback.points, 300);
+  EXPECT_EQ(by_playback.rmax_alarms, 0);
+  EXPECT_LE(by_playback.max_rmax_ratio, 1.02);
+  // The newest cycle received, jumping with the arrivals, misreads the tracking.
+  EXPECT_GT(by_cycle.max_rmax_ratio, by_playback.max_rmax_ratio);
+  EXPECT_GT(by_cycle.rmax_alarms, 0);
 }
 
 }  // namespace

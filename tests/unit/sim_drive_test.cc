@@ -9,7 +9,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <memory>
 #include <random>
+#include <vector>
 
 #include "common/drive/drive_profile.h"
 #include "tools/servo_sim/sim_drive.h"
@@ -238,6 +240,93 @@ TEST(SimDrive, WithoutTheWatchdogASilentMasterOnlyStopsTheStream) {
   EXPECT_TRUE(d.follows());
   EXPECT_EQ(d.comm_trips(), 0);
   EXPECT_NEAR(d.position_mm(), 1.0, 1e-3);
+}
+
+}  // namespace
+}  // namespace cnc::servo_sim
+
+namespace cnc::servo_sim {
+namespace {
+
+// The simulated world (SimWorld) under a stalled master: three axes stream a
+// diagonal jerk-limited move at up to about 180 mm/s per axis, one write per axis
+// per millisecond, and the master stalls (writes nothing) for stall_ms from write
+// 500 on, then goes on from where it stopped (its playback is counted in its ticks,
+// like the drive bridge's). The world is stepped like the simulator steps it: on its
+// 1 ms grid and at every write. Returns the largest |following error| of any axis.
+struct WorldRun {
+  double max_fe = 0;
+  int64_t pauses = 0;
+  double longest_pause_s = 0;
+};
+WorldRun run_world(double max_pause_s, int stall_ms) {
+  const drive::DriveProfile profile = sim_profile();
+  config::ServoSimAxisConfig sim;
+  sim.bandwidth_hz = 40;
+  sim.damping = 1.0;
+  std::vector<std::unique_ptr<SimDrive>> drives;
+  std::vector<SimDrive*> ptrs;
+  const char* names[3] = {"X", "Y", "Z"};
+  for (int a = 0; a < 3; ++a) {
+    drives.push_back(std::make_unique<SimDrive>(names[a], a + 1, profile, sim, 250.0, 0.0, 3000.0));
+    ptrs.push_back(drives.back().get());
+  }
+  SimWorld world(ptrs, max_pause_s);
+  double now = 100.0;
+  world.advance_to(now);
+  for (SimDrive* d : ptrs) {
+    write_field(*d, drive::Role::kControlword, 1);
+    d->after_request(now);
+  }
+  const double period = 0.001, t0 = 0.05, T = 1.2;
+  const double dist[3] = {100.0, -60.0, 30.0};
+  WorldRun r;
+  double grid = now;
+  int64_t tick = 0;  // the master's playback, in its ticks
+  for (int k = 1; k <= 1500; ++k) {
+    const double wall = now + k * period;
+    if (k >= 500 && k < 500 + stall_ms) continue;  // stalled: no tick, no write
+    ++tick;
+    for (int a = 0; a < 3; ++a) {
+      const double arrive = wall + 0.00005 * a;  // the axes' writes follow each other on one link
+      while (grid + period <= arrive) {
+        grid += period;
+        world.advance_to(grid);
+        for (SimDrive* d : ptrs) r.max_fe = std::max(r.max_fe, std::fabs(read_field(*d, drive::Role::kFollowingError)));
+      }
+      world.advance_to(arrive);
+      write_field(*ptrs[a], drive::Role::kTargetPosition, s_curve(static_cast<double>(tick) * period, t0, T, dist[a]));
+      ptrs[a]->after_request(arrive);
+    }
+  }
+  r.pauses = world.pauses();
+  r.longest_pause_s = world.longest_pause_s();
+  return r;
+}
+
+TEST(SimWorld, AStalledMastersDryStreamStopsTheWorldInsteadOfMakingAFollowingError) {
+  // 1, 3 and 8 ms stalls at about 150 mm/s (write 500, 0.45 s in): the world stands
+  // while the stream is dry, so the drives resume where the master resumes, at the
+  // speed they had. As a real drive with an empty buffer (max_pause 0) the same
+  // stalls are following errors of about v x the stall.
+  for (int stall : {1, 3, 8}) {
+    const WorldRun paused = run_world(0.05, stall);
+    const WorldRun real = run_world(0.0, stall);
+    std::printf("stall %d ms: largest following error %.2f um with the world standing, %.1f um without\n", stall,
+                paused.max_fe * 1e3, real.max_fe * 1e3);
+    EXPECT_LT(paused.max_fe, 0.005) << stall << " ms";
+    EXPECT_GE(paused.pauses, 1) << stall << " ms";
+    EXPECT_GT(real.max_fe, 0.03) << stall << " ms";  // the test can tell the difference
+    EXPECT_EQ(real.pauses, 0);
+  }
+}
+
+TEST(SimWorld, AStallLongerThanTheAllowanceIsARealUnderflow) {
+  // 80 ms of silence against a 20 ms allowance: the world stands 20 ms, then the
+  // drives run dry (hold their last target) as real ones would.
+  const WorldRun r = run_world(0.02, 80);
+  EXPECT_NEAR(r.longest_pause_s, 0.02, 1e-9);
+  EXPECT_GT(r.max_fe, 0.1);
 }
 
 }  // namespace

@@ -14,7 +14,7 @@ M="$WORK/machine.yaml"
 make_machine "$SRC/config/machines/sim3.yaml" "$M"
 start logger "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/run"
 sleep 0.2
-start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M"
+start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M" ${SIM_ARGS:-}  # SIM_ARGS="--master-stall-pause-s 0": stalls as real drives would see them
 start drive-bridge "$BUILD/services/cnc-drive-bridge" --machine "$M"
 start monitor "$BUILD/services/cnc-monitor" --machine "$M"
 start program-server "$BUILD/services/cnc-program-server" --machine "$M"
@@ -28,5 +28,5 @@ grep -E "program done|cnc-ctl:" "$WORK/ctl.out" | sed 's/^/# /'
 echo "# $VICTIM stopped for $MS ms: $(cat "$WORK/stalls.out" 2>/dev/null)"
 for s in interpolator program-server monitor drive-bridge servo-sim logger; do stop "$s" TERM; done
 grep -h "ticks held for a stalled link" "$WORK/drive-bridge.log" | sed 's/^.*\] /# bridge: /'
-grep -h "stalled .* time" "$WORK/servo-sim.log" | sed 's/^.*\] /# simulator: /'
+grep -hE "stalled .* time|ran dry" "$WORK/servo-sim.log" | sed "s/^.*\] /# simulator: /" || true
 echo "cnc-ctl exit $rc"

@@ -7,6 +7,8 @@
 //                 [--control FIFO] [--inject "T:CMD; ..."]  fault injection (fault_injector.h)
 //                 [--trace CSV] [--persist FILE] [--final-state FILE]
 //                 [--latency-dir DIR]                       cycle timing at the end (or $CNC_LATENCY_DIR)
+//                 [--master-stall-pause-s S]                how long a master's dry stream stops the simulated
+//                                                           world (default timing.setpoint_timeout_s; 0: never)
 //
 // --rtu-timing real (default) holds each RTU reply until a real line at the
 // configured baud would have carried request and reply (a pseudo-terminal moves
@@ -31,6 +33,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <ctime>
 #include <filesystem>
 #include <fstream>
@@ -169,6 +172,7 @@ class SideWriter {
   static constexpr size_t kMaxAxes = 16;
   struct Sample {
     double wall_s = 0;
+    double world_s = 0;  // wall_s less the time the simulated world stood (SimWorld)
     double pos[kMaxAxes]{};
     double vel[kMaxAxes]{};
     bool on[kMaxAxes]{};
@@ -181,7 +185,7 @@ class SideWriter {
       trace_.open(trace_file);
       trace_ << "wall_s";
       for (const auto& n : names_) trace_ << "," << n << "_mm," << n << "_mm_s," << n << "_on";
-      trace_ << "\n" << std::flush;
+      trace_ << ",world_s\n" << std::flush;
     }
     thread_ = std::thread([this] { run(); });
   }
@@ -216,7 +220,8 @@ class SideWriter {
             std::snprintf(buf, sizeof buf, ",%.6f,%.4f,%d", s->pos[i], s->vel[i], s->on[i] ? 1 : 0);
             row += buf;
           }
-          row += "\n";
+          std::snprintf(buf, sizeof buf, ",%.4f\n", s->world_s);
+          row += buf;
           trace_ << row << std::flush;
         }
         last = *s;
@@ -243,6 +248,24 @@ class SideWriter {
   std::thread thread_;
 };
 
+// Diagnostics (CNC_SIM_DEBUG_TRACE=FILE): every grid step and every target write,
+// in memory allocated up front, written to FILE (and FILE.writes) at exit.
+struct DebugTrace {
+  static constexpr int kAx = 3;
+  struct Step {
+    double mono, grid, shifted;
+    double demand[kAx], actual[kAx], vel[kAx], fe[kAx], ahead[kAx];
+  };
+  struct Write {
+    double mono;
+    int axis;
+    double target, ahead;
+  };
+  std::vector<Step> steps;
+  std::vector<Write> writes;
+  std::string file;
+};
+
 class Simulator {
  public:
   Simulator(const cnc::config::MachineConfig& cfg, const cnc::service::Args& args);
@@ -267,6 +290,7 @@ class Simulator {
   std::vector<std::unique_ptr<cnc::drive::DriveProfile>> profiles_;
   std::vector<std::unique_ptr<SimDrive>> drives_;
   std::vector<SimDrive*> all_, tcp_, rtu_;
+  std::unique_ptr<cnc::servo_sim::SimWorld> world_;
   cnc::servo_sim::FaultInjector injector_;
   // TCP
   std::string bind_;
@@ -297,6 +321,8 @@ class Simulator {
   int64_t stalls_ = 0;     // process stalls the simulated world paused for
   double stalled_s_ = 0;
   double next_step_s_;
+  DebugTrace dbg_;
+  double dbg_shift_ = 0;
 };
 
 Simulator::Simulator(const cnc::config::MachineConfig& cfg, const cnc::service::Args& args)
@@ -346,6 +372,18 @@ Simulator::Simulator(const cnc::config::MachineConfig& cfg, const cnc::service::
     }
   }
   if (all_.empty()) throw std::runtime_error("no axis uses transport modbus_tcp or modbus_rtu");
+  {
+    // How long a stalled master's dry stream stops the simulated world (SimWorld).
+    const std::string p = args.option("master-stall-pause-s");
+    double pause = cfg.setpoint_timeout_s;
+    if (!p.empty()) {
+      char* end = nullptr;
+      pause = std::strtod(p.c_str(), &end);
+      if (end == p.c_str() || *end != '\0' || !std::isfinite(pause) || pause < 0)
+        throw cnc::config::ConfigError("", "--master-stall-pause-s", "'" + p + "' is not a number of seconds >= 0");
+    }
+    world_ = std::make_unique<cnc::servo_sim::SimWorld>(all_, pause);
+  }
   if (!args.option("port").empty()) port_ = std::stoi(args.option("port"));
   bind_ = args.option("bind", "127.0.0.1");
   device_ = args.option("device");
@@ -385,8 +423,16 @@ void Simulator::after_reply(SimDrive& d, const uint8_t* pdu) {
   written_range(pdu, &addr, &n);
   const int first = d.emulator().profile().first_address();
   const int end = d.emulator().profile().end_address();
+  const int64_t before = d.emulator().target_writes();
   if (n > 0 && addr >= first && addr + n <= end) d.emulator().after_write(addr, n);
-  d.after_request(cnc::util::monotonic_s());
+  // The world first: the drive takes the write at the moment the world has reached
+  // (a dry stream stood until now), not stepping itself alone past its newest target.
+  const double now = cnc::util::monotonic_s();
+  world_->advance_to(now);
+  d.after_request(now);
+  if (!dbg_.file.empty() && before != d.emulator().target_writes() && dbg_.writes.size() < dbg_.writes.capacity()) {
+    dbg_.writes.push_back({now, d.unit(), d.emulator().target_mm(), d.buffer_end_s() - now});
+  }
 }
 
 void Simulator::open_listener() {
@@ -413,14 +459,30 @@ void Simulator::step_dynamics() {
   const double late = now - next_step_s_;
   if (late > kStall) {
     const double lost = late - dt_;
-    for (SimDrive* d : all_) d->shift_time(lost);
+    world_->stand(lost);
     next_step_s_ += lost;
     ++stalls_;
     stalled_s_ += lost;
+    dbg_shift_ += lost;
   }
   int steps = 0;
   while (now >= next_step_s_ && steps < 1000) {
-    for (SimDrive* d : all_) d->step_to(next_step_s_);
+    world_->advance_to(next_step_s_);
+    if (!dbg_.file.empty() && dbg_.steps.size() < dbg_.steps.capacity()) {
+      DebugTrace::Step st{};
+      st.mono = cnc::util::monotonic_s();
+      st.grid = next_step_s_;
+      st.shifted = dbg_shift_;
+      dbg_shift_ = 0;
+      for (size_t i = 0; i < all_.size() && i < DebugTrace::kAx; ++i) {
+        st.demand[i] = all_[i]->last_demand_mm();
+        st.actual[i] = all_[i]->position_mm();
+        st.vel[i] = all_[i]->velocity_mm_s();
+        st.fe[i] = all_[i]->last_fe_mm();
+        st.ahead[i] = all_[i]->buffer_end_s() - next_step_s_;
+      }
+      dbg_.steps.push_back(st);
+    }
     next_step_s_ += dt_;
     ++steps;
   }
@@ -447,7 +509,7 @@ void Simulator::serve_tcp_client(int fd, std::vector<int>& closed) {
     modbus_reply_exception(tcp_ctx_, query, static_cast<unsigned>(code));
     return;
   }
-  d->step_to(cnc::util::monotonic_s());  // the reply reads the registers as they are at this moment
+  world_->advance_to(cnc::util::monotonic_s());  // the reply reads the registers as they are at this moment
   modbus_reply(tcp_ctx_, query, len, d->emulator().mapping());
   after_reply(*d, query + header);
 }
@@ -462,7 +524,7 @@ void Simulator::answer_rtu(const uint8_t* frame, int len, double rx_end_s) {
   if (const int code = injector_.take_exception()) {
     modbus_reply_exception(rtu_ctx_, frame, static_cast<unsigned>(code));
   } else {
-    d->step_to(cnc::util::monotonic_s());  // the reply reads the registers as they are at this moment
+    world_->advance_to(cnc::util::monotonic_s());  // the reply reads the registers as they are at this moment
     modbus_reply(rtu_ctx_, frame, len, d->emulator().mapping());
     after_reply(*d, frame + 1);
   }
@@ -565,6 +627,7 @@ void Simulator::housekeeping(double now) {
     if (now >= next_persist_s_) next_persist_s_ = now + 0.05;
     SideWriter::Sample smp;
     smp.wall_s = wall_s();
+    smp.world_s = smp.wall_s - world_->stood_s();
     smp.trace = trace_row;
     for (size_t i = 0; i < all_.size(); ++i) {
       smp.pos[i] = all_[i]->position_mm();
@@ -608,6 +671,11 @@ int Simulator::run() {
     std::vector<std::string> names;
     for (const SimDrive* d : all_) names.push_back(d->name());
     writer_ = std::make_unique<SideWriter>(names, args_.option("trace"), args_.option("persist"));
+  }
+  if (const char* f = std::getenv("CNC_SIM_DEBUG_TRACE")) {
+    dbg_.file = f;
+    dbg_.steps.reserve(400000);
+    dbg_.writes.reserve(1200000);
   }
   cnc::util::apply_realtime("cnc-servo-sim", cfg_.realtime_priority, cfg_.realtime_cpus);
 
@@ -687,10 +755,34 @@ int Simulator::run() {
     lat.compute = &lat_compute;
     cnc::util::report_latency(lat, cnc::util::latency_dir(args_.option("latency-dir")));
   }
+  if (!dbg_.file.empty()) {
+    FILE* f = std::fopen(dbg_.file.c_str(), "w");
+    if (f) {
+      std::fprintf(f, "mono,grid,shifted");
+      for (int i = 0; i < DebugTrace::kAx; ++i) std::fprintf(f, ",dem%d,act%d,vel%d,fe%d,ahead%d", i, i, i, i, i);
+      std::fprintf(f, "\n");
+      for (const auto& st : dbg_.steps) {
+        std::fprintf(f, "%.6f,%.6f,%.6f", st.mono, st.grid, st.shifted);
+        for (int i = 0; i < DebugTrace::kAx; ++i)
+          std::fprintf(f, ",%.6f,%.6f,%.3f,%.6f,%.6f", st.demand[i], st.actual[i], st.vel[i], st.fe[i], st.ahead[i]);
+        std::fprintf(f, "\n");
+      }
+      std::fclose(f);
+    }
+    f = std::fopen((dbg_.file + ".writes").c_str(), "w");
+    if (f) {
+      std::fprintf(f, "mono,unit,target,ahead\n");
+      for (const auto& w : dbg_.writes) std::fprintf(f, "%.6f,%d,%.6f,%.6f\n", w.mono, w.axis, w.target, w.ahead);
+      std::fclose(f);
+    }
+  }
   const std::string report = positions_json(all_);
   if (stalls_ > 0)
     spdlog::warn("cnc-servo-sim: the process stalled {} time(s) over {} ms; the simulated drives paused with it", stalls_,
                  static_cast<int64_t>(stalled_s_ * 1e3));
+  spdlog::info("cnc-servo-sim: the master's stream ran dry {} time(s), {:.1f} ms in all, the longest {:.1f} ms; the "
+               "simulated world stood meanwhile (--master-stall-pause-s)",
+               world_->pauses(), world_->paused_s() * 1e3, world_->longest_pause_s() * 1e3);
   spdlog::info("cnc-servo-sim: final positions {}", report);
   if (!args_.option("final-state").empty()) std::ofstream(args_.option("final-state")) << report << "\n";
   return cnc::service::kExitOk;
@@ -707,7 +799,7 @@ int main(int argc, char** argv) {
   cnc::service::Spec spec{"cnc-servo-sim",
                           "Modbus TCP / RTU servo drive simulator",
                           {"port", "bind", "device", "rtu-timing", "control", "inject", "trace", "persist",
-                           "final-state", "latency-dir"},
+                           "final-state", "latency-dir", "master-stall-pause-s"},
                           {}};
   return cnc::service::run(spec, argc, argv, run_sim);
 }

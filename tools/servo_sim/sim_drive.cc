@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace cnc::servo_sim {
 
@@ -47,6 +48,15 @@ void SimDrive::quick_stop_at(double t_s, double* x, double* v, double* a) const 
   *x = stop_x0_ + stop_v0_ * tau - 0.5 * dir * comm_decel_ * tau * tau;
   *v = stop_v0_ - dir * comm_decel_ * tau;
   *a = t_s - stop_t0_ < t_end ? -dir * comm_decel_ : 0.0;
+}
+
+double SimDrive::stream_end_s() const {
+  // Only a stream whose rate is known: the first interval after a (re)start is a
+  // guess (kRestartInterval_s), and a world standing on it would teach the drive a
+  // master's rate without the time it stood (a serial line writes every few ms).
+  if (!emu_.follows() || comm_ != Comm::kOk || last_write_s_ < 0 || n_pts_ < 2 || stream_writes_ < 1)
+    return std::numeric_limits<double>::infinity();
+  return pts_[n_pts_ - 1].t_s;
 }
 
 double SimDrive::demand_mm(double now_s) const {
@@ -202,6 +212,42 @@ void SimDrive::step_to(double now_s) {
   model_.step(dt, target, v_ff, a_ff, true);
   emu_.set_actual(model_.position_mm(), model_.velocity_mm_s());
   emu_.set_following_error(target - model_.position_mm());
+  last_fe_ = target - model_.position_mm();
+  last_demand_ = target;
+}
+
+void SimWorld::shift(double dt_s) {
+  for (SimDrive* d : drives_) d->shift_time(dt_s);
+  stood_s_ += dt_s;
+}
+
+void SimWorld::stand(double dt_s) {
+  if (dt_s <= 0) return;
+  shift(dt_s);
+  if (t_ >= 0) t_ += dt_s;
+}
+
+void SimWorld::advance_to(double now_s) {
+  if (t_ >= 0 && now_s <= t_) return;
+  double end = std::numeric_limits<double>::infinity();
+  for (const SimDrive* d : drives_) end = std::min(end, d->stream_end_s());
+  if (now_s > end && max_pause_s_ > 0) {
+    // The stream ran dry at `end`: the world stands from then (or from where it
+    // already is) to now, within what is left of this stall's allowance.
+    const double from = t_ >= 0 ? std::max(end, t_) : end;
+    const double stand_s = std::min(now_s - from, max_pause_s_ - episode_s_);
+    if (stand_s > 0) {
+      if (episode_s_ == 0) ++pauses_;
+      shift(stand_s);
+      episode_s_ += stand_s;
+      paused_s_ += stand_s;
+      longest_s_ = std::max(longest_s_, episode_s_);
+    }
+  } else if (now_s <= end) {
+    episode_s_ = 0;
+  }
+  for (SimDrive* d : drives_) d->step_to(now_s);
+  t_ = now_s;
 }
 
 }  // namespace cnc::servo_sim

@@ -22,6 +22,7 @@
 // last target, as before.
 #include <algorithm>
 #include <string>
+#include <vector>
 
 #include "common/drive/drive_emulator.h"
 #include "tools/servo_sim/servo_model.h"
@@ -55,6 +56,11 @@ class SimDrive {
   // This process stalled for dt_s: the drive's clock skips it (see the simulator's
   // step_dynamics), as if the world had paused.
   void shift_time(double dt_s);
+  // Following a master's stream (enabled, its watchdog not acting, targets coming at
+  // a rate it has measured: the second write after a (re)start on):
+  // the time its newest target is scheduled at, past which the demand would run dry;
+  // +infinity when it follows no stream.
+  double stream_end_s() const;
   // Position demand at time now_s (the ramp between the last two targets).
   double demand_mm(double now_s) const;
   // Communication watchdog: quick stops begun, and the speed and place each began at.
@@ -64,6 +70,11 @@ class SimDrive {
   double comm_stop_x0() const { return stop_x0_; }
   double comm_timeout_s() const { return comm_timeout_s_; }
   double comm_decel() const { return comm_decel_; }
+  // Diagnostics: the time of the newest target in the buffer, of the last write.
+  double buffer_end_s() const { return pts_[n_pts_ - 1].t_s; }
+  double last_write_s() const { return last_write_s_; }
+  double last_fe_mm() const { return last_fe_; }
+  double last_demand_mm() const { return last_demand_; }
 
  private:
   std::string name_;
@@ -71,6 +82,8 @@ class SimDrive {
   drive::DriveEmulator emu_;
   ServoModel model_;
   int64_t writes_seen_ = 0;
+  double last_fe_ = 0;
+  double last_demand_ = 0;
   double t_s_ = -1;          // time the dynamics have reached
   double last_write_s_ = -1;
   double usual_s_ = 0;       // the master's write interval (estimated)
@@ -104,6 +117,56 @@ class SimDrive {
   double extrapolation_slope() const;
   // The quick stop's demand, velocity and acceleration at t.
   void quick_stop_at(double t_s, double* x, double* v, double* a) const;
+};
+
+// The simulated drives' world and its clock. The drives stand in for drives on
+// hardware of their own, fed by a real-time master that keeps its cycle. This cell
+// runs on a PC (often a VM) that does not: its processes stall now and then, all at
+// once (the VM paused) or one of them (the master's thread starved). Such a stall is
+// not a property of the controller, and a real cell would not have it; so it must
+// neither make a following error here nor be hidden as one:
+//  * a stall of the simulator's own process (stand(): it was not running) is time in
+//    which the simulated world stood, as before;
+//  * a master whose stream runs dry (a drive that follows a stream has reached its
+//    newest target: the master's writes are late by more than its buffer) stops the
+//    world at that moment, for every drive together, until the stream goes on: the
+//    master's playback stood meanwhile too (the drive bridge's playback is counted in
+//    its ticks, and it holds for a stalled link), so the drives resume where the
+//    stream resumes, at the speed they had, instead of a hold and a catch-up in their
+//    demand (a following error of about v x the stall: 0.1-0.3 mm for 1-2 ms at
+//    200 mm/s on a buffer 1.5 write intervals deep);
+//  * for at most max_pause_s per stall (timing.setpoint_timeout_s by default: a master
+//    silent longer than the cell's own setpoint watchdog has stopped, not stalled);
+//    beyond it the drive behaves as a real one with an empty buffer (holds its last
+//    target, or with its communication watchdog on extrapolates and then stops).
+// The stalls stood through are counted (pauses(), paused_s(), longest_pause_s()): on
+// real hardware each would be a following error of about v x its length, and the
+// cyclic services' latency histograms say how long they are. max_pause_s = 0: every
+// dry buffer is a real underflow (benches that measure what a stalled master does).
+class SimWorld {
+ public:
+  SimWorld(std::vector<SimDrive*> drives, double max_pause_s) : drives_(std::move(drives)), max_pause_s_(max_pause_s) {}
+  // Every drive's dynamics up to now_s (monotonic), the world standing where a
+  // stream runs dry (see above).
+  void advance_to(double now_s);
+  // The simulator's process stalled for dt_s: the world stood.
+  void stand(double dt_s);
+  int64_t pauses() const { return pauses_; }
+  double paused_s() const { return paused_s_; }
+  double longest_pause_s() const { return longest_s_; }
+  // Time the world stood in all, by either cause: wall time minus world time.
+  double stood_s() const { return stood_s_; }
+
+ private:
+  void shift(double dt_s);
+  std::vector<SimDrive*> drives_;
+  double max_pause_s_;
+  double t_ = -1;           // the time every drive has been advanced to
+  double episode_s_ = 0;    // the current dry stall, stood through so far
+  int64_t pauses_ = 0;
+  double paused_s_ = 0;
+  double longest_s_ = 0;
+  double stood_s_ = 0;
 };
 
 }  // namespace cnc::servo_sim
