@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <stdexcept>
 
@@ -35,6 +36,31 @@ PeerWatch::PeerWatch(bus::Bus& bus, const std::string& heartbeat_channel, const 
   al_.text.reserve(kTextBytes);
   bus_.subscribe<cnc::lcmt_heartbeat>(heartbeat_channel,
                                       [this](const cnc::lcmt_heartbeat& m) { on_heartbeat(m, clock_()); });
+  // Every channel of the cell (the heartbeat channel's prefix): any message a peer
+  // sends is a sign of life. The bus verifies each message once, whichever
+  // subscriptions match it, and hands over only what verified.
+  const std::string suffix = config::channels::kHeartbeat;
+  const std::string prefix = heartbeat_channel.size() >= suffix.size() &&
+                                     heartbeat_channel.compare(heartbeat_channel.size() - suffix.size(), suffix.size(),
+                                                               suffix) == 0
+                                 ? heartbeat_channel.substr(0, heartbeat_channel.size() - suffix.size())
+                                 : std::string();
+  if (!prefix.empty()) {
+    bus_.subscribe_raw(bus::exact_channel(prefix) + ".*",
+                       [this](const std::string&, const void* data, size_t size, int64_t) {
+                         if (const auto h = bus::peek_header(data, size)) on_message(h->sender, clock_());
+                       });
+  }
+}
+
+void PeerWatch::on_message(int32_t sender, double now_s) {
+  if (sender == 0 || sender == bus_.sender()) return;  // unknown, or this process's own
+  for (size_t i = 0; i < n_; ++i) {
+    Peer& p = peers_[i];
+    if (p.sender != sender || p.stopped) continue;
+    p.last_s = std::max(p.last_s, now_s);
+    return;
+  }
 }
 
 void PeerWatch::on_heartbeat(const cnc::lcmt_heartbeat& m, double now_s) {
@@ -44,6 +70,7 @@ void PeerWatch::on_heartbeat(const cnc::lcmt_heartbeat& m, double now_s) {
     if (p.pid != 0 && m.pid != p.pid && !p.lost && !p.stopped) p.restarted = true;
     p.last_s = now_s;
     p.pid = m.pid;
+    p.sender = m.sender;
     p.state = m.state;
     p.stopped = m.state == cnc::lcmt_heartbeat::STOPPING;
     return;

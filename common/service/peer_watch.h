@@ -1,7 +1,11 @@
 #pragma once
 // Watches the heartbeats of the peers a service depends on. Every service publishes
-// HEARTBEAT every timing.heartbeat_period_s (service::Heartbeat); a peer whose
-// heartbeat has been missing for timing.heartbeat_timeout_s is lost:
+// HEARTBEAT every timing.heartbeat_period_s (service::Heartbeat); a peer from which
+// nothing has come for timing.heartbeat_timeout_s is lost. Any message of the cell's
+// channels from the peer's sender id (learnt from its heartbeats: the header's
+// `sender`) is a sign of life too, verified like every message where the cell signs:
+// a busy or lossy moment that delays or drops its heartbeats while its setpoints or
+// statuses still come is no loss.
 //
 //   PeerWatch peers(bus, cfg, "cnc-interpolator", {"cnc-drive-bridge", "cnc-program-server"});
 //   ... every cycle, after the bus was drained:
@@ -50,6 +54,8 @@ class PeerWatch {
   int check(double now_s);
   // A heartbeat, as the subscription hands it over (public for tests).
   void on_heartbeat(const cnc::lcmt_heartbeat& m, double now_s);
+  // Any other message of the cell from `sender` (public for tests).
+  void on_message(int32_t sender, double now_s);
 
   size_t size() const { return n_; }
   const std::string& name(size_t i) const { return peers_[i].name; }
@@ -70,6 +76,7 @@ class PeerWatch {
     double last_s = -1e308;
     double lost_at_s = 0;  // time of its last heartbeat when found lost
     int32_t pid = 0;
+    int32_t sender = 0;     // its messages' sender id, from its last heartbeat (0: unknown)
     int8_t state = -1;
     bool lost = false;
     bool stopped = false;

@@ -118,5 +118,35 @@ TEST(PeerWatch, HeartbeatsThroughTheBusAndNoAllocationOnTheCyclicPath) {
   EXPECT_EQ(a[1].code, "peer_back");
 }
 
+TEST(PeerWatch, AnyMessageFromAPeersSenderIsASignOfLife) {
+  // cnc-a's heartbeats (sender 42) stop at t = 10 while its other messages go on
+  // until t = 13: it is lost only 1 s after its last message, not its last
+  // heartbeat. Messages of another sender, or of sender 0, keep nothing alive.
+  Fixture f;
+  cnc::lcmt_heartbeat hb = heartbeat("cnc-a", 5, cnc::lcmt_heartbeat::RUNNING);
+  hb.sender = 42;
+  f.watch.on_heartbeat(hb, 10.0);
+  for (double t = 10.0; t <= 13.0; t += 0.004) {
+    f.watch.on_message(42, t);
+    f.watch.on_message(43, t + 5);  // another process
+    f.watch.on_message(0, t + 5);
+    EXPECT_EQ(f.watch.check(t), 0) << t;
+  }
+  EXPECT_EQ(f.watch.check(13.9), 0);
+  EXPECT_EQ(f.watch.check(14.1), 1);
+  EXPECT_TRUE(f.watch.lost(0));
+  f.watch.on_message(42, 14.2);  // it speaks again: back
+  f.watch.check(14.2);
+  EXPECT_FALSE(f.watch.lost(0));
+  const auto a = f.take();
+  ASSERT_EQ(a.size(), 2u);
+  EXPECT_EQ(a[0].code, "peer_lost");
+  EXPECT_EQ(a[1].code, "peer_back");
+  // Allocation-free, like the heartbeat handler.
+  test::AllocGuard g;
+  for (int k = 0; k < 1000; ++k) f.watch.on_message(42, 15.0 + k * 0.001);
+  EXPECT_EQ(g.allocations() + g.frees(), 0);
+}
+
 }  // namespace
 }  // namespace cnc::service
