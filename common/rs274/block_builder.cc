@@ -508,9 +508,14 @@ std::vector<program::NurbsGeometry> split_at_corners(const program::NurbsGeometr
       if (m >= p && p >= 1) {
         const int j = i - 1;  // the curve passes through P_j at this knot
         if (j >= 1 && j + 1 < n) {
-          const auto& a = rest.control_points[static_cast<size_t>(j - 1)];
+          // The legs to the nearest control points that differ from P_j (a doubled
+          // point beside it is a leg of no length: the turn is to the next one).
           const auto& c = rest.control_points[static_cast<size_t>(j)];
-          const auto& d = rest.control_points[static_cast<size_t>(j + 1)];
+          int ja = j - 1, jd = j + 1;
+          while (ja > 0 && rest.control_points[static_cast<size_t>(ja)] == c) --ja;
+          while (jd + 1 < n && rest.control_points[static_cast<size_t>(jd)] == c) ++jd;
+          const auto& a = rest.control_points[static_cast<size_t>(ja)];
+          const auto& d = rest.control_points[static_cast<size_t>(jd)];
           double l0 = 0, l1 = 0, dot = 0;
           for (int k = 0; k < 3; ++k) {
             const double e0 = c[static_cast<size_t>(k)] - a[static_cast<size_t>(k)];

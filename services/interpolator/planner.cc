@@ -45,6 +45,7 @@ constexpr double kCornerTurnCos = 0.939692620785908;  // cos 20°: a turn left u
 constexpr double kMaxSpeedRatio = 1.5;
 constexpr double kMinChord = 1e-7;
 constexpr int kMaxGeoDepth = 48;
+constexpr int kMaxLimitDepth = 8;
 
 template <class ProbeFn>
 void refine(double u0, const Probe& a, double u1, const Probe& b, const ProbeFn& probe, double v_top, int n,
@@ -58,7 +59,7 @@ void refine(double u0, const Probe& a, double u1, const Probe& b, const ProbeFn&
   bool need = false;
   Probe m;
   bool have_m = false;
-  if (depth < 8 && lo < v_top) {
+  if (depth < kMaxLimitDepth && lo < v_top) {
     m = probe(um);
     have_m = true;
     need = !(std::fabs(b.v - a.v) <= 0.005 * lo && m.v >= 0.995 * lo);
@@ -417,6 +418,21 @@ void Planner::plan_block(Planned& p) {
     p.samples[i + 1].s = s;
   }
   p.length = s;
+  // On an arc the curvature does not change, so the jerk share of the curvature term
+  // goes to what the tangential acceleration a adds across the path: its turning with
+  // the tangent, a·v·|k_a|, and the centripetal term's growth, d(v²k)/dt = 2·a·v·|k_a|
+  // per axis (on an arc of 0.1 mm the path's acceleration from rest turned at 40
+  // rad/s: jerk 1.08x the limit). The block's acceleration is held to it at its
+  // fastest speed.
+  if (b.kind == program::BlockKind::kArcCw || b.kind == program::BlockKind::kArcCcw) {
+    for (size_t i = 0; i < n; ++i) {
+      const double v = std::min(p.samples[i].v_geo, 1.5 * p.v_prog);
+      if (!(v > 0) || !std::isfinite(v)) continue;
+      for (int a = 0; a < naxes_; ++a)
+        if (std::fabs(kvec[i][a]) > 0)
+          p.accel = std::min(p.accel, kCentripetalShare * cfg_.axes[a].max_jerk_mm_s3 / (3 * v * std::fabs(kvec[i][a])));
+    }
+  }
   // Jerk from the curvature changing along the path: v³·|dk/ds| per axis.
   for (size_t i = 0; i + 1 < n && curved; ++i) {
     const double ds = p.samples[i + 1].s - p.samples[i].s;
