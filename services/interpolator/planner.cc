@@ -500,6 +500,27 @@ void Planner::plan_junction(const Planned& prev, Planned& next) const {
   const double v = corner_speed(t0, t1, std::min(prev.accel, next.accel), &stop);
   // No direction found (a block that does not move away from its end): a stop.
   next.v_entry = stop || !(norm(t0, naxes_) > 0 && norm(t1, naxes_) > 0) || std::isnan(v) ? 0 : v;
+  // The curvature may jump at the junction (arc to arc in another plane, line to
+  // arc): the centripetal acceleration steps by v²·|Δk_a| within a cycle, which must
+  // stay within half a cycle's jerk per axis (arc-to-arc junctions ran at up to 2x
+  // the jerk limit).
+  if (next.v_entry > 0 && (prev.path.curved() || next.path.curved())) {
+    auto curvature_at = [&](const motion::PathSegment& path, double u, AxisVec* k) {
+      AxisVec q{}, d1{}, dd2{}, t{};
+      path.eval(u, &q, &d1, &dd2);
+      *k = AxisVec{};
+      if (path.curved()) local_frame(d1, dd2, naxes_, &t, k);
+    };
+    AxisVec k0{}, k1{};
+    curvature_at(prev.path, prev.path.u_end(), &k0);
+    curvature_at(next.path, next.path.u_begin(), &k1);
+    for (int a = 0; a < naxes_; ++a) {
+      const double dk = std::fabs(k1[a] - k0[a]);
+      if (dk > 0 && std::isfinite(dk))
+        next.v_entry = std::min(next.v_entry, std::sqrt(0.5 * cfg_.axes[a].max_jerk_mm_s3 * period_s_ / dk));
+    }
+    if (next.v_entry < 1e-3) next.v_entry = 0;  // a crawl across a junction: a stop there
+  }
 }
 
 double Planner::corner_speed(const AxisVec& t0, const AxisVec& t1, double a_path, bool* stop) const {
