@@ -54,7 +54,27 @@ AxisConfig read_axis(MapReader r) {
   a.sim.max_velocity_mm_s = s.get_double("max_velocity_mm_s", 0.0, 0.0, 1e4);
   a.sim.comm_timeout_s = s.get_double("comm_timeout_s", 0.0, 0.0, 60.0);
   a.sim.comm_stop_decel_mm_s2 = s.get_double("comm_stop_decel_mm_s2", 0.0, 0.0, 1e6);
+  a.sim.has_home_switch = s.has("home_switch_mm");
+  a.sim.home_switch_mm = s.get_double("home_switch_mm", 0.0, -1e5, 1e5);
+  a.sim.home_switch_sigma_mm = s.get_double("home_switch_sigma_mm", a.sim.home_switch_sigma_mm, 0.0, 10.0);
+  a.sim.home_switch_hysteresis_mm = s.get_double("home_switch_hysteresis_mm", a.sim.home_switch_hysteresis_mm, 0.0, 100.0);
+  a.sim.home_switch_seed = static_cast<uint64_t>(s.get_int("home_switch_seed", 1, 0, INT64_MAX));
   s.finish();
+  if (r.has("home")) {
+    MapReader h = r.map("home");
+    HomeConfig& k = a.home;
+    k.method = h.get_choice("method", "switch", {"none", "switch", "absolute"});
+    k.search_velocity_mm_s = h.get_double("search_velocity_mm_s", k.search_velocity_mm_s, 1e-3, a.max_velocity_mm_s);
+    k.latch_velocity_mm_s = h.get_double("latch_velocity_mm_s", k.latch_velocity_mm_s, 1e-3, a.max_velocity_mm_s);
+    k.direction = static_cast<int>(h.get_int("direction", k.direction, -1, 1));
+    if (k.direction == 0) h.fail("direction", "must be -1 or 1");
+    k.switch_position_mm = h.get_double("switch_position_mm", k.direction < 0 ? a.min_mm : a.max_mm, -1e5, 1e5);
+    k.position_mm = h.get_double("position_mm", a.home_mm, a.min_mm, a.max_mm);
+    k.backoff_mm = h.get_double("backoff_mm", k.backoff_mm, 1e-3, 1e3);
+    k.order = static_cast<int>(h.get_int("order", 0, 0, 64));
+    h.finish();
+  }
+  a.jog_velocity_mm_s = r.get_double("jog_velocity_mm_s", 0.1 * a.max_velocity_mm_s, 1e-3, a.max_velocity_mm_s);
   r.finish();
   return a;
 }
@@ -107,6 +127,13 @@ MachineConfig read_machine(MapReader top) {
     c.block_window = static_cast<int>(r.get_int("block_window", c.block_window, 1, 4096));
     c.plan_budget_samples = static_cast<int>(r.get_int("plan_budget_samples", c.plan_budget_samples, 2, 10'000'000));
     c.param_update = r.get_choice("param_update", c.param_update, {"first_order", "taylor2", "corrected"});
+    r.finish();
+  }
+  if (top.has("operator")) {
+    MapReader r = top.map("operator");
+    c.operator_.homing_required = r.get_bool("homing_required", false);
+    c.operator_.jog_keepalive_timeout_s = r.get_double("jog_keepalive_timeout_s", 0.2, 0.01, 10.0);
+    c.operator_.mdi_directory = r.get_string("mdi_directory", "");
     r.finish();
   }
   {

@@ -46,6 +46,30 @@ struct ServoSimAxisConfig {
   // and faults, as a real drive's communication-loss reaction does.
   double comm_timeout_s = 0;
   double comm_stop_decel_mm_s2 = 0;
+  // A home switch (issue 17): closed beyond home_switch_mm in the axis's home
+  // direction (axes[].home.direction), where each closing happens at home_switch_mm
+  // plus a normal draw of sigma (drawn anew each time it opens; seeded), and opens
+  // again hysteresis_mm back. The drive latches its position at each closing edge.
+  bool has_home_switch = false;
+  double home_switch_mm = 0;
+  double home_switch_sigma_mm = 0.002;
+  double home_switch_hysteresis_mm = 0.05;
+  uint64_t home_switch_seed = 1;
+};
+
+// Homing of one axis (axes[].home, issue 17), LinuxCNC's sequence: search towards the
+// switch at search_velocity, back off, approach again at latch_velocity; the position
+// latched at the switch's edge is switch_position_mm in machine coordinates; then the
+// axis moves to position_mm. `absolute`: the drive's position is the machine's.
+struct HomeConfig {
+  std::string method = "none";  // none (needs no homing) | switch | absolute
+  double search_velocity_mm_s = 10;
+  double latch_velocity_mm_s = 1;
+  int direction = -1;               // towards the switch: -1 or +1
+  double switch_position_mm = 0;    // machine coordinate of the switch's closing point (LinuxCNC HOME_OFFSET)
+  double position_mm = 0;           // where the axis goes after homing (LinuxCNC HOME)
+  double backoff_mm = 2;            // back off the switch this far before the latch approach
+  int order = 0;                    // homing all: lower first, equal together one after another
 };
 
 struct AxisConfig {
@@ -59,6 +83,19 @@ struct AxisConfig {
   double home_mm = 0;  // where the simulated drive starts
   DriveConfig drive;
   ServoSimAxisConfig sim;  // used by cnc-servo-sim only
+  HomeConfig home;
+  double jog_velocity_mm_s = 0;  // jogging's speed (0: a tenth of max_velocity_mm_s)
+};
+
+// Operator functions (section `operator:`, issue 17).
+struct OperatorConfig {
+  // No program, MDI or homing-free motion other than jogging until every axis with
+  // a home method is homed.
+  bool homing_required = false;
+  // A continuous jog stops (jerk-limited, recorded) when no JOG_KEEPALIVE came for this long.
+  double jog_keepalive_timeout_s = 0.2;
+  // Where MDI lines and touch-offs are written as one-line programs ("" = the system's temp folder).
+  std::string mdi_directory;
 };
 
 struct ProcessConfig {
@@ -162,6 +199,8 @@ struct MachineConfig {
   ProcessConfig process;
   CuttingConfig cutting;
   ProgramConfig program;
+
+  OperatorConfig operator_;
 
   DriveBridgeConfig drive_bridge;
   // drive_bridge.profile_dir: where drive profiles are; "" = config/drives beside the machine's folder.

@@ -76,6 +76,17 @@ void DriveEmulator::set_following_error(double fe_mm) {
   f.encode(fe_mm, reg(f.address));
 }
 
+void DriveEmulator::set_home_latch(double position_mm, int64_t count) {
+  if (profile_.has(Role::kHomeLatchPosition)) {
+    const Field& f = profile_.field(Role::kHomeLatchPosition);
+    f.encode(position_mm, reg(f.address));
+  }
+  if (profile_.has(Role::kHomeLatchCount)) {
+    const Field& f = profile_.field(Role::kHomeLatchCount);
+    f.encode_raw(count & 0xFFFF, reg(f.address));
+  }
+}
+
 void DriveEmulator::inject_fault(uint16_t code) {
   logic_.drive_fault(drive_, code);
   refresh_status();

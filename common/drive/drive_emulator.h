@@ -37,6 +37,8 @@ class DriveEmulator {
   void set_actual(double position_mm, double velocity_mm_s);
   // Where the profile maps it: the drive's position demand minus actual.
   void set_following_error(double fe_mm);
+  // Where the profile maps them: the home switch latch (position and edge count).
+  void set_home_latch(double position_mm, int64_t count);
   void inject_fault(uint16_t code);
   void power_up();  // back to the power-up state (the simulator restarted)
   const DriveProfile& profile() const { return profile_; }

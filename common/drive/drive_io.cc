@@ -15,13 +15,14 @@ DriveIo::DriveIo(const DriveProfile& profile, int unit, Link& link)
   };
   std::vector<Want> want;
   for (Role r : {Role::kStatusword, Role::kActualPosition, Role::kActualVelocity, Role::kErrorCode,
-                 Role::kFollowingError}) {
+                 Role::kFollowingError, Role::kHomeLatchPosition, Role::kHomeLatchCount}) {
     if (!profile.has(r)) continue;
     const Field& f = profile.field(r);
     // The drive's following error, where the profile has it, is read every exchange:
-    // the bridge checks the limit on it.
+    // the bridge checks the limit on it. So is the home latch (homing waits on it).
     want.push_back({{f.address, f.words},
-                    r == Role::kStatusword || r == Role::kActualPosition || r == Role::kFollowingError});
+                    r == Role::kStatusword || r == Role::kActualPosition || r == Role::kFollowingError ||
+                        r == Role::kHomeLatchPosition || r == Role::kHomeLatchCount});
   }
   std::sort(want.begin(), want.end(), [](const Want& a, const Want& b) { return a.r.addr < b.r.addr; });
   std::vector<Want> merged;
@@ -90,6 +91,10 @@ TxResult DriveIo::exchange(const double* target_mm, LinkCounters& c) {
   actual_mm_ = profile_.field(Role::kActualPosition).decode(value(Role::kActualPosition));
   if (profile_.has(Role::kFollowingError))
     drive_fe_mm_ = profile_.field(Role::kFollowingError).decode(value(Role::kFollowingError));
+  if (profile_.has(Role::kHomeLatchPosition) && profile_.has(Role::kHomeLatchCount)) {
+    home_latch_mm_ = profile_.field(Role::kHomeLatchPosition).decode(value(Role::kHomeLatchPosition));
+    home_latch_count_ = profile_.field(Role::kHomeLatchCount).decode_raw(value(Role::kHomeLatchCount));
+  }
   have_status_ = true;
   // The drive's error code, for the fault report: once per fault when the cyclic reads do not carry it.
   const bool fault = logic_.decode(statusword_).fault;

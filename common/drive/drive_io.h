@@ -33,6 +33,10 @@ class DriveIo {
   // profile maps it; read with every exchange.
   bool reports_following_error() const { return profile_.has(Role::kFollowingError); }
   double drive_following_error_mm() const { return drive_fe_mm_; }
+  // The home switch latch, where the profile maps it (position and count, read with every exchange).
+  bool has_home_latch() const { return profile_.has(Role::kHomeLatchPosition) && profile_.has(Role::kHomeLatchCount); }
+  double home_latch_mm() const { return home_latch_mm_; }
+  int64_t home_latch_count() const { return home_latch_count_; }
   // The last target written, as the drive has it (rounded to its counts).
   double written_mm() const { return written_mm_; }
   uint16_t error_code() const;
@@ -66,6 +70,8 @@ class DriveIo {
   uint16_t statusword_ = 0;
   double actual_mm_ = 0;
   double drive_fe_mm_ = 0;
+  double home_latch_mm_ = 0;
+  int64_t home_latch_count_ = 0;
   double written_mm_ = 0;
 };
 

@@ -18,7 +18,8 @@ namespace {
 
 constexpr std::array<const char*, kRoleCount> kRoleNames = {
     "controlword", "statusword", "mode", "mode_display", "target_position",
-    "actual_position", "actual_velocity", "error_code", "fault_reset", "following_error"};
+    "actual_position", "actual_velocity", "error_code", "fault_reset", "following_error",
+    "home_latch_position", "home_latch_count"};
 
 uint32_t join(const uint16_t* regs, WordOrder order) {
   const uint32_t lo = order == WordOrder::kLowFirst ? regs[0] : regs[1];

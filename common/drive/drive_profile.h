@@ -31,8 +31,10 @@ enum class Role : int8_t {
   kErrorCode,       // drive's fault / alarm code (read)
   kFaultReset,      // a separate alarm-clear register (Leadshine-style)
   kFollowingError,  // mm, the drive's own position demand minus actual (CiA-402 0x60F4; read)
+  kHomeLatchPosition,  // mm, the position latched at the home switch's last closing edge (CiA-402 touch probe 0x60BA; read)
+  kHomeLatchCount,     // closing edges latched so far, wrapping (read)
 };
-inline constexpr int kRoleCount = 10;
+inline constexpr int kRoleCount = 12;
 const char* role_name(Role r);
 
 enum class WordOrder : int8_t { kLowFirst, kHighFirst };

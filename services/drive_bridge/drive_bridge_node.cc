@@ -461,6 +461,9 @@ void DriveBridgeNode::publish_status_inner(int64_t overruns) {
       s.axis_name[i] = cfg_.axes[i].name;
       s.fault[i].reserve(256);
     }
+    s.num_latches = static_cast<int32_t>(n);
+    s.home_latch_count.resize(n);
+    s.home_latch_mm.resize(n);
   }
   s.setpoint_cycle = core_.last_cycle();
   s.playback_cycle = core_.mode() == BridgeCore::Mode::kFollowing && core_.last_cycle() >= 0 ? core_.playback_cycle() : -1.0;
@@ -498,6 +501,8 @@ void DriveBridgeNode::publish_status_inner(int64_t overruns) {
     s.exceptions[i] = a.rep.counters.exceptions;
     s.crc_errors[i] = a.rep.counters.crc_errors;
     s.reconnects[i] = a.rep.counters.reconnects;
+    s.home_latch_count[i] = a.rep.has_home_latch ? static_cast<int32_t>(a.rep.home_latch_count) : -1;
+    s.home_latch_mm[i] = a.rep.home_latch_mm;
   }
   s.setpoint_gaps = core_.setpoint_gaps();
   s.servo_overruns = overruns;

@@ -141,6 +141,9 @@ void LinkWorker::round(double now_s) {
       }
       s.have_written = write;
       s.written_mm = io.written_mm();
+      s.work.has_home_latch = io.has_home_latch();
+      s.work.home_latch_mm = io.home_latch_mm();
+      s.work.home_latch_count = io.home_latch_count();
       if (write && c.follow && probe_) probe_(axis_index_[i], c.cmd_cycle, now_s);
       s.last_answer_s = now_s;
       if (s.lost) {

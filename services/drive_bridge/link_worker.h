@@ -57,6 +57,9 @@ struct AxisReport {
   double fe_mm = 0;         // following error: the drive's own (demand - actual) where its profile maps it, else lag_mm
   double lag_mm = 0;        // last target written before this exchange, minus the actual position
   int64_t fe_samples = 0;
+  bool has_home_latch = false;  // the profile maps a home switch latch
+  double home_latch_mm = 0;     // its position and edge count, as last read
+  int64_t home_latch_count = 0;
   drive::LinkCounters counters;
   std::array<char, 96> last_error{};  // fixed size: reports are copied every tick
 };

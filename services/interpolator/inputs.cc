@@ -15,6 +15,13 @@ bool to_core_command(const cnc::lcmt_program_command& m, Command* out) {
     case C::RESUME: *out = {Command::Kind::kResume, 1.0, {}}; return true;
     case C::STOP: *out = {Command::Kind::kStop, 1.0, {}}; return true;
     case C::OVERRIDE: *out = {Command::Kind::kOverride, m.feed_override, {}}; return true;
+    case C::HOMED:
+      if (!std::isfinite(m.value) || m.axis < 0 || m.axis >= program::kMaxAxes) return false;
+      *out = Command{};
+      out->kind = Command::Kind::kHomed;
+      out->axis = m.axis;
+      out->value = m.value;
+      return true;
     case C::RESET: {
       // As applied, a reset carries the position taken, one finite value per axis.
       if (m.num_axes <= 0 || m.num_axes > program::kMaxAxes || m.position_mm.size() != static_cast<size_t>(m.num_axes))

@@ -365,10 +365,24 @@ bool Interpolator::apply_command(const Command& cmd) {
       hold_ = false;
       stopping_ = false;
       state_ = RunState::kIdle;
+      // The drives' positions, less the offsets of homed axes.
       for (int a = 0; a < naxes_; ++a)
-        if (std::isfinite(cmd.position_mm[a])) pos_[a] = cmd.position_mm[a];
-      out_.position_mm = pos_;
+        if (std::isfinite(cmd.position_mm[a])) pos_[a] = cmd.position_mm[a] - drive_offset_[a];
+      output_position();
       break;
+    case Command::Kind::kHomed: {
+      if (cmd.axis < 0 || cmd.axis >= naxes_ || !std::isfinite(cmd.value)) break;
+      if (state_ == RunState::kRunning || state_ == RunState::kHeld || state_ == RunState::kStarved) break;
+      const auto a = static_cast<size_t>(cmd.axis);
+      // The drive stays where it is: the machine position moves by the change of offset.
+      pos_[a] += drive_offset_[a] - cmd.value;
+      drive_offset_[a] = cmd.value;
+      homed_[a] = true;
+      any_offset_ = any_offset_ || cmd.value != 0;
+      have_tail_ = false;  // the next program starts where the path now is
+      output_position();
+      break;
+    }
     case Command::Kind::kOverride:
       if (std::isfinite(cmd.feed_override)) {
         // The cap follows at once; the look-ahead over the buffer is re-planned by
@@ -681,6 +695,12 @@ bool Interpolator::creep_to_stop() {
   return true;
 }
 
+void Interpolator::output_position() {
+  out_.position_mm = pos_;
+  if (!any_offset_) return;
+  for (int a = 0; a < naxes_; ++a) out_.position_mm[a] += drive_offset_[a];
+}
+
 const Setpoint& Interpolator::step() {
   if (pending_n_ > 0) flush_requests();
   out_.cycle = cycle_;
@@ -807,7 +827,7 @@ const Setpoint& Interpolator::step() {
       if (blocks_.empty() && v_ > 0) v_ = a_ = 0;
     }
   }
-  out_.position_mm = pos_;
+  output_position();
   out_.state = state_;
   ++cycle_;
   if (retire_pending_) {

@@ -48,12 +48,20 @@ const char* to_string(RunState state);
 ParamUpdate param_update_from_string(const std::string& s);
 
 struct Command {
-  enum class Kind : int8_t { kLoad = 1, kStart = 2, kHold = 3, kResume = 4, kStop = 5, kOverride = 6, kReset = 7 };
+  enum class Kind : int8_t {
+    kLoad = 1, kStart = 2, kHold = 3, kResume = 4, kStop = 5, kOverride = 6, kReset = 7,
+    // Homing found the axis's machine position (issue 17): from now on the setpoints
+    // of `axis` are its machine position plus `value` (the drive's position minus the
+    // machine's), and it counts as homed. Applied only while the path stands.
+    kHomed = 13
+  };
   Kind kind = Kind::kStart;
   double feed_override = 1.0;  // kOverride: 0.0 .. 1.5
   // kReset: the program is dropped, the path is at rest at this position (where
   // the drives stand, as the node took it from AXIS_STATUS); one finite value per axis.
   std::array<double, program::kMaxAxes> position_mm{};
+  int axis = -1;      // kHomed
+  double value = 0;   // kHomed: drive minus machine position, mm
 };
 
 struct Setpoint {
@@ -122,7 +130,13 @@ class Interpolator {
   int64_t planned_samples() const { return planned_samples_; }
   double feed_override() const { return override_; }
   double program_time_s() const { return static_cast<double>(program_cycles_) * period_s_; }
+  // The setpoint (what the drives are sent): the machine position plus each homed
+  // axis's drive offset (none before homing: the drive's position is taken as the machine's).
   const Setpoint& last() const { return out_; }
+  // Where the path stands in machine coordinates (blocks start and end there).
+  double machine_position(int axis) const { return pos_[static_cast<size_t>(axis)]; }
+  bool homed(int axis) const { return homed_[static_cast<size_t>(axis)]; }
+  double drive_offset(int axis) const { return drive_offset_[static_cast<size_t>(axis)]; }
   void set_param_update(ParamUpdate mode) { param_update_ = mode; }
   // Why the last refused block was refused.
   const std::string& last_refusal() const { return refusal_; }
@@ -216,6 +230,11 @@ class Interpolator {
   bool rest_next_ = false;
 
   std::array<double, program::kMaxAxes> pos_{};
+  std::array<double, program::kMaxAxes> drive_offset_{};
+  std::array<bool, program::kMaxAxes> homed_{};
+  bool any_offset_ = false;
+  // out_.position_mm from pos_ (plus the drive offsets once an axis was homed).
+  void output_position();
   int64_t cycle_ = 0;
   int64_t blocks_done_ = 0;
   int64_t starved_cycles_ = 0;

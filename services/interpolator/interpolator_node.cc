@@ -76,6 +76,7 @@ void InterpolatorNode::on_program_state(const cnc::lcmt_program_state& m) {
   if (!loaded || m.program_token == token_) return;
   // In FAULT nothing new is taken; after it, no program loaded before it.
   if (fault_ || m.program_token <= retired_token_) return;
+  if (manual_ != Manual::kNone) return;  // taken once the operator move has ended
   const RunState s = core_.state();
   if (s == RunState::kRunning || s == RunState::kHeld || s == RunState::kStarved) {
     spdlog::warn("program {} loaded while a program runs: ignored until it ends", m.program_path);
@@ -199,6 +200,8 @@ void InterpolatorNode::fault(const std::string& cause) {
   num_blocks_ = 0;
   load_pending_ = false;
   reorder_.clear();
+  manual_ = Manual::kNone;
+  manual_text_.clear();
   alarm(cnc::lcmt_alarm::FAULT, "interp_fault", "program stopped: " + cause + "; RESET to continue");
 }
 
@@ -341,6 +344,16 @@ void InterpolatorNode::run_cycle() {
                                                 "the path stands where the drives are: " + where + " mm");
       continue;
     }
+    using PC = cnc::lcmt_program_command;
+    if (m.command == PC::HOME || m.command == PC::JOG || m.command == PC::JOG_KEEPALIVE) {
+      on_manual_command(m);
+      continue;
+    }
+    if (m.command == PC::HOMED) {
+      spdlog::warn("HOMED from sender {} ignored: it is this interpolator's own input", m.sender);
+      continue;
+    }
+    if (m.command == PC::STOP && manual_ == Manual::kHome) manual_stop("homing stopped by the operator");
     Command c;
     if (m.command == cnc::lcmt_program_command::LOAD || !to_core_command(m, &c)) continue;  // LOAD: via PROGRAM_STATE
     if (fault_ && (c.kind == Command::Kind::kStart || c.kind == Command::Kind::kResume)) {
@@ -364,6 +377,18 @@ void InterpolatorNode::run_cycle() {
         continue;
       }
     }
+    if (c.kind == Command::Kind::kStart && (manual_ != Manual::kNone || !unhomed().empty())) {
+      const std::string why = manual_ != Manual::kNone ? manual_text_ + " runs: STOP it first" : unhomed() + ": HOME first";
+      spdlog::warn("START refused: {}", why);
+      alarm(cnc::lcmt_alarm::WARNING, "start_refused", "START refused: " + why);
+      continue;
+    }
+    if (c.kind == Command::Kind::kStart && core_.state() == RunState::kDone && token_ == done_token_) {
+      // A START sent again (cnc-ctl repeats one whose answer it did not see) after the
+      // program's end: the program ran once; it would stand STARVED with nothing to run.
+      spdlog::warn("START ignored: program {} has ended (LOAD it again)", program_path_);
+      continue;
+    }
     if (c.kind == Command::Kind::kStart) {
       if (token_ == 0) {
         spdlog::warn("START without a loaded program: ignored");
@@ -376,9 +401,11 @@ void InterpolatorNode::run_cycle() {
       spdlog::warn("feed override {} outside 0..1.5: ignored (seq {})", m.feed_override, m.seq);
       continue;
     }
+    if (c.kind == Command::Kind::kStart) spdlog::info("START {} (token {})", program_path_, token_);
     apply_command(c, m);
   }
   pending_commands_.clear();
+  manual_cycle();
 
   // Feed the planner and take its finished plans (the one feed policy of the core
   // library, feed_policy.h). Each block handed over and each group of plans taken is
@@ -441,6 +468,7 @@ void InterpolatorNode::run_cycle() {
   request_blocks();
 
   const Setpoint& sp = core_.step();
+  if (sp.state == RunState::kDone) done_token_ = token_;
   cnc::lcmt_setpoint& out = setpoint_msg_;
   out.cycle = sp.cycle;
   out.period_s = cfg_.ipo_period_s;
@@ -478,7 +506,10 @@ void InterpolatorNode::run_cycle() {
 void InterpolatorNode::publish_state(bool force) {
   const RunState s = core_.state();
   const int64_t now = core_.cycle();
-  if (!force && s == last_state_ && fault_ == last_fault_ && now - last_state_cycle_ < resend_cycles_) return;
+  if (!force && s == last_state_ && fault_ == last_fault_ && manual_ == last_manual_ &&
+      now - last_state_cycle_ < resend_cycles_)
+    return;
+  last_manual_ = manual_;
   last_state_ = s;
   last_fault_ = fault_;
   last_state_cycle_ = now;
@@ -493,8 +524,12 @@ void InterpolatorNode::publish_state(bool force) {
   m.feed_override = core_.feed_override();
   m.program_time_s = core_.program_time_s();
   m.num_axes = core_.last().num_axes > 0 ? core_.last().num_axes : static_cast<int32_t>(cfg_.axes.size());
-  for (int a = 0; a < m.num_axes; ++a)
-    m.position_mm.push_back(core_.last().num_axes > 0 ? core_.last().position_mm[a] : cfg_.axes[a].home_mm);
+  // Machine coordinates (the setpoints are the drives', which differ by a homed axis's offset).
+  for (int a = 0; a < m.num_axes; ++a) m.position_mm.push_back(core_.machine_position(a));
+  m.mode = static_cast<int8_t>(manual_);
+  m.num_homed = m.num_axes;
+  for (int a = 0; a < m.num_axes; ++a) m.homed.push_back(core_.homed(a) ? 1 : 0);
+  m.mode_text = manual_text_;
   bus_.publish(ch_state_, m);
 }
 

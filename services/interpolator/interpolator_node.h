@@ -75,6 +75,45 @@ class InterpolatorNode {
   std::string reset_position(cnc::lcmt_program_command* out) const;
   void watch_drives();
 
+  // Operator motion (issue 17, interpolator_node_manual.cc): jogs and the homing
+  // sequence are moves the node makes itself, as a program of a line and an END
+  // block under a token of its own (negative): its LOAD, blocks, plans and START are
+  // recorded inputs like a program's, and so are the STOPs it decides (the jog's
+  // keepalive lost, the home switch reached) and each axis's HOMED.
+  enum class Manual : int8_t { kNone = 0, kJog = 1, kHome = 2 };
+  void on_manual_command(const cnc::lcmt_program_command& m);
+  // "" when an operator move may start now, else why not.
+  std::string manual_refusal() const;
+  // A line of `axis` from where the path stands to `target_mm` (machine) at `feed`.
+  void start_move(int axis, double target_mm, double feed_mm_per_min, const std::string& label);
+  void manual_cycle();
+  void home_next_axis();
+  void manual_stop(const std::string& why);
+  void manual_refuse(const char* what, const std::string& why);
+  bool limits_apply(int axis) const;
+  // "" when a program may move the axes (homing_required: every axis with a method homed).
+  std::string unhomed() const;
+  Manual manual_ = Manual::kNone;
+  std::string manual_text_;
+  bool jog_continuous_ = false;
+  int jog_axis_ = -1;
+  double jog_dir_ = 0;
+  double jog_keepalive_s_ = 0;
+  double jog_keepalive_mm_ = 0;     // where the path was at the last keepalive (machine)
+  double jog_keepalive_v_ = 0;      // and its speed, mm/s
+  int64_t local_token_ = 0;
+  struct Homing {
+    std::vector<int> axes;  // in order
+    size_t next = 0;
+    int axis = -1;
+    int phase = 0;  // 0 search, 1 stopping on the switch, 2 back off, 3 latch, 4 stopping on the latch, 5 to home
+    int32_t count0 = 0;
+    double seen_mm = 0;   // where the search found the switch (drive)
+    double latch_mm = 0;  // the latch of the slow approach (drive)
+  } home_;
+  Manual last_manual_ = Manual::kNone;
+  int64_t done_token_ = 0;  // the program that ran to its end (a START again is not a new run)
+
   config::MachineConfig cfg_;
   bus::Bus& bus_;
   // Block planning runs on the planner's thread; the cyclic thread takes its plans.

@@ -12,7 +12,8 @@
 
 namespace cnc::pps {
 
-enum class CellState : int8_t { kIdle, kLoaded, kRunning, kHeld, kFault };
+// kJogging, kHoming: the interpolator runs an operator move (a jog, the homing sequence).
+enum class CellState : int8_t { kIdle, kLoaded, kRunning, kHeld, kFault, kJogging, kHoming };
 
 inline const char* to_string(CellState s) {
   switch (s) {
@@ -21,6 +22,8 @@ inline const char* to_string(CellState s) {
     case CellState::kRunning: return "running";
     case CellState::kHeld: return "held";
     case CellState::kFault: return "fault";
+    case CellState::kJogging: return "jogging";
+    case CellState::kHoming: return "homing";
   }
   return "?";
 }
@@ -30,7 +33,41 @@ struct CellView {
   std::string program;  // the program loaded, running or held
   std::string fault;    // kFault: its cause
   std::string drives;   // "" when every drive is enabled (or no drive status is known), else e.g. "axis X is disabled"
+  std::string motion;   // kJogging, kHoming: what moves, e.g. "jog X+ continuous"
+  // "" when program motion is allowed, else e.g. "axis Z is not homed" (operator.homing_required).
+  std::string unhomed;
 };
+
+// The operator commands (issue 17) in `v`: "" allowed, else why not.
+inline std::string operator_refusal(const cnc::lcmt_program_command& c, const CellView& v) {
+  using C = cnc::lcmt_program_command;
+  const std::string running = "program " + v.program + " is running: STOP it first";
+  const std::string held = "program " + v.program + " is held: STOP it first";
+  const std::string fault = "the cell is in FAULT (" + v.fault + "): RESET first";
+  const std::string moving = v.motion + " runs: STOP it first";
+  if (c.command == C::JOG_KEEPALIVE) return "";
+  if (c.command == C::HOMED) return "HOMED is the interpolator's own input, never a command";
+  if (c.command == C::JOG && !(std::isfinite(c.value) && c.value != 0))
+    return "jog " + std::to_string(c.value) + ": the increment (or direction) must be a non-zero number";
+  if (c.command == C::JOG && !(std::isfinite(c.feed_mm_per_min) && c.feed_mm_per_min >= 0))
+    return "jog feed " + std::to_string(c.feed_mm_per_min) + " mm/min is not a speed";
+  if (c.command == C::TOUCH_OFF && !std::isfinite(c.value)) return "touch-off: the value is not a number";
+  if (c.command == C::MDI && c.text.empty()) return "MDI: the line is empty";
+  if (c.command == C::MDI && c.text.find_first_of("\n\r") != std::string::npos) return "MDI: one line only";
+  switch (v.state) {
+    case CellState::kIdle:
+    case CellState::kLoaded:
+      if (!v.drives.empty() && c.command != C::TOUCH_OFF) return v.drives + ": enable the drives first";
+      if (c.command == C::MDI && !v.unhomed.empty()) return v.unhomed + ": HOME first";
+      return "";
+    case CellState::kRunning: return running;
+    case CellState::kHeld: return held;
+    case CellState::kJogging:
+    case CellState::kHoming: return moving;
+    case CellState::kFault: return fault;
+  }
+  return "?";
+}
 
 // "" when `command` (lcmt_program_command::LOAD ... RESET) is allowed in `v`, else why not.
 inline std::string refusal(const cnc::lcmt_program_command& c, const CellView& v) {
@@ -38,6 +75,19 @@ inline std::string refusal(const cnc::lcmt_program_command& c, const CellView& v
   const std::string running = "program " + v.program + " is running";
   const std::string held = "program " + v.program + " is held";
   const std::string fault = "the cell is in FAULT (" + v.fault + "): RESET first";
+  if (c.command >= C::HOME && c.command <= C::HOMED) return operator_refusal(c, v);
+  // An operator move runs: nothing of a program until it ends (STOP ends it).
+  const bool manual = v.state == CellState::kJogging || v.state == CellState::kHoming;
+  if (manual) {
+    switch (c.command) {
+      case C::LOAD:
+      case C::START:
+      case C::RESET: return v.motion + " runs: STOP it first";
+      case C::HOLD: return "no program is running";
+      case C::RESUME: return "no program is held";
+      default: break;
+    }
+  }
   switch (c.command) {
     case C::LOAD:
       switch (v.state) {
@@ -46,15 +96,19 @@ inline std::string refusal(const cnc::lcmt_program_command& c, const CellView& v
         case CellState::kRunning: return running + ": STOP it first";
         case CellState::kHeld: return held + ": STOP it first";
         case CellState::kFault: return fault;
+        default: break;
       }
       break;
     case C::START:
       switch (v.state) {
         case CellState::kIdle: return "no program is loaded: LOAD one first";
-        case CellState::kLoaded: return v.drives.empty() ? "" : v.drives + ": enable the drives first";
+        case CellState::kLoaded:
+          if (!v.drives.empty()) return v.drives + ": enable the drives first";
+          return v.unhomed.empty() ? "" : v.unhomed + ": HOME first";
         case CellState::kRunning: return running + " already";
         case CellState::kHeld: return held + ": RESUME it";
         case CellState::kFault: return fault;
+        default: break;
       }
       break;
     case C::HOLD:
@@ -64,6 +118,7 @@ inline std::string refusal(const cnc::lcmt_program_command& c, const CellView& v
         case CellState::kIdle:
         case CellState::kLoaded: return "no program is running";
         case CellState::kFault: return "the cell is in FAULT (" + v.fault + "): nothing runs";
+        default: break;
       }
       break;
     case C::RESUME:
@@ -73,6 +128,7 @@ inline std::string refusal(const cnc::lcmt_program_command& c, const CellView& v
         case CellState::kIdle:
         case CellState::kLoaded: return "no program is held";
         case CellState::kFault: return fault;
+        default: break;
       }
       break;
     case C::STOP: return "";
@@ -87,6 +143,7 @@ inline std::string refusal(const cnc::lcmt_program_command& c, const CellView& v
         case CellState::kFault: return "";
         case CellState::kRunning: return running + ": STOP it first";
         case CellState::kHeld: return held + ": STOP it first";
+        default: break;
       }
       break;
     default: break;

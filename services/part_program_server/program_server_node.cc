@@ -6,7 +6,9 @@
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
+#include <unistd.h>
 #include <iterator>
 #include <sstream>
 
@@ -47,6 +49,19 @@ ProgramServerNode::ProgramServerNode(const config::MachineConfig& cfg, bus::Bus&
 void ProgramServerNode::on_interp_state(const cnc::lcmt_interp_state& m) {
   using S = cnc::lcmt_program_state;
   using P = cnc::lcmt_setpoint;
+  {
+    const bool act = m.state == P::RUNNING || m.state == P::HELD || m.state == P::STARVED;
+    const int8_t mode = act ? m.mode : int8_t{cnc::lcmt_interp_state::MODE_PROGRAM};
+    if (mode != cnc::lcmt_interp_state::MODE_PROGRAM && program_ready_) {
+      // An operator move: a program loaded before starts where the machine stood then.
+      spdlog::info("{}: the program loaded before is unloaded (its start moved); load it again", m.mode_text);
+      program_ready_ = false;
+    }
+    interp_active_ = act;
+    interp_mode_ = mode;
+    interp_mode_text_ = m.mode_text;
+    if (m.num_homed == m.num_axes && m.num_homed == static_cast<int32_t>(cfg_.axes.size())) interp_homed_ = m.homed;
+  }
   const bool fault = m.state == P::FAULT;
   if (fault != interp_fault_) {
     interp_fault_ = fault;
@@ -93,6 +108,12 @@ CellView ProgramServerNode::view(double now_s) const {
     v.state = CellState::kFault;
     v.fault = own_fault_ ? own_fault_text_
                          : (interp_fault_text_.empty() ? std::string("the interpolator is in FAULT") : interp_fault_text_);
+  } else if (interp_mode_ == cnc::lcmt_interp_state::MODE_JOG) {
+    v.state = CellState::kJogging;
+    v.motion = interp_mode_text_;
+  } else if (interp_mode_ == cnc::lcmt_interp_state::MODE_HOME) {
+    v.state = CellState::kHoming;
+    v.motion = interp_mode_text_;
   } else if (state_ == S::RUNNING) {
     v.state = CellState::kRunning;
   } else if (state_ == S::HELD) {
@@ -101,6 +122,11 @@ CellView ProgramServerNode::view(double now_s) const {
     v.state = CellState::kLoaded;
   } else {
     v.state = CellState::kIdle;
+  }
+  if (cfg_.operator_.homing_required) {
+    for (size_t a = 0; a < cfg_.axes.size() && v.unhomed.empty(); ++a)
+      if (cfg_.axes[a].home.method != "none" && (a >= interp_homed_.size() || interp_homed_[a] == 0))
+        v.unhomed = "axis " + cfg_.axes[a].name + " is not homed";
   }
   if (now_s - axes_s_ <= 0.5) {
     for (size_t i = 0; i < axes_.drive_state.size() && v.drives.empty(); ++i) {
@@ -114,8 +140,9 @@ CellView ProgramServerNode::view(double now_s) const {
 }
 
 void ProgramServerNode::refuse(const cnc::lcmt_program_command& m, const std::string& why) {
-  static const char* const kNames[] = {"?", "LOAD", "START", "HOLD", "RESUME", "STOP", "OVERRIDE", "RESET"};
-  const char* name = m.command >= 1 && m.command <= 7 ? kNames[m.command] : "?";
+  static const char* const kNames[] = {"?",    "LOAD", "START",         "HOLD",      "RESUME", "STOP", "OVERRIDE",
+                                       "RESET", "HOME", "JOG", "JOG_KEEPALIVE", "TOUCH_OFF", "MDI",    "HOMED"};
+  const char* name = m.command >= 1 && m.command <= 13 ? kNames[m.command] : "?";
   refusal_ = std::string(name) + (m.command == cnc::lcmt_program_command::LOAD ? " " + m.program_path : "") +
              " refused: " + why;
   refused_sender_ = m.sender;
@@ -143,27 +170,20 @@ void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {
     return;
   }
   switch (m.command) {
-    case C::LOAD: {
-      // The token must differ from every earlier one, also across restarts.
-      const int64_t token = std::max(util::wall_utime(), core_.token() + 1);
-      const LoadResult r = core_.load(m.program_path, token, machine_position_);
-      if (r.ok) {
-        spdlog::info("loaded {}: {} blocks (token {})", m.program_path, core_.num_blocks(), token);
-        for (const std::string& w : r.warnings) spdlog::warn("{}", w);
-        state_ = S::LOADED;
-        program_ready_ = true;
-        last_refusal_ = LoadResult{};
-        sent_.clear();
-        blocks_sent_ = blocks_resent_ = 0;
-        restored_ = false;
-        write_state_file();
-      } else {
-        spdlog::error("program refused: {}", r.error);
-        last_refusal_ = r;
-        refused_path_ = m.program_path;
-        state_ = S::REFUSED;
+    case C::LOAD: load_program(m.program_path); break;
+    case C::MDI: load_line(m, m.text); break;
+    case C::TOUCH_OFF: {
+      if (m.axis < 0 || m.axis >= static_cast<int32_t>(cfg_.axes.size())) {
+        refuse(m, "no axis " + std::to_string(m.axis));
+        return;
       }
-      publish_state(true);
+      char v[64];
+      std::snprintf(v, sizeof v, "%.6f", m.value);
+      const std::string& name = cfg_.axes[static_cast<size_t>(m.axis)].name;
+      // LinuxCNC's touch-off: G10 L20 P0 (the active work offset) so that the current
+      // position reads the value; the tool's: G10 L10 for the tool in the spindle.
+      load_line(m, m.jog_continuous == 2 ? "G10 L10 P#<_current_tool> " + name + v + " G43"
+                                         : "G10 L20 P0 " + name + v);
       break;
     }
     case C::START:
@@ -189,6 +209,52 @@ void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {
       break;
     default: break;
   }
+}
+
+void ProgramServerNode::load_program(const std::string& path) {
+  using S = cnc::lcmt_program_state;
+  // The token must differ from every earlier one, also across restarts.
+  const int64_t token = std::max(util::wall_utime(), core_.token() + 1);
+  const LoadResult r = core_.load(path, token, machine_position_);
+  if (r.ok) {
+    spdlog::info("loaded {}: {} blocks (token {})", path, core_.num_blocks(), token);
+    for (const std::string& w : r.warnings) spdlog::warn("{}", w);
+    state_ = S::LOADED;
+    program_ready_ = true;
+    last_refusal_ = LoadResult{};
+    sent_.clear();
+    blocks_sent_ = blocks_resent_ = 0;
+    restored_ = false;
+    write_state_file();
+  } else {
+    spdlog::error("program refused: {}", r.error);
+    last_refusal_ = r;
+    refused_path_ = path;
+    state_ = S::REFUSED;
+  }
+  publish_state(true);
+}
+
+void ProgramServerNode::load_line(const cnc::lcmt_program_command& m, const std::string& line) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::path dir = cfg_.operator_.mdi_directory.empty()
+                           ? fs::temp_directory_path(ec) / ("cnc-mdi-" + std::to_string(::getpid()))
+                           : fs::path(cfg_.operator_.mdi_directory);
+  fs::create_directories(dir, ec);
+  // Named by the command's sender and seq, so cnc-ctl knows its program's answer.
+  const fs::path file = dir / ("mdi-" + std::to_string(static_cast<uint32_t>(m.sender)) + "-" +
+                               std::to_string(m.seq) + ".ngc");
+  {
+    std::ofstream out(file);
+    out << line << "\nM2\n";
+    if (!out) {
+      refuse(m, "cannot write " + file.string());
+      return;
+    }
+  }
+  spdlog::info("MDI {}: {}", ++mdi_count_, line);
+  load_program(file.string());
 }
 
 void ProgramServerNode::interpolator_lost() {

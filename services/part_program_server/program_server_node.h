@@ -76,6 +76,17 @@ class ProgramServerNode {
   std::string interp_fault_text_;
   bool own_fault_ = false;       // a publish of this node failed
   std::string own_fault_text_;
+  // The interpolator's operator motion (issue 17) and homed axes, from INTERP_STATE.
+  int8_t interp_mode_ = 0;
+  std::string interp_mode_text_;
+  bool interp_active_ = false;
+  std::vector<int8_t> interp_homed_;
+  // MDI and touch-off: the line is written to a one-line program (with M2, so the
+  // parameters it sets are written to the var file at its end, as a program's) and
+  // loaded like one; cnc-ctl starts it.
+  void load_line(const cnc::lcmt_program_command& m, const std::string& line);
+  int64_t mdi_count_ = 0;
+  void load_program(const std::string& path);
   cnc::lcmt_axis_status axes_{};
   double axes_s_ = -1e9;
   std::string refusal_;

@@ -81,6 +81,71 @@ TEST(Interlock, StartNeedsEnabledDrivesAndOverrideItsRange) {
   EXPECT_EQ(pps::refusal(cmd(C::OVERRIDE, 0.0), v), "");
 }
 
+// Issue 17: the operator commands in every state, and the program commands while an
+// operator move runs or the axes are not homed (README, commands and states).
+TEST(Interlock, OperatorCommandsInEveryState) {
+  const CellState states[] = {CellState::kIdle,  CellState::kLoaded,  CellState::kRunning, CellState::kHeld,
+                              CellState::kFault, CellState::kJogging, CellState::kHoming};
+  struct Row {
+    int8_t command;
+    const char* expect[7];
+  };
+  const char* kMove = "jog X+ continuous runs: STOP it first";
+  const Row rows[] = {
+      {C::HOME, {"", "", "p.ngc is running: STOP it first", "p.ngc is held: STOP it first", "FAULT (why): RESET first", kMove, kMove}},
+      {C::JOG, {"", "", "p.ngc is running: STOP it first", "p.ngc is held: STOP it first", "FAULT (why): RESET first", kMove, kMove}},
+      {C::JOG_KEEPALIVE, {"", "", "", "", "", "", ""}},
+      {C::TOUCH_OFF, {"", "", "p.ngc is running: STOP it first", "p.ngc is held: STOP it first", "FAULT (why): RESET first", kMove, kMove}},
+      {C::MDI, {"", "", "p.ngc is running: STOP it first", "p.ngc is held: STOP it first", "FAULT (why): RESET first", kMove, kMove}},
+      {C::HOMED, {"interpolator's own", "interpolator's own", "interpolator's own", "interpolator's own", "interpolator's own", "interpolator's own", "interpolator's own"}},
+      {C::LOAD, {"", "", "STOP it first", "STOP it first", "RESET first", kMove, kMove}},
+      {C::START, {"no program is loaded", "", "already", "RESUME it", "RESET first", kMove, kMove}},
+      {C::HOLD, {"no program is running", "no program is running", "", "", "nothing runs", "no program is running", "no program is running"}},
+      {C::RESUME, {"no program is held", "no program is held", "", "", "RESET first", "no program is held", "no program is held"}},
+      {C::STOP, {"", "", "", "", "", "", ""}},
+      {C::RESET, {"", "", "STOP it first", "STOP it first", "", kMove, kMove}},
+  };
+  for (const Row& r : rows) {
+    for (int s = 0; s < 7; ++s) {
+      pps::CellView v;
+      v.state = states[s];
+      v.program = "/x/p.ngc";
+      v.fault = "why";
+      v.motion = "jog X+ continuous";
+      lcmt_program_command c = cmd(r.command);
+      c.value = 1.0;
+      c.text = "G0 X1";
+      const std::string got = pps::refusal(c, v);
+      const std::string want = r.expect[s];
+      if (want.empty()) {
+        EXPECT_EQ(got, "") << "command " << int(r.command) << " in " << to_string(states[s]);
+      } else {
+        EXPECT_NE(got.find(want), std::string::npos)
+            << "command " << int(r.command) << " in " << to_string(states[s]) << ": '" << got << "'";
+      }
+    }
+  }
+  // Not homed (operator.homing_required): START and MDI refused, jogging, homing and touch-off allowed.
+  pps::CellView v;
+  v.state = CellState::kLoaded;
+  v.unhomed = "axis Z is not homed";
+  EXPECT_EQ(pps::refusal(cmd(C::START), v), "axis Z is not homed: HOME first");
+  lcmt_program_command mdi = cmd(C::MDI);
+  mdi.text = "G0 X1";
+  EXPECT_EQ(pps::refusal(mdi, v), "axis Z is not homed: HOME first");
+  lcmt_program_command jog = cmd(C::JOG);
+  jog.value = -2;
+  EXPECT_EQ(pps::refusal(jog, v), "");
+  EXPECT_EQ(pps::refusal(cmd(C::HOME), v), "");
+  // Bad arguments.
+  jog.value = 0;
+  EXPECT_NE(pps::refusal(jog, v).find("non-zero"), std::string::npos);
+  mdi.text = "G0 X1\nG0 X2";
+  EXPECT_NE(pps::refusal(mdi, v).find("one line only"), std::string::npos);
+  mdi.text = "";
+  EXPECT_NE(pps::refusal(mdi, v).find("empty"), std::string::npos);
+}
+
 // ---- the bus -------------------------------------------------------------------------
 
 TEST(BusPublishFailure, IsCountedNamedAndUsesNoSequenceNumber) {

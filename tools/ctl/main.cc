@@ -6,6 +6,13 @@
 //   cnc-ctl --machine M --do enable [--timeout S] | disable | fault-reset    (drive bridge, DRIVE_CMD)
 //   cnc-ctl --machine M --do reset [--timeout S]   after a fault: enable the drives (DRIVE_CMD), then
 //                                                  RESET (the interpolator takes their position)
+//   cnc-ctl --machine M --do home [--axis X]       home one axis, or all in the configured order
+//   cnc-ctl --machine M --do jog --axis X --value D [--feed F]          incremental jog by D mm
+//   cnc-ctl --machine M --do jog --axis X --value +1|-1 --hold S [--feed F]
+//                                                  continuous jog, held for S s (a keepalive every
+//                                                  50 ms; SIGINT/SIGTERM releases it), then STOP
+//   cnc-ctl --machine M --do touch-off --axis X --value V [--tool]   G10 L20 (or the tool: G10 L10)
+//   cnc-ctl --machine M --do mdi --line "G0 X10"   one line through the program server's interpreter
 //
 // A command the cell refuses in its state (LOAD or START while a program runs, ...)
 // ends cnc-ctl at once with the reason from PROGRAM_STATE and exit 3.
@@ -255,11 +262,136 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
     std::fprintf(stderr, "cnc-ctl: --do %s was sent 5 times and the interpolator does not show it\n", what.c_str());
     return kExitTimeout;
   }
-  if (what != "run" && what != "load") {
-    std::fprintf(stderr, "cnc-ctl: --do must be one of run load start hold resume stop override reset enable disable fault-reset\n");
+  // The axis named by --axis (-1: none given).
+  auto axis_arg = [&]() -> int {
+    const std::string name = args.option("axis");
+    if (name.empty()) return -1;
+    const int a = cfg.axis_index(name);
+    if (a < 0) {
+      std::fprintf(stderr, "cnc-ctl: --axis %s: the machine has no such axis\n", name.c_str());
+      std::exit(cnc::service::kExitBadInput);
+    }
+    return a;
+  };
+  // An operator command with its fields; refused at once with the server's reason.
+  auto send_op = [&](int8_t command, int axis, double value, double feed, int8_t flag, const std::string& text) {
+    lcmt_program_command c{};
+    c.command = command;
+    c.axis = axis;
+    c.value = value;
+    c.feed_mm_per_min = feed;
+    c.jog_continuous = flag;
+    c.text = text;
+    if (!bus.publish(cfg.channel(ch::kProgramCmd), c)) {
+      std::fprintf(stderr, "cnc-ctl: %s\n", bus.last_publish_error());
+      std::exit(kExitSendFailed);
+    }
+    sent_seq = c.seq;
+  };
+  auto interp_active = [&] {
+    const int8_t st = view.interp.state;
+    return st == cnc::lcmt_setpoint::RUNNING || st == cnc::lcmt_setpoint::HELD || st == cnc::lcmt_setpoint::STARVED;
+  };
+  // An alarm from the interpolator with one of these codes since index `from`: its text.
+  auto alarm_since = [&](size_t from, std::initializer_list<const char*> codes) -> std::string {
+    for (size_t i = from; i < view.alarms.size(); ++i)
+      for (const char* c : codes)
+        if (view.alarms[i].source == "cnc-interpolator" && view.alarms[i].code == c) return view.alarms[i].text;
+    return "";
+  };
+  auto print_position = [&](const char* what_done) {
+    std::printf("%s:", what_done);
+    for (int i = 0; i < view.interp.num_axes; ++i)
+      std::printf(" %s %.4f%s", cfg.axes[static_cast<size_t>(i)].name.c_str(),
+                  view.interp.position_mm[static_cast<size_t>(i)],
+                  static_cast<size_t>(i) < view.interp.homed.size() && view.interp.homed[static_cast<size_t>(i)]
+                      ? " (homed)"
+                      : "");
+    std::printf("\n");
+  };
+  if (what == "home" || what == "jog") {
+    wait_for(bus, 1.0, [&] { return view.have_program && view.have_interp && view.have_axes; });
+    if (!view.have_interp) {
+      std::fprintf(stderr, "cnc-ctl: no INTERP_STATE: is the interpolator running?\n");
+      return kExitTimeout;
+    }
+    const int axis = axis_arg();
+    const size_t alarms0 = view.alarms.size();
+    const int8_t mode = what == "home" ? cnc::lcmt_interp_state::MODE_HOME : cnc::lcmt_interp_state::MODE_JOG;
+    const double hold_s = std::stod(args.option("hold", "0"));
+    const bool continuous = hold_s > 0;
+    if (what == "home") {
+      send_op(lcmt_program_command::HOME, axis, 0.0, 0.0, 0, "");
+    } else {
+      if (axis < 0) {
+        std::fprintf(stderr, "cnc-ctl: --do jog needs --axis\n");
+        return cnc::service::kExitBadInput;
+      }
+      send_op(lcmt_program_command::JOG, axis, std::stod(args.option("value", "0")),
+              std::stod(args.option("feed", "0")), continuous ? 1 : 0, "");
+    }
+    auto op_refused = [&] {
+      return !refused().empty() || !alarm_since(alarms0, {"home_refused", "jog_refused"}).empty();
+    };
+    // Started: the interpolator reports the mode; or refused.
+    if (!wait_for(bus, 2.0, [&] {
+          // Its own: a jog of this axis (another axis's jog that runs is not this one's start).
+          const bool mine = what == "home" || view.interp.mode_text.rfind("jog " + cfg.axes[static_cast<size_t>(axis)].name, 0) == 0;
+          return op_refused() || (view.interp.mode == mode && interp_active() && mine) ||
+                 !alarm_since(alarms0, {"home_done", "home_aborted"}).empty();
+        })) {
+      std::fprintf(stderr, "cnc-ctl: the interpolator did not start the %s\n", what.c_str());
+      return kExitTimeout;
+    }
+    if (op_refused()) {
+      const std::string why = !refused().empty() ? refused() : alarm_since(alarms0, {"home_refused", "jog_refused"});
+      std::fprintf(stderr, "cnc-ctl: %s\n", why.c_str());
+      return kExitRefused;
+    }
+    if (continuous) {
+      // Held: a keepalive every 50 ms until the hold time is over or a signal releases it.
+      const double end = cnc::util::monotonic_s() + hold_s;
+      double next = 0;
+      while (cnc::util::monotonic_s() < end && !cnc::util::stop_requested() && interp_active()) {
+        if (cnc::util::monotonic_s() >= next) {
+          send_op(lcmt_program_command::JOG_KEEPALIVE, axis, 0.0, 0.0, 0, "");
+          next = cnc::util::monotonic_s() + 0.05;
+        }
+        if (bus.handle(10) > 0) bus.drain();
+      }
+      send(lcmt_program_command::STOP);
+    }
+    // Ended: the path stands (homing: home_done or aborted).
+    auto ended = [&] { return !interp_active() || view.interp.state == cnc::lcmt_setpoint::FAULT; };
+    const bool fin = what == "home" ? wait_for(bus, timeout_s, [&] {
+      return !alarm_since(alarms0, {"home_done", "home_aborted", "interp_fault"}).empty();
+    })
+                                    : wait_for(bus, timeout_s, ended);
+    if (!fin) {
+      std::fprintf(stderr, "cnc-ctl: the %s did not end within %.0f s\n", what.c_str(), timeout_s);
+      return kExitTimeout;
+    }
+    if (const std::string why = alarm_since(alarms0, {"home_aborted"}); !why.empty()) {
+      std::fprintf(stderr, "cnc-ctl: %s\n", why.c_str());
+      return kExitFault;
+    }
+    if (view.interp.state == cnc::lcmt_setpoint::FAULT) {
+      std::fprintf(stderr, "cnc-ctl: fault: %s\n", alarm_since(alarms0, {"interp_fault"}).c_str());
+      return kExitFault;
+    }
+    wait_for(bus, 0.5, [&] { return !interp_active() && view.interp.mode == cnc::lcmt_interp_state::MODE_PROGRAM; });
+    print_position(what == "home" ? "homed" : "jogged");
+    if (const std::string lost = alarm_since(alarms0, {"jog_keepalive_lost"}); !lost.empty())
+      std::printf("%s\n", lost.c_str());
+    return 0;
+  }
+  const bool line_cmd = what == "mdi" || what == "touch-off";
+  if (what != "run" && what != "load" && !line_cmd) {
+    std::fprintf(stderr, "cnc-ctl: --do must be one of run load start hold resume stop override reset enable disable "
+                         "fault-reset home jog touch-off mdi\n");
     return cnc::service::kExitBadInput;
   }
-  const std::string program_arg = args.option("program");
+  const std::string program_arg = line_cmd ? std::string("(") + what + ")" : args.option("program");
   if (program_arg.empty()) {
     std::fprintf(stderr, "cnc-ctl: --program FILE is required\n");
     return cnc::service::kExitBadInput;
@@ -288,14 +420,33 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
 
   // LOAD; repeated if no answer (a lost datagram), the answer names the path.
   const int64_t old_token = view.have_program ? view.program.program_token : 0;
+  // MDI and touch-off: the server writes the line to mdi-SENDER-SEQ.ngc and loads it.
+  std::string line_suffix;
   auto answered = [&] {
+    if (line_cmd)
+      return view.have_program && view.program.program_path.ends_with(line_suffix) &&
+             (view.program.state == cnc::lcmt_program_state::REFUSED ||
+              (view.program.state == cnc::lcmt_program_state::LOADED && view.program.program_token != old_token));
     return view.have_program && view.program.program_path == program &&
            (view.program.state == cnc::lcmt_program_state::REFUSED ||
             (view.program.state == cnc::lcmt_program_state::LOADED && view.program.program_token != old_token));
   };
   bool got = false;
   for (int attempt = 0; attempt < 5 && !got; ++attempt) {
-    send(lcmt_program_command::LOAD, program);
+    if (what == "mdi") {
+      send_op(lcmt_program_command::MDI, -1, 0.0, 0.0, 0, args.option("line"));
+    } else if (what == "touch-off") {
+      const int axis = axis_arg();
+      if (axis < 0) {
+        std::fprintf(stderr, "cnc-ctl: --do touch-off needs --axis\n");
+        return cnc::service::kExitBadInput;
+      }
+      send_op(lcmt_program_command::TOUCH_OFF, axis, std::stod(args.option("value", "0")), 0.0,
+              args.flags.count("tool") ? 2 : 0, "");
+    } else {
+      send(lcmt_program_command::LOAD, program);
+    }
+    line_suffix = "/mdi-" + std::to_string(static_cast<uint32_t>(bus.sender())) + "-" + std::to_string(sent_seq) + ".ngc";
     got = wait_for(bus, 2.0, [&] { return answered() || !refused().empty(); });
   }
   if (const std::string why = refused(); !why.empty()) {
@@ -450,6 +601,9 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
 }  // namespace
 
 int main(int argc, char** argv) {
-  cnc::service::Spec spec{"cnc-ctl", "operator commands to a running cell", {"do", "program", "value", "timeout"}, {}};
+  cnc::service::Spec spec{"cnc-ctl",
+                          "operator commands to a running cell",
+                          {"do", "program", "value", "timeout", "axis", "feed", "hold", "line"},
+                          {"tool"}};
   return cnc::service::run(spec, argc, argv, run_ctl);
 }

@@ -357,6 +357,7 @@ Simulator::Simulator(const cnc::config::MachineConfig& cfg, const cnc::service::
     const double at = start.count(a.name) ? std::clamp(start[a.name], a.min_mm, a.max_mm) : a.home_mm;
     drives_.push_back(std::make_unique<SimDrive>(a.name, d.unit_id, *by_file[file], a.sim, a.max_velocity_mm_s, at,
                                                  a.max_accel_mm_s2));
+    drives_.back()->set_home_switch(a.sim, a.home.direction);
     all_.push_back(drives_.back().get());
     if (d.transport == "modbus_tcp") {
       if (port_ < 0) port_ = d.port;

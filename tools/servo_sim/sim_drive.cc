@@ -165,6 +165,36 @@ void SimDrive::after_request(double now_s) {
   last_write_s_ = now_s;
 }
 
+void SimDrive::set_home_switch(const config::ServoSimAxisConfig& sim, int direction) {
+  sw_on_ = sim.has_home_switch;
+  if (!sw_on_) return;
+  sw_side_ = direction < 0 ? -1.0 : 1.0;
+  sw_at_ = sim.home_switch_mm;
+  sw_sigma_ = sim.home_switch_sigma_mm;
+  sw_hyst_ = sim.home_switch_hysteresis_mm;
+  sw_rng_.seed(sim.home_switch_seed);
+  sw_trip_ = sw_at_ + sw_sigma_ * sw_noise_(sw_rng_);
+  sw_closed_ = sw_side_ * (model_.position_mm() - sw_trip_) >= 0;
+  emu_.set_home_latch(0.0, 0);
+}
+
+void SimDrive::step_switch() {
+  if (!sw_on_) return;
+  const double x = model_.position_mm();
+  if (!sw_closed_ && sw_side_ * (x - sw_trip_) >= 0) {
+    // The closing edge: the drive latches where the axis is at this step (a touch
+    // probe input's capture; at speed v it lands up to v times the step beyond the trip).
+    sw_closed_ = true;
+    ++sw_count_;
+    sw_latch_mm_ = x;
+    emu_.set_home_latch(sw_latch_mm_, sw_count_);
+  } else if (sw_closed_ && sw_side_ * (x - sw_trip_) < -sw_hyst_) {
+    // Open again: its next closing is at a new point (the switch's repeatability).
+    sw_closed_ = false;
+    sw_trip_ = sw_at_ + sw_sigma_ * sw_noise_(sw_rng_);
+  }
+}
+
 void SimDrive::step_to(double now_s) {
   if (t_s_ < 0) t_s_ = now_s;
   if (now_s <= t_s_) return;
@@ -204,6 +234,7 @@ void SimDrive::step_to(double now_s) {
     model_.step(dt, model_.position_mm(), 0.0, 0.0, false);
     emu_.set_actual(model_.position_mm(), model_.velocity_mm_s());
     emu_.set_following_error(0.0);
+    step_switch();
     return;
   }
   double v_ff = 0, a_ff = 0;
@@ -214,6 +245,7 @@ void SimDrive::step_to(double now_s) {
   emu_.set_following_error(target - model_.position_mm());
   last_fe_ = target - model_.position_mm();
   last_demand_ = target;
+  step_switch();
 }
 
 void SimWorld::shift(double dt_s) {

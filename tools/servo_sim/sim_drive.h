@@ -21,6 +21,7 @@
 // again only after a fault reset and enable from a master. Off (0), a gap holds the
 // last target, as before.
 #include <algorithm>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -53,6 +54,13 @@ class SimDrive {
   double position_mm() const { return model_.position_mm(); }
   double velocity_mm_s() const { return model_.velocity_mm_s(); }
   bool follows() const { return emu_.follows(); }
+  // A home switch (sim.has_home_switch): closed beyond its trip point in `direction`
+  // (the axis's home direction); the drive latches its position at each closing
+  // edge (the profile's home_latch_position / home_latch_count registers).
+  void set_home_switch(const config::ServoSimAxisConfig& sim, int direction);
+  bool home_switch_closed() const { return sw_closed_; }
+  int64_t home_latches() const { return sw_count_; }
+  double home_latch_mm() const { return sw_latch_mm_; }
   // This process stalled for dt_s: the drive's clock skips it (see the simulator's
   // step_dynamics), as if the world had paused.
   void shift_time(double dt_s);
@@ -104,6 +112,16 @@ class SimDrive {
   int segment_at(double t_s) const;
   double slope(int i) const { return (pts_[i + 1].mm - pts_[i].mm) / (pts_[i + 1].t_s - pts_[i].t_s); }
   void feed_forward(double t_s, double* v_ff, double* a_ff) const;
+
+  // Home switch.
+  void step_switch();
+  bool sw_on_ = false;
+  double sw_side_ = -1, sw_at_ = 0, sw_sigma_ = 0, sw_hyst_ = 0, sw_trip_ = 0;
+  std::mt19937_64 sw_rng_;
+  std::normal_distribution<double> sw_noise_{0.0, 1.0};
+  bool sw_closed_ = false;
+  int64_t sw_count_ = 0;
+  double sw_latch_mm_ = 0;
 
   // Communication watchdog.
   enum class Comm { kOk, kStopping, kFaulted };
