@@ -99,6 +99,23 @@ print(f"# homing repeatability: {len(v)} homings of X, latched at mean {statisti
 sys.exit(0 if 0 < spread <= 14 and abs(statistics.mean(v) + 4) <= 0.01 else 1)
 PY
 
+# A STOP while homing aborts it (cnc-ctl home exits 5 naming why); homing again works.
+"${CTL[@]}" --do home --axis Y --timeout 30 >"$WORK/home_abort.out" 2>&1 &
+TEST_PIDS[home_abort]=$!
+for ((i = 0; i < 300; i++)); do
+  "${CTL[@]}" --do load --program "$WORK/part.ngc" >"$WORK/probe0.out" 2>&1 || true  # loads (no more) until homing runs
+  grep -q "home Y: .* runs: STOP it first" "$WORK/probe0.out" && break
+  sleep 0.02
+done
+grep -q "home Y: .* runs: STOP it first" "$WORK/probe0.out" || { cat "$WORK/probe0.out" >&2; fail "homing Y did not start"; }
+note "while homing: $(tail -1 "$WORK/probe0.out")"
+ok stop_homing "${CTL[@]}" --do stop
+rc=0; wait "${TEST_PIDS[home_abort]}" || rc=$?; unset "TEST_PIDS[home_abort]"
+[ "$rc" -eq 5 ] && grep -q "homing aborted: homing stopped by the operator" "$WORK/home_abort.out" \
+  || { cat "$WORK/home_abort.out" >&2; fail "STOP while homing: cnc-ctl exit $rc, expected 5 (aborted)"; }
+note "home aborted: $(grep 'homing aborted' "$WORK/home_abort.out" | tail -1)"
+ok home_y_again "${CTL[@]}" --do home --axis Y --timeout 30
+
 # 3. Jogging: incremental, clamped at the soft limit, refused there.
 ok jog_x10 "${CTL[@]}" --do jog --axis X --value 10 --feed 3000 --timeout 20
 axis_at jog_x10 X 10
@@ -112,7 +129,7 @@ ok jog_back "${CTL[@]}" --do mdi --line "G53 G0 X0" --timeout 20
 "${CTL[@]}" --do jog --axis Y --value 1 --feed 600 --hold 100 --timeout 120 >"$WORK/jog_cont.out" 2>&1 &
 TEST_PIDS[jog]=$!
 for ((i = 0; i < 500; i++)); do
-  "${CTL[@]}" --do mdi --line "G0 X1" >"$WORK/probe.out" 2>&1 || true
+  "${CTL[@]}" --do load --program "$WORK/part.ngc" >"$WORK/probe.out" 2>&1 || true  # loads (no more) until the jog runs
   grep -q "jog Y+ continuous runs" "$WORK/probe.out" && break
   sleep 0.02
 done
