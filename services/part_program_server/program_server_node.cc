@@ -181,9 +181,8 @@ void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {
       std::snprintf(v, sizeof v, "%.6f", m.value);
       const std::string& name = cfg_.axes[static_cast<size_t>(m.axis)].name;
       // LinuxCNC's touch-off: G10 L20 P0 (the active work offset) so that the current
-      // position reads the value; the tool's: G10 L10 for the tool in the spindle.
-      load_line(m, m.jog_continuous == 2 ? "G10 L10 P#<_current_tool> " + name + v + " G43"
-                                         : "G10 L20 P0 " + name + v);
+      // position reads the value. (The tool's, G10 L10, is refused by the interlock.)
+      load_line(m, "G10 L20 P0 " + name + v);
       break;
     }
     case C::START:

@@ -171,6 +171,7 @@ PY
 ok touch_x "${CTL[@]}" --do touch-off --axis X --value 100 --timeout 20
 grep -qE "^5221[[:space:]]+-100" "$WORK/cnc.var" || { grep -E "^52(2|4)" "$WORK/cnc.var" >&2; fail "G54 X offset (#5221) is not -100 in the var file"; }
 note "var file: $(grep -E '^5221' "$WORK/cnc.var")"
+expect_refused touch_tool "tool touch-off is not available yet" "${CTL[@]}" --do touch-off --axis Z --value 50 --tool
 rc=0; "${CTL[@]}" --do touch-off --axis Q --value 1 >"$WORK/touch_q.out" 2>&1 || rc=$?
 [ "$rc" -eq 2 ] && grep -q "no such axis" "$WORK/touch_q.out" || fail "touch-off of axis Q: exit $rc, expected 2"
 

@@ -144,6 +144,10 @@ TEST(Interlock, OperatorCommandsInEveryState) {
   EXPECT_NE(pps::refusal(mdi, v).find("one line only"), std::string::npos);
   mdi.text = "";
   EXPECT_NE(pps::refusal(mdi, v).find("empty"), std::string::npos);
+  lcmt_program_command tool = cmd(C::TOUCH_OFF);
+  tool.value = 50;
+  tool.jog_continuous = 2;
+  EXPECT_NE(pps::refusal(tool, v).find("tool touch-off is not available yet"), std::string::npos);
 }
 
 // ---- the bus -------------------------------------------------------------------------

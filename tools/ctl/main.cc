@@ -11,7 +11,7 @@
 //   cnc-ctl --machine M --do jog --axis X --value +1|-1 --hold S [--feed F]
 //                                                  continuous jog, held for S s (a keepalive every
 //                                                  50 ms; SIGINT/SIGTERM releases it), then STOP
-//   cnc-ctl --machine M --do touch-off --axis X --value V [--tool]   G10 L20 (or the tool: G10 L10)
+//   cnc-ctl --machine M --do touch-off --axis X --value V   G10 L20 P0 (--tool: refused, not available yet)
 //   cnc-ctl --machine M --do mdi --line "G0 X10"   one line through the program server's interpreter
 //
 // A command the cell refuses in its state (LOAD or START while a program runs, ...)
