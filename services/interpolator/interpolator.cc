@@ -191,12 +191,14 @@ void Interpolator::take(PlanUpdate& u) {
     if (blocks_.empty()) p->live_entry = v_;
     blocks_.push_back(p);
     planned_samples_ += u.samples;
+    ++work_.blocks_taken;
   }
   if (blocks_.empty()) return;
   const uint64_t first = blocks_.front().serial;
   for (const PlanUpdate::Patch& pt : u.patches) {
     if (pt.serial < first || pt.serial - first >= blocks_.size()) continue;  // done, or not yet taken
     Planned& p = blocks_[static_cast<size_t>(pt.serial - first)];
+    work_.patch_values += pt.count;
     std::copy(u.values.begin() + pt.offset, u.values.begin() + pt.offset + pt.count,
               p.v_bw.begin() + pt.from);
     if (pt.from == 0 && p.live_entry < p.v_entry && !p.v_bw.empty()) p.v_bw[0] = std::min(p.v_bw[0], p.live_entry);
@@ -213,6 +215,7 @@ int Interpolator::apply_plans(int64_t budget, int64_t* budget_used) {
     if (u->block != nullptr || !u->error.empty()) ++taken_;
     take(*u);
     link_->pop();
+    ++work_.plans_taken;
     ++n;
   }
   return n;
@@ -446,6 +449,7 @@ bool Interpolator::safe(double v_n, double a_n, double s_n, double* v_target) co
   const double T = period_s_;
   double offset = 0;  // arc length of the front block's start relative to its start
   double horizon = -1;
+  ++work_.safe_calls;
   for (size_t b = 0; b < blocks_.size(); ++b) {
     const Planned& p = blocks_[b];
     A = std::min(A, p.accel);
@@ -463,9 +467,10 @@ bool Interpolator::safe(double v_n, double a_n, double s_n, double* v_target) co
                                             [&](const Sample& x) { return offset + x.s - s_n < 0; });
     for (size_t i = static_cast<size_t>(first - p.samples.begin()); i < n; ++i) {
       const double d = offset + p.samples[i].s - s_n;
+      ++work_.safe_samples;
       if (d > horizon) return true;
       const double vt = p.v_bw[i];
-      if (vt < v_n + a_n * a_n / (2 * J) &&
+      if (vt < v_n + a_n * a_n / (2 * J) && ++work_.brake_evals > 0 &&
           brake_distance(v_n, a_n, vt, A, J) + 0.5 * std::max(0.0, v_n - vt) * T > d + 1e-9) {
         if (v_target != nullptr) *v_target = vt;
         return false;
@@ -507,6 +512,7 @@ double Interpolator::advance(double ds, bool* reached_stop) {
       out_.u = p.path.u_end();
       pop_block();
       ++blocks_done_;
+      ++work_.blocks_started;
       s_ = 0;
       u_ = blocks_.empty() ? 0 : blocks_.front().path.u_begin();
       if (!blocks_.empty() && blocks_.front().stop_at_start()) {
@@ -536,12 +542,14 @@ double Interpolator::advance(double ds, bool* reached_stop) {
     // sample spacing and is kept as it is.
     double du_table = 0;
     const double u_tab = u_on_table(p, s_ + step, &du_table);
+    ++work_.table_lookups;
     if (!std::isfinite(u) || !(std::fabs(u - u_tab) <= 0.5 * du_table)) u = u_tab;
     u = std::clamp(u, u_, p.path.u_end());  // forward only (eq. 7 can step back where |P'| is tiny)
     if (param_update_ == ParamUpdate::kCorrected) {
       // Newton on |P(u) − P(u_k)| = Δs: the chord of the step has the commanded length.
       bool converged = false;  // |P(u) − P(u_k)| = Δs at the u that stands
       for (int it = 0; it < 4; ++it) {
+        ++work_.newton_iters;
         AxisVec Q{}, q1{}, q2{};
         p.path.eval(u, &Q, &q1, &q2);
         double L = 0, dLdu = 0;
@@ -566,6 +574,7 @@ double Interpolator::advance(double ds, bool* reached_stop) {
       // did by 44 um at the end of LinuxCNC's trident, closed by a jump in the
       // block's last cycle); and the path always moves on.
       auto chord = [&](double uu) {
+        ++work_.bisect_evals;
         const motion::AxisVec Q = p.path.point(uu);
         double L2 = 0;
         for (int a = 0; a < naxes_; ++a) L2 += (Q[a] - P[a]) * (Q[a] - P[a]);

@@ -77,6 +77,22 @@ struct Setpoint {
   RunState state = RunState::kIdle;
 };
 
+// What the cyclic part did, counted over the core's life (the bench diffs them
+// around a cycle to tell what its slowest cycles did). Plain counters: they cost a
+// few increments per cycle and change nothing the core computes.
+struct WorkCounters {
+  int64_t plans_taken = 0;     // updates taken from the planner
+  int64_t blocks_taken = 0;    // ...of which new blocks
+  int64_t patch_values = 0;    // look-ahead values copied from the updates
+  int64_t blocks_started = 0;  // blocks the path ran into (a block end crossed)
+  int64_t table_lookups = 0;   // arc-length table lookups (u from s)
+  int64_t newton_iters = 0;    // Newton iterations on the chord length
+  int64_t bisect_evals = 0;    // curve points of the bracketing/bisection fallback
+  int64_t safe_calls = 0;      // look-ahead checks
+  int64_t safe_samples = 0;    // look-ahead samples visited by them
+  int64_t brake_evals = 0;     // brake distances computed by them
+};
+
 class Interpolator {
  public:
   // Plans inline: apply_block and an override take their plans at once.
@@ -137,6 +153,9 @@ class Interpolator {
   double machine_position(int axis) const { return pos_[static_cast<size_t>(axis)]; }
   bool homed(int axis) const { return homed_[static_cast<size_t>(axis)]; }
   double drive_offset(int axis) const { return drive_offset_[static_cast<size_t>(axis)]; }
+  const WorkCounters& work() const { return work_; }
+  // Arc length into the block being executed (mm).
+  double s_in_block() const { return s_; }
   void set_param_update(ParamUpdate mode) { param_update_ = mode; }
   // Why the last refused block was refused.
   const std::string& last_refusal() const { return refusal_; }
@@ -242,6 +261,7 @@ class Interpolator {
   int64_t planned_samples_ = 0;
   Setpoint out_;
   std::string refusal_;
+  mutable WorkCounters work_;
 };
 
 }  // namespace cnc::interp

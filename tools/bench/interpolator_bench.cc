@@ -6,7 +6,13 @@
 // order (seed 001 eq. 6), second order (seed 000 eq. 7) and eq. 7 with the
 // chord-length correction — all measured in the same run on the same program.
 //
-//   cnc-bench-interpolator [--machine FILE] [--blocks N] [--paced]
+//   cnc-bench-interpolator [--machine FILE] [--blocks N] [--paced] [--slowest]
+//
+// Printed per run: min/mean/p99/p99.9/max of the cyclic compute (wall) and of the
+// cyclic thread's CPU time per cycle; --slowest adds, for the slowest cycles, the
+// block and the arc length in it, what the cycle did (plans taken, blocks started,
+// Newton iterations, look-ahead samples, ...: Interpolator::work()) and the page
+// faults and context switches of the thread (getrusage(RUSAGE_THREAD) around it).
 //
 // Unpaced, cycles run back to back and, only where the path would otherwise run out
 // of plans (fewer than two blocks queued while the planner works), the loop waits
@@ -21,6 +27,8 @@
 #include <numbers>
 #include <random>
 #include <vector>
+
+#include <sys/resource.h>
 
 #include "common/service/service.h"
 #include "common/util/signals.h"
@@ -82,15 +90,74 @@ std::vector<Block> dense_program(int n_blocks) {
   return blocks;
 }
 
+// What one cycle did: taken around it, outside its timed part.
+struct CycleRecord {
+  double wall_ns = 0, cpu_ns = 0;
+  int64_t cycle = -1;
+  int64_t block = -1;        // the block being executed at the cycle's start
+  double s_mm = 0;           // ...and how far into it (arc length)
+  int64_t queued = 0;        // blocks taken and not finished, at the start
+  int64_t submitted = 0;     // blocks handed to the planner in the cycle
+  int64_t minflt = 0, majflt = 0;  // page faults of this thread in the cycle
+  int64_t nvcsw = 0, nivcsw = 0;   // context switches of this thread in the cycle
+  cnc::interp::WorkCounters work;  // what the core did in the cycle (differences)
+};
+
+// The k largest records by a key, kept sorted (largest first), no allocation per insert.
+class TopK {
+ public:
+  explicit TopK(size_t k, double CycleRecord::*key) : k_(k), key_(key) { v_.reserve(k + 1); }
+  void offer(const CycleRecord& r) {
+    if (v_.size() == k_ && r.*key_ <= v_.back().*key_) return;
+    auto it = std::upper_bound(v_.begin(), v_.end(), r, [&](const CycleRecord& a, const CycleRecord& b) {
+      return a.*key_ > b.*key_;
+    });
+    v_.insert(it, r);
+    if (v_.size() > k_) v_.pop_back();
+  }
+  const std::vector<CycleRecord>& records() const { return v_; }
+
+ private:
+  size_t k_;
+  double CycleRecord::*key_;
+  std::vector<CycleRecord> v_;
+};
+
+cnc::interp::WorkCounters diff(const cnc::interp::WorkCounters& a, const cnc::interp::WorkCounters& b) {
+  cnc::interp::WorkCounters d;
+  d.plans_taken = b.plans_taken - a.plans_taken;
+  d.blocks_taken = b.blocks_taken - a.blocks_taken;
+  d.patch_values = b.patch_values - a.patch_values;
+  d.blocks_started = b.blocks_started - a.blocks_started;
+  d.table_lookups = b.table_lookups - a.table_lookups;
+  d.newton_iters = b.newton_iters - a.newton_iters;
+  d.bisect_evals = b.bisect_evals - a.bisect_evals;
+  d.safe_calls = b.safe_calls - a.safe_calls;
+  d.safe_samples = b.safe_samples - a.safe_samples;
+  d.brake_evals = b.brake_evals - a.brake_evals;
+  return d;
+}
+
 struct Result {
   std::vector<double> cycle_ns;
+  std::vector<double> cpu_ns;  // the same cycles in this thread's CPU time
   double cpu_max_ns = 0;  // the longest cycle in this thread's CPU time (preemption left out)
   int64_t cpu_max_cycle = -1;  // ...and which cycle it was
   double wall_s = 0;
   double fluct_max = 0, fluct_rms = 0;
   int64_t cycles = 0;
   int64_t waits = 0;  // cycles the loop waited for the planner (outside the timing)
+  TopK slow_wall{12, &CycleRecord::wall_ns};
+  TopK slow_cpu{12, &CycleRecord::cpu_ns};
+  int64_t minflt = 0;           // page faults of the cyclic thread in timed cycles, all of them
+  int64_t faulting_cycles = 0;  // timed cycles with at least one
+  uint64_t digest = 1469598103934665603ull;  // FNV-1a over every setpoint's positions, feed and state
 };
+
+void fold(uint64_t* h, const void* p, size_t n) {
+  const auto* b = static_cast<const unsigned char*>(p);
+  for (size_t i = 0; i < n; ++i) *h = (*h ^ b[i]) * 1099511628211ull;
+}
 
 enum class Planning { kInline, kThread };
 
@@ -110,7 +177,9 @@ Result run(const cnc::config::MachineConfig& cfg, const std::vector<Block>& bloc
   ip.set_param_update(mode);
   ip.apply_command({cnc::interp::Command::Kind::kStart, 1.0});
   Result r;
-  r.cycle_ns.reserve(1 << 20);
+  // Touched up front (not first touched by the loop as it grows).
+  r.cycle_ns.assign(1 << 20, 0.0);
+  r.cpu_ns.assign(1 << 20, 0.0);
   // The blocks as they would come out of the node's message decoding, made up front.
   std::vector<std::unique_ptr<Block>> source;
   source.reserve(blocks.size());
@@ -140,22 +209,49 @@ Result run(const cnc::config::MachineConfig& cfg, const std::vector<Block>& bloc
       ++r.waits;
     }
     timespec c0{}, c1{};
-    if (time_cycles) clock_gettime(CLOCK_THREAD_CPUTIME_ID, &c0);
+    rusage ru0{}, ru1{};
+    CycleRecord rec;
+    cnc::interp::WorkCounters w0;
+    int64_t submitted = 0;
+    if (time_cycles) {
+      getrusage(RUSAGE_THREAD, &ru0);
+      w0 = ip.work();
+      rec.block = ip.queued_blocks() > 0 ? ip.last().block_index : -1;
+      rec.s_mm = ip.s_in_block();
+      rec.queued = static_cast<int64_t>(ip.queued_blocks());
+      clock_gettime(CLOCK_THREAD_CPUTIME_ID, &c0);
+    }
     const auto t0 = std::chrono::steady_clock::now();
     // The cyclic path as in the node: the feed policy (plans taken, blocks handed
     // over) and the step; with Planning::kInline the planning happens in here too.
-    feed.cycle(ip, next, [](int64_t) {}, [](int) {});
+    feed.cycle(ip, next, [&submitted](int64_t) { ++submitted; }, [](int) {});
     const cnc::interp::Setpoint& sp = ip.step();
     const auto t1 = std::chrono::steady_clock::now();
-    if (time_cycles) {
+    if (time_cycles && static_cast<size_t>(r.cycles) < r.cycle_ns.size()) {
       clock_gettime(CLOCK_THREAD_CPUTIME_ID, &c1);
-      r.cycle_ns.push_back(std::chrono::duration<double, std::nano>(t1 - t0).count());
+      getrusage(RUSAGE_THREAD, &ru1);
+      const double wall_ns = std::chrono::duration<double, std::nano>(t1 - t0).count();
       const double cpu_ns =
           static_cast<double>(c1.tv_sec - c0.tv_sec) * 1e9 + static_cast<double>(c1.tv_nsec - c0.tv_nsec);
+      r.cycle_ns[static_cast<size_t>(r.cycles)] = wall_ns;
+      r.cpu_ns[static_cast<size_t>(r.cycles)] = cpu_ns;
       if (cpu_ns > r.cpu_max_ns) {
         r.cpu_max_ns = cpu_ns;
         r.cpu_max_cycle = r.cycles;
       }
+      rec.wall_ns = wall_ns;
+      rec.cpu_ns = cpu_ns;
+      rec.cycle = r.cycles;
+      rec.submitted = submitted;
+      rec.minflt = ru1.ru_minflt - ru0.ru_minflt;
+      rec.majflt = ru1.ru_majflt - ru0.ru_majflt;
+      rec.nvcsw = ru1.ru_nvcsw - ru0.ru_nvcsw;
+      rec.nivcsw = ru1.ru_nivcsw - ru0.ru_nivcsw;
+      rec.work = diff(w0, ip.work());
+      r.minflt += rec.minflt;
+      if (rec.minflt > 0) ++r.faulting_cycles;
+      r.slow_wall.offer(rec);
+      r.slow_cpu.offer(rec);
     }
     ++r.cycles;
     // Feed fluctuation: the realised step (chord) against the commanded one, in cruise.
@@ -169,26 +265,77 @@ Result run(const cnc::config::MachineConfig& cfg, const std::vector<Block>& bloc
       ++n_fl;
     }
     prev = sp.position_mm;
+    fold(&r.digest, sp.position_mm.data(), sizeof(double) * static_cast<size_t>(sp.num_axes));
+    fold(&r.digest, &sp.feed_mm_per_min, sizeof sp.feed_mm_per_min);
+    fold(&r.digest, &sp.state, sizeof sp.state);
   }
   r.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_all).count();
+  if (time_cycles) {
+    const size_t n = std::min(r.cycle_ns.size(), static_cast<size_t>(r.cycles));
+    r.cycle_ns.resize(n);
+    r.cpu_ns.resize(n);
+  }
   r.fluct_rms = n_fl ? std::sqrt(sum2 / static_cast<double>(n_fl)) : 0;
   return r;
 }
 
-void report(const char* what, const Result& r, double period_s) {
-  std::vector<double> ns = r.cycle_ns;
+struct Stats {
+  double min = 0, mean = 0, p99 = 0, p999 = 0, max = 0;
+};
+
+Stats stats(std::vector<double> ns) {
+  Stats s;
+  if (ns.empty()) return s;
   std::sort(ns.begin(), ns.end());
-  double mean = 0;
-  for (double x : ns) mean += x;
-  mean /= static_cast<double>(ns.size());
-  const double p99 = ns[static_cast<size_t>(0.99 * static_cast<double>(ns.size() - 1))];
-  std::printf("%s: mean %.2f us, p50 %.2f us, p99 %.2f us, p99.9 %.2f us, max %.2f us (max in thread CPU time %.2f us "
-              "at cycle %lld; %lld cycles, %.1f s of machining, %lld waits for the planner)\n",
-              what, mean * 1e-3, ns[ns.size() / 2] * 1e-3, p99 * 1e-3,
-              ns[static_cast<size_t>(0.999 * static_cast<double>(ns.size() - 1))] * 1e-3, ns.back() * 1e-3,
-              r.cpu_max_ns * 1e-3, static_cast<long long>(r.cpu_max_cycle), static_cast<long long>(r.cycles),
-              static_cast<double>(r.cycles) * period_s,
-              static_cast<long long>(r.waits));
+  for (double x : ns) s.mean += x;
+  s.mean /= static_cast<double>(ns.size());
+  s.min = ns.front();
+  s.p99 = ns[static_cast<size_t>(0.99 * static_cast<double>(ns.size() - 1))];
+  s.p999 = ns[static_cast<size_t>(0.999 * static_cast<double>(ns.size() - 1))];
+  s.max = ns.back();
+  return s;
+}
+
+void print_stats(const char* what, const Stats& s) {
+  std::printf("    %-22s min %6.2f  mean %6.2f  p99 %7.2f  p99.9 %7.2f  max %8.2f us\n", what, s.min * 1e-3,
+              s.mean * 1e-3, s.p99 * 1e-3, s.p999 * 1e-3, s.max * 1e-3);
+}
+
+void print_records(const char* title, const std::vector<CycleRecord>& recs) {
+  std::printf("    %s\n", title);
+  std::printf("      %8s %8s %8s %6s %7s %3s %3s %5s %5s %6s %4s %4s %6s %6s %5s %5s %6s %4s %4s\n", "wall_us", "cpu_us",
+              "cycle", "block", "s_mm", "q", "sub", "taken", "blk", "patch", "strt", "tab", "newton", "bisect",
+              "safe", "smpl", "brake", "mflt", "csw");
+  for (const CycleRecord& r : recs) {
+    const auto& w = r.work;
+    std::printf("      %8.2f %8.2f %8lld %6lld %7.3f %3lld %3lld %5lld %5lld %6lld %4lld %4lld %6lld %6lld %5lld %5lld "
+                "%6lld %4lld %2lld/%lld\n",
+                r.wall_ns * 1e-3, r.cpu_ns * 1e-3, static_cast<long long>(r.cycle), static_cast<long long>(r.block),
+                r.s_mm, static_cast<long long>(r.queued), static_cast<long long>(r.submitted),
+                static_cast<long long>(w.plans_taken), static_cast<long long>(w.blocks_taken),
+                static_cast<long long>(w.patch_values), static_cast<long long>(w.blocks_started),
+                static_cast<long long>(w.table_lookups), static_cast<long long>(w.newton_iters),
+                static_cast<long long>(w.bisect_evals), static_cast<long long>(w.safe_calls),
+                static_cast<long long>(w.safe_samples), static_cast<long long>(w.brake_evals),
+                static_cast<long long>(r.minflt + r.majflt), static_cast<long long>(r.nvcsw),
+                static_cast<long long>(r.nivcsw));
+  }
+}
+
+void report(const char* what, const Result& r, double period_s, bool detail) {
+  std::printf("  %s: %lld cycles, %.1f s of machining, %lld waits for the planner; cyclic thread page faults %lld in "
+              "%lld cycles\n",
+              what, static_cast<long long>(r.cycles), static_cast<double>(r.cycles) * period_s,
+              static_cast<long long>(r.waits), static_cast<long long>(r.minflt),
+              static_cast<long long>(r.faulting_cycles));
+  print_stats("cyclic compute (wall)", stats(r.cycle_ns));
+  print_stats("thread CPU time", stats(r.cpu_ns));
+  if (!detail) return;
+  print_records("slowest cycles by thread CPU time (taken: plans, blk: of which blocks, patch: look-ahead values "
+                "copied, strt: blocks started, tab: table lookups, safe/smpl/brake: look-ahead checks, samples, brake "
+                "distances, mflt: page faults, csw: context switches vol/invol):",
+                r.slow_cpu.records());
+  print_records("slowest cycles by wall time:", r.slow_wall.records());
 }
 
 int bench(const cnc::config::MachineConfig& machine, const cnc::service::Args& args) {
@@ -203,15 +350,17 @@ int bench(const cnc::config::MachineConfig& machine, const cnc::service::Args& a
   const bool paced = args.flags.count("paced") > 0;
   run(cfg, blocks, cnc::interp::ParamUpdate::kCorrected, false);  // warm-up
   std::printf("compute time of the cyclic path per coarse cycle (feed policy + plans taken + step):\n");
-  report("  planning on the planner thread", run(cfg, blocks, cnc::interp::ParamUpdate::kCorrected, true,
-                                                 Planning::kThread, paced),
-         cfg.ipo_period_s);
-  report("  planning inline in the cycle  ", run(cfg, blocks, cnc::interp::ParamUpdate::kCorrected, true,
-                                                 Planning::kInline, paced),
-         cfg.ipo_period_s);
+  const bool detail = args.flags.count("slowest") > 0;
+  report("planning on the planner thread", run(cfg, blocks, cnc::interp::ParamUpdate::kCorrected, true,
+                                               Planning::kThread, paced),
+         cfg.ipo_period_s, detail);
+  report("planning inline in the cycle", run(cfg, blocks, cnc::interp::ParamUpdate::kCorrected, true,
+                                             Planning::kInline, paced),
+         cfg.ipo_period_s, false);
   const Result dry = run(cfg, blocks, cnc::interp::ParamUpdate::kCorrected, false);
-  std::printf("dry run: %.0f setpoints/s (%.0fx real time at 1 ms)\n",
-              static_cast<double>(dry.cycles) / dry.wall_s, static_cast<double>(dry.cycles) / dry.wall_s * 1e-3);
+  std::printf("dry run: %.0f setpoints/s (%.0fx real time at 1 ms), %lld setpoints, digest %016llx\n",
+              static_cast<double>(dry.cycles) / dry.wall_s, static_cast<double>(dry.cycles) / dry.wall_s * 1e-3,
+              static_cast<long long>(dry.cycles), static_cast<unsigned long long>(dry.digest));
 
   std::printf("feed fluctuation (realised step vs commanded, |.| max and rms, same program):\n");
   const std::pair<cnc::interp::ParamUpdate, const char*> modes[] = {
@@ -233,7 +382,7 @@ int bench(const cnc::config::MachineConfig& machine, const cnc::service::Args& a
 
 int main(int argc, char** argv) {
   cnc::service::Spec spec{"cnc-bench-interpolator", "interpolator compute time and feed fluctuation", {"blocks"},
-                          {"paced"}};
+                          {"paced", "slowest"}};
   if (argc == 1) {
     static char a0[] = "cnc-bench-interpolator", a1[] = "--machine", a2[] = CNC_SOURCE_DIR "/config/machines/sim3.yaml";
     static char* def[] = {a0, a1, a2, nullptr};
