@@ -3,6 +3,7 @@
 #include <sched.h>
 #include <spdlog/spdlog.h>
 #include <sys/mman.h>
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -64,6 +65,46 @@ std::string make_realtime(int priority) {
   }
   g_memory_locked = true;
   return "";
+}
+
+namespace {
+
+bool may_lock_memory(std::string* why) {
+  rlimit lim{};
+  if (getrlimit(RLIMIT_MEMLOCK, &lim) == 0 && lim.rlim_cur == RLIM_INFINITY) return true;
+  // CAP_IPC_LOCK (bit 14) in the effective set.
+  std::ifstream status("/proc/self/status");
+  std::string line;
+  while (std::getline(status, line)) {
+    if (line.rfind("CapEff:", 0) != 0) continue;
+    const unsigned long long caps = std::strtoull(line.c_str() + 7, nullptr, 16);
+    if (caps & (1ull << 14)) return true;
+    break;
+  }
+  *why = "no CAP_IPC_LOCK and RLIMIT_MEMLOCK is " + std::to_string(lim.rlim_cur / 1024) + " KiB";
+  return false;
+}
+
+__attribute__((noinline)) void touch_stack(size_t bytes) {
+  // A frame of `bytes`, written once per page: the pages are there before the cycles run.
+  volatile char* frame = static_cast<volatile char*>(__builtin_alloca(bytes));
+  for (size_t i = 0; i < bytes; i += 4096) frame[i] = 0;
+  frame[bytes - 1] = 0;
+}
+
+}  // namespace
+
+std::string prepare_cyclic_memory(size_t stack_bytes) {
+  std::string why;
+  if (!g_memory_locked && may_lock_memory(&why)) {
+    if (mlockall(MCL_CURRENT | MCL_FUTURE) == 0) {
+      g_memory_locked = true;
+    } else {
+      why = std::string("mlockall: ") + std::strerror(errno);
+    }
+  }
+  if (stack_bytes > 0) touch_stack(stack_bytes);
+  return g_memory_locked ? "" : why;
 }
 
 std::string cpu_list(const std::vector<int>& cpus) {

@@ -30,6 +30,13 @@ std::string pin_to_cpus(const std::vector<int>& cpus, std::vector<int>* applied 
 // service, what was asked, why it is not possible and how the service runs instead.
 void apply_realtime(const std::string& service, int priority, const std::vector<int>& cpus);
 
+// Memory for a cyclic thread without page faults in its cycles: mlockall(MCL_CURRENT |
+// MCL_FUTURE) unless make_realtime locked it already, where permitted (CAP_IPC_LOCK, or
+// an unlimited RLIMIT_MEMLOCK: under a finite limit MCL_FUTURE would make later
+// allocations fail), then `stack_bytes` of the calling thread's stack touched. Returns
+// "" when memory is locked, else why not (the stack is touched either way).
+std::string prepare_cyclic_memory(size_t stack_bytes = 256 * 1024);
+
 // The calling thread's scheduling as it is: "SCHED_FIFO 40, memory locked, CPUs 1"
 // or "SCHED_OTHER, memory not locked, CPUs 0-1".
 std::string describe_scheduling();

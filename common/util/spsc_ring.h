@@ -13,7 +13,7 @@ template <class T>
 class SpscRing {
  public:
   // Holds up to `capacity` elements (rounded up to a power of two).
-  explicit SpscRing(size_t capacity) : mask_(round_up(capacity) - 1), slots_(new T[mask_ + 1]) {}
+  explicit SpscRing(size_t capacity) : mask_(round_up(capacity) - 1), slots_(new T[mask_ + 1]()) {}  // value-initialised: the pages are touched here
   SpscRing(const SpscRing&) = delete;
   SpscRing& operator=(const SpscRing&) = delete;
 

@@ -1,6 +1,7 @@
 #include "services/interpolator/interpolator.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -109,14 +110,14 @@ Interpolator::Interpolator(const config::MachineConfig& cfg)
     : cfg_(cfg), period_s_(cfg.ipo_period_s), naxes_(static_cast<int>(cfg.axes.size())),
       param_update_(param_update_from_string(cfg.param_update)), own_link_(std::make_unique<SyncPlanLink>(cfg)),
       link_(own_link_.get()), inline_(true),
-      blocks_(static_cast<size_t>(std::max(64, 2 * cfg.block_window + 4))) {
+      blocks_(static_cast<size_t>(std::max(64, 2 * cfg.block_window + 4))), look_(kLookCapacity) {
   for (int a = 0; a < naxes_; ++a) pos_[a] = cfg_.axes[a].home_mm;
 }
 
 Interpolator::Interpolator(const config::MachineConfig& cfg, PlanLink& link)
     : cfg_(cfg), period_s_(cfg.ipo_period_s), naxes_(static_cast<int>(cfg.axes.size())),
       param_update_(param_update_from_string(cfg.param_update)), link_(&link),
-      blocks_(static_cast<size_t>(std::max(64, 2 * cfg.block_window + 4))) {
+      blocks_(static_cast<size_t>(std::max(64, 2 * cfg.block_window + 4))), look_(kLookCapacity) {
   for (int a = 0; a < naxes_; ++a) pos_[a] = cfg_.axes[a].home_mm;
 }
 
@@ -202,6 +203,21 @@ void Interpolator::take(PlanUpdate& u) {
     std::copy(u.values.begin() + pt.offset, u.values.begin() + pt.offset + pt.count,
               p.v_bw.begin() + pt.from);
     if (pt.from == 0 && p.live_entry < p.v_entry && !p.v_bw.empty()) p.v_bw[0] = std::min(p.v_bw[0], p.live_entry);
+    update_suffix_min(p, pt.from, pt.from + pt.count);
+  }
+}
+
+void Interpolator::update_suffix_min(Planned& p, size_t from, size_t end) {
+  // v_min[i] = min(v_bw[i..n)), a NaN counted as -inf (it never lets safe() skip).
+  // v_bw changed in [from, end): v_min is recomputed from end - 1 down to from, and
+  // below from until a minimum comes out as it was (the rest below is unchanged then).
+  const size_t n = p.v_bw.size();
+  if (p.v_min.size() != n) return;
+  for (size_t i = std::min(end, n); i-- > 0;) {
+    const double x = p.v_bw[i] >= -kInf ? p.v_bw[i] : -kInf;
+    const double m = i + 1 < n ? std::min(x, p.v_min[i + 1]) : x;
+    if (i < from && m == p.v_min[i]) break;
+    p.v_min[i] = m;
   }
 }
 
@@ -442,7 +458,60 @@ double Interpolator::cap_at(const Planned& p, double s, Limit* why, double* v_ge
   return v;
 }
 
+bool Interpolator::safe_plain(double v_n, double a_n, double s_n, double* v_target) const {
+  // The look-ahead check as it was before safe() skipped and safe_cached() gathered:
+  // every sample from s_n to the horizon (the reference of set_verify_lookahead).
+  double A = kInf, J = kInf;
+  const double T = period_s_;
+  double offset = 0;
+  double horizon = -1;
+  for (size_t b = 0; b < blocks_.size(); ++b) {
+    const Planned& p = blocks_[b];
+    A = std::min(A, p.accel);
+    J = std::min(J, p.jerk);
+    if (horizon < 0) horizon = brake_distance(v_n, a_n, 0.0, A, J) + v_n * period_s_ + 1e-9;
+    if (p.stop_block() || (p.live_entry == 0 && offset > 0)) {
+      if (v_target != nullptr) *v_target = 0;
+      return brake_distance(v_n, a_n, 0.0, A, J) + 0.5 * v_n * T <= offset - s_n + 1e-9;
+    }
+    const size_t n = p.samples.size();
+    const auto first = std::partition_point(p.samples.begin(), p.samples.end(),
+                                            [&](const Sample& x) { return offset + x.s - s_n < 0; });
+    for (size_t i = static_cast<size_t>(first - p.samples.begin()); i < n; ++i) {
+      const double d = offset + p.samples[i].s - s_n;
+      if (d > horizon) return true;
+      const double vt = p.v_bw[i];
+      if (vt < v_n + a_n * a_n / (2 * J) &&
+          brake_distance(v_n, a_n, vt, A, J) + 0.5 * std::max(0.0, v_n - vt) * T > d + 1e-9) {
+        if (v_target != nullptr) *v_target = vt;
+        return false;
+      }
+    }
+    offset += p.length;
+  }
+  return true;
+}
+
+void Interpolator::verify(bool r, double v_n, double a_n, double s_n, const double* v_target) const {
+  double vt = -1;
+  const bool r0 = safe_plain(v_n, a_n, s_n, &vt);
+  if (r0 != r || (!r && v_target != nullptr && std::bit_cast<uint64_t>(vt) != std::bit_cast<uint64_t>(*v_target)))
+    ++lookahead_mismatches_;
+}
+
 bool Interpolator::safe(double v_n, double a_n, double s_n, double* v_target) const {
+  const bool r = safe_scan(v_n, a_n, s_n, v_target);
+  if (verify_lookahead_) verify(r, v_n, a_n, s_n, v_target);
+  return r;
+}
+
+bool Interpolator::safe_cached(double v_n, double a_n, double s_n, double* v_target) {
+  const bool r = safe_gathered(v_n, a_n, s_n, v_target);
+  if (verify_lookahead_) verify(r, v_n, a_n, s_n, v_target);
+  return r;
+}
+
+bool Interpolator::safe_scan(double v_n, double a_n, double s_n, double* v_target) const {
   double A = kInf, J = kInf;
   // The brake is continuous-time; executed in whole cycles it needs about half a
   // cycle's travel at the speed it sheds more room.
@@ -465,12 +534,21 @@ bool Interpolator::safe(double v_n, double a_n, double s_n, double* v_target) co
     const size_t n = p.samples.size();
     const auto first = std::partition_point(p.samples.begin(), p.samples.end(),
                                             [&](const Sample& x) { return offset + x.s - s_n < 0; });
+    // No sample from i on with a limit under v_n + a_n²/(2J) (v_min: the least limit
+    // from i to the block's end): none of them can be missed, so the scan would only
+    // return at the first of them beyond the horizon; the last one tells whether there is one.
+    const double v_reach = v_n + a_n * a_n / (2 * J);
     for (size_t i = static_cast<size_t>(first - p.samples.begin()); i < n; ++i) {
+      if (p.v_min[i] >= v_reach) {
+        ++work_.safe_skips;
+        if (offset + p.samples[n - 1].s - s_n > horizon) return true;
+        break;
+      }
       const double d = offset + p.samples[i].s - s_n;
       ++work_.safe_samples;
       if (d > horizon) return true;
       const double vt = p.v_bw[i];
-      if (vt < v_n + a_n * a_n / (2 * J) && ++work_.brake_evals > 0 &&
+      if (vt < v_reach && ++work_.brake_evals > 0 &&
           brake_distance(v_n, a_n, vt, A, J) + 0.5 * std::max(0.0, v_n - vt) * T > d + 1e-9) {
         if (v_target != nullptr) *v_target = vt;
         return false;
@@ -479,6 +557,138 @@ bool Interpolator::safe(double v_n, double a_n, double s_n, double* v_target) co
     offset += p.length;
   }
   return true;
+}
+
+void Interpolator::build_look(double vn_lo, double a_lo, double sn_lo, double vn_hi, double a_hi, double sn_hi) {
+  // For every a in [a_lo, a_hi] (v_n and s_n grow with a): safe() skips the samples
+  // behind s_n >= sn_lo, returns true at the first sample beyond its horizon (at
+  // most look_H_, checked per try), fails only at a sample whose limit is under
+  // v_n + a²/(2J) <= vn_hi + max(a_lo², a_hi²)/(2J) or at the stop point. Gathered
+  // here: those samples, the stop point, the last sample before it.
+  look_ok_ = false;
+  look_n_ = 0;
+  look_term_ = false;
+  look_last_ = false;
+  look_fail_ = SIZE_MAX;
+  if (blocks_.empty()) return;
+  ++work_.look_builds;
+  {
+    const Planned& p0 = blocks_.front();
+    const double A0 = std::min(kInf, p0.accel), J0 = std::min(kInf, p0.jerk);
+    const double h_lo = brake_distance(vn_lo, a_lo, 0.0, A0, J0) + vn_lo * period_s_ + 1e-9;
+    const double h_hi = brake_distance(vn_hi, a_hi, 0.0, A0, J0) + vn_hi * period_s_ + 1e-9;
+    look_H_ = std::max(h_lo, h_hi);
+  }
+  look_sn_lo_ = sn_lo;
+  look_sn_hi_ = sn_hi;
+  look_vn_hi_ = vn_hi;
+  look_m2_ = std::max(a_lo * a_lo, a_hi * a_hi);
+  if (!std::isfinite(look_H_) || !std::isfinite(sn_lo) || !std::isfinite(sn_hi) || !std::isfinite(vn_hi) ||
+      !std::isfinite(look_m2_))
+    return;
+  double A = kInf, J = kInf;
+  double offset = 0;
+  for (size_t b = 0; b < blocks_.size(); ++b) {
+    const Planned& p = blocks_[b];
+    A = std::min(A, p.accel);
+    J = std::min(J, p.jerk);
+    if (p.stop_block() || (p.live_entry == 0 && offset > 0)) {
+      look_term_ = true;
+      look_term_off_ = offset;
+      look_term_A_ = A;
+      look_term_J_ = J;
+      break;
+    }
+    const double theta = look_vn_hi_ + look_m2_ / (2 * J);
+    const size_t n = p.samples.size();
+    const auto first = std::partition_point(p.samples.begin(), p.samples.end(),
+                                            [&](const Sample& x) { return offset + x.s - sn_lo < 0; });
+    for (size_t i = static_cast<size_t>(first - p.samples.begin()); i < n; ++i) {
+      if (offset + p.samples[i].s - sn_hi > look_H_) {
+        // Beyond every try's horizon: each returns true by here.
+        look_ok_ = true;
+        return;
+      }
+      if (p.v_min[i] >= theta) break;  // nothing under it to the block's end
+      if (p.v_bw[i] < theta) {
+        if (look_n_ == look_.size()) return;  // too many: full checks
+        look_[look_n_++] = LookCand{offset, p.samples[i].s, p.v_bw[i], A, J};
+      }
+    }
+    if (n > 0) {
+      look_last_ = true;
+      look_last_off_ = offset;
+      look_last_s_ = p.samples[n - 1].s;
+    }
+    offset += p.length;
+  }
+  look_ok_ = true;
+}
+
+bool Interpolator::safe_gathered(double v_n, double a_n, double s_n, double* v_target) {
+  const Planned& p0 = blocks_.front();
+  const double A0 = std::min(kInf, p0.accel), J0 = std::min(kInf, p0.jerk);
+  const double horizon = look_ok_ ? brake_distance(v_n, a_n, 0.0, A0, J0) + v_n * period_s_ + 1e-9 : 0.0;
+  if (!look_ok_ || !(horizon <= look_H_) || !(s_n >= look_sn_lo_ && s_n <= look_sn_hi_) || !(v_n <= look_vn_hi_) ||
+      !(a_n * a_n <= look_m2_)) {
+    ++work_.look_fallbacks;
+    return safe_scan(v_n, a_n, s_n, v_target);
+  }
+  ++work_.safe_calls;
+  const double T = period_s_;
+  auto fails = [&](const LookCand& c, double d) {
+    ++work_.safe_samples;
+    const double vt = c.vt;
+    return vt < v_n + a_n * a_n / (2 * c.J) && ++work_.brake_evals > 0 &&
+           brake_distance(v_n, a_n, vt, c.A, c.J) + 0.5 * std::max(0.0, v_n - vt) * T > d + 1e-9;
+  };
+  // Reached only when no sample before it is beyond the horizon.
+  auto term_reached = [&] { return !(look_last_ && look_last_off_ + look_last_s_ - s_n > horizon); };
+  auto term_ok = [&] {
+    ++work_.brake_evals;
+    return brake_distance(v_n, a_n, 0.0, look_term_A_, look_term_J_) + 0.5 * v_n * T <= look_term_off_ - s_n + 1e-9;
+  };
+  if (v_target == nullptr) {
+    // Any miss within reach answers false, whichever is found first: the last one first.
+    if (look_fail_ < look_n_) {
+      const LookCand& c = look_[look_fail_];
+      const double d = c.offset + c.s - s_n;
+      if (d >= 0 && d <= horizon && fails(c, d)) return false;
+    } else if (look_fail_ == look_n_ && look_term_ && term_reached() && !term_ok()) {
+      return false;
+    }
+  }
+  for (size_t k = 0; k < look_n_; ++k) {
+    const LookCand& c = look_[k];
+    const double d = c.offset + c.s - s_n;
+    if (d < 0) continue;
+    if (d > horizon) return true;
+    if (fails(c, d)) {
+      look_fail_ = k;
+      if (v_target != nullptr) *v_target = c.vt;
+      return false;
+    }
+  }
+  if (!look_term_ || !term_reached()) return true;
+  if (v_target != nullptr) *v_target = 0;
+  if (term_ok()) return true;
+  look_fail_ = look_n_;
+  return false;
+}
+
+void Interpolator::eval_on(const Planned& p, double u, AxisVec* P, AxisVec* d1, AxisVec* d2) {
+  const uint64_t bits = std::bit_cast<uint64_t>(u);
+  if (last_eval_.serial == p.serial && last_eval_.u_bits == bits) {
+    ++work_.curve_reuses;
+  } else {
+    ++work_.curve_evals;
+    p.path.eval(u, &last_eval_.P, &last_eval_.d1, &last_eval_.d2);
+    last_eval_.serial = p.serial;
+    last_eval_.u_bits = bits;
+  }
+  *P = last_eval_.P;
+  *d1 = last_eval_.d1;
+  *d2 = last_eval_.d2;
 }
 
 double Interpolator::advance(double ds, bool* reached_stop) {
@@ -525,7 +735,7 @@ double Interpolator::advance(double ds, bool* reached_stop) {
     const double step = ds - moved;
     // Seed 000 eq. 7: u += Δs/|P'| − Δs²·(P'·P'')/(2|P'|⁴).
     AxisVec P{}, d1{}, d2{};
-    p.path.eval(u_, &P, &d1, &d2);
+    eval_on(p, u_, &P, &d1, &d2);
     double sp2 = 0, dd = 0, d2sq = 0;
     for (int a = 0; a < naxes_; ++a) {
       sp2 += d1[a] * d1[a];
@@ -551,7 +761,7 @@ double Interpolator::advance(double ds, bool* reached_stop) {
       for (int it = 0; it < 4; ++it) {
         ++work_.newton_iters;
         AxisVec Q{}, q1{}, q2{};
-        p.path.eval(u, &Q, &q1, &q2);
+        eval_on(p, u, &Q, &q1, &q2);
         double L = 0, dLdu = 0;
         for (int a = 0; a < naxes_; ++a) L += (Q[a] - P[a]) * (Q[a] - P[a]);
         L = std::sqrt(L);
@@ -575,7 +785,8 @@ double Interpolator::advance(double ds, bool* reached_stop) {
       // block's last cycle); and the path always moves on.
       auto chord = [&](double uu) {
         ++work_.bisect_evals;
-        const motion::AxisVec Q = p.path.point(uu);
+        motion::AxisVec Q{}, q1{}, q2{};
+        eval_on(p, uu, &Q, &q1, &q2);
         double L2 = 0;
         for (int a = 0; a < naxes_; ++a) L2 += (Q[a] - P[a]) * (Q[a] - P[a]);
         return std::sqrt(L2);
@@ -642,7 +853,10 @@ double Interpolator::advance(double ds, bool* reached_stop) {
       arc += std::min(step * step * step * k2 / 24.0, 0.1 * step);
     }
     s_ += arc;
-    pos_ = p.path.point(u_);
+    {
+      AxisVec q1{}, q2{};
+      eval_on(p, u_, &pos_, &q1, &q2);
+    }
     out_.block_index = p.block.index;
     out_.source_line = p.block.source_line;
     out_.u = u_;
@@ -682,6 +896,13 @@ double Interpolator::u_on_table(const Planned& p, double s, double* du) {
 
 bool Interpolator::creep_to_stop() {
   // Within half a cycle's jerk-limited travel (J·T³/2) of the next stop point.
+  const double T = period_s_;
+  // J below is at most the front block's: a path faster than that allows cannot
+  // creep, and is told so without walking the buffer (the walk gives the same false).
+  if (!blocks_.empty() && !blocks_.front().stop_block()) {
+    const double J0 = blocks_.front().jerk;
+    if (v_ > 0.5 * J0 * T * T || std::fabs(a_) > J0 * T) return false;
+  }
   double d = -s_;
   double J = kInf;
   bool first = true;
@@ -691,8 +912,8 @@ bool Interpolator::creep_to_stop() {
     first = false;
     J = std::min(J, p.jerk);
     d += p.length;
+    if (d > 0.5 * J * T * T * T) return false;  // only grows while the bound only falls
   }
-  const double T = period_s_;
   // Slow enough that stopping within this cycle stays within the jerk limit.
   if (v_ > 0.5 * J * T * T || std::fabs(a_) > J * T) return false;
   if (!(d > 0) || d > 0.5 * J * T * T * T) return false;
@@ -784,8 +1005,15 @@ const Setpoint& Interpolator::step() {
       bool limited = false;
       if (!ok(a_n)) {
         limited = true;
+        // The search below tries accelerations in [a_lo, a_n] only: gather what they check once.
+        const double vn_lo = next_v(a_lo), vn_hi = next_v(a_n);
+        build_look(vn_lo, a_lo, s_ + 0.5 * (v_ + vn_lo) * T, vn_hi, a_n, s_ + 0.5 * (v_ + vn_hi) * T);
+        auto ok_in = [&](double a, double* v_target = nullptr) {
+          const double vn = next_v(a);
+          return safe_cached(vn, a, s_ + 0.5 * (v_ + vn) * T, v_target);
+        };
         double v_target = 0;
-        if (!ok(a_lo, &v_target)) {
+        if (!ok_in(a_lo, &v_target)) {
           // Even the hardest brake misses a limit ahead (an override dropped it under
           // the current speed): brake towards it as hard as the jerk limit lets the
           // brake still land on it, rather than braking flat out and hitting zero
@@ -795,7 +1023,7 @@ const Setpoint& Interpolator::step() {
           double lo = a_lo, hi = a_n;
           for (int i = 0; i < 14; ++i) {
             const double mid = 0.5 * (lo + hi);
-            (ok(mid) ? lo : hi) = mid;
+            (ok_in(mid) ? lo : hi) = mid;
           }
           a_n = lo;
         }

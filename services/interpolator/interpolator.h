@@ -91,6 +91,11 @@ struct WorkCounters {
   int64_t safe_calls = 0;      // look-ahead checks
   int64_t safe_samples = 0;    // look-ahead samples visited by them
   int64_t brake_evals = 0;     // brake distances computed by them
+  int64_t safe_skips = 0;      // block remainders they skipped (no limit there can be missed)
+  int64_t look_builds = 0;     // searches over the acceleration with the samples gathered once
+  int64_t look_fallbacks = 0;  // tries outside what was gathered (full check instead)
+  int64_t curve_evals = 0;     // curve points (with derivatives) computed in the step
+  int64_t curve_reuses = 0;    // ...and taken from the one before instead
 };
 
 class Interpolator {
@@ -154,6 +159,10 @@ class Interpolator {
   bool homed(int axis) const { return homed_[static_cast<size_t>(axis)]; }
   double drive_offset(int axis) const { return drive_offset_[static_cast<size_t>(axis)]; }
   const WorkCounters& work() const { return work_; }
+  // Tests: every look-ahead check also done as a plain scan of every sample to the
+  // horizon; lookahead_mismatches() counts the answers (and limits) that differ.
+  void set_verify_lookahead(bool on) { verify_lookahead_ = on; }
+  int64_t lookahead_mismatches() const { return lookahead_mismatches_; }
   // Arc length into the block being executed (mm).
   double s_in_block() const { return s_; }
   void set_param_update(ParamUpdate mode) { param_update_ = mode; }
@@ -186,6 +195,8 @@ class Interpolator {
   bool push_request(const PlanRequest& r);
   bool flush_requests();
   void take(PlanUpdate& u);
+  // Recomputes p.v_min after p.v_bw changed in [from, end).
+  static void update_suffix_min(Planned& p, size_t from, size_t end);
   void clear_blocks();
   void pop_block();
   bool check_block(const program::Block& block);
@@ -200,7 +211,21 @@ class Interpolator {
   // Whether a jerk-limited brake from (v_next, a_next) at s_next still meets every
   // limit ahead; when not, *v_target (if given) is the speed limit it misses.
   bool safe(double v_next, double a_next, double s_next, double* v_target = nullptr) const;
+  // safe() for the accelerations of one cycle's search, a in [a_lo, a_hi]: the
+  // samples such a brake could miss are gathered once (build_look) and each try
+  // visits only them, the one that failed last first; the same answers as safe(),
+  // which it falls back to for a try outside the bounds it was built for.
+  void build_look(double vn_lo, double a_lo, double sn_lo, double vn_hi, double a_hi, double sn_hi);
+  bool safe_cached(double v_n, double a_n, double s_n, double* v_target = nullptr);
+  bool safe_scan(double v_n, double a_n, double s_n, double* v_target) const;
+  bool safe_gathered(double v_n, double a_n, double s_n, double* v_target);
+  bool safe_plain(double v_n, double a_n, double s_n, double* v_target) const;
+  void verify(bool r, double v_n, double a_n, double s_n, const double* v_target) const;
   double advance(double ds, bool* reached_stop);
+  // p.path.eval(u, ...), or the result of the last call when it was for the same
+  // block and the same u (bit for bit): a step starts where the last one's Newton
+  // iteration ended, and the setpoint is the point it converged on.
+  void eval_on(const Planned& p, double u, motion::AxisVec* P, motion::AxisVec* d1, motion::AxisVec* d2);
   // u at arc length s from the planner's samples; *du: the u spacing of the two around s.
   static double u_on_table(const Planned& p, double s, double* du);
   // Arc length at u from the planner's samples.
@@ -248,6 +273,27 @@ class Interpolator {
   // stands still, so the start from rest begins from a rest the setpoints show.
   bool rest_next_ = false;
 
+  // build_look's samples, in path order: where (block offset, s), limit, brake limits.
+  struct LookCand {
+    double offset, s, vt, A, J;
+  };
+  static constexpr size_t kLookCapacity = 1024;  // more: that search checks in full
+  std::vector<LookCand> look_;
+  size_t look_n_ = 0;
+  bool look_ok_ = false;
+  double look_H_ = 0, look_sn_lo_ = 0, look_sn_hi_ = 0, look_vn_hi_ = 0, look_m2_ = 0;
+  bool look_term_ = false;  // a stop point within reach: where, and the brake limits up to it
+  double look_term_off_ = 0, look_term_A_ = 0, look_term_J_ = 0;
+  bool look_last_ = false;  // the last sample before it
+  double look_last_off_ = 0, look_last_s_ = 0;
+  size_t look_fail_ = 0;  // the candidate that failed last (look_n_: the stop point; more: none)
+
+  struct LastEval {
+    uint64_t serial = UINT64_MAX;  // of the block (none yet)
+    uint64_t u_bits = 0;
+    motion::AxisVec P{}, d1{}, d2{};
+  } last_eval_;
+
   std::array<double, program::kMaxAxes> pos_{};
   std::array<double, program::kMaxAxes> drive_offset_{};
   std::array<bool, program::kMaxAxes> homed_{};
@@ -262,6 +308,8 @@ class Interpolator {
   Setpoint out_;
   std::string refusal_;
   mutable WorkCounters work_;
+  bool verify_lookahead_ = false;
+  mutable int64_t lookahead_mismatches_ = 0;
 };
 
 }  // namespace cnc::interp

@@ -660,6 +660,7 @@ PlanUpdate* Planner::process(const PlanRequest& r) {
     else p->v_entry = 0;
     p->live_entry = p->v_entry;
     p->v_bw.assign(p->samples.size(), -1.0);
+    p->v_min.assign(p->samples.size(), -1.0);
     u->samples = static_cast<int64_t>(p->samples.size());
     u->block = p.get();
     list_.push_back(Entry{std::move(p), {}});

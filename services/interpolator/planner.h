@@ -49,6 +49,7 @@ struct Planned {
 
   // Cyclic side, written only by the thread that steps the core after the handover.
   std::vector<double> v_bw;     // look-ahead limits per sample (sized by the planner)
+  std::vector<double> v_min;    // v_min[i]: the least of v_bw[i..] (sized by the planner)
   double live_entry = 0;        // the entry limit the cyclic side uses
   bool stop_at_start() const { return stop_block() || live_entry == 0; }
 

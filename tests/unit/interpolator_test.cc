@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <random>
 #include <string>
@@ -508,6 +509,112 @@ TEST(Interpolator, RerunsAreBitIdentical) {
     ASSERT_EQ(first[k].block_index, second[k].block_index);
     ASSERT_EQ(std::memcmp(&first[k].feed_mm_per_min, &second[k].feed_mm_per_min, sizeof(double)), 0);
   }
+}
+
+}  // namespace
+}  // namespace cnc::interp
+
+namespace cnc::interp {
+namespace {
+
+// A wavy NURBS pass (cubic, 7 control points a block, G1 joins): the path is under a
+// look-ahead limit most of the time, the bisection over the acceleration runs often.
+std::vector<Block> dense_nurbs(int n_blocks) {
+  std::vector<Block> blocks;
+  std::array<double, 3> p = {0, 0, 0};
+  double heading = 0;
+  for (int i = 0; i < n_blocks; ++i) {
+    Block b = motion(i, BlockKind::kNurbs, {p[0], p[1], p[2]}, {}, 3000);
+    b.nurbs.order = 4;
+    std::vector<std::array<double, 3>> cp = {p};
+    for (int k = 1; k < 7; ++k) {
+      heading += 0.12 * std::sin(0.05 * (i * 7 + k));
+      std::array<double, 3> q = cp.back();
+      q[0] += 0.5 * std::cos(heading);
+      q[1] += 0.5 * std::sin(heading);
+      q[2] = -2.0 - 2.0 * std::sin(0.02 * (i * 7 + k)) + (k == 6 ? 0 : 0.01 * ((i * 7 + k) % 5 - 2));
+      cp.push_back(q);
+    }
+    if (!blocks.empty()) {
+      const auto& prev = blocks.back().nurbs.control_points;
+      for (int d = 0; d < 3; ++d) cp[1][d] = p[d] + (p[d] - prev[prev.size() - 2][d]);
+    }
+    b.nurbs.control_points = cp;
+    b.nurbs.weights.assign(7, 1.0);
+    b.nurbs.knots = {0, 0, 0, 0, 0.25, 0.5, 0.75, 1, 1, 1, 1};
+    b.end = {cp.back()[0], cp.back()[1], cp.back()[2]};
+    p = cp.back();
+    blocks.push_back(b);
+  }
+  blocks.push_back(end_block(n_blocks, {p[0], p[1], p[2]}));
+  return blocks;
+}
+
+// The look-ahead's shortcuts (the rest of a block skipped where its least limit
+// cannot be missed, the samples of a cycle's acceleration search gathered once, the
+// one that failed last tried first) answer every check as the plain scan of every
+// sample to the horizon does, limit included: on NURBS, and on lines with holds
+// and override changes (an override re-plans every block's limits).
+TEST(Interpolator, LookaheadShortcutsAnswerAsThePlainScan) {
+  {
+    Interpolator ip(sim3());
+    ip.set_verify_lookahead(true);
+    ip.apply_command(cmd(Command::Kind::kStart));
+    load_all(ip, dense_nurbs(40));
+    std::mt19937 rng(3);
+    std::uniform_int_distribution<int> event(0, 399);
+    std::uniform_real_distribution<double> ovr(0.05, 1.5);
+    for (int i = 0; i < kMaxCycles && ip.state() != RunState::kDone; ++i) {
+      if (event(rng) == 0) ip.apply_command(cmd(Command::Kind::kOverride, ovr(rng)));
+      ip.step();
+    }
+    EXPECT_EQ(ip.state(), RunState::kDone);
+    EXPECT_EQ(ip.lookahead_mismatches(), 0);
+    const WorkCounters& w = ip.work();
+    std::printf("NURBS: %lld cycles, %lld searches gathered, %lld checks in full in them, %lld block rests skipped\n",
+                static_cast<long long>(ip.cycle()), static_cast<long long>(w.look_builds),
+                static_cast<long long>(w.look_fallbacks), static_cast<long long>(w.safe_skips));
+    EXPECT_GT(w.look_builds, 300);
+    EXPECT_GT(w.safe_skips, 300);
+    EXPECT_LT(w.look_fallbacks, w.look_builds);
+  }
+  std::mt19937 rng(11);  // fixed seed: reproducible
+  std::uniform_real_distribution<double> coord(-5.0, 40.0);
+  std::uniform_real_distribution<double> feed(300.0, 40000.0);
+  std::uniform_real_distribution<double> ovr(0.0, 1.5);
+  std::uniform_int_distribution<int> event(0, 99);
+  int64_t builds = 0;
+  for (int program = 0; program < 20; ++program) {
+    std::vector<Block> blocks;
+    Point p = {0, 0, 0};
+    for (int i = 0; i < 10; ++i) {
+      const Point q = {coord(rng), coord(rng), -coord(rng)};
+      blocks.push_back(motion(i, i % 4 == 3 ? BlockKind::kRapid : BlockKind::kLine, p, q, feed(rng)));
+      p = q;
+    }
+    blocks.push_back(end_block(static_cast<int64_t>(blocks.size()), p));
+    Interpolator ip(sim3());
+    ip.set_verify_lookahead(true);
+    ip.apply_command(cmd(Command::Kind::kStart));
+    load_all(ip, blocks);
+    bool held = false;
+    for (int i = 0; i < kMaxCycles && ip.state() != RunState::kDone; ++i) {
+      const int e = event(rng);
+      if (e == 0) ip.apply_command(cmd(Command::Kind::kOverride, ovr(rng)));
+      if (e == 1 || (held && e < 12)) {
+        held = !held;
+        ip.apply_command(cmd(held ? Command::Kind::kHold : Command::Kind::kResume));
+      }
+      if (ip.feed_override() < 0.05) ip.apply_command(cmd(Command::Kind::kOverride, 0.05));
+      ip.step();
+    }
+    SCOPED_TRACE("program " + std::to_string(program));
+    EXPECT_EQ(ip.state(), RunState::kDone);
+    EXPECT_EQ(ip.lookahead_mismatches(), 0);
+    builds += ip.work().look_builds;
+    if (HasFailure()) break;
+  }
+  EXPECT_GT(builds, 100);
 }
 
 }  // namespace

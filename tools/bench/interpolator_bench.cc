@@ -29,8 +29,10 @@
 #include <vector>
 
 #include <sys/resource.h>
+#include <unistd.h>
 
 #include "common/service/service.h"
+#include "common/util/realtime.h"
 #include "common/util/signals.h"
 #include "services/interpolator/feed_policy.h"
 #include "services/interpolator/interpolator.h"
@@ -135,6 +137,11 @@ cnc::interp::WorkCounters diff(const cnc::interp::WorkCounters& a, const cnc::in
   d.safe_calls = b.safe_calls - a.safe_calls;
   d.safe_samples = b.safe_samples - a.safe_samples;
   d.brake_evals = b.brake_evals - a.brake_evals;
+  d.safe_skips = b.safe_skips - a.safe_skips;
+  d.look_builds = b.look_builds - a.look_builds;
+  d.look_fallbacks = b.look_fallbacks - a.look_fallbacks;
+  d.curve_evals = b.curve_evals - a.curve_evals;
+  d.curve_reuses = b.curve_reuses - a.curve_reuses;
   return d;
 }
 
@@ -151,6 +158,7 @@ struct Result {
   TopK slow_cpu{12, &CycleRecord::cpu_ns};
   int64_t minflt = 0;           // page faults of the cyclic thread in timed cycles, all of them
   int64_t faulting_cycles = 0;  // timed cycles with at least one
+  cnc::interp::WorkCounters work;  // the core's counters over the run
   uint64_t digest = 1469598103934665603ull;  // FNV-1a over every setpoint's positions, feed and state
 };
 
@@ -270,6 +278,7 @@ Result run(const cnc::config::MachineConfig& cfg, const std::vector<Block>& bloc
     fold(&r.digest, &sp.state, sizeof sp.state);
   }
   r.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_all).count();
+  r.work = ip.work();
   if (time_cycles) {
     const size_t n = std::min(r.cycle_ns.size(), static_cast<size_t>(r.cycles));
     r.cycle_ns.resize(n);
@@ -330,12 +339,61 @@ void report(const char* what, const Result& r, double period_s, bool detail) {
               static_cast<long long>(r.faulting_cycles));
   print_stats("cyclic compute (wall)", stats(r.cycle_ns));
   print_stats("thread CPU time", stats(r.cpu_ns));
+  const double n = static_cast<double>(std::max<int64_t>(1, r.cycles));
+  const auto& w = r.work;
+  std::printf("    work per cycle: look-ahead checks %.3f, samples %.2f, brake distances %.3f, skips %.3f; Newton "
+              "iterations %.3f, bisection points %.4f, table lookups %.3f\n",
+              static_cast<double>(w.safe_calls) / n, static_cast<double>(w.safe_samples) / n,
+              static_cast<double>(w.brake_evals) / n, static_cast<double>(w.safe_skips) / n,
+              static_cast<double>(w.newton_iters) / n, static_cast<double>(w.bisect_evals) / n,
+              static_cast<double>(w.table_lookups) / n);
+  std::printf("    look-ahead searches with the samples gathered once: %lld, full checks in them: %lld; curve points "
+              "per cycle %.3f computed, %.3f reused\n",
+              static_cast<long long>(w.look_builds), static_cast<long long>(w.look_fallbacks),
+              static_cast<double>(w.curve_evals) / n, static_cast<double>(w.curve_reuses) / n);
   if (!detail) return;
   print_records("slowest cycles by thread CPU time (taken: plans, blk: of which blocks, patch: look-ahead values "
                 "copied, strt: blocks started, tab: table lookups, safe/smpl/brake: look-ahead checks, samples, brake "
                 "distances, mflt: page faults, csw: context switches vol/invol):",
                 r.slow_cpu.records());
   print_records("slowest cycles by wall time:", r.slow_wall.records());
+}
+
+// The platform's own noise on the same measurement: a fixed computation of about
+// the mean cycle's length (the same work every time), timed as the cycles are. What
+// its tail shows (interrupts, the hypervisor taking the virtual CPU: counted in the
+// thread's CPU time too) is not the interpolator's.
+Result noise_floor(int64_t cycles) {
+  Result r;
+  r.cycle_ns.assign(static_cast<size_t>(cycles), 0.0);
+  r.cpu_ns.assign(static_cast<size_t>(cycles), 0.0);
+  volatile double sink = 0;
+  for (int64_t k = 0; k < cycles; ++k) {
+    timespec c0{}, c1{};
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &c0);
+    const auto t0 = std::chrono::steady_clock::now();
+    double x = 1.0 + 1e-9 * static_cast<double>(k % 7);
+    for (int i = 0; i < 400; ++i) x = std::sqrt(x * 1.0000001 + 0.5);
+    sink = sink + x;
+    const auto t1 = std::chrono::steady_clock::now();
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &c1);
+    r.cycle_ns[static_cast<size_t>(k)] = std::chrono::duration<double, std::nano>(t1 - t0).count();
+    r.cpu_ns[static_cast<size_t>(k)] =
+        static_cast<double>(c1.tv_sec - c0.tv_sec) * 1e9 + static_cast<double>(c1.tv_nsec - c0.tv_nsec);
+  }
+  r.cycles = cycles;
+  return r;
+}
+
+// Time the hypervisor ran others on this machine's virtual CPUs (/proc/stat "steal"), in s.
+double steal_s() {
+  std::FILE* f = std::fopen("/proc/stat", "r");
+  if (f == nullptr) return 0;
+  unsigned long long v[8] = {};
+  const int n = std::fscanf(f, "cpu %llu %llu %llu %llu %llu %llu %llu %llu", &v[0], &v[1], &v[2], &v[3], &v[4], &v[5],
+                            &v[6], &v[7]);
+  std::fclose(f);
+  return n == 8 ? static_cast<double>(v[7]) / static_cast<double>(sysconf(_SC_CLK_TCK)) : 0.0;
 }
 
 int bench(const cnc::config::MachineConfig& machine, const cnc::service::Args& args) {
@@ -348,12 +406,27 @@ int bench(const cnc::config::MachineConfig& machine, const cnc::service::Args& a
               n_blocks, cfg.chord_tolerance_mm * 1e3);
 
   const bool paced = args.flags.count("paced") > 0;
+  // As the service does (services/interpolator/main.cc): memory locked where permitted, stack touched.
+  const std::string unlocked = cnc::util::prepare_cyclic_memory();
+  std::printf("memory: %s\n", unlocked.empty() ? "locked (mlockall)" : ("not locked: " + unlocked).c_str());
   run(cfg, blocks, cnc::interp::ParamUpdate::kCorrected, false);  // warm-up
   std::printf("compute time of the cyclic path per coarse cycle (feed policy + plans taken + step):\n");
   const bool detail = args.flags.count("slowest") > 0;
-  report("planning on the planner thread", run(cfg, blocks, cnc::interp::ParamUpdate::kCorrected, true,
-                                               Planning::kThread, paced),
-         cfg.ipo_period_s, detail);
+  const double steal0 = steal_s();
+  const Result threaded = run(cfg, blocks, cnc::interp::ParamUpdate::kCorrected, true, Planning::kThread, paced);
+  const double steal1 = steal_s();
+  report("planning on the planner thread", threaded, cfg.ipo_period_s, detail);
+  {
+    const Result floor = noise_floor(threaded.cycles);
+    const double steal2 = steal_s();
+    std::printf("  the same timing around a fixed computation (the platform's noise), %lld times:\n",
+                static_cast<long long>(floor.cycles));
+    print_stats("fixed work (wall)", stats(floor.cycle_ns));
+    print_stats("thread CPU time", stats(floor.cpu_ns));
+    std::printf("    CPU time stolen by the hypervisor (/proc/stat, all CPUs): %.2f s during the run above, %.2f s "
+                "during this one\n",
+                steal1 - steal0, steal2 - steal1);
+  }
   report("planning inline in the cycle", run(cfg, blocks, cnc::interp::ParamUpdate::kCorrected, true,
                                              Planning::kInline, paced),
          cfg.ipo_period_s, false);
