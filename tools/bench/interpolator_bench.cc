@@ -6,13 +6,14 @@
 // order (seed 001 eq. 6), second order (seed 000 eq. 7) and eq. 7 with the
 // chord-length correction — all measured in the same run on the same program.
 //
-//   cnc-bench-interpolator [--machine FILE] [--blocks N] [--paced] [--slowest]
+//   cnc-bench-interpolator [--machine FILE] [--blocks N] [--paced] [--slowest] [--cyclic-only]
 //
 // Printed per run: min/mean/p99/p99.9/max of the cyclic compute (wall) and of the
 // cyclic thread's CPU time per cycle; --slowest adds, for the slowest cycles, the
 // block and the arc length in it, what the cycle did (plans taken, blocks started,
 // Newton iterations, look-ahead samples, ...: Interpolator::work()) and the page
 // faults and context switches of the thread (getrusage(RUSAGE_THREAD) around it).
+// --cyclic-only stops after the planner-thread run and the platform's noise floor.
 //
 // Unpaced, cycles run back to back and, only where the path would otherwise run out
 // of plans (fewer than two blocks queued while the planner works), the loop waits
@@ -427,6 +428,7 @@ int bench(const cnc::config::MachineConfig& machine, const cnc::service::Args& a
                 "during this one\n",
                 steal1 - steal0, steal2 - steal1);
   }
+  if (args.flags.count("cyclic-only") > 0) return 0;
   report("planning inline in the cycle", run(cfg, blocks, cnc::interp::ParamUpdate::kCorrected, true,
                                              Planning::kInline, paced),
          cfg.ipo_period_s, false);
@@ -455,7 +457,7 @@ int bench(const cnc::config::MachineConfig& machine, const cnc::service::Args& a
 
 int main(int argc, char** argv) {
   cnc::service::Spec spec{"cnc-bench-interpolator", "interpolator compute time and feed fluctuation", {"blocks"},
-                          {"paced", "slowest"}};
+                          {"paced", "slowest", "cyclic-only"}};
   if (argc == 1) {
     static char a0[] = "cnc-bench-interpolator", a1[] = "--machine", a2[] = CNC_SOURCE_DIR "/config/machines/sim3.yaml";
     static char* def[] = {a0, a1, a2, nullptr};
