@@ -21,8 +21,9 @@ namespace cnc::interp {
 namespace ch = config::channels;
 
 namespace {
-// Inputs kept for a later publish while the bus fails (about 16 s of a busy program).
-constexpr size_t kMaxUnsent = 4096;
+// Inputs kept until the logger confirms them or, while the bus fails, for a later
+// publish (about 16 s of a busy program).
+constexpr size_t kMaxPendingInputs = 4096;
 // An AXIS_STATUS older than this does not tell where the drives are now.
 constexpr double kStatusFresh_s = 0.5;
 // The bridge publishes AXIS_STATUS every T_ipo: silent this long while a program
@@ -54,6 +55,7 @@ InterpolatorNode::InterpolatorNode(const config::MachineConfig& cfg, bus::Bus& b
       // Re-request after ~100 ms without the block (a lost request or block).
       resend_cycles_(std::max<int64_t>(2, std::llround(0.1 / cfg.ipo_period_s))),
       health_(bus, cfg.channel(ch::kAlarm), "cnc-interpolator", cnc::lcmt_alarm::FAULT),
+      inputs_(kMaxPendingInputs),
       peers_(bus, cfg, "cnc-interpolator", {"cnc-drive-bridge", "cnc-program-server"}) {
   bus_.subscribe<cnc::lcmt_program_command>(cfg.channel(ch::kProgramCmd),
                                             [this](const auto& m) { on_command(m); });
@@ -110,37 +112,43 @@ void InterpolatorNode::apply_command(const Command& c, const cnc::lcmt_program_c
   publish_input(in);
 }
 
-void InterpolatorNode::publish_input(const cnc::lcmt_interp_input& input) {
-  cnc::lcmt_interp_input in = input;
-  in.index = next_input_index_++;
-  // Kept until the logger confirms it. Bounded: with no logger confirming, the
-  // oldest is given up (the log, if any, can no longer replay the run).
-  constexpr size_t kMaxUnconfirmed = 4096;
-  if (unconfirmed_.size() >= kMaxUnconfirmed) {
-    unconfirmed_.pop_front();
-    if (inputs_unconfirmed_dropped_++ == 0 && logger_seen_) {
-      spdlog::error("the logger has not confirmed {} inputs: the log of this run may not replay", kMaxUnconfirmed);
-      alarm(cnc::lcmt_alarm::WARNING, "inputs_unconfirmed",
-            "the logger has not confirmed " + std::to_string(kMaxUnconfirmed) +
-                " interpolator inputs: the log of this run may not replay");
-    }
-  }
-  unconfirmed_.push_back(Unconfirmed{in, util::monotonic_s()});
-  if (unsent_inputs_.empty()) {
-    cnc::lcmt_interp_input copy = in;
-    if (bus_.publish(ch_input_, copy)) return;
-  }
-  if (unsent_inputs_.size() < kMaxUnsent) {
-    unsent_inputs_.push_back(in);
-  } else if (inputs_dropped_++ == 0) {
-    spdlog::error("more than {} inputs could not be published: this run can no longer be replayed", kMaxUnsent);
+void InterpolatorNode::drop_oldest_input() {
+  const bool sent = pending(0).sent;
+  inputs_head_ = (inputs_head_ + 1) % inputs_.size();
+  --inputs_size_;
+  if (!sent) {
+    --inputs_unsent_;
+    if (inputs_dropped_++ == 0)
+      spdlog::error("more than {} inputs could not be published: this run can no longer be replayed",
+                    kMaxPendingInputs);
+  } else if (inputs_unconfirmed_dropped_++ == 0 && logger_seen_) {
+    spdlog::error("the logger has not confirmed {} inputs: the log of this run may not replay", kMaxPendingInputs);
+    alarm(cnc::lcmt_alarm::WARNING, "inputs_unconfirmed",
+          "the logger has not confirmed " + std::to_string(kMaxPendingInputs) +
+              " interpolator inputs: the log of this run may not replay");
   }
 }
 
+void InterpolatorNode::publish_input(const cnc::lcmt_interp_input& input) {
+  if (inputs_size_ == inputs_.size()) drop_oldest_input();
+  PendingInput& e = pending(inputs_size_);
+  ++inputs_size_;
+  e.in = input;
+  e.in.index = next_input_index_++;
+  e.sent = false;
+  ++inputs_unsent_;
+  flush_inputs();  // this one goes now unless an older one still cannot
+}
+
 void InterpolatorNode::flush_inputs() {
-  while (!unsent_inputs_.empty()) {
-    if (!bus_.publish(ch_input_, unsent_inputs_.front())) return;
-    unsent_inputs_.pop_front();
+  if (inputs_unsent_ == 0) return;
+  const double now = util::monotonic_s();
+  while (inputs_unsent_ > 0) {
+    PendingInput& e = pending(inputs_size_ - inputs_unsent_);
+    if (!bus_.publish(ch_input_, e.in)) return;
+    e.sent = true;
+    e.sent_s = now;
+    --inputs_unsent_;
   }
 }
 
@@ -156,22 +164,27 @@ void InterpolatorNode::on_logger_stats(const cnc::lcmt_logger_stats& m) {
     else return;
   }
   logger_seen_ = true;
-  while (!unconfirmed_.empty() && unconfirmed_.front().in.index < next) unconfirmed_.pop_front();
+  while (inputs_size_ > 0 && pending(0).in.index < next) {
+    if (!pending(0).sent) --inputs_unsent_;  // cannot be (confirmed before sent), kept consistent
+    inputs_head_ = (inputs_head_ + 1) % inputs_.size();
+    --inputs_size_;
+  }
   // Sent again: what the logger lacks and should have had by now (sent over half a
   // second before this report). At most 64 a report, oldest first; a new seq each.
+  // The never-sent ones are flush_inputs()'s, in order.
   const double now = util::monotonic_s();
   int resent = 0;
-  for (auto& u : unconfirmed_) {
-    if (resent >= 64 || now - u.sent_s < 0.5) break;
-    cnc::lcmt_interp_input copy = u.in;
-    if (!bus_.publish(ch_input_, copy)) break;
-    u.sent_s = now;
+  for (size_t i = 0; i + inputs_unsent_ < inputs_size_; ++i) {
+    PendingInput& e = pending(i);
+    if (resent >= 64 || now - e.sent_s < 0.5) break;
+    if (!bus_.publish(ch_input_, e.in)) break;
+    e.sent_s = now;
     ++resent;
   }
   if (resent > 0) {
     inputs_resent_ += resent;
     spdlog::info("{} input(s) sent again that the logger did not confirm (from index {}; {} in all)", resent,
-                 unconfirmed_.front().in.index, inputs_resent_);
+                 pending(0).in.index, inputs_resent_);
   }
 }
 

@@ -20,7 +20,6 @@
 // past the last block it holds), and goes on when the server is back and answers
 // the block requests again (the server reloads its program: --state).
 #include <array>
-#include <deque>
 #include <map>
 #include <string>
 #include <vector>
@@ -144,19 +143,24 @@ class InterpolatorNode {
   std::string detail_;
   int64_t retired_token_ = 0;  // programs up to this token are never taken again (after a fault)
   service::BusHealth health_;
-  // Inputs whose publish failed, sent again in order before any newer one: the
-  // record of inputs stays complete and contiguous across a bus outage.
-  std::deque<cnc::lcmt_interp_input> unsent_inputs_;
-  int64_t inputs_dropped_ = 0;  // beyond kMaxUnsent: the run is no longer replayable
-  // Inputs the logger has not confirmed yet (index order), with when they were sent
-  // (monotonic s). A datagram lost on the way to the logger is sent again, so the
-  // log of a run on a lossy network still replays. Bounded: the oldest is given up
-  // (counted, one alarm) when no logger confirms anything.
-  struct Unconfirmed {
+  // The inputs the logger has not confirmed yet, in index order, in one ring of
+  // slots made up front (a slot's message is assigned over, its strings and arrays
+  // reused). Each was sent (when: sent again after 0.5 s unconfirmed, so the log of
+  // a run on a lossy network still replays) or never sent: its publish failed, or an
+  // older one's did. The never-sent ones are the newest inputs_unsent_ of the ring,
+  // published in order before any newer one, so the record stays complete and
+  // contiguous across a bus outage. Full (no logger confirms anything, or the bus
+  // fails for long), the oldest is given up: counted, and said once.
+  struct PendingInput {
     cnc::lcmt_interp_input in;
-    double sent_s;
+    double sent_s = 0;
+    bool sent = false;
   };
-  std::deque<Unconfirmed> unconfirmed_;
+  PendingInput& pending(size_t i) { return inputs_[(inputs_head_ + i) % inputs_.size()]; }
+  void drop_oldest_input();
+  std::vector<PendingInput> inputs_;
+  size_t inputs_head_ = 0, inputs_size_ = 0, inputs_unsent_ = 0;
+  int64_t inputs_dropped_ = 0;  // never sent and given up: the run is no longer replayable
   int64_t next_input_index_ = 0;
   int64_t inputs_resent_ = 0;
   int64_t inputs_unconfirmed_dropped_ = 0;
