@@ -216,6 +216,13 @@ void ProgramServerNode::load_program(const std::string& path) {
   const int64_t token = std::max(util::wall_utime(), core_.token() + 1);
   const LoadResult r = core_.load(path, token, machine_position_);
   if (r.ok) {
+    // The one-line program of an earlier MDI is not loaded any more: its file goes
+    // (the folder would otherwise grow by a file a line for the life of the cell).
+    if (!mdi_file_.empty() && mdi_file_ != path) {
+      std::error_code ec;
+      std::filesystem::remove(mdi_file_, ec);
+    }
+    mdi_file_.clear();  // load_line names its own file again
     spdlog::info("loaded {}: {} blocks (token {})", path, core_.num_blocks(), token);
     for (const std::string& w : r.warnings) spdlog::warn("{}", w);
     state_ = S::LOADED;
@@ -254,6 +261,11 @@ void ProgramServerNode::load_line(const cnc::lcmt_program_command& m, const std:
   }
   spdlog::info("MDI {}: {}", ++mdi_count_, line);
   load_program(file.string());
+  if (core_.path() == file.string()) {
+    mdi_file_ = file.string();
+  } else {
+    std::filesystem::remove(file, ec);  // refused: not kept
+  }
 }
 
 void ProgramServerNode::interpolator_lost() {

@@ -86,6 +86,7 @@ class ProgramServerNode {
   // loaded like one; cnc-ctl starts it.
   void load_line(const cnc::lcmt_program_command& m, const std::string& line);
   int64_t mdi_count_ = 0;
+  std::string mdi_file_;  // the line loaded last: removed once another program is loaded
   void load_program(const std::string& path);
   cnc::lcmt_axis_status axes_{};
   double axes_s_ = -1e9;

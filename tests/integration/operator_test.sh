@@ -202,6 +202,9 @@ expect_refused touch_running "long.ngc is running: STOP it first" "${CTL[@]}" --
 rc=0; wait "${TEST_PIDS[long]}" || rc=$?; unset "TEST_PIDS[long]"
 [ "$rc" -eq 0 ] || { cat "$WORK/long.out" >&2; fail "the program after homing did not complete ($rc)"; }
 
+# The one-line programs of MDI and touch-off do not pile up: each goes when another program is loaded.
+n_mdi=$(find "$WORK/mdi" -name 'mdi-*.ngc' | wc -l)
+[ "$n_mdi" -le 1 ] || fail "$n_mdi MDI files left in $WORK/mdi"
 stop interpolator TERM
 stop program-server TERM
 stop drive-bridge TERM
