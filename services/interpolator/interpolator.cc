@@ -1039,7 +1039,17 @@ const Setpoint& Interpolator::step() {
       Limit w2;
       double geo_end = kInf;
       cap_at(p, std::min(p.length, s_ + v_avg * T), &w2, &geo_end);
-      const double hard = std::min(geo_here, geo_end);
+      double hard = std::min(geo_here, geo_end);
+      // And the samples the step passes over: a narrow dip between them (a turn the
+      // planner resolved only at its chord floor) bounds the step too.
+      if (p.path.curved()) {
+        const double s_hi = std::min(p.length, s_ + v_avg * T);
+        auto it = std::partition_point(p.samples.begin(), p.samples.end(),
+                                       [&](const Sample& x) { return x.s <= s_; });
+        // (Never below 1 um/s: a sample's limit of zero, a singular point, would hold
+        // the step short of it for good; the look-ahead brakes for it as before.)
+        for (; it != p.samples.end() && it->s < s_hi; ++it) hard = std::min(hard, std::max(it->v_geo, 1e-3));
+      }
       if (v_avg > hard) {
         v_n = std::max(0.0, 2.0 * hard - v_);
         if (geo_end < geo_here) why = w2;
