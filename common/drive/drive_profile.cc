@@ -8,10 +8,7 @@
 
 #include "common/config/yaml_reader.h"
 #include "common/drive/profile_logic.h"
-
-#ifndef CNC_DRIVES_DIR
-#define CNC_DRIVES_DIR ""
-#endif
+#include "common/util/install.h"
 
 namespace cnc::drive {
 namespace {
@@ -169,8 +166,9 @@ std::string find_drive_profile(const std::string& name, const std::string& machi
   if (!profile_dir.empty()) return (rel(profile_dir) / file).string();
   const fs::path beside = machine_dir / ".." / "drives" / file;
   if (fs::exists(beside)) return beside.lexically_normal().string();
-  const fs::path built_in = fs::path(CNC_DRIVES_DIR) / file;
-  if (!std::string(CNC_DRIVES_DIR).empty() && fs::exists(built_in)) return built_in.string();
+  // The shipped profiles: PREFIX/share/cnc/config/drives when installed, else the source tree's.
+  const fs::path built_in = fs::path(util::resource_path("config/drives")) / file;
+  if (fs::exists(built_in)) return built_in.string();
   return beside.lexically_normal().string();  // does not exist: the loader says so with this path
 }
 

@@ -4,12 +4,16 @@
 
 #include "cnc/lcmt_heartbeat.hpp"
 #include "common/util/clock.h"
+#include "common/util/install.h"
 
 namespace cnc::service {
 
 Heartbeat::Heartbeat(bus::Bus& bus, const config::MachineConfig& cfg, std::string service_name)
     : bus_(bus), channel_(cfg.channel(config::channels::kHeartbeat)), name_(std::move(service_name)),
-      period_s_(cfg.heartbeat_period_s), rejects_(bus, cfg.channel(config::channels::kAlarm), name_) {}
+      period_s_(cfg.heartbeat_period_s), rejects_(bus, cfg.channel(config::channels::kAlarm), name_) {
+  char host[256] = {};
+  if (gethostname(host, sizeof host - 1) == 0) host_ = host;
+}
 
 void Heartbeat::tick(int8_t state, int64_t loop_overruns, const std::string& detail, bool force) {
   const double now = util::monotonic_s();
@@ -22,6 +26,8 @@ void Heartbeat::tick(int8_t state, int64_t loop_overruns, const std::string& det
   hb.state = state;
   hb.loop_overruns = loop_overruns;
   hb.detail = detail;
+  hb.version = util::version();
+  hb.host = host_;
   for (const auto& [ch, st] : bus_.stats()) {
     hb.channel.push_back(ch);
     hb.received.push_back(st.received);

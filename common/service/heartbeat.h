@@ -20,6 +20,7 @@ class Heartbeat {
   bus::Bus& bus_;
   std::string channel_;
   std::string name_;
+  std::string host_;  // gethostname(), once
   double period_s_;
   double last_s_ = -1e9;
   RejectAlarms rejects_;

@@ -6,6 +6,7 @@
 #include <exception>
 
 #include "common/config/yaml_reader.h"
+#include "common/util/install.h"
 #include "common/util/signals.h"
 
 namespace cnc::service {
@@ -32,7 +33,7 @@ bus::Security bus_security(const config::MachineConfig& cfg, const std::string& 
 
 namespace {
 void usage(const Spec& spec) {
-  std::fprintf(stderr, "%s: %s\nusage: %s%s", spec.name.c_str(), spec.summary.c_str(), spec.name.c_str(),
+  std::fprintf(stderr, "%s %s: %s\nusage: %s%s", spec.name.c_str(), util::version(), spec.summary.c_str(), spec.name.c_str(),
                spec.needs_machine ? " --machine FILE" : "");
   for (const auto& o : spec.options) std::fprintf(stderr, " [--%s VALUE]", o.c_str());
   for (const auto& f : spec.flags) std::fprintf(stderr, " [--%s]", f.c_str());
@@ -47,6 +48,10 @@ int run(const Spec& spec, int argc, char** argv,
     const std::string a = argv[i];
     if (a == "-h" || a == "--help") {
       usage(spec);
+      return kExitOk;
+    }
+    if (a == "--version") {
+      std::printf("%s %s\n", spec.name.c_str(), util::version());
       return kExitOk;
     }
     if (a.rfind("--", 0) != 0) {

@@ -13,6 +13,7 @@
 //                                                  50 ms; SIGINT/SIGTERM releases it), then STOP
 //   cnc-ctl --machine M --do touch-off --axis X --value V   G10 L20 P0 (--tool: refused, not available yet)
 //   cnc-ctl --machine M --do mdi --line "G0 X10"   one line through the program server's interpreter
+//   cnc-ctl --machine M --do status [--timeout S]  the cell's services (host, pid, version, state)
 //
 // A command the cell refuses in its state (LOAD or START while a program runs, ...)
 // ends cnc-ctl at once with the reason from PROGRAM_STATE and exit 3.
@@ -38,6 +39,7 @@
 #include "common/bus/bus.h"
 #include "common/service/service.h"
 #include "common/util/clock.h"
+#include "common/util/install.h"
 #include "common/util/signals.h"
 
 namespace ch = cnc::config::channels;
@@ -111,6 +113,34 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
     view.alarms.push_back(m);
     std::fprintf(stderr, "ALARM %s [%s] %s\n", m.source.c_str(), m.code.c_str(), m.text.c_str());
   });
+
+  // status: every service heard on HEARTBEAT within a listening window (two heartbeat
+  // timeouts, or --timeout): its host, pid, version, state and the time since it was
+  // last heard; then the program's and the interpolator's state. Exit 4 when none was heard.
+  if (what == "status") {
+    const double listen_s = args.options.count("timeout") ? timeout_s : 2 * cfg.heartbeat_timeout_s;
+    const double t0 = cnc::util::monotonic_s();
+    wait_for(bus, listen_s, [] { return false; });
+    if (cnc::util::stop_requested()) return cnc::service::kExitFailure;
+    const double now = cnc::util::monotonic_s();
+    static const char* const kStates[] = {"starting", "running", "stopping", "fault"};
+    std::printf("%-20s %-16s %8s  %-26s %-9s %s\n", "service", "host", "pid", "version", "state", "last heard");
+    for (const auto& [name, hb] : view.heartbeats) {
+      const char* state = hb.state >= 0 && hb.state <= 3 ? kStates[hb.state] : "?";
+      std::printf("%-20s %-16s %8d  %-26s %-9s %.2f s ago\n", name.c_str(), hb.host.empty() ? "?" : hb.host.c_str(),
+                  hb.pid, hb.version.empty() ? "?" : hb.version.c_str(), state, now - view.heartbeat_s[name]);
+    }
+    static const char* const kProgram[] = {"idle", "loaded", "running", "held", "done", "refused", "stopped", "fault"};
+    static const char* const kInterp[] = {"idle", "running", "held", "done", "starved", "fault"};
+    if (view.have_program)
+      std::printf("program: %s %s\n", view.program.state >= 0 && view.program.state <= 7 ? kProgram[view.program.state] : "?",
+                  view.program.program_path.empty() ? "(none loaded)" : view.program.program_path.c_str());
+    if (view.have_interp)
+      std::printf("interpolator: %s, feed override %.2f\n",
+                  view.interp.state >= 0 && view.interp.state <= 5 ? kInterp[view.interp.state] : "?", view.interp.feed_override);
+    std::printf("cnc-ctl %s: %zu services heard in %.1f s\n", cnc::util::version(), view.heartbeats.size(), now - t0);
+    return view.heartbeats.empty() ? kExitTimeout : 0;
+  }
 
   // The seq of the last program command sent: the server names it when it refuses it.
   int64_t sent_seq = -1;
@@ -388,7 +418,7 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
   const bool line_cmd = what == "mdi" || what == "touch-off";
   if (what != "run" && what != "load" && !line_cmd) {
     std::fprintf(stderr, "cnc-ctl: --do must be one of run load start hold resume stop override reset enable disable "
-                         "fault-reset home jog touch-off mdi\n");
+                         "fault-reset home jog touch-off mdi status\n");
     return cnc::service::kExitBadInput;
   }
   const std::string program_arg = line_cmd ? std::string("(") + what + ")" : args.option("program");

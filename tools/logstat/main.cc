@@ -219,6 +219,15 @@ int run_logstat(const cnc::config::MachineConfig& cfg, const cnc::service::Args&
                 "%lld (logger)\n",
                 hb_count("cnc-interpolator", sp, "published"), hb_count("cnc-drive-bridge", sp, "received"),
                 hb_count("cnc-monitor", sp, "received"), static_cast<long long>(bus.stats(sp).received));
+    // Which build of each service ran, and where (its heartbeats carry both).
+    std::printf("  services            ");
+    bool first = true;
+    for (const auto& [service, hb] : last_hb) {
+      std::printf("%s%s %s on %s", first ? "" : "\n                      ", service.c_str(),
+                  hb.version.empty() ? "(no version)" : hb.version.c_str(), hb.host.empty() ? "?" : hb.host.c_str());
+      first = false;
+    }
+    std::printf("\n");
     std::printf("  sequence gaps       per channel, as each receiver counted them:\n");
     std::map<std::string, std::string> per_channel;
     for (const auto& [service, hb] : last_hb) {
