@@ -18,13 +18,36 @@
 #   ./cnc conformance [conformance.py options]     our interpreter against LinuxCNC's rs274
 #   ./cnc bench latency [--load N] [--out DIR]     cycle timing of the demo, idle and with N busy loops
 #   ./cnc key gen|rotate|show [--machine FILE] [--grace S] [--activate-in S]  the cell's signing key
+#   ./cnc package                                  Debian packages (cnc, cnc-cam) into build/packages, lintian-checked
 #   ./cnc build                                    set up and build only
 set -euo pipefail
 
-ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
-BUILD="${CNC_BUILD_DIR:-$ROOT/build}"
+SELF="$(readlink -f "${BASH_SOURCE[0]}")"
+ROOT="$(dirname "$SELF")"
+if [ -f "$ROOT/CMakeLists.txt" ]; then
+  INSTALLED=0  # the source tree: builds into $BUILD and runs from there
+  BUILD="${CNC_BUILD_DIR:-$ROOT/build}"
+else
+  # Installed from the Debian package (/usr/bin/cnc): the programs beside it, the
+  # run-time files in /usr/share/cnc (laid out as the source tree), nothing to build.
+  INSTALLED=1
+  BINDIR="$ROOT"
+  ROOT="$(cd "$BINDIR/../share/cnc" && pwd)" || { echo "cnc: neither a source tree nor an installed share/cnc beside $SELF" >&2; exit 2; }
+  BUILD=""
+fi
 DEFAULT_MACHINE="$ROOT/config/machines/sim3.yaml"
 DEFAULT_PROGRAM="$ROOT/config/programs/demo.ngc"
+
+# bin NAME: the path of program NAME (cnc-ctl, cnc-logger, ...), built or installed.
+bin() {
+  if [ "$INSTALLED" -eq 1 ]; then echo "$BINDIR/$1"; return; fi
+  case "$1" in
+    cnc-logger|cnc-interpolator|cnc-drive-bridge|cnc-monitor|cnc-program-server) echo "$BUILD/services/$1" ;;
+    cnc-cam) echo "$BUILD/tools/cam/$1" ;;
+    cnc-rs274) echo "$BUILD/tools/rs274/$1" ;;
+    *) echo "$BUILD/tools/$1" ;;
+  esac
+}
 
 # Debian packages the project needs to build, test and run.
 PACKAGES=(
@@ -36,6 +59,8 @@ PACKAGES=(
   chromium                               # renders the run report headless in its test
   iproute2 util-linux procps             # ip, unshare: private network namespaces in tests
   nftables                               # random datagram loss on an input chain (loss test)
+  dpkg-dev lintian                       # ./cnc package: CPack's dependencies (dpkg-shlibdeps), the packages' check
+  systemd                                # systemd-analyze verify of the packages' units (package test)
   socat                                  # pseudo-terminal pairs standing in for RS-485 (Modbus RTU tests)
   python3-pymodbus python3-serial python3-serial-asyncio python3-yaml  # drive emulated with pymodbus (interop test)
   mbpoll                                 # reads the simulator's registers (interop test)
@@ -93,6 +118,7 @@ install_missing() {
 }
 
 build() {
+  if [ "$INSTALLED" -eq 1 ]; then return 0; fi  # installed: the programs are there
   install_missing
   if [ ! -f "$BUILD/CMakeCache.txt" ]; then
     cmake -S "$ROOT" -B "$BUILD" -DCMAKE_BUILD_TYPE=Release >/dev/null
@@ -124,7 +150,7 @@ cmd_up() {
   # The whole cell on this PC: its signing key is made on the first run. A part of
   # a cell (--only) needs the key of the PC that made it: copied, never made anew.
   if [ -z "$only" ]; then
-    "$BUILD/tools/cnc-key" gen --machine "$machine" --if-missing || die "up: cannot make the cell's key"
+    "$(bin cnc-key)" gen --machine "$machine" --if-missing || die "up: cannot make the cell's key"
   fi
   local chosen=()
   if [ -n "$only" ]; then
@@ -164,7 +190,7 @@ cmd_up() {
       local sdir="${CNC_STATE_DIR:-$(dirname "$machine")}"
       mkdir -p "$sdir" && args+=(--state "$sdir/$(basename "$machine" .yaml).program-server.state")
     fi
-    "$BUILD/${EXE[$s]}" "${args[@]}" &
+    "$(bin "${EXE[$s]##*/}")" "${args[@]}" &
     pids[$s]=$!
     say "started $s (pid ${pids[$s]})"
     sleep 0.1
@@ -198,20 +224,30 @@ cmd_demo() {
     esac
   done
   build
+  local runs="$ROOT/runs"
+  if [ "$INSTALLED" -eq 1 ]; then
+    # Installed: the run goes to ./runs (or $CNC_RUN_DIR), with a copy of the machine
+    # file and its own key beside it (the shipped files in /usr/share/cnc stay as they are).
+    runs="${CNC_RUN_DIR:-$PWD/runs}"
+    local copy_dir
+    copy_dir="$runs/demo-machine"
+    mkdir -p "$copy_dir"
+    cp "$machine" "$copy_dir/" && machine="$copy_dir/$(basename "$machine")"
+  fi
   # The cell's signing key, made on the first run (before cnc-ctl, which signs too).
-  "$BUILD/tools/cnc-key" gen --machine "$machine" --if-missing || die "demo: cannot make the cell's key"
-  local run_dir="$ROOT/runs/demo-$(date -u +%Y%m%d-%H%M%S)"
+  "$(bin cnc-key)" gen --machine "$machine" --if-missing || die "demo: cannot make the cell's key"
+  local run_dir="$runs/demo-$(date -u +%Y%m%d-%H%M%S)"
   mkdir -p "$run_dir"
   say "starting the cell ($machine), output in $run_dir"
   # Each cyclic service writes its cycle timing into $run_dir/latency at the end (./cnc report shows it).
   CNC_LATENCY_DIR="$run_dir/latency" \
-    "$ROOT/cnc" up --machine "$machine" --log-out "$run_dir/cell" --sim-final-state "$run_dir/final-positions.json" \
+    "$SELF" up --machine "$machine" --log-out "$run_dir/cell" --sim-final-state "$run_dir/final-positions.json" \
     >"$run_dir/services.log" 2>&1 &
   local up_pid=$!
   # A signal to the demo stops the cell (up stops its services in reverse order).
   trap "kill -TERM $up_pid 2>/dev/null || true" TERM INT
   local ctl_rc=0
-  run_child "$BUILD/tools/cnc-ctl" --machine "$machine" --do run --program "$program" --timeout 300 || ctl_rc=$?
+  run_child "$(bin cnc-ctl)" --machine "$machine" --do run --program "$program" --timeout 300 || ctl_rc=$?
   kill -TERM "$up_pid"
   local up_rc=0
   wait "$up_pid" || up_rc=$?
@@ -219,7 +255,7 @@ cmd_demo() {
   echo "== summary =="
   # With the machine's key: every logged message's MAC verified (signing cells).
   local stat
-  stat="$("$BUILD/tools/cnc-logstat" --log "$run_dir/cell.lcmlog" --summary --machine "$machine" 2>&1 || true)"
+  stat="$("$(bin cnc-logstat)" --log "$run_dir/cell.lcmlog" --summary --machine "$machine" 2>&1 || true)"
   sed -n '/^run summary/,$p' <<<"$stat"
   sed -n 's/^signatures: /  signatures (MAC)    /p' <<<"$stat"
   echo "  final positions     $(cat "$run_dir/final-positions.json" 2>/dev/null || echo '(simulator did not report)')"
@@ -247,7 +283,7 @@ cmd_plan() {
     esac
   done
   [ -n "$csv" ] || { [ -z "$plot" ] || csv="${plot%.png}.csv"; }
-  local plan=("$BUILD/tools/cnc-plan" --machine "$machine" --program "$program" ${csv:+--csv "$csv"} "${rest[@]}")
+  local plan=("$(bin cnc-plan)" --machine "$machine" --program "$program" ${csv:+--csv "$csv"} "${rest[@]}")
   # Without a plot the dry run is the whole command: it takes the script's place and its signals.
   [ -n "$plot" ] || exec "${plan[@]}"
   run_child "${plan[@]}"
@@ -258,7 +294,7 @@ cmd_plan() {
 # runs the dry run (cnc-plan) into DIR/setpoints.csv, predicts along it and writes DIR/index.html;
 # predict slot|wall|zmap|zmap-check|calibrate ...: cnc-predict itself.
 cmd_predict() {
-  if [ $# -eq 0 ] || [ ! -f "$1" ]; then exec "$BUILD/tools/cnc-predict" "$@"; fi
+  if [ $# -eq 0 ] || [ ! -f "$1" ]; then exec "$(bin cnc-predict)" "$@"; fi
   local program="$1"; shift
   local machine="$DEFAULT_MACHINE" out="" rest=()
   while [ $# -gt 0 ]; do
@@ -271,8 +307,8 @@ cmd_predict() {
   [ -n "$out" ] || die "predict: --out DIR is required"
   mkdir -p "$out"
   say "predict: dry run of $program"
-  run_child "$BUILD/tools/cnc-plan" --machine "$machine" --program "$program" --csv "$out/setpoints.csv" >&2
-  run_child "$BUILD/tools/cnc-predict" program --csv "$out/setpoints.csv" --program "$program" --out "$out" "${rest[@]}"
+  run_child "$(bin cnc-plan)" --machine "$machine" --program "$program" --csv "$out/setpoints.csv" >&2
+  run_child "$(bin cnc-predict)" program --csv "$out/setpoints.csv" --program "$program" --out "$out" "${rest[@]}"
   run_child /usr/bin/python3 "$ROOT/tools/predict/make_predict_report.py" "$out" --title "$(basename "$program")"
 }
 
@@ -289,7 +325,7 @@ cmd_report() {
     esac
   done
   [ -n "$out" ] || die "report: --out DIR is required"
-  run_child "$BUILD/tools/cnc-logexport" --log "$log" --out "$out"
+  run_child "$(bin cnc-logexport)" --log "$log" --out "$out"
   # The cycle timing the services wrote beside the log (./cnc demo: RUN_DIR/latency), when there is some.
   local lat
   lat="$(dirname "$log")/latency"
@@ -302,7 +338,7 @@ cmd_report() {
 # Our interpreter (cnc-rs274) against LinuxCNC's rs274; see tools/conformance/README.md.
 # Without options: 200 random programs, the project's programs and LinuxCNC's samples.
 cmd_conformance() {
-  local ours="$BUILD/tools/rs274/cnc-rs274" conf="$ROOT/tools/conformance"
+  local ours="$(bin cnc-rs274)" conf="$ROOT/tools/conformance"
   [ -x "$ours" ] || die "conformance: $ours is not built yet"
   [ -x /usr/bin/rs274 ] || die "conformance: /usr/bin/rs274 missing (apt-get install linuxcnc-uspace)"
   if [ $# -eq 0 ]; then
@@ -325,14 +361,37 @@ cmd_bench() {
 
 # key gen|rotate|show [--machine FILE | --file KEYFILE] [...]: see tools/key/main.cc.
 cmd_key() {
-  [ -x "$BUILD/tools/cnc-key" ] || build
+  [ -x "$(bin cnc-key)" ] || build
   local args=("$@") has_target=0
   for a in "$@"; do case "$a" in --machine|--file) has_target=1 ;; esac; done
   [ "$has_target" -eq 1 ] || args+=(--machine "$DEFAULT_MACHINE")
-  exec "$BUILD/tools/cnc-key" "${args[@]}"
+  exec "$(bin cnc-key)" "${args[@]}"
+}
+
+# package: Debian packages of this tree (CPack; packaging/CMakeLists.txt) into
+# $BUILD/packages, each checked by lintian; prints their names, sizes and dependencies.
+cmd_package() {
+  [ "$INSTALLED" -eq 0 ] || die "package: packages are built from the source tree"
+  build
+  cmake "$BUILD" >/dev/null  # configure again: the packages' version is the repository's now
+  cmake --build "$BUILD" -j "$(nproc)" >"$BUILD/last-build.log" 2>&1 || die "build failed (see $BUILD/last-build.log)"
+  rm -rf "$BUILD/packages" && mkdir -p "$BUILD/packages"
+  (cd "$BUILD" && cpack -G DEB -B "$BUILD/packages" >"$BUILD/packages/cpack.log" 2>&1) ||
+    { tail -20 "$BUILD/packages/cpack.log" >&2; die "cpack failed (see $BUILD/packages/cpack.log)"; }
+  rm -rf "$BUILD/packages/_CPack_Packages"
+  local rc=0 deb
+  for deb in "$BUILD"/packages/*.deb; do
+    echo "$deb  $(du -k "$deb" | cut -f1) kB, installed $(dpkg-deb -f "$deb" Installed-Size) kB"
+    echo "  Depends: $(dpkg-deb -f "$deb" Depends)"
+    if command -v lintian >/dev/null; then
+      lintian --fail-on error "$deb" | sed 's/^/  lintian: /' || rc=1
+    fi
+  done
+  return $rc
 }
 
 cmd_test() {
+  [ "$INSTALLED" -eq 0 ] || die "test: the test suite runs in the source tree (git clone, then ./cnc test)"
   build
   cd "$BUILD"
   local start=$SECONDS
@@ -347,15 +406,16 @@ main() {
     demo) cmd_demo "$@" ;;
     test) cmd_test "$@" ;;
     build) build ;;
-    up) [ -x "$BUILD/services/cnc-logger" ] || build; cmd_up "$@" ;;
-    ctl) exec "$BUILD/tools/cnc-ctl" "$@" ;;
-    logstat) exec "$BUILD/tools/cnc-logstat" "$@" ;;
-    replay) [ $# -gt 0 ] || die "replay: LOG is required"; log="$1"; shift; exec "$BUILD/tools/cnc-replay" --log "$log" "$@" ;;
-    plan) [ -x "$BUILD/tools/cnc-plan" ] || build; cmd_plan "$@" ;;
-    report) [ -x "$BUILD/tools/cnc-logexport" ] || build; cmd_report "$@" ;;
-    cam) [ -x "$BUILD/tools/cam/cnc-cam" ] || build; exec "$BUILD/tools/cam/cnc-cam" "$@" ;;
-    predict) { [ -x "$BUILD/tools/cnc-predict" ] && [ -x "$BUILD/tools/cnc-plan" ]; } || build; cmd_predict "$@" ;;
-    conformance) [ -x "$BUILD/tools/rs274/cnc-rs274" ] || build; cmd_conformance "$@" ;;
+    package) cmd_package "$@" ;;
+    up) [ -x "$(bin cnc-logger)" ] || build; cmd_up "$@" ;;
+    ctl) exec "$(bin cnc-ctl)" "$@" ;;
+    logstat) exec "$(bin cnc-logstat)" "$@" ;;
+    replay) [ $# -gt 0 ] || die "replay: LOG is required"; log="$1"; shift; exec "$(bin cnc-replay)" --log "$log" "$@" ;;
+    plan) [ -x "$(bin cnc-plan)" ] || build; cmd_plan "$@" ;;
+    report) [ -x "$(bin cnc-logexport)" ] || build; cmd_report "$@" ;;
+    cam) [ -x "$(bin cnc-cam)" ] || build; exec "$(bin cnc-cam)" "$@" ;;
+    predict) { [ -x "$(bin cnc-predict)" ] && [ -x "$(bin cnc-plan)" ]; } || build; cmd_predict "$@" ;;
+    conformance) [ -x "$(bin cnc-rs274)" ] || build; cmd_conformance "$@" ;;
     bench) cmd_bench "$@" ;;
     key) cmd_key "$@" ;;
     *) awk 'NR > 1 && /^#/ {sub(/^# ?/, ""); print; next} NR > 1 {exit}' "$0"; [ -z "$cmd" ] || exit 2 ;;

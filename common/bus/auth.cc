@@ -106,7 +106,9 @@ std::string key_file_problem(const std::string& path) {
   if (::stat(path.c_str(), &st) != 0)
     return "key file " + path + ": " + std::strerror(errno) + " (create one with: ./cnc key gen --machine FILE)";
   if (!S_ISREG(st.st_mode)) return "key file " + path + " is not a regular file";
-  if (st.st_uid != ::geteuid())
+  // root may use the key of the cell's service user (an operator's `sudo cnc-ctl` on a
+  // packaged cell, whose key belongs to the cnc user): root reads every file anyway.
+  if (st.st_uid != ::geteuid() && ::geteuid() != 0)
     return "key file " + path + " (mode " + mode_text(st.st_mode) + ") belongs to uid " + std::to_string(st.st_uid) +
            ", not to this user (uid " + std::to_string(::geteuid()) + ")";
   if ((st.st_mode & 077) != 0)
@@ -168,6 +170,16 @@ void write_key_file(const std::string& path, const KeySet& keys) {
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
   if (fd < 0) throw KeyFileError("cannot create " + tmp + ": " + std::strerror(errno));
   ::fchmod(fd, 0600);  // whatever the umask
+  // A key rewritten by root (`sudo cnc-key rotate` on a packaged cell) keeps the owner
+  // of the file it replaces: the cell's service user must go on reading it.
+  if (struct stat old{}; ::geteuid() == 0 && ::stat(path.c_str(), &old) == 0 && old.st_uid != 0) {
+    if (::fchown(fd, old.st_uid, old.st_gid) != 0) {
+      const int err = errno;
+      ::close(fd);
+      ::unlink(tmp.c_str());
+      throw KeyFileError("cannot give " + tmp + " the owner of " + path + ": " + std::strerror(err));
+    }
+  }
   size_t done = 0;
   while (done < text.size()) {
     const ssize_t n = ::write(fd, text.data() + done, text.size() - done);
