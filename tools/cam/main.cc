@@ -74,6 +74,7 @@
 #include "common/cam/shapes.h"
 #include "common/cam/points_csv.h"
 #include "common/cam/stl.h"
+#include "common/util/install.h"
 
 namespace {
 
@@ -146,7 +147,7 @@ std::string fmt_g(double v) {
 // One of tools/cam's matplotlib scripts on Debian's python3 (which has matplotlib),
 // with its arguments passed as they are (no shell); an error if it fails.
 void run_plot(const std::string& script, const std::vector<std::string>& args) {
-  const std::string path = std::string(CNC_SOURCE_DIR) + "/tools/cam/" + script;
+  const std::string path = cnc::util::resource_path("tools/cam/" + script);  // installed: /usr/share/cnc/tools/cam
   std::vector<std::string> all{"/usr/bin/python3", path};
   all.insert(all.end(), args.begin(), args.end());
   std::vector<char*> argv;
