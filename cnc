@@ -65,7 +65,7 @@ PACKAGES=(
   python3-pymodbus python3-serial python3-serial-asyncio python3-yaml  # drive emulated with pymodbus (interop test)
   mbpoll                                 # reads the simulator's registers (interop test)
   linuxcnc-uspace                        # rs274: LinuxCNC's interpreter, the conformance oracle (tools/conformance)
-  libcli11-dev                           # command-line flags of cnc-cam
+  libcli11-dev                           # command-line flags (CLI11): every service, cnc-ctl, cnc-cam, ...
   libpolyclipping-dev                    # Clipper: polygon offsets of cnc-cam rough's levels
   libcgal-dev                            # CGAL's AABB tree, the baseline of cnc-cam-index-bench (optional)
   clang libclang-rt-14-dev               # libFuzzer with ASan and UBSan: tests/fuzz/run (optional)

@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <exception>
 
+#include <CLI/CLI.hpp>
+
 #include "common/config/yaml_reader.h"
 #include "common/util/install.h"
 #include "common/util/signals.h"
@@ -31,53 +33,31 @@ bus::Security bus_security(const config::MachineConfig& cfg, const std::string& 
   return sec;
 }
 
-namespace {
-void usage(const Spec& spec) {
-  std::fprintf(stderr, "%s %s: %s\nusage: %s%s", spec.name.c_str(), util::version(), spec.summary.c_str(), spec.name.c_str(),
-               spec.needs_machine ? " --machine FILE" : "");
-  for (const auto& o : spec.options) std::fprintf(stderr, " [--%s VALUE]", o.c_str());
-  for (const auto& f : spec.flags) std::fprintf(stderr, " [--%s]", f.c_str());
-  std::fprintf(stderr, "\n");
-}
-}  // namespace
-
+// The flags by CLI11: --help and --version on every service in one style, and an
+// error naming the flag for an unknown or malformed one (exit 2).
 int run(const Spec& spec, int argc, char** argv,
         const std::function<int(const config::MachineConfig&, const Args&)>& body) {
   Args args;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "-h" || a == "--help") {
-      usage(spec);
-      return kExitOk;
-    }
-    if (a == "--version") {
-      std::printf("%s %s\n", spec.name.c_str(), util::version());
-      return kExitOk;
-    }
-    if (a.rfind("--", 0) != 0) {
-      std::fprintf(stderr, "%s: unexpected argument '%s'\n", spec.name.c_str(), a.c_str());
-      usage(spec);
-      return kExitBadInput;
-    }
-    const std::string key = a.substr(2);
-    if (spec.flags.count(key)) {
-      args.flags.insert(key);
-      continue;
-    }
-    if (key != "machine" && spec.options.count(key) == 0) {
-      std::fprintf(stderr, "%s: unknown option '%s'\n", spec.name.c_str(), a.c_str());
-      usage(spec);
-      return kExitBadInput;
-    }
-    if (i + 1 >= argc) {
-      std::fprintf(stderr, "%s: option '%s' needs a value\n", spec.name.c_str(), a.c_str());
-      return kExitBadInput;
-    }
-    if (key == "machine") {
-      args.machine_file = argv[++i];
-    } else {
-      args.options[key] = argv[++i];
-    }
+  CLI::App app{spec.summary, spec.name};
+  app.set_version_flag("--version", spec.name + " " + util::version());
+  app.add_option("--machine", args.machine_file, "the cell's machine config (YAML)")
+      ->type_name("FILE")
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
+  for (const auto& o : spec.options) {
+    app.add_option_function<std::string>("--" + o, [&args, o](const std::string& v) { args.options[o] = v; })
+        ->type_name("VALUE")
+        ->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
+  }
+  for (const auto& f : spec.flags) app.add_flag_callback("--" + f, [&args, f] { args.flags.insert(f); });
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForVersion& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    std::fprintf(stderr, "%s: %s (see %s --help)\n", spec.name.c_str(), e.what(), spec.name.c_str());
+    return kExitBadInput;
   }
   spdlog::set_pattern("%H:%M:%S.%e %n[%l] %v");
   spdlog::default_logger()->set_level(spdlog::level::info);
@@ -86,8 +66,7 @@ int run(const Spec& spec, int argc, char** argv,
     config::MachineConfig cfg;
     if (spec.needs_machine || !args.machine_file.empty()) {
       if (args.machine_file.empty()) {
-        std::fprintf(stderr, "%s: --machine FILE is required\n", spec.name.c_str());
-        usage(spec);
+        std::fprintf(stderr, "%s: --machine FILE is required (see %s --help)\n", spec.name.c_str(), spec.name.c_str());
         return kExitBadInput;
       }
       cfg = config::load_machine_config(args.machine_file);

@@ -36,5 +36,7 @@ check_case servo_period 's/servo_period_s: 0.001 /servo_period_s: 0.003 /' \
 rc=0; "$BUILD/services/cnc-interpolator" --machine "$WORK/nope.yaml" >"$WORK/out" 2>&1 || rc=$?
 [ "$rc" -eq 2 ] && grep -q "nope.yaml: (top level): cannot open the file" "$WORK/out" || fail "missing config: exit $rc"
 rc=0; "$BUILD/services/cnc-interpolator" --machine "$SRC/config/machines/sim3.yaml" --bogus 1 >"$WORK/out" 2>&1 || rc=$?
-[ "$rc" -eq 2 ] && grep -q "unknown option '--bogus'" "$WORK/out" || fail "unknown flag: exit $rc"
+[ "$rc" -eq 2 ] && grep -q "cnc-interpolator: The following arguments were not expected:.*--bogus" "$WORK/out" || { cat "$WORK/out"; fail "unknown flag: exit $rc"; }
+rc=0; "$BUILD/services/cnc-interpolator" --machine >"$WORK/out" 2>&1 || rc=$?
+[ "$rc" -eq 2 ] && grep -q "cnc-interpolator: --machine: 1 required FILE missing" "$WORK/out" || { cat "$WORK/out"; fail "flag without its value: exit $rc"; }
 echo "PASS"
