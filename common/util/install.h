@@ -6,7 +6,7 @@
 namespace cnc::util {
 
 // The version of this build (cmake/version.cmake): the project's version, the number
-// of commits and the commit, e.g. "0.1.0+412.g20fd61f" (".dirty" for a changed tree).
+// of commits and the commit, e.g. "0.1.0+412.g20fd61f" (uncommitted changes do not show).
 // Every executable prints it for --version and every service sends it in its heartbeat.
 const char* version();
 
