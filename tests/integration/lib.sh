@@ -116,12 +116,13 @@ netns_host() {
   local name="$1" dev="${2:-}" ready="$WORK/netns-$1.pid"
   local setup='ip link set lo up'
   [ "$dev" = lo ] && setup="$setup && ip route add 224.0.0.0/4 dev lo"
-  unshare -n bash -c "$setup"' && echo $$ >"$0" && exec sleep 3600' "$ready" &
+  # Its own network and host name (UTS namespace): a PC of its own, named NAME.
+  unshare -n -u bash -c "hostname '$name' && $setup"' && echo $$ >"$0" && exec sleep 3600' "$ready" &
   TEST_PIDS[netns-$name]=$!
   disown "$!"  # killed by cleanup without a job report
   local i
   for ((i = 0; i < 500; i++)); do [ -s "$ready" ] && break; sleep 0.01; done
   [ -s "$ready" ] || fail "network namespace $name was not set up"
   NETNS_PID[$name]=$(cat "$ready")
-  HOST[$name]="nsenter -t ${NETNS_PID[$name]} -n --"
+  HOST[$name]="nsenter -t ${NETNS_PID[$name]} -n -u --"
 }

@@ -75,6 +75,15 @@ cat "$WORK/ctl.out" >&2
 [ "$rc" -eq 0 ] || { tail -n 20 "$WORK"/up-h*.log >&2; fail "the demo did not complete over three hosts (cnc-ctl exit $rc)"; }
 grep -q "program done" "$WORK/ctl.out" || fail "no completion report"
 note "demo over three hosts: cnc-ctl $(awk -v a="$t0" -v b="$t1" 'BEGIN{printf "%.1f", b-a}') s"
+# Every host sees every service: the cell's status from h3 names each on its host,
+# with this build's version.
+${HOST[h3]} "$BUILD/tools/cnc-ctl" --machine "$M" --do status >"$WORK/status.out" 2>&1 || { cat "$WORK/status.out" >&2; fail "cnc-ctl --do status on h3"; }
+cat "$WORK/status.out" >&2
+version="$("$BUILD/tools/cnc-ctl" --version | awk '{print $2}')"
+for sh in cnc-program-server:h1 cnc-interpolator:h1 cnc-drive-bridge:h2 cnc-logger:h3 cnc-monitor:h3; do
+  awk -v s="${sh%%:*}" -v h="${sh##*:}" -v v="$version" '$1 == s && $2 == h && $4 == v && $5 == "running" {ok = 1} END {exit !ok}' \
+    "$WORK/status.out" || fail "status on h3 does not list ${sh%%:*} running on ${sh##*:} with version $version"
+done
 # The log of this run ends here: h3's part stops (the logger last), and starts again
 # for the second part with a new log.
 stop up-h3 TERM
