@@ -60,6 +60,7 @@ PACKAGES=(
   iproute2 util-linux procps             # ip, unshare: private network namespaces in tests
   nftables                               # random datagram loss on an input chain (loss test)
   dpkg-dev lintian                       # ./cnc package: CPack's dependencies (dpkg-shlibdeps), the packages' check
+  adduser                                # the cnc package's postinst (integration.package installs it)
   systemd                                # systemd-analyze verify of the packages' units (package test)
   socat                                  # pseudo-terminal pairs standing in for RS-485 (Modbus RTU tests)
   python3-pymodbus python3-serial python3-serial-asyncio python3-yaml  # drive emulated with pymodbus (interop test)
