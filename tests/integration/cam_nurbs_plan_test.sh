@@ -12,21 +12,7 @@ trap 'rm -rf "$WORK"' EXIT
 fail() { echo "FAIL: $*" >&2; exit 1; }
 
 # The terrain of cam_plan_test.sh: 40 x 30 mm at 1 mm, ASCII STL (2,400 triangles).
-/usr/bin/python3 - "$WORK/terrain.stl" <<'PY'
-import math, sys
-z = lambda x, y: 2.0 * math.sin(x / 7.0) * math.cos(y / 9.0)
-with open(sys.argv[1], "w") as f:
-    f.write("solid terrain\n")
-    for i in range(40):
-        for j in range(30):
-            a, b, c, d = (i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1)
-            for tri in ((a, b, c), (a, c, d)):
-                f.write(" facet normal 0 0 1\n  outer loop\n")
-                for (x, y) in tri:
-                    f.write("   vertex %.6f %.6f %.6f\n" % (x, y, z(x, y)))
-                f.write("  endloop\n endfacet\n")
-    f.write("endsolid terrain\n")
-PY
+/usr/bin/python3 "$SRC/tests/integration/grid_stl.py" "$WORK/terrain.stl" 40 30 "2.0 * math.sin(x / 7.0) * math.cos(y / 9.0)"
 
 TOL=0.005
 args=(--stl "$WORK/terrain.stl" --tool ball:4 --pick 3 --step 0.1 --threads 1)

@@ -18,21 +18,10 @@ if ! /usr/bin/python3 -c 'import matplotlib' 2>/dev/null; then
   exit 77
 fi
 
-/usr/bin/python3 - "$WORK/groove.stl" "$WORK/xy.csv" <<'PY'
-import math, sys
-z = lambda x, y: 0.6 * abs(x - 12) + 1.5 * math.sin(y / 4.0)
+/usr/bin/python3 "$SRC/tests/integration/grid_stl.py" "$WORK/groove.stl" 30 20 "0.6 * abs(x - 12) + 1.5 * math.sin(y / 4.0)"
+/usr/bin/python3 - "$WORK/xy.csv" <<'PY'
+import sys
 with open(sys.argv[1], "w") as f:
-    f.write("solid groove\n")
-    for i in range(30):
-        for j in range(20):
-            a, b, c, d = (i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1)
-            for tri in ((a, b, c), (a, c, d)):
-                f.write(" facet normal 0 0 1\n  outer loop\n")
-                for (x, y) in tri:
-                    f.write("   vertex %.6f %.6f %.6f\n" % (x, y, z(x, y)))
-                f.write("  endloop\n endfacet\n")
-    f.write("endsolid groove\n")
-with open(sys.argv[2], "w") as f:
     f.write("x,y\n")
     for j in range(81):
         for i in range(121):

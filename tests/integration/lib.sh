@@ -104,6 +104,12 @@ sys.exit(0 if worst <= 1e-3 else 1)
 PY
 }
 
+# status_lists FILE SERVICE HOST VERSION: `cnc-ctl --do status` output FILE lists
+# SERVICE running on HOST with VERSION.
+status_lists() {
+  awk -v s="$2" -v h="$3" -v v="$4" '$1 == s && $2 == h && $4 == v && $5 == "running" {ok = 1} END {exit !ok}' "$1"
+}
+
 # netns_host NAME [MCAST_DEV]: a network namespace standing for one host, held by a
 # sleeping process (registered like a started process, so cleanup removes it), with
 # its loopback up; with MCAST_DEV "lo", multicast goes out on the loopback (a host

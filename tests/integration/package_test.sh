@@ -119,8 +119,7 @@ sleep 1.5
 ctl --do status >"$WORK/status.txt" 2>&1 || { cat "$WORK/status.txt"; fail "cnc-ctl --do status"; }
 cat "$WORK/status.txt" >&2
 for s in cnc-logger cnc-drive-bridge cnc-monitor cnc-program-server cnc-interpolator; do  # (the simulator is no LCM service)
-  awk -v s="$s" -v h="$(hostname)" -v v="$VERSION" '$1 == s && $2 == h && $4 == v && $5 == "running" {ok = 1} END {exit !ok}' \
-    "$WORK/status.txt" || fail "status does not list $s on $(hostname), $VERSION, running"
+  status_lists "$WORK/status.txt" "$s" "$(hostname)" "$VERSION" || fail "status does not list $s on $(hostname), $VERSION, running"
 done
 # The shipped cell file enables no drive by itself: a program is refused until reset.
 rc=0; ctl --do run --program /usr/share/cnc/config/programs/lines.ngc --timeout 30 >"$WORK/refused.txt" 2>&1 || rc=$?

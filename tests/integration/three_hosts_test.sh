@@ -81,8 +81,7 @@ ${HOST[h3]} "$BUILD/tools/cnc-ctl" --machine "$M" --do status >"$WORK/status.out
 cat "$WORK/status.out" >&2
 version="$("$BUILD/tools/cnc-ctl" --version | awk '{print $2}')"
 for sh in cnc-program-server:h1 cnc-interpolator:h1 cnc-drive-bridge:h2 cnc-logger:h3 cnc-monitor:h3; do
-  awk -v s="${sh%%:*}" -v h="${sh##*:}" -v v="$version" '$1 == s && $2 == h && $4 == v && $5 == "running" {ok = 1} END {exit !ok}' \
-    "$WORK/status.out" || fail "status on h3 does not list ${sh%%:*} running on ${sh##*:} with version $version"
+  status_lists "$WORK/status.out" "${sh%%:*}" "${sh##*:}" "$version" || fail "status on h3 does not list ${sh%%:*} running on ${sh##*:} with version $version"
 done
 # The log of this run ends here: h3's part stops (the logger last), and starts again
 # for the second part with a new log.
