@@ -42,7 +42,7 @@ DEFAULT_PROGRAM="$ROOT/config/programs/demo.ngc"
 bin() {
   if [ "$INSTALLED" -eq 1 ]; then echo "$BINDIR/$1"; return; fi
   case "$1" in
-    cnc-logger|cnc-interpolator|cnc-drive-bridge|cnc-monitor|cnc-program-server) echo "$BUILD/services/$1" ;;
+    cnc-logger|cnc-interpolator|cnc-drive-bridge|cnc-monitor|cnc-program-server|cnc-hmi) echo "$BUILD/services/$1" ;;
     cnc-cam) echo "$BUILD/tools/cam/$1" ;;
     cnc-rs274) echo "$BUILD/tools/rs274/$1" ;;
     *) echo "$BUILD/tools/$1" ;;
@@ -69,12 +69,14 @@ PACKAGES=(
   libcli11-dev                           # command-line flags (CLI11): every service, cnc-ctl, cnc-cam, ...
   libpolyclipping-dev                    # Clipper: polygon offsets of cnc-cam rough's levels
   libcgal-dev                            # CGAL's AABB tree, the baseline of cnc-cam-index-bench (optional)
+  libboost-dev nlohmann-json3-dev        # cnc-hmi: Boost.Beast (HTTP, WebSocket), JSON
+  chromium-driver python3-selenium       # integration.hmi drives the page in headless Chromium
   clang libclang-rt-14-dev               # libFuzzer with ASan and UBSan: tests/fuzz/run (optional)
 )
 
 # Service name -> executable, in start order. The logger starts first and stops
 # last so that it records everything the others publish, their final heartbeats too.
-SERVICES=(logger servo-sim drive-bridge monitor program-server interpolator)
+SERVICES=(logger servo-sim drive-bridge monitor program-server interpolator hmi)
 declare -A EXE=(
   [logger]=services/cnc-logger
   [servo-sim]=tools/cnc-servo-sim
@@ -82,6 +84,7 @@ declare -A EXE=(
   [monitor]=services/cnc-monitor
   [program-server]=services/cnc-program-server
   [interpolator]=services/cnc-interpolator
+  [hmi]=services/cnc-hmi
 )
 
 say() { printf '%s\n' "cnc: $*" >&2; }
@@ -194,6 +197,7 @@ cmd_up() {
     "$(bin "${EXE[$s]##*/}")" "${args[@]}" &
     pids[$s]=$!
     say "started $s (pid ${pids[$s]})"
+    if [ "$s" = hmi ]; then say "the operator's page: $("$(bin cnc-hmi)" --machine "$machine" --print-url 2>/dev/null)"; fi
     sleep 0.1
   done
   # A service that ends on its own does not end the others: stopping them would take
@@ -240,6 +244,7 @@ cmd_demo() {
   local run_dir="$runs/demo-$(date -u +%Y%m%d-%H%M%S)"
   mkdir -p "$run_dir"
   say "starting the cell ($machine), output in $run_dir"
+  say "the operator's page while the demo runs: $("$(bin cnc-hmi)" --machine "$machine" --print-url 2>/dev/null)"
   # Each cyclic service writes its cycle timing into $run_dir/latency at the end (./cnc report shows it).
   CNC_LATENCY_DIR="$run_dir/latency" \
     "$SELF" up --machine "$machine" --log-out "$run_dir/cell" --sim-final-state "$run_dir/final-positions.json" \

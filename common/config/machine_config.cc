@@ -137,6 +137,25 @@ MachineConfig read_machine(MapReader top) {
     r.finish();
   }
   {
+    MapReader r = top.map("hmi");
+    const std::filesystem::path base = std::filesystem::path(top.file()).parent_path();
+    const auto resolve = [&](const std::string& v) {
+      if (v.empty() || v[0] == '/') return v;
+      return (base / v).lexically_normal().string();
+    };
+    c.hmi.listen = r.get_string("listen", c.hmi.listen);
+    c.hmi.port = static_cast<int>(r.get_int("port", c.hmi.port, 1, 65535));
+    c.hmi.users_file = resolve(r.get_string("users_file", ""));
+    c.hmi.read_only_without_login = r.get_bool("read_only_without_login", false);
+    c.hmi.program_dir = resolve(r.get_string("program_dir", "../programs"));
+    c.hmi.status_rate_hz = r.get_double("status_rate_hz", c.hmi.status_rate_hz, 20.0, 100.0);
+    const bool local = c.hmi.listen == "127.0.0.1" || c.hmi.listen == "::1" || c.hmi.listen == "localhost";
+    if (!local && c.hmi.users_file.empty())
+      r.fail("users_file", "is required when hmi.listen is not a localhost address ('" + c.hmi.listen +
+                               "'): a shop network needs passwords (cnc-hmi --hash-password makes a line)");
+    r.finish();
+  }
+  {
     MapReader r = top.map("process");
     c.process.ball_radius_mm = r.get_double("ball_radius_mm", 0.0, 0.0, 100.0);
     c.process.flutes = static_cast<int>(r.get_int("flutes", 0, 0, program::kMaxFlutes));

@@ -98,6 +98,16 @@ struct OperatorConfig {
   std::string mdi_directory;
 };
 
+// The browser HMI cnc-hmi (section `hmi:`, issue 17): where it listens, who may use it.
+struct HmiConfig {
+  std::string listen = "127.0.0.1";  // any other address needs users_file
+  int port = 8080;
+  std::string users_file;            // "user:$argon2id$..." lines (crypto_pwhash_str); relative to the config
+  bool read_only_without_login = false;  // a view-only page for a browser that has not logged in
+  std::string program_dir;           // the only folder programs are loaded from ("" = ../programs beside the config)
+  double status_rate_hz = 25;        // status pushed to each browser (>= 20)
+};
+
 struct ProcessConfig {
   // Seed 000's roughness feed law; all zero = not set.
   double ball_radius_mm = 0;
@@ -201,6 +211,7 @@ struct MachineConfig {
   ProgramConfig program;
 
   OperatorConfig operator_;
+  HmiConfig hmi;
 
   DriveBridgeConfig drive_bridge;
   // drive_bridge.profile_dir: where drive profiles are; "" = config/drives beside the machine's folder.

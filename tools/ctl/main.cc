@@ -37,6 +37,7 @@
 #include "cnc/lcmt_program_state.hpp"
 #include "cnc/lcmt_setpoint.hpp"
 #include "common/bus/bus.h"
+#include "common/service/operator_commands.h"
 #include "common/service/service.h"
 #include "common/util/clock.h"
 #include "common/util/install.h"
@@ -145,21 +146,20 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
   // The seq of the last program command sent: the server names it when it refuses it.
   int64_t sent_seq = -1;
   auto send = [&](int8_t command, const std::string& path = "", double value = 1.0) {
-    lcmt_program_command c{};
+    cnc::service::OperatorCommand c;
     c.command = command;
     c.program_path = path;
     c.feed_override = value;
-    if (!bus.publish(cfg.channel(ch::kProgramCmd), c)) {
+    sent_seq = cnc::service::send_program_command(bus, cfg, c);
+    if (sent_seq < 0) {
       std::fprintf(stderr, "cnc-ctl: %s\n", bus.last_publish_error());
       std::exit(kExitSendFailed);
     }
-    sent_seq = c.seq;
   };
   // The refusal of the last command sent, "" while none came.
   auto refused = [&]() -> std::string {
-    if (!view.have_program || sent_seq < 0) return "";
-    if (view.program.refused_sender != bus.sender() || view.program.refused_seq != sent_seq) return "";
-    return view.program.refusal;
+    if (!view.have_program) return "";
+    return cnc::service::refusal_of(view.program, bus.sender(), sent_seq);
   };
   // Sends a program command and waits up to `wait_s` for its refusal: "" when none came.
   auto send_checked = [&](int8_t command, double wait_s, const std::string& path = "", double value = 1.0) {
@@ -170,9 +170,7 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
 
   // Drive bridge commands. `enable` waits until every axis reports ENABLED.
   auto drive_command = [&](int8_t command) {
-    cnc::lcmt_drive_command c{};
-    c.command = command;
-    if (!bus.publish(cfg.channel(ch::kDriveCmd), c)) {
+    if (!cnc::service::send_drive_command(bus, cfg, command)) {
       std::fprintf(stderr, "cnc-ctl: %s\n", bus.last_publish_error());
       std::exit(kExitSendFailed);
     }
@@ -305,18 +303,19 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
   };
   // An operator command with its fields; refused at once with the server's reason.
   auto send_op = [&](int8_t command, int axis, double value, double feed, int8_t flag, const std::string& text) {
-    lcmt_program_command c{};
+    cnc::service::OperatorCommand c;
     c.command = command;
     c.axis = axis;
     c.value = value;
     c.feed_mm_per_min = feed;
     c.jog_continuous = flag;
     c.text = text;
-    if (!bus.publish(cfg.channel(ch::kProgramCmd), c)) {
+    c.feed_override = 0;
+    sent_seq = cnc::service::send_program_command(bus, cfg, c);
+    if (sent_seq < 0) {
       std::fprintf(stderr, "cnc-ctl: %s\n", bus.last_publish_error());
       std::exit(kExitSendFailed);
     }
-    sent_seq = c.seq;
   };
   auto interp_active = [&] {
     const int8_t st = view.interp.state;
@@ -476,7 +475,7 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
     } else {
       send(lcmt_program_command::LOAD, program);
     }
-    line_suffix = "/mdi-" + std::to_string(static_cast<uint32_t>(bus.sender())) + "-" + std::to_string(sent_seq) + ".ngc";
+    line_suffix = cnc::service::mdi_program_suffix(bus.sender(), sent_seq);
     got = wait_for(bus, 2.0, [&] { return answered() || !refused().empty(); });
   }
   if (const std::string why = refused(); !why.empty()) {

@@ -1,0 +1,325 @@
+// cnc-hmi's page: the cell's state from the WebSocket, the operator's actions to it.
+// The API (README, "The browser HMI"): JSON text frames; the server sends hello,
+// status (25 Hz), program, preview, alarms, alarm, result, programs, runs; the page
+// sends {id, action, ...}.
+'use strict';
+
+const S = {
+  ws: null, axes: [], mayControl: false, nextId: 1, unavailable: [],
+  preview: null, bounds: null, trail: [], programLines: 0, currentLine: -1,
+  jogTimer: null, jogAxis: null, sliderBusy: false, lastStatus: null,
+};
+// Measured in the page (the integration test reads it): status messages shown.
+// rate: frames in the last second; minRate: the lowest such second after the first.
+window.hmiStats = { status: 0, since: 0, rate: 0, minRate: 0, window: [], results: [], previewPoints: 0 };
+
+const $ = (id) => document.getElementById(id);
+const fmt = (v, d = 3) => (typeof v === 'number' ? v.toFixed(d) : '—');
+
+function send(action, extra = {}) {
+  if (!S.ws || S.ws.readyState !== WebSocket.OPEN) { showMsg(false, 'not connected'); return -1; }
+  const id = S.nextId++;
+  S.ws.send(JSON.stringify(Object.assign({ id, action }, extra)));
+  return id;
+}
+
+function showMsg(ok, text) {
+  const m = $('msg');
+  m.textContent = text;
+  m.className = 'msg ' + (ok ? 'ok' : 'err');
+}
+
+function connect() {
+  const ws = new WebSocket(`ws://${location.host}/ws`);
+  S.ws = ws;
+  ws.onopen = () => { $('conn').textContent = 'connected'; $('conn').className = 'badge ok'; };
+  ws.onclose = () => {
+    $('conn').textContent = 'disconnected'; $('conn').className = 'badge bad';
+    stopJog();
+    setTimeout(connect, 1000);
+  };
+  ws.onmessage = (ev) => {
+    let m;
+    try { m = JSON.parse(ev.data); } catch (e) { return; }
+    const h = handlers[m.t];
+    if (h) h(m);
+  };
+}
+
+const handlers = {
+  hello(m) {
+    S.axes = m.axes; S.mayControl = m.may_control; S.unavailable = m.unavailable || [];
+    $('machine').textContent = `${m.machine} · cnc-hmi ${m.version}`;
+    $('who').textContent = m.may_control ? (m.login ? `user ${m.user}` : 'local') : 'view only';
+    $('logout').hidden = !m.login;
+    document.body.classList.toggle('view-only', !m.may_control);
+    buildAxes();
+    fillPrograms(m.programs);
+    $('program-dir').textContent = m.program_dir;
+    for (const el of document.querySelectorAll('[data-control]')) el.disabled = !m.may_control;
+    for (const el of document.querySelectorAll('[data-unavailable]')) {
+      const missing = S.unavailable.includes(el.dataset.unavailable);
+      el.disabled = missing || !m.may_control;
+      el.title = missing ? 'not a cell command yet' : '';
+    }
+    if (!m.may_control) showMsg(false, 'view only: log in to operate the machine');
+  },
+  status(m) {
+    const st = window.hmiStats;
+    const now = performance.now();
+    if (st.status++ === 0) st.since = now;
+    st.window.push(now);
+    while (st.window.length && st.window[0] < now - 1000) st.window.shift();
+    st.rate = st.window.length;
+    if (now - st.since > 1500 && !document.hidden) st.minRate = st.minRate ? Math.min(st.minRate, st.rate) : st.rate;
+    $('rate').textContent = `${st.rate} Hz`;
+    S.lastStatus = m;
+    m.axes.forEach((a, i) => {
+      const set = (k, v) => { const el = $(`dro-${a.name}-${k}`); if (el) el.textContent = v; };
+      set('cmd', fmt(a.cmd)); set('act', fmt(a.act)); set('fe', fmt(a.fe, 4));
+      set('dtg', fmt(a.dtg)); set('homed', a.homed === undefined ? '—' : (a.homed ? 'yes' : 'no'));
+      set('drive', a.drive || '—');
+      const row = $(`dro-${a.name}`);
+      if (row) row.className = a.drive === 'fault' ? 'fault' : '';
+    });
+    $('feed').textContent = typeof m.feed === 'number' ? m.feed.toFixed(0) : '—';
+    const it = m.interp || {}, pg = m.program || {};
+    $('mode').textContent = it.mode ? `${it.mode}${it.mode_text ? ' (' + it.mode_text + ')' : ''}` : '—';
+    $('states').innerHTML = '';
+    const addState = (label, v, cls) => {
+      const b = document.createElement('b'); b.textContent = `${label} ${v}`; b.className = 'badge ' + cls;
+      b.id = `state-${label}`; $('states').appendChild(b);
+    };
+    addState('program', pg.state || '—', pg.state === 'fault' || pg.state === 'refused' ? 'bad' : pg.state === 'running' ? 'ok' : '');
+    addState('interp', it.state || '—', it.state === 'fault' ? 'bad' : it.state === 'held' ? 'warn' : it.state === 'running' ? 'ok' : '');
+    $('program-state').textContent = pg.state || '';
+    if (typeof it.feed_override === 'number') {
+      $('feed-override-cell').textContent = `${Math.round(it.feed_override * 100)} %`;
+      if (!S.sliderBusy && document.activeElement !== $('feed-override')) {
+        $('feed-override').value = Math.round(it.feed_override * 100);
+        $('feed-override-out').textContent = `${Math.round(it.feed_override * 100)} %`;
+      }
+    }
+    const line = typeof m.line === 'number' && m.line_in_program !== false ? m.line : -1;
+    $('line-no').textContent = line >= 0 ? line : '—';
+    highlight(line);
+    const sv = $('services'); sv.innerHTML = '';
+    for (const [name, s] of Object.entries(m.services || {})) {
+      const d = document.createElement('span'); d.title = `${name}: ${s.state}, ${s.age} s ago`;
+      if (s.lost || s.state !== 'running') d.className = 'lost';
+      sv.appendChild(d);
+    }
+    const x = m.axes[0] && m.axes[0].act, y = m.axes[1] && m.axes[1].act;
+    if (typeof x === 'number' && typeof y === 'number') {
+      const last = S.trail[S.trail.length - 1];
+      if (!last || Math.abs(last[0] - x) + Math.abs(last[1] - y) > 0.01) {
+        S.trail.push([x, y]);
+        if (S.trail.length > 3000) S.trail.shift();
+      }
+      drawPreview([x, y]);
+    }
+  },
+  program(m) {
+    $('program-name').textContent = m.name || '';
+    const box = $('program-text');
+    box.innerHTML = '';
+    const lines = (m.text || '').split('\n');
+    if (lines.length && lines[lines.length - 1] === '') lines.pop();
+    const frag = document.createDocumentFragment();
+    lines.forEach((t, i) => {
+      const d = document.createElement('div');
+      d.id = `L${i + 1}`;
+      const ln = document.createElement('span'); ln.className = 'ln'; ln.textContent = i + 1;
+      d.appendChild(ln); d.appendChild(document.createTextNode(t));
+      frag.appendChild(d);
+    });
+    box.appendChild(frag);
+    S.programLines = lines.length; S.currentLine = -1;
+  },
+  preview(m) {
+    if (m.error) { showMsg(false, `preview: ${m.error}`); return; }
+    S.preview = m.points; S.bounds = null; S.trail = [];
+    window.hmiStats.previewPoints = m.points.length / 3;
+    drawPreview(null);
+  },
+  alarms(m) { $('alarms-body').innerHTML = ''; for (const a of m.alarms) addAlarm(a); },
+  alarm(m) { addAlarm(m); },
+  result(m) {
+    window.hmiStats.results.push({ id: m.id, ok: m.ok, text: m.text, at: performance.now() });
+    showMsg(m.ok, m.text);
+  },
+  programs(m) { fillPrograms(m.programs); },
+  runs(m) {
+    const body = $('runs-body'); body.innerHTML = '';
+    for (const r of m.runs) {
+      const tr = document.createElement('tr');
+      const date = new Date(r.mtime * 1000).toISOString().replace('T', ' ').slice(0, 19);
+      const cells = [r.name, date, `${(r.bytes / 1e6).toFixed(1)} MB`];
+      for (const c of cells) { const td = document.createElement('td'); td.textContent = c; tr.appendChild(td); }
+      const td = document.createElement('td');
+      if (r.report) {
+        const a = document.createElement('a');
+        a.href = `/runs/${r.log.includes('/') ? r.name + '/report' : r.name.replace(/\.lcmlog$/, '') + '-report'}/index.html`;
+        a.target = '_blank'; a.rel = 'noopener'; a.textContent = 'report';
+        td.appendChild(a);
+      } else { td.textContent = `./cnc report runs/${r.log} --out …`; td.className = 'small'; }
+      tr.appendChild(td);
+      body.appendChild(tr);
+    }
+  },
+};
+
+function addAlarm(a) {
+  const tr = document.createElement('tr');
+  tr.className = a.severity;
+  const t = new Date(a.utime / 1000);
+  const cells = [t.toLocaleTimeString([], { hour12: false }) + '.' + String(t.getMilliseconds()).padStart(3, '0'),
+    a.source, a.code, a.text];
+  for (const c of cells) { const td = document.createElement('td'); td.textContent = c; tr.appendChild(td); }
+  tr.dataset.code = a.code;
+  const body = $('alarms-body');
+  body.insertBefore(tr, body.firstChild);
+  while (body.children.length > 200) body.removeChild(body.lastChild);
+}
+
+function fillPrograms(list) {
+  const sel = $('program-list'); const keep = sel.value; sel.innerHTML = '';
+  for (const p of list || []) { const o = document.createElement('option'); o.value = o.textContent = p; sel.appendChild(o); }
+  if (keep) sel.value = keep;
+}
+
+function highlight(line) {
+  if (line === S.currentLine) return;
+  const old = $(`L${S.currentLine}`); if (old) old.classList.remove('current');
+  S.currentLine = line;
+  const el = $(`L${line}`);
+  if (el) {
+    el.classList.add('current');
+    const box = $('program-text');
+    if (el.offsetTop < box.scrollTop + 20 || el.offsetTop > box.scrollTop + box.clientHeight - 40)
+      box.scrollTop = el.offsetTop - box.clientHeight / 3;
+  }
+}
+
+function buildAxes() {
+  const dro = $('dro-body'); dro.innerHTML = '';
+  const jog = $('jog-axes'); jog.innerHTML = '';
+  const to = $('to-axis'); to.innerHTML = '';
+  for (const a of S.axes) {
+    const tr = document.createElement('tr'); tr.id = `dro-${a.name}`;
+    const name = document.createElement('td'); name.textContent = a.name; tr.appendChild(name);
+    for (const k of ['cmd', 'act', 'fe', 'dtg', 'homed', 'drive']) {
+      const td = document.createElement('td'); td.id = `dro-${a.name}-${k}`; td.textContent = '—'; tr.appendChild(td);
+    }
+    dro.appendChild(tr);
+    const row = document.createElement('div'); row.className = 'jog-row';
+    const b = document.createElement('b'); b.textContent = a.name; row.appendChild(b);
+    const mk = (label, id, title) => {
+      const btn = document.createElement('button'); btn.textContent = label; btn.id = id; btn.title = title;
+      btn.dataset.control = ''; row.appendChild(btn); return btn;
+    };
+    mk('−step', `jog-${a.name}-minus`, 'incremental jog by the step, negative').onclick = () => jogStep(a.name, -1);
+    mk('+step', `jog-${a.name}-plus`, 'incremental jog by the step, positive').onclick = () => jogStep(a.name, 1);
+    const cm = mk('◀ hold', `jog-${a.name}-cminus`, 'continuous jog while held');
+    const cp = mk('hold ▶', `jog-${a.name}-cplus`, 'continuous jog while held');
+    for (const [btn, dir] of [[cm, -1], [cp, 1]]) {
+      btn.addEventListener('pointerdown', (e) => { e.preventDefault(); startJog(a.name, dir); });
+      for (const ev of ['pointerup', 'pointerleave', 'pointercancel']) btn.addEventListener(ev, () => stopJog());
+    }
+    mk('home', `home-${a.name}`, `home ${a.name}`).onclick = () => send('home', { axis: a.name });
+    jog.appendChild(row);
+    const o = document.createElement('option'); o.value = o.textContent = a.name; to.appendChild(o);
+  }
+}
+
+function jogFeed() { return Number($('jog-feed').value) || 0; }
+function jogStep(axis, dir) {
+  send('jog', { axis, value: dir * Number($('jog-step').value), feed: jogFeed(), continuous: false });
+}
+function startJog(axis, dir) {
+  stopJog();
+  S.jogAxis = axis;
+  send('jog', { axis, value: dir, feed: jogFeed(), continuous: true });
+  // The keepalive: the cell stops the jog 0.2 s after the last one (a lost page stops it).
+  S.jogTimer = setInterval(() => send('jog_keepalive', { axis }), 50);
+}
+function stopJog() {
+  if (S.jogTimer === null) return;
+  clearInterval(S.jogTimer); S.jogTimer = null;
+  send('jog_stop', { axis: S.jogAxis });
+  S.jogAxis = null;
+}
+window.addEventListener('blur', stopJog);
+
+function drawPreview(tool) {
+  const cv = $('preview'), g = cv.getContext('2d');
+  const w = cv.width, h = cv.height;
+  g.clearRect(0, 0, w, h);
+  let b = S.bounds;
+  if (!b) {
+    b = { x0: Infinity, y0: Infinity, x1: -Infinity, y1: -Infinity };
+    const p = S.preview || [];
+    for (let i = 0; i < p.length; i += 3) {
+      b.x0 = Math.min(b.x0, p[i]); b.x1 = Math.max(b.x1, p[i]); b.y0 = Math.min(b.y0, p[i + 1]); b.y1 = Math.max(b.y1, p[i + 1]);
+    }
+    if (!isFinite(b.x0)) b = { x0: -10, y0: -10, x1: 110, y1: 110 };
+    const mx = (b.x1 - b.x0) * 0.08 + 2, my = (b.y1 - b.y0) * 0.08 + 2;
+    b = { x0: b.x0 - mx, x1: b.x1 + mx, y0: b.y0 - my, y1: b.y1 + my };
+    S.bounds = b;
+  }
+  if (tool && (tool[0] < b.x0 || tool[0] > b.x1 || tool[1] < b.y0 || tool[1] > b.y1)) {
+    S.bounds = { x0: Math.min(b.x0, tool[0] - 5), x1: Math.max(b.x1, tool[0] + 5), y0: Math.min(b.y0, tool[1] - 5), y1: Math.max(b.y1, tool[1] + 5) };
+    b = S.bounds;
+  }
+  const s = Math.min(w / (b.x1 - b.x0), h / (b.y1 - b.y0));
+  const X = (x) => (x - b.x0) * s + (w - (b.x1 - b.x0) * s) / 2;
+  const Y = (y) => h - ((y - b.y0) * s + (h - (b.y1 - b.y0) * s) / 2);
+  g.strokeStyle = '#333a42'; g.lineWidth = 1;
+  g.beginPath(); g.moveTo(X(0), 0); g.lineTo(X(0), h); g.moveTo(0, Y(0)); g.lineTo(w, Y(0)); g.stroke();
+  const p = S.preview;
+  if (p && p.length >= 6) {
+    g.strokeStyle = '#5b8fc7'; g.lineWidth = 1.2; g.beginPath(); g.moveTo(X(p[0]), Y(p[1]));
+    for (let i = 3; i < p.length; i += 3) g.lineTo(X(p[i]), Y(p[i + 1]));
+    g.stroke();
+  }
+  if (S.trail.length > 1) {
+    g.strokeStyle = '#e3a33b'; g.lineWidth = 1.5; g.beginPath(); g.moveTo(X(S.trail[0][0]), Y(S.trail[0][1]));
+    for (const q of S.trail) g.lineTo(X(q[0]), Y(q[1]));
+    g.stroke();
+  }
+  if (tool) {
+    g.fillStyle = '#ff4b4b'; g.beginPath(); g.arc(X(tool[0]), Y(tool[1]), 5, 0, 2 * Math.PI); g.fill();
+  }
+  g.fillStyle = '#889'; g.font = '11px sans-serif';
+  g.fillText(`XY ${(b.x1 - b.x0).toFixed(0)} × ${(b.y1 - b.y0).toFixed(0)} mm`, 6, 14);
+}
+
+function wire() {
+  $('btn-start').onclick = () => send('start');
+  $('btn-hold').onclick = () => send('hold');
+  $('btn-resume').onclick = () => send('resume');
+  $('btn-stop').onclick = () => { stopJog(); send('stop'); };
+  $('btn-reset').onclick = () => send('reset');
+  $('btn-enable').onclick = () => send('enable');
+  $('btn-home-all').onclick = () => send('home');
+  $('btn-load').onclick = () => send('load', { path: $('program-list').value });
+  $('btn-refresh').onclick = () => send('programs');
+  $('btn-runs').onclick = () => send('runs');
+  $('btn-touch-off').onclick = () => send('touch_off', { axis: $('to-axis').value, value: Number($('to-value').value) });
+  $('mdi-form').onsubmit = (e) => {
+    e.preventDefault();
+    const line = $('mdi-line').value.trim();
+    if (line) send('mdi', { line });
+  };
+  const slider = $('feed-override');
+  slider.addEventListener('input', () => {
+    S.sliderBusy = true;
+    $('feed-override-out').textContent = `${slider.value} %`;
+  });
+  slider.addEventListener('change', () => {
+    S.sliderBusy = false;
+    send('override', { value: Number(slider.value) / 100 });
+  });
+}
+
+window.addEventListener('DOMContentLoaded', () => { wire(); drawPreview(null); connect(); });

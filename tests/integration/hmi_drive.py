@@ -1,0 +1,305 @@
+#!/usr/bin/python3
+"""hmi_drive.py URL OUT_DIR CTL_CMD...: drives cnc-hmi's page in headless Chromium
+(Debian's chromium with its chromium-driver, python3-selenium) as an operator would,
+for integration.hmi. The cell runs with a users file (user `operator`, password from
+$HMI_PASSWORD) and the test's program `square.ngc` in the program directory.
+
+Every wait is on a condition with a generous time limit, never a sleep as
+synchronisation. Timings (command to visible effect) are measured in the page: the
+click and a MutationObserver on the element that shows the effect, both in the
+page's clock. Writes OUT_DIR/*.png and OUT_DIR/timings.json; exit 1 on a failure.
+CTL_CMD (cnc-ctl --machine M) injects a fault from outside the page: DRIVE_CMD DISABLE.
+"""
+import json
+import os
+import subprocess
+import sys
+import time
+
+from selenium import webdriver
+from selenium.common.exceptions import TimeoutException
+from selenium.webdriver.chrome.service import Service
+from selenium.webdriver.common.by import By
+from selenium.webdriver.support.ui import WebDriverWait
+
+URL, OUT = sys.argv[1], sys.argv[2]
+CTL = sys.argv[3:]
+PASSWORD = os.environ["HMI_PASSWORD"]
+os.makedirs(OUT, exist_ok=True)
+timings = {}
+T0 = time.monotonic()
+
+
+def note(msg):
+    print(f"# [{time.monotonic() - T0:5.1f} s] {msg}", file=sys.stderr, flush=True)
+
+
+def fail(msg):
+    note("FAIL: " + msg)
+    try:
+        shot("failure")
+        with open(os.path.join(OUT, "failure.html"), "w") as f:
+            f.write(driver.page_source)
+    except Exception:  # noqa: BLE001 - the failure itself is what matters
+        pass
+    sys.exit(1)
+
+
+def shot(name):
+    path = os.path.join(OUT, name + ".png")
+    driver.save_screenshot(path)
+    note(f"screenshot {path}")
+
+
+opts = webdriver.ChromeOptions()
+opts.binary_location = "/usr/bin/chromium"
+for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--no-first-run",
+          "--disable-background-networking", "--disable-component-update", "--disable-sync",
+          "--window-size=1700,1050", f"--user-data-dir={os.path.join(OUT, 'chromium-profile')}"):
+    opts.add_argument(a)
+driver = webdriver.Chrome(service=Service("/usr/bin/chromedriver"), options=opts)
+driver.set_script_timeout(60)
+
+
+def wait(what, cond, timeout=20.0):
+    try:
+        return WebDriverWait(driver, timeout, poll_frequency=0.05).until(lambda d: cond())
+    except TimeoutException:
+        fail(f"{what}: not seen within {timeout} s")
+
+
+def text(el_id):
+    return driver.execute_script("const e = document.getElementById(arguments[0]); return e ? e.textContent : null;",
+                                 el_id)
+
+
+def num(el_id):
+    try:
+        return float(text(el_id))
+    except (TypeError, ValueError):
+        return None
+
+
+# In the page: click `button` (or run `action`: a small set of named steps), then watch
+# element `el` until the predicate holds; milliseconds from the click to the change, in
+# the page's own clock (the frame that shows the change), or -1 after `timeout_ms`.
+EFFECT_JS = r"""
+const [button, el, kind, value, tol, timeoutMs, done] = arguments;
+const t0 = performance.now();
+const read = () => { const e = document.getElementById(el); return e ? e.textContent : ''; };
+const base = parseFloat(read());
+const holds = () => {
+  const t = read(), v = parseFloat(t);
+  if (kind === 'moves') return isFinite(v) && isFinite(base) && Math.abs(v - base) > tol;
+  if (kind === 'near') return isFinite(v) && Math.abs(v - value) <= tol;
+  if (kind === 'equals') return t === value;
+  if (kind === 'contains') return t.includes(value);
+  return false;
+};
+let finished = false;
+const finish = (ms) => { if (finished) return; finished = true; obs.disconnect(); done({ms, text: read()}); };
+const obs = new MutationObserver(() => { if (holds()) finish(performance.now() - t0); });
+obs.observe(document.body, {subtree: true, childList: true, characterData: true});
+setTimeout(() => finish(-1), timeoutMs);
+if (button.startsWith('override:')) {
+  const s = document.getElementById('feed-override');
+  s.value = button.slice(9);
+  s.dispatchEvent(new Event('input'));
+  s.dispatchEvent(new Event('change'));
+} else {
+  document.getElementById(button).click();
+}
+if (holds()) finish(0);
+"""
+
+
+def effect(name, button, el, kind, value=None, tol=0.0, timeout_s=20.0):
+    r = driver.execute_async_script(EFFECT_JS, button, el, kind, value, tol, int(timeout_s * 1000))
+    if r["ms"] < 0:
+        fail(f"{name}: clicking {button} did not show on #{el} within {timeout_s} s ({kind} {value}, "
+             f"shows '{r['text']}')")
+    timings[name] = round(r["ms"], 1)
+    note(f"{name}: {r['ms']:.0f} ms from the click to #{el} = '{r['text']}'")
+    return r
+
+
+def last_result():
+    return driver.execute_script("const r = window.hmiStats.results; return r.length ? r[r.length - 1] : null;")
+
+
+def results_since(n):
+    return driver.execute_script("return window.hmiStats.results.slice(arguments[0]);", n)
+
+
+def n_results():
+    return driver.execute_script("return window.hmiStats.results.length;")
+
+
+def wait_result(n0, what, timeout=30.0, ok=True):
+    """The first result after n0 whose text matches `what` (a substring); must be ok (or not)."""
+    def found():
+        for r in results_since(n0):
+            if what in r["text"] or (not r["ok"] and ok):
+                return r
+        return None
+    r = wait(f"result '{what}'", found, timeout)
+    if r["ok"] != ok:
+        fail(f"expected {'success' if ok else 'a refusal'} for '{what}', got: {r['text']}")
+    note(f"result: {r['text']}")
+    return r
+
+
+def state(label):
+    t = text(f"state-{label}") or ""
+    return t.split(" ", 1)[1] if " " in t else t
+
+
+try:
+    # 1. No password: the login page, and a WebSocket without a session is refused.
+    driver.get(URL)
+    wait("the login page", lambda: driver.find_elements(By.ID, "login-form"))
+    if "/login.html" not in driver.current_url:
+        fail(f"without a session the browser should land on the login page, got {driver.current_url}")
+    shot("01-login")
+    ws = driver.execute_async_script("""
+      const done = arguments[0];
+      const ws = new WebSocket(`ws://${location.host}/ws`);
+      ws.onopen = () => { ws.send(JSON.stringify({action: 'jog', axis: 'X', value: 50})); done('opened'); };
+      ws.onerror = () => done('refused');
+      setTimeout(() => done('timeout'), 5000);""")
+    if ws != "refused":
+        fail(f"a WebSocket without a session was not refused: {ws}")
+    note("no session: the login page; the WebSocket (a jog of X by 50 mm in it) refused")
+
+    # 2. Wrong passwords (a known user, an unknown one): refused, the same page, no hint.
+    pages = []
+    for user, pw in (("operator", "not-the-password"), ("nobody", PASSWORD)):
+        driver.find_element(By.ID, "user").send_keys(user)
+        driver.find_element(By.ID, "password").send_keys(pw)
+        driver.find_element(By.ID, "login-button").click()
+        wait("the refusal", lambda: driver.find_elements(By.ID, "refused"))
+        pages.append(driver.find_element(By.ID, "refused").text)
+    if pages[0] != pages[1] or pages[0] != "Login refused.":
+        fail(f"the refusals differ or hint: {pages}")
+    shot("02-login-refused")
+    timings["login_refusals"] = 2
+    note("2 wrong logins refused with the same text: " + pages[0])
+
+    # 3. Log in.
+    driver.find_element(By.ID, "user").send_keys("operator")
+    driver.find_element(By.ID, "password").send_keys(PASSWORD)
+    driver.find_element(By.ID, "login-button").click()
+    wait("the page, connected", lambda: text("conn") == "connected", 20)
+    wait("the drives enabled", lambda: text("dro-X-drive") == "enabled" and text("dro-Y-drive") == "enabled", 20)
+    wait("a status rate", lambda: driver.execute_script("return window.hmiStats.rate") >= 15, 10)
+    x0 = num("dro-X-act")
+    if x0 is None or abs(x0) > 0.01:
+        fail(f"X should stand at 0 (nothing changed before the login), shows {text('dro-X-act')}")
+    note(f"logged in; X at {x0:.3f}: the refused clients changed nothing")
+    wait("the login refusals alarm", lambda: driver.execute_script(
+        "return document.querySelector('#alarms-body tr[data-code=hmi_login_refused]') !== null"), 10)
+
+    # 4. Home X on its switch, then jog X by +10 mm.
+    n0 = n_results()
+    effect("home_x_to_mode_shown", "home-X", "mode", "contains", "home", timeout_s=10)
+    wait("X homed", lambda: text("dro-X-homed") == "yes", 30)
+    wait("homing done", lambda: state("interp") in ("idle", "done") and (text("mode") or "").startswith("program"), 20)
+    wait("X back at 0", lambda: abs((num("dro-X-act") or 99)) < 0.005, 10)
+    note(f"X homed ({text('dro-X-homed')}) at {text('dro-X-act')}")
+    driver.execute_script("document.getElementById('jog-step').value = '10';")
+    effect("jog_x_click_to_position_moves", "jog-X-plus", "dro-X-act", "moves", tol=0.001, timeout_s=10)
+    wait("X at 10", lambda: abs((num("dro-X-act") or 0) - 10) < 0.005, 20)
+    note(f"jogged: X {text('dro-X-act')}")
+    shot("03-jogged")
+
+    # 5. Touch off X: this position reads 0 (G10 L20 P0 X0) through the program server.
+    driver.execute_script("document.getElementById('to-axis').value = 'X'; document.getElementById('to-value').value = '0';")
+    n0 = n_results()
+    driver.find_element(By.ID, "btn-touch-off").click()
+    wait_result(n0, "touch_off started")
+    wait("the touch-off line's end", lambda: state("program") == "done", 20)
+
+    # 6. Load and start the program; the highlighted line moves.
+    driver.execute_script("document.getElementById('program-list').value = 'square.ngc';")
+    n0 = n_results()
+    driver.find_element(By.ID, "btn-load").click()
+    wait_result(n0, "loaded")
+    wait("the program text", lambda: driver.execute_script("return document.querySelectorAll('#program-text div').length") >= 8)
+    wait("the preview", lambda: driver.execute_script("return (window.hmiStats.previewPoints || 0) > 4"), 30)
+    effect("start_click_to_running", "btn-start", "state-interp", "contains", "running", timeout_s=10)
+    wait("line 5 highlighted", lambda: text("line-no") == "5", 20)
+    t_line = time.monotonic()
+    f_line = driver.execute_script("return [window.hmiStats.status, performance.now()]")
+    wait("the highlight moves to line 6", lambda: text("line-no") == "6", 20)
+    f_end = driver.execute_script("return [window.hmiStats.status, performance.now()]")
+    # The display rate while the program runs (no screenshot in between: one stalls the page).
+    timings["display_rate_hz_running"] = round((f_end[0] - f_line[0]) / ((f_end[1] - f_line[1]) / 1000.0), 1)
+    note(f"position display while running: {f_end[0] - f_line[0]} frames in {(f_end[1] - f_line[1]) / 1000:.2f} s"
+         f" = {timings['display_rate_hz_running']} Hz")
+    if timings["display_rate_hz_running"] < 20:
+        fail(f"display rate while running {timings['display_rate_hz_running']} Hz < 20 Hz")
+    hl = driver.execute_script("const e = document.querySelector('#program-text div.current'); return e ? e.id : null;")
+    if hl != "L6":
+        fail(f"the highlighted program line is {hl}, not L6")
+    note(f"highlight moved 5 -> 6 ({time.monotonic() - t_line:.1f} s: 40 mm at 10 mm/s)")
+    shot("04-running")
+
+    # 7. Hold: the feed shown drops to 0 and the position stands.
+    effect("hold_click_to_feed_0", "btn-hold", "feed", "equals", "0", timeout_s=10)
+    wait("held", lambda: state("interp") == "held", 10)
+    y1 = num("dro-Y-act")
+    s0 = driver.execute_script("return window.hmiStats.status")
+    wait("0.5 s of status while held", lambda: driver.execute_script("return window.hmiStats.status") >= s0 + 12, 10)
+    y2 = num("dro-Y-act")
+    if abs(y2 - y1) > 0.002:
+        fail(f"held, but Y moved from {y1} to {y2}")
+    note(f"held: Y stands at {y2:.3f} ({abs(y2 - y1) * 1000:.1f} um over 12 status frames)")
+    timings["held_motion_um"] = round(abs(y2 - y1) * 1000, 2)
+    shot("05-held")
+    effect("resume_click_to_feed", "btn-resume", "feed", "near", 600, 1.0, timeout_s=10)
+
+    # 8. Feed override 50 %: the feed shown follows (600 -> 300 mm/min).
+    effect("override_50_to_feed_300", "override:50", "feed", "near", 300, 3.0, timeout_s=10)
+    if text("feed-override-cell") != "50 %":
+        wait("the cell's override 50 %", lambda: text("feed-override-cell") == "50 %", 5)
+    effect("override_100_to_feed_600", "override:100", "feed", "near", 600, 3.0, timeout_s=10)
+
+    # 9. Stop.
+    effect("stop_click_to_stopped", "btn-stop", "state-program", "contains", "stopped", timeout_s=10)
+    wait("the interpolator stands", lambda: state("interp") in ("idle", "done"), 10)
+
+    # 10. MDI a slow move, a fault injected from outside during it (DRIVE_CMD DISABLE by
+    #     cnc-ctl), the alarm shown; Reset from the page.
+    driver.find_element(By.ID, "mdi-line").send_keys("G1 Y60 F300")
+    n0 = n_results()
+    driver.find_element(By.ID, "btn-mdi").click()
+    wait_result(n0, "mdi started")
+    wait("the MDI move", lambda: state("interp") == "running", 10)
+    subprocess.run(CTL + ["--do", "disable"], check=True, timeout=20)
+    t_inj = time.monotonic()
+    wait("the fault alarm", lambda: driver.execute_script(
+        "return document.querySelector('#alarms-body tr.fault') !== null"), 10)
+    timings["injected_fault_to_alarm_shown_ms"] = round((time.monotonic() - t_inj) * 1000, 1)
+    alarm = driver.execute_script("const r = document.querySelector('#alarms-body tr.fault'); return r.textContent;")
+    note(f"alarm shown: {alarm}")
+    wait("FAULT", lambda: state("interp") == "fault", 10)
+    shot("06-alarm")
+    n0 = n_results()
+    effect("reset_click_to_interp_idle", "btn-reset", "state-interp", "contains", "idle", timeout_s=30)
+    wait_result(n0, "reset:")
+    wait("drives enabled again", lambda: all(text(f"dro-{a}-drive") == "enabled" for a in "XYZ"), 10)
+    shot("07-reset")
+
+    # The display rate over the whole session.
+    st = driver.execute_script("return {n: window.hmiStats.status, ms: performance.now() - window.hmiStats.since,"
+                               " min: window.hmiStats.minRate || 0};")
+    timings["status_frames"] = st["n"]
+    timings["display_rate_hz_mean"] = round(st["n"] / (st["ms"] / 1000.0), 1)
+    timings["display_rate_hz_min_1s_incl_screenshots"] = st["min"]
+    note(f"position display: {st['n']} frames in {st['ms'] / 1000:.1f} s = {timings['display_rate_hz_mean']} Hz mean, "
+         f"lowest 1 s window {st['min']} Hz (screenshots stall the page)")
+finally:
+    with open(os.path.join(OUT, "timings.json"), "w") as f:
+        json.dump(timings, f, indent=1)
+    driver.quit()
+print(json.dumps(timings))

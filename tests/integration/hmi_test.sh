@@ -1,0 +1,92 @@
+#!/usr/bin/env bash
+# The browser HMI (issue 17 items 2 and 4): the cell started by ./cnc up (cnc-hmi
+# with it) in a private network namespace, listening with a users file; the page
+# driven in headless Chromium (tests/integration/hmi_drive.py: selenium with Debian's
+# chromium-driver): the login page and a refused WebSocket without a session, two
+# wrong passwords refused alike (and counted: the hmi_login_refused ALARM, the
+# heartbeat), home X, jog X by 10 mm, touch off X, load and start a program and see
+# the highlighted line move, hold (motion stands), resume, feed override 50 % and
+# back, stop, MDI, a fault injected from outside (DRIVE_CMD DISABLE) shown in the
+# alarm list, reset. Timings from the click to the change on the page and the
+# position display rate, measured in the page; screenshots in
+# BUILD/test-output/hmi/ (timings.json beside them).
+#   hmi_test.sh BUILD_DIR SOURCE_DIR
+source "$(dirname "$0")/lib.sh"
+enter_private_netns "$@"
+BUILD="$1"; SRC="$2"
+WORK="$(mktemp -d /tmp/cnc-hmi-test.XXXXXX)"
+OUT="$BUILD/test-output/hmi"
+trap 'cleanup' EXIT
+[ -x /usr/bin/chromedriver ] || fail "chromium-driver is not installed (./cnc installs it: PACKAGES)"
+/usr/bin/python3 -c 'import selenium' 2>/dev/null || fail "python3-selenium is not installed (./cnc installs it: PACKAGES)"
+rm -rf "$OUT" && mkdir -p "$OUT"
+
+make_machine "$SRC/config/machines/sim3.yaml" "$WORK/base.yaml"
+M="$WORK/machine.yaml"
+# Home switches on the simulated axes (X homes on its switch from the page), homing not required.
+/usr/bin/python3 "$SRC/tests/integration/operator_machine.py" "$WORK/base.yaml" "$M" "$WORK/mdi"
+sed -i 's/homing_required: true/homing_required: false/' "$M"
+mkdir -p "$WORK/programs" "$WORK/mdi"
+cat >"$WORK/programs/square.ngc" <<'NGC'
+G21 G90 G17 G54
+G0 X20 Y10 Z2
+G1 Z-1 F600
+G1 X40
+G1 Y50
+G1 X0
+G1 Y10
+G1 X40
+G1 Y50
+G0 Z5
+M2
+NGC
+export HMI_PASSWORD="chips-and-$RANDOM-coolant"
+printf '%s\n' "$HMI_PASSWORD" | "$BUILD/services/cnc-hmi" --hash-password operator >"$WORK/users" ||
+  fail "cnc-hmi --hash-password failed"
+grep -q '^operator:\$argon2id\$' "$WORK/users" || fail "the users file line is not an argon2id hash: $(cat "$WORK/users")"
+chmod 600 "$WORK/users"
+cat >>"$M" <<EOF2
+program:
+  var_file: $WORK/cnc.var
+hmi:
+  listen: 127.0.0.1
+  port: 8093
+  users_file: users
+  program_dir: programs
+EOF2
+
+# Bad input: a shop-network address without a users file is a config error naming the key.
+sed -e 's/^  users_file: users$//' -e 's/listen: 127.0.0.1/listen: 0.0.0.0/' "$M" >"$WORK/open.yaml"
+rc=0; "$BUILD/services/cnc-hmi" --machine "$WORK/open.yaml" >"$WORK/open.out" 2>&1 || rc=$?
+[ "$rc" -eq 2 ] && grep -q 'hmi.users_file.*is required when hmi.listen is not a localhost address' "$WORK/open.out" ||
+  { cat "$WORK/open.out" >&2; fail "listening on 0.0.0.0 without a users file: exit $rc, expected 2 naming hmi.users_file"; }
+note "0.0.0.0 without users file refused: $(head -1 "$WORK/open.out")"
+
+# On a failure ./cnc up stops its services itself (SIGTERM) before the rest is killed.
+stop_up() { local p="${TEST_PIDS[up]:-}"; [ -z "$p" ] || { kill -TERM "$p" 2>/dev/null; wait "$p" 2>/dev/null; }; cleanup; }
+trap 'stop_up' EXIT
+(cd "$WORK" && CNC_BUILD_DIR="$BUILD" CNC_STATE_DIR="$WORK" exec "$SRC/cnc" up --machine "$M" --log-out "$WORK/cell") \
+  >"$WORK/up.log" 2>&1 &
+TEST_PIDS[up]=$!
+for _ in $(seq 1 300); do grep -q "cnc-hmi: open http://127.0.0.1:8093/" "$WORK/up.log" && break; sleep 0.1; done
+grep -q "cnc-hmi: open http://127.0.0.1:8093/" "$WORK/up.log" || { cat "$WORK/up.log" >&2; fail "cnc-hmi did not print its URL"; }
+grep -q "the operator's page: http://127.0.0.1:8093/" "$WORK/up.log" || fail "./cnc up did not print the page's URL"
+"$BUILD/tools/cnc-ctl" --machine "$M" --do enable --timeout 30 >"$WORK/enable.out" 2>&1 || { cat "$WORK/enable.out" >&2; fail "the drives did not enable"; }
+
+rc=0
+timeout 150 /usr/bin/python3 "$SRC/tests/integration/hmi_drive.py" "http://127.0.0.1:8093/" "$OUT" \
+  "$BUILD/tools/cnc-ctl" --machine "$M" 2>&1 | tee "$WORK/drive.log" >&2 || rc=$?
+[ "${PIPESTATUS[0]}" -eq 0 ] && [ "$rc" -eq 0 ] || { tail -40 "$WORK/up.log" >&2; fail "the browser session failed (screenshots in $OUT)"; }
+
+# The touch-off reached the var file (G10 L20 P0 X0 at X = 10: the G54 X offset 10).
+grep -qE '^5221[[:space:]]+10\.0' "$WORK/cnc.var" || { cat "$WORK/cnc.var" >&2 2>/dev/null; fail "the touch-off is not in the var file (5221 10.0)"; }
+# The refused logins counted: in the log and in the heartbeat's detail.
+grep -q "login refused for user 'operator'" "$WORK/up.log" || fail "the refused login is not in the log"
+grep -q "login refused for user 'nobody'" "$WORK/up.log" || fail "the refused unknown user is not in the log"
+"$BUILD/tools/cnc-ctl" --machine "$M" --do status >"$WORK/status.out" 2>&1 || true
+grep -q '^cnc-hmi ' "$WORK/status.out" || { cat "$WORK/status.out" >&2; fail "cnc-ctl --do status does not list cnc-hmi"; }
+stop up TERM
+grep -q "cnc-hmi: stopped (1 logins, 2 refused)" "$WORK/up.log" || { grep cnc-hmi "$WORK/up.log" >&2; fail "cnc-hmi's count of logins is not 1 accepted, 2 refused"; }
+note "timings: $(cat "$OUT/timings.json" | tr -d '\n ')"
+note "screenshots: $(ls "$OUT"/*.png | tr '\n' ' ')"
+echo "hmi test passed"
