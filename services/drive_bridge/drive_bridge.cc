@@ -82,6 +82,7 @@ void BridgeCore::fault(const std::string& why) {
   if (faulted()) return;
   fault_reason_ = why;
   mode_ = Mode::kStopping;
+  stop_held_ticks_ = 0;
   p_size_ = 0;
   seg_cycle_ = -1;
 }
@@ -305,7 +306,18 @@ void BridgeCore::limit_step(bool follow) {
 }
 
 bool BridgeCore::hold() {
-  if (mode_ != Mode::kFollowing || last_cycle_ < 0 || braking_) return false;
+  if (mode_ == Mode::kStopping) {
+    // A controlled stop waits for a stalled link as the playback does: stepped on
+    // meanwhile, its next command would reach the drive as a jump over the ticks
+    // it missed (a speed spike inside the stop: 203 mm/s in a stop from 200 mm/s
+    // seen under load). At most timing.setpoint_timeout_s of holds per stop, so a
+    // link that stays stalled never holds up the other axes' stop for longer.
+    if (static_cast<double>(stop_held_ticks_ + 1) * servo_s_ > cfg_.setpoint_timeout_s) return false;
+    ++stop_held_ticks_;
+    ++held_ticks_;
+    return true;
+  }
+  if (mode_ != Mode::kFollowing || last_cycle_ < 0) return false;
   // The newest setpoint may lead τ by at most kMaxHoldOverLead cycles over the usual lead: the buffer keeps
   // kPoints, and the lag a hold adds is made up only below the velocity limits.
   if (static_cast<double>(last_cycle_) - tau_ > (lead_cycles_ + kMaxHoldOverLead)) return false;

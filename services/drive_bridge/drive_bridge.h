@@ -65,10 +65,12 @@ class BridgeCore {
   // Instead of a tick, while the drives' link is stalled (the command of the last
   // tick has not reached them): the playback stands still, so the drives receive
   // the commands one tick after another when the link moves again, instead of a
-  // jump over the ticks it missed. Allowed only while following a stream normally
-  // and while the newest setpoint leads the playback by at most 4 cycles over the
-  // usual lead (the lag it adds must be made up);
-  // returns false (and does nothing) otherwise: the caller ticks instead.
+  // jump over the ticks it missed. Allowed while following a stream (braking for a
+  // starved one too) while the newest setpoint leads the playback by at most 4
+  // cycles over the usual lead (the lag it adds must be made up) and the setpoint
+  // watchdog has not run out, and in a controlled stop for at most
+  // timing.setpoint_timeout_s per stop; returns false (and does nothing)
+  // otherwise: the caller ticks instead.
   bool hold();
   // Faults: a controlled stop from the current motion, then kStopped. The first reason stays.
   void fault(const std::string& why);
@@ -147,6 +149,7 @@ class BridgeCore {
   bool ref_fresh_ = true;  // the reference's differences are not known yet (after a reset)
   int64_t rejoins_ = 0;
   int64_t held_ticks_ = 0;
+  int64_t stop_held_ticks_ = 0;  // holds for a stalled link in the current controlled stop
   int64_t seg_cycle_ = -1;
   AxisArray cmd_{};
   AxisArray vel_{};      // commanded velocity of the last tick, mm/s

@@ -434,7 +434,8 @@ bool DriveBridgeNode::link_stalled() {
     // demand (Leadshine-style drives over RTU: a following error of 2.4 mm).
     if (p.usual_ticks <= 1.5 && waited >= 1) stalled = true;
   }
-  return stalled && state_ == State::kEnabled;
+  // Also in a controlled stop (kStopping): the stop's commands are a stream too.
+  return stalled && (state_ == State::kEnabled || state_ == State::kStopping);
 }
 
 void DriveBridgeNode::publish_status_inner(int64_t overruns) {

@@ -10,8 +10,9 @@
 #     naming the running program); the running program goes on.
 #  3. A drive fault mid-program (the simulator's fault injection on Y, X moving at
 #     about 100 mm/s): the bridge stops X at the configured deceleration (the
-#     recorded AXIS_STATUS, receive-time stamped), the
-#     interpolator goes to FAULT; reset; a program runs to its end.
+#     simulator's trace), the interpolator goes to FAULT; reset; a program runs to
+#     its end.
+#  Both stops are measured by stop_trace.py on the simulated world's time.
 #  4. Every process exits 0 on SIGTERM, and the log replays bit for bit (the RESETs
 #     and the positions they took are recorded inputs).
 #   fault_reset_test.sh BUILD_DIR SOURCE_DIR
@@ -25,6 +26,9 @@ M="$WORK/machine.yaml"
 make_machine "$SRC/config/machines/sim3.yaml" "$M"
 CTL=("$BUILD/tools/cnc-ctl" --machine "$M")
 DECEL=$(sed -n 's/^ *stop_decel_mm_s2: *\([0-9.]*\).*/\1/p' "$M")
+# X's jerk limit (the first axis in the file): the bridge's stop is jerk-limited.
+JERK_X=$(sed -n 's/^ *max_jerk_mm_s3: *\([0-9.]*\).*/\1/p' "$M" | head -n 1)
+HERE="$(cd "$(dirname "$0")" && pwd)"
 
 cat >"$WORK/long.ngc" <<'NGC'
 G21 G90
@@ -82,8 +86,9 @@ expect_refused() {
 "${CTL[@]}" --do run --program "$WORK/long.ngc" --timeout 30 >"$WORK/ctl1.out" 2>&1 &
 ctl_pid=$!
 x=$(wait_x 100)
-cut_time=$(date +%s.%N)
+cut_before=$(date +%s.%N)
 ip route del 224.0.0.0/4 dev lo
+cut_after=$(date +%s.%N)
 note "multicast route removed at X = $x mm"
 sleep 1
 all_alive "with the route removed"
@@ -94,56 +99,8 @@ cat "$WORK/ctl1.out" >&2
 [ "$rc" -eq 5 ] || fail "cnc-ctl exit $rc during the outage, expected 5 (fault)"
 sleep 1
 all_alive "after the route came back"
-/usr/bin/python3 - "$WORK/trace.csv" "$cut_time" "$DECEL" <<'PY' || fail "the axes did not come to a controlled stop"
-import csv, sys
-rows = [r for r in csv.DictReader(open(sys.argv[1])) if None not in r.values()]
-cut, decel = float(sys.argv[2]), float(sys.argv[3])
-t = [float(r["wall_s"]) for r in rows]
-# The simulated world's own time (wall time less the stalls it stood through: the
-# simulator's process stalled, or its master's stream ran dry): the axes' motion is
-# smooth on it, where a stall would be a flat step on the wall clock.
-world = lambda r: float(r.get("world_s") or r["wall_s"])
-rows = [r for k, r in enumerate(rows) if k == 0 or world(r) > world(rows[k - 1])]  # rows in a stall: one
-t = [float(r["wall_s"]) for r in rows]
-tw = [world(r) for r in rows]
-x = [float(r["X_mm"]) for r in rows]
-def decel_fit(t, x, v, vmax, lo=0, hi=None):
-    # Least-squares parabola x(t) over the braking phase (speed from 90 % down to 10 %
-    # of where it started): its deceleration, robust to the jitter of single samples.
-    hi = len(v) if hi is None else hi
-    idx = [k for k in range(lo, hi) if 0.1 * vmax < v[k] < 0.9 * vmax]
-    k0, k1 = idx[0], idx[-1] + 1
-    ts = [t[k] - t[k0] for k in range(k0, k1 + 1)]; xs = [x[k] for k in range(k0, k1 + 1)]
-    n = len(ts); S = lambda f: sum(f(i) for i in range(n))
-    A = [[S(lambda i: ts[i] ** (r + c)) for c in range(3)] for r in range(3)]
-    b = [S(lambda i: xs[i] * ts[i] ** r) for r in range(3)]
-    for c in range(3):  # Gaussian elimination
-        for r in range(c + 1, 3):
-            f = A[r][c] / A[c][c]
-            A[r] = [A[r][j] - f * A[c][j] for j in range(3)]; b[r] -= f * b[c]
-    q = [0.0] * 3
-    for r in (2, 1, 0):
-        q[r] = (b[r] - sum(A[r][j] * q[j] for j in range(r + 1, 3))) / A[r][r]
-    return -2 * q[2], n
-# Speeds from the positions (the trace's velocity column is a noisy instantaneous one).
-v = [(x[k + 1] - x[k]) / (tw[k + 1] - tw[k]) for k in range(len(t) - 1)]
-i = max(k for k in range(len(t) - 1) if t[k] <= cut) - 1
-rest = next(k for k in range(i, len(t)) if all(abs(x[j] - x[k]) < 1e-3 for j in range(k, min(len(t), k + 30))))
-fitted, n = decel_fit(tw, x, v, v[i], i, rest)
-# Single 50 ms windows: the samples' time stamps jitter by about a millisecond.
-worst = max((v[k] - v[k + 5]) / (tw[k + 5] - tw[k]) for k in range(i, max(i + 1, rest - 5)))
-dist = x[rest] - x[i]
-# The bridge's stop is jerk-limited (X: 60000 mm/s^3, config/machines/sim3.yaml): it
-# reaches the full deceleration after a/j and releases it over a/j, which adds v*a/j.
-jerk = 60000.0
-bound = v[i] ** 2 / (2 * decel) + v[i] * (0.05 + decel / jerk) + 0.1
-print(f"# publish failure at X = {x[i]:.3f} mm, {v[i]:.1f} mm/s; at rest {(t[rest] - cut) * 1e3:.0f} ms later at "
-      f"X = {x[rest]:.3f} mm: {dist:.3f} mm (bound v^2/2a + v*(timeout + a/j) + 0.1 = {bound:.3f} mm); deceleration "
-      f"{fitted:.0f} mm/s^2 fitted over {n} samples (configured {decel:g}: within -25/+10 %), largest over 50 ms "
-      f"{worst:.0f} mm/s^2 (within +25 %)", file=sys.stderr)
-ok = v[i] > 150 and 0 <= dist <= bound and 0.75 * decel <= fitted <= 1.10 * decel and worst <= 1.25 * decel
-sys.exit(0 if ok else 1)
-PY
+/usr/bin/python3 "$HERE/stop_trace.py" "publish failure" "$WORK/trace.csv" "$cut_before" "$cut_after" "$DECEL" "$JERK_X" 150 0.75 \
+  || fail "the axes did not come to a controlled stop"
 grep -q "fault: the bus failed" "$WORK/drive-bridge.log" || fail "the bridge did not fault on its failed publishes"
 grep -q "fault: publish on" "$WORK/interpolator.log" || fail "the interpolator did not fault on its failed publishes"
 
@@ -163,11 +120,22 @@ expect_refused "$WORK/refused4.out" "diag.ngc is running" "${CTL[@]}" --do start
 # ---- 3. drive fault -----------------------------------------------------------
 x=$(wait_x 120)
 /usr/bin/python3 -c "import sys; sys.exit(0 if float('$x') < 330 else 1)" || fail "the refusals took too long: X at $x mm"
+fault_before=$(date +%s.%N)
 echo "fault Y" >"$WORK/sim.ctl"
+fault_after=$(date +%s.%N)
 note "drive Y faulted at X = $x mm"
 expect_drive_fault "$ctl_pid" "fault"
 sleep 1
 all_alive "after the drive fault"
+# X's stop, on the simulator's trace (the simulated world's time: the AXIS_STATUS
+# positions are read by the bridge's link thread at times that jitter under load).
+# From about 100 mm/s the bridge's jerk-limited stop (a/j = 33 ms to reach the full
+# deceleration, 33 ms to release it) spends most of its ~80 ms ramping, so the
+# parabola fitted between 90 % and 10 % of the speed reads below the plateau: within
+# -40 %. The fault lands where the FIFO write meets the path: X cruising at 100 mm/s
+# or already slowing for diag.ngc's corner (74 mm/s seen once); from 50 mm/s on.
+/usr/bin/python3 "$HERE/stop_trace.py" "drive fault on Y" "$WORK/trace.csv" "$fault_before" "$fault_after" "$DECEL" "$JERK_X" 50 0.6 \
+  || fail "X did not come to a controlled stop after Y's drive fault"
 expect_refused "$WORK/refused5.out" "FAULT" "${CTL[@]}" --do run --program "$WORK/short.ngc" --timeout 10
 "${CTL[@]}" --do reset --timeout 20 >&2 || fail "cnc-ctl --do reset failed after the drive fault"
 "${CTL[@]}" --do run --program "$WORK/short.ngc" --timeout 30 >&2 || fail "no program ran after the second reset"
@@ -179,7 +147,7 @@ stop monitor TERM
 stop drive-bridge TERM
 stop servo-sim TERM
 stop logger TERM
-/usr/bin/python3 - "$WORK/cell.lcmlog" "$TEST_PREFIX" "$DECEL" <<'PY' || fail "the recorded ALARMs or the drive-fault stop are wrong"
+/usr/bin/python3 - "$WORK/cell.lcmlog" "$TEST_PREFIX" "$DECEL" <<'PY' || fail "the recorded ALARMs are wrong"
 import struct, sys
 log, prefix, decel = sys.argv[1], sys.argv[2], float(sys.argv[3])
 data = open(log, "rb").read()
@@ -196,37 +164,11 @@ class R:
         n = struct.calcsize(f); v = struct.unpack(">" + f, s.b[s.p:s.p + n]); s.p += n; return v[0]
     def str(s):
         n = s.get("i"); v = s.b[s.p:s.p + n - 1].decode(); s.p += n; return v
-def decel_fit(t, x, v, vmax, lo=0, hi=None):
-    # Least-squares parabola x(t) over the braking phase (speed from 90 % down to 10 %
-    # of where it started): its deceleration, robust to the jitter of single samples.
-    hi = len(v) if hi is None else hi
-    idx = [k for k in range(lo, hi) if 0.1 * vmax < v[k] < 0.9 * vmax]
-    k0, k1 = idx[0], idx[-1] + 1
-    ts = [t[k] - t[k0] for k in range(k0, k1 + 1)]; xs = [x[k] for k in range(k0, k1 + 1)]
-    n = len(ts); S = lambda f: sum(f(i) for i in range(n))
-    A = [[S(lambda i: ts[i] ** (r + c)) for c in range(3)] for r in range(3)]
-    b = [S(lambda i: xs[i] * ts[i] ** r) for r in range(3)]
-    for c in range(3):  # Gaussian elimination
-        for r in range(c + 1, 3):
-            f = A[r][c] / A[c][c]
-            A[r] = [A[r][j] - f * A[c][j] for j in range(3)]; b[r] -= f * b[c]
-    q = [0.0] * 3
-    for r in (2, 1, 0):
-        q[r] = (b[r] - sum(A[r][j] * q[j] for j in range(r + 1, 3))) / A[r][r]
-    return -2 * q[2], n
-alarms, status = [], []
+alarms = []
 for ts, ch, b in events:
     if ch == prefix + "ALARM":
         r = R(b); r.get("q"); r.get("q"); r.get("i")
         alarms.append((ts, r.str(), r.get("b"), r.str(), r.str()))
-    elif ch == prefix + "AXIS_STATUS":
-        r = R(b); r.get("q"); r.get("q"); r.get("i"); r.get("q"); n = r.get("i")
-        names = [r.str() for _ in range(n)]
-        r.p += 8 * n  # commanded
-        actual = [r.get("d") for _ in range(n)]
-        r.p += 8 * n  # following error
-        state = [r.get("b") for _ in range(n)]
-        status.append((ts * 1e-6, actual, state))
 ok = True
 for src in ("cnc-drive-bridge", "cnc-interpolator"):
     a = [x for x in alarms if x[1] == src and x[3] == "publish_failed"]
@@ -235,32 +177,6 @@ for src in ("cnc-drive-bridge", "cnc-interpolator"):
 resets = [x for x in alarms if x[3] == "reset"]
 print(f"# reset ALARMs: {len(resets)}", file=sys.stderr)
 ok = ok and len(resets) >= 2
-# The drive fault: X's deceleration from the recorded AXIS_STATUS, from the first
-# status not ENABLED until X stands.
-# (The last such change between two consecutive statuses: the outage left a gap.)
-first = [k for k in range(1, len(status)) if status[k][2][1] != 2 and status[k - 1][2][1] == 2
-         and status[k][0] - status[k - 1][0] < 0.02 and abs(status[k][1][0] - status[k - 1][1][0]) > 0.1][-1]
-ts = [s[0] for s in status]; xs = [s[1][0] for s in status]
-k0 = first - 1
-rest = next(k for k in range(first, len(status)) if abs(xs[k] - xs[k - 1]) < 1e-4)
-v = [(xs[k + 1] - xs[k]) / (ts[k + 1] - ts[k]) for k in range(k0 - 3, rest)]
-# Receive times jitter: the deceleration fitted over the braking phase, and the
-# largest over windows of 13 statuses (about 50 ms).
-tt = ts[k0 - 3:rest + 1]; xx = xs[k0 - 3:rest + 1]
-fitted, n = decel_fit(tt, xx, v, v[3])
-w = 13
-worst = max((v[k] - v[k + w]) / (tt[k + w] - tt[k]) for k in range(0, len(v) - w))
-print(f"# drive fault on Y: X at {v[3]:.1f} mm/s stopped within {(ts[rest] - ts[k0]) * 1e3:.0f} ms; deceleration "
-      f"{fitted:.0f} mm/s^2 fitted over {n} statuses (configured {decel:g}: within -40/+10 %), largest over 50 ms "
-      f"{worst:.0f} mm/s^2 (within +25 %)", file=sys.stderr)
-# From 100 mm/s the bridge's jerk-limited stop (60000 mm/s^3: 33 ms to reach the full
-# deceleration, 33 ms to release it) spends most of its ~80 ms ramping, so the parabola
-# fitted between 90 % and 10 % of the speed reads well below the plateau (1275-1640
-# mm/s^2 seen); the stop time and the 50 ms maximum still bound it.
-# The fault lands where the FIFO write happens to meet the path: X cruising at 100 mm/s
-# or already slowing for diag.ngc's corner (74 mm/s seen once in ten loaded suite
-# runs). From 50 mm/s on the stop is long enough to fit.
-ok = ok and v[3] > 50 and 0.6 * decel <= fitted <= 1.10 * decel and worst <= 1.25 * decel
 sys.exit(0 if ok else 1)
 PY
 "$BUILD/tools/cnc-replay" --log "$WORK/cell.lcmlog" >"$WORK/replay.out" 2>&1 || { cat "$WORK/replay.out" >&2; fail "the run does not replay"; }

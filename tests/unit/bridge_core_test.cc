@@ -429,6 +429,43 @@ TEST(BridgeCore, FaultMidMoveIsAStopWithinTheLimits) {
   r.print("fault stop");
 }
 
+TEST(BridgeCore, StalledLinkHoldsAControlledStopForAtMostTheSetpointTimeout) {
+  // A fault mid-cruise, then the drives' link stalls for 10 ticks during the stop:
+  // the stop's commands stand still meanwhile (the drives get them one tick after
+  // another afterwards, no jump) and the stop ends exactly as one without the stall,
+  // 10 ticks later. Holds are allowed for at most timing.setpoint_timeout_s per
+  // stop: a link that stays stalled does not hold up the other axes' stop.
+  const config::MachineConfig cfg = machine();
+  const std::vector<double> xs = smooth_stream(200.0, 1800.0, 100);
+  Runner plain(cfg), held(cfg);
+  for (int64_t k = 0; k < 100; ++k) {
+    plain.cycle(k, at(xs[static_cast<size_t>(k)]));
+    held.cycle(k, at(xs[static_cast<size_t>(k)]));
+  }
+  plain.core.fault("test");
+  held.core.fault("test");
+  plain.idle(20);
+  held.idle(20);
+  const AxisArray before = held.core.commanded();
+  EXPECT_EQ(held.hold(10), 10);
+  EXPECT_EQ(held.core.commanded()[0], before[0]);
+  plain.idle(1000);
+  held.idle(1000);
+  EXPECT_EQ(plain.core.mode(), BridgeCore::Mode::kStopped);
+  EXPECT_EQ(held.core.mode(), BridgeCore::Mode::kStopped);
+  held.expect_limits("a stop held 10 ticks for a stalled link", cfg.stop_decel_mm_s2);
+  EXPECT_EQ(held.core.commanded()[0], plain.core.commanded()[0]);
+  // The allowance: setpoint_timeout_s of holds in one stop, then the stop goes on.
+  Runner r(cfg);
+  for (int64_t k = 0; k < 100; ++k) r.cycle(k, at(xs[static_cast<size_t>(k)]));
+  r.core.fault("test");
+  const int allowed = r.hold(1000);
+  EXPECT_EQ(allowed, static_cast<int>(std::floor(cfg.setpoint_timeout_s / cfg.servo_period_s + 1e-9)));
+  EXPECT_FALSE(r.core.hold());
+  std::printf("[ figures  ] a controlled stop held 10 ticks ends where the unheld one does (X %.6f mm); "
+              "holds allowed per stop: %d ticks\n", held.core.commanded()[0], allowed);
+}
+
 TEST(BridgeCore, JoinsOnlyAStreamThatStartsWhereTheAxesStand) {
   Runner r(machine());
   r.cycle(0, at(10.0));
