@@ -22,6 +22,13 @@ bool to_core_command(const cnc::lcmt_program_command& m, Command* out) {
       out->axis = m.axis;
       out->value = m.value;
       return true;
+    case C::SINGLE_BLOCK:
+    case C::OPTIONAL_STOP:
+      if (!(m.value == 0 || m.value == 1)) return false;
+      *out = Command{};
+      out->kind = m.command == C::SINGLE_BLOCK ? Command::Kind::kSingleBlock : Command::Kind::kOptionalStop;
+      out->value = m.value;
+      return true;
     case C::RESET: {
       // As applied, a reset carries the position taken, one finite value per axis.
       if (m.num_axes <= 0 || m.num_axes > program::kMaxAxes || m.position_mm.size() != static_cast<size_t>(m.num_axes))

@@ -112,6 +112,7 @@ Interpolator::Interpolator(const config::MachineConfig& cfg)
       link_(own_link_.get()), inline_(true),
       blocks_(static_cast<size_t>(std::max(64, 2 * cfg.block_window + 4))), look_(kLookCapacity) {
   for (int a = 0; a < naxes_; ++a) pos_[a] = cfg_.axes[a].home_mm;
+  optional_stop_ = cfg_.program.optional_stop;
 }
 
 Interpolator::Interpolator(const config::MachineConfig& cfg, PlanLink& link)
@@ -119,6 +120,7 @@ Interpolator::Interpolator(const config::MachineConfig& cfg, PlanLink& link)
       param_update_(param_update_from_string(cfg.param_update)), link_(&link),
       blocks_(static_cast<size_t>(std::max(64, 2 * cfg.block_window + 4))), look_(kLookCapacity) {
   for (int a = 0; a < naxes_; ++a) pos_[a] = cfg_.axes[a].home_mm;
+  optional_stop_ = cfg_.program.optional_stop;
 }
 
 Interpolator::~Interpolator() = default;
@@ -190,7 +192,12 @@ void Interpolator::take(PlanUpdate& u) {
     // On an empty buffer the path starts from its current speed (at rest: a block
     // arriving after the buffer ran out starts from a stop).
     if (blocks_.empty()) p->live_entry = v_;
+    p->planned_v0 = 0;
+    // Single block: a new line's start is a stop. The path can always stop there: the
+    // buffer's end, where the block is appended, is a stop in the look-ahead.
+    const bool sb = single_block_ && p->line_start && !blocks_.empty() && !p->stop_block() && p->live_entry > 0;
     blocks_.push_back(p);
+    if (sb) single_block_stop(*p);
     planned_samples_ += u.samples;
     ++work_.blocks_taken;
   }
@@ -202,6 +209,7 @@ void Interpolator::take(PlanUpdate& u) {
     work_.patch_values += pt.count;
     std::copy(u.values.begin() + pt.offset, u.values.begin() + pt.offset + pt.count,
               p.v_bw.begin() + pt.from);
+    if (pt.from == 0 && !p.v_bw.empty()) p.planned_v0 = p.v_bw[0];
     if (pt.from == 0 && p.live_entry < p.v_entry && !p.v_bw.empty()) p.v_bw[0] = std::min(p.v_bw[0], p.live_entry);
     update_suffix_min(p, pt.from, pt.from + pt.count);
   }
@@ -364,10 +372,30 @@ bool Interpolator::apply_command(const Command& cmd) {
         state_ = RunState::kRunning;
         hold_ = false;
         stopping_ = false;
+        single_block_held_ = false;
+        single_block_go_ = true;  // single block: the first line runs
       }
       break;
-    case Command::Kind::kHold: hold_ = true; break;
-    case Command::Kind::kResume: hold_ = false; break;
+    case Command::Kind::kHold:
+      hold_ = true;
+      single_block_held_ = false;
+      break;
+    case Command::Kind::kResume:
+      hold_ = false;
+      single_block_held_ = false;
+      break;
+    case Command::Kind::kSingleBlock:
+      if (!std::isfinite(cmd.value)) break;
+      if ((cmd.value != 0) != single_block_) {
+        single_block_ = cmd.value != 0;
+        single_block_go_ = false;  // switched on in a run: the next line start holds
+        if (single_block_) mark_single_block_stops();
+        else unmark_single_block_stops();
+      }
+      break;
+    case Command::Kind::kOptionalStop:
+      if (std::isfinite(cmd.value)) optional_stop_ = cmd.value != 0;
+      break;
     case Command::Kind::kStop:
       if (state_ != RunState::kIdle && state_ != RunState::kDone) stopping_ = true;
       break;
@@ -382,6 +410,7 @@ bool Interpolator::apply_command(const Command& cmd) {
       dwell_left_ = -1;
       rest_next_ = false;
       hold_ = false;
+      single_block_held_ = false;
       stopping_ = false;
       state_ = RunState::kIdle;
       // The drives' positions, less the offsets of homed axes.
@@ -925,6 +954,51 @@ bool Interpolator::creep_to_stop() {
   return true;
 }
 
+void Interpolator::single_block_stop(Planned& p) {
+  p.single_block_stop = true;
+  p.live_entry = 0;
+  if (!p.v_bw.empty() && p.v_bw[0] > 0) {
+    p.v_bw[0] = 0;
+    update_suffix_min(p, 0, 1);
+  }
+}
+
+void Interpolator::mark_single_block_stops() {
+  // The first line start ahead that a jerk-limited brake from where the path is now
+  // reaches at rest (with the margin of a cycle and a half of travel: the look-ahead
+  // check runs on the next cycle's state), and every one after it.
+  const double T = period_s_;
+  double A = kInf, J = kInf;
+  double offset = 0;
+  bool reachable = false;
+  for (size_t b = 0; b < blocks_.size(); ++b) {
+    Planned& p = blocks_[b];
+    if (b > 0) {
+      if (!reachable) reachable = p.stop_at_start() || brake_distance(v_, a_, 0.0, A, J) + 1.5 * v_ * T + 1e-9 <= offset - s_;
+      if (reachable && p.line_start && !p.stop_at_start()) single_block_stop(p);
+    }
+    A = std::min(A, p.accel);
+    J = std::min(J, p.jerk);
+    offset += p.length;
+  }
+}
+
+void Interpolator::unmark_single_block_stops() {
+  // Back to the planner's junction speeds (lifting a stop never makes a brake miss:
+  // every limit beyond it was planned for the path running through it).
+  for (size_t b = 0; b < blocks_.size(); ++b) {
+    Planned& p = blocks_[b];
+    if (!p.single_block_stop) continue;
+    p.single_block_stop = false;
+    if (b == 0 && s_ == 0 && v_ == 0) continue;  // the path stands on it: it starts from rest
+    p.live_entry = p.v_entry;
+    if (!p.v_bw.empty()) {
+      p.v_bw[0] = std::min(p.planned_v0, p.v_entry);
+      update_suffix_min(p, 0, 1);
+    }
+  }
+}
+
 void Interpolator::output_position() {
   out_.position_mm = pos_;
   if (!any_offset_) return;
@@ -942,6 +1016,22 @@ const Setpoint& Interpolator::step() {
   if (active) {
     ++program_cycles_;
     const double T = period_s_;
+    // Single block: at rest at a line's start, hold until RESUME (the line START
+    // began with runs; an event that holds by itself, M0 M1 M6, holds there instead).
+    if (single_block_ && !auto_resume_pauses_ && !hold_ && !stopping_ && v_ == 0 && s_ == 0 && !blocks_.empty()) {
+      const Planned& f = blocks_.front();
+      const bool own_pause = f.block.kind == program::BlockKind::kEvent && f.block.event.pauses() &&
+                             (f.block.event.kind != program::EventKind::kOptionalStop || optional_stop_);
+      if (f.line_start && f.serial != single_block_passed_ && f.block.kind != program::BlockKind::kEnd && !own_pause) {
+        single_block_passed_ = f.serial;
+        if (single_block_go_) {
+          single_block_go_ = false;
+        } else {
+          hold_ = true;
+          single_block_held_ = true;
+        }
+      }
+    }
     const bool pausing = hold_ || stopping_;
     // Arrived at a stop block: dwell, end, or wait.
     if (!blocks_.empty() && blocks_.front().stop_block() && v_ == 0) {
@@ -952,8 +1042,16 @@ const Setpoint& Interpolator::step() {
         pop_block();
         ++blocks_done_;
         state_ = RunState::kDone;
+      } else if (stopping_) {
+        // STOP at rest before a dwell or an event: the program ends here.
+        clear_blocks();
+        stopping_ = false;
+        hold_ = false;
+        state_ = RunState::kIdle;
+        v_ = a_ = 0;
       } else if (!pausing && p.block.kind == program::BlockKind::kEvent && p.block.event.pauses() &&
-                 !event_paused_ && !auto_resume_pauses_) {
+                 (p.block.event.kind != program::EventKind::kOptionalStop || optional_stop_) && !event_paused_ &&
+                 !auto_resume_pauses_) {
         // M0, M1, M6: at rest here until the operator resumes (a RESUME input).
         event_paused_ = true;
         hold_ = true;
@@ -969,6 +1067,8 @@ const Setpoint& Interpolator::step() {
           event_paused_ = false;
           if (!blocks_.empty()) u_ = blocks_.front().path.u_begin();
         }
+      } else if (hold_) {
+        state_ = RunState::kHeld;  // held at rest before a dwell or an event
       }
     } else if (blocks_.empty() || (stopping_ && v_ == 0 && a_ == 0)) {
       if (stopping_) {

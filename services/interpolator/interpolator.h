@@ -53,7 +53,13 @@ struct Command {
     // Homing found the axis's machine position (issue 17): from now on the setpoints
     // of `axis` are its machine position plus `value` (the drive's position minus the
     // machine's), and it counts as homed. Applied only while the path stands.
-    kHomed = 13
+    kHomed = 13,
+    // Switches (value 1 on, 0 off; README "Single block, optional stop, block delete").
+    // Single block: the path comes to rest at the start of each program line (the first
+    // line boundary ahead it can still stop at, jerk-limited) and holds there until a
+    // RESUME (or the program's START) lets it run the next line. Optional stop: an M1
+    // holds the path (else the path only rests there, as at any program event).
+    kSingleBlock = 14, kOptionalStop = 15
   };
   Kind kind = Kind::kStart;
   double feed_override = 1.0;  // kOverride: 0.0 .. 1.5
@@ -61,7 +67,7 @@ struct Command {
   // the drives stand, as the node took it from AXIS_STATUS); one finite value per axis.
   std::array<double, program::kMaxAxes> position_mm{};
   int axis = -1;      // kHomed
-  double value = 0;   // kHomed: drive minus machine position, mm
+  double value = 0;   // kHomed: drive minus machine position, mm; kSingleBlock, kOptionalStop: 1 on, 0 off
 };
 
 struct Setpoint {
@@ -150,6 +156,10 @@ class Interpolator {
   // policy bounds what it takes per cycle (see motion.plan_budget_samples).
   int64_t planned_samples() const { return planned_samples_; }
   double feed_override() const { return override_; }
+  bool single_block() const { return single_block_; }
+  bool optional_stop() const { return optional_stop_; }
+  // Held by single block at the start of a line (a RESUME runs that line).
+  bool single_block_held() const { return hold_ && single_block_held_; }
   double program_time_s() const { return static_cast<double>(program_cycles_) * period_s_; }
   // The setpoint (what the drives are sent): the machine position plus each homed
   // axis's drive offset (none before homing: the drive's position is taken as the machine's).
@@ -246,6 +256,16 @@ class Interpolator {
   bool auto_resume_pauses_ = false;
   bool stopping_ = false;
   double override_ = 1.0;
+  bool single_block_ = false;
+  bool optional_stop_ = true;
+  bool single_block_held_ = false;           // hold_ was set by single block
+  bool single_block_go_ = false;             // START: the first line runs without a hold
+  uint64_t single_block_passed_ = UINT64_MAX;  // serial of the line start last held at (or let go)
+  // Single block on: the line starts ahead from the first one the path can still stop
+  // at become stop points (live_entry 0); off: they are given back the planner's entry.
+  void mark_single_block_stops();
+  void unmark_single_block_stops();
+  void single_block_stop(Planned& p);
 
   Ring blocks_;  // front: the block being executed
   int64_t next_index_ = 0;

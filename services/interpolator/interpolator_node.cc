@@ -416,6 +416,11 @@ void InterpolatorNode::run_cycle() {
     }
     if (c.kind == Command::Kind::kStart) spdlog::info("START {} (token {})", program_path_, token_);
     apply_command(c, m);
+    if (c.kind == Command::Kind::kSingleBlock || c.kind == Command::Kind::kOptionalStop) {
+      spdlog::info("{} {}", c.kind == Command::Kind::kSingleBlock ? "single block" : "optional stop (M1)",
+                   c.value != 0 ? "on" : "off");
+      publish_state(true);
+    }
   }
   pending_commands_.clear();
   manual_cycle();
@@ -543,6 +548,9 @@ void InterpolatorNode::publish_state(bool force) {
   m.num_homed = m.num_axes;
   for (int a = 0; a < m.num_axes; ++a) m.homed.push_back(core_.homed(a) ? 1 : 0);
   m.mode_text = manual_text_;
+  m.single_block = core_.single_block() ? 1 : 0;
+  m.optional_stop = core_.optional_stop() ? 1 : 0;
+  m.source_line = core_.last().source_line;
   bus_.publish(ch_state_, m);
 }
 

@@ -658,6 +658,8 @@ PlanUpdate* Planner::process(const PlanRequest& r) {
     // The path starts from rest after a clear; otherwise the junction with the block before.
     if (!list_.empty()) plan_junction(*list_.back().p, *p);
     else p->v_entry = 0;
+    p->line_start = list_.empty() || list_.back().p->block.source_line != p->block.source_line ||
+                    list_.back().p->block.source_file != p->block.source_file;
     p->live_entry = p->v_entry;
     p->v_bw.assign(p->samples.size(), -1.0);
     p->v_min.assign(p->samples.size(), -1.0);

@@ -45,12 +45,17 @@ struct Planned {
   double accel = 0, jerk = 0;   // tangential limits over the block
   double v_entry = 0;           // junction limit with the previous block (planner's)
   uint64_t serial = 0;          // submission number (monotonic over the core's life)
+  // The first block of a program line (its source file or line differs from the block
+  // before, or none came before in this epoch): where single block holds.
+  bool line_start = false;
   bool stop_block() const;      // dwell / end / event: the path stops here
 
   // Cyclic side, written only by the thread that steps the core after the handover.
   std::vector<double> v_bw;     // look-ahead limits per sample (sized by the planner)
   std::vector<double> v_min;    // v_min[i]: the least of v_bw[i..] (sized by the planner)
   double live_entry = 0;        // the entry limit the cyclic side uses
+  bool single_block_stop = false;  // live_entry made 0 by the single-block switch
+  double planned_v0 = 0;        // the planner's v_bw[0] before the cyclic side lowered it to live_entry
   bool stop_at_start() const { return stop_block() || live_entry == 0; }
 
   Planned(program::Block b, motion::PathSegment p) : block(std::move(b)), path(std::move(p)) {}

@@ -79,6 +79,16 @@ inline std::string refusal(const cnc::lcmt_program_command& c, const CellView& v
   const std::string held = "program " + v.program + " is held";
   const std::string fault = "the cell is in FAULT (" + v.fault + "): RESET first";
   if (c.command >= C::HOME && c.command <= C::HOMED) return operator_refusal(c, v);
+  if (c.command == C::SINGLE_BLOCK || c.command == C::OPTIONAL_STOP || c.command == C::BLOCK_DELETE) {
+    const char* name = c.command == C::SINGLE_BLOCK ? "single block" : c.command == C::OPTIONAL_STOP ? "optional stop"
+                                                                                                      : "block delete";
+    if (!(c.value == 0 || c.value == 1)) return std::string(name) + " " + std::to_string(c.value) + ": the value is 1 (on) or 0 (off)";
+    // Block delete is read as the program is interpreted, at its load: set it before.
+    if (c.command == C::BLOCK_DELETE && (v.state == CellState::kRunning || v.state == CellState::kHeld))
+      return (v.state == CellState::kRunning ? running : held) +
+             ": block delete is read when a program is loaded: STOP it, switch, and load it again";
+    return "";
+  }
   // An operator move runs: nothing of a program until it ends (STOP ends it).
   const bool manual = v.state == CellState::kJogging || v.state == CellState::kHoming;
   if (manual) {

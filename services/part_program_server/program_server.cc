@@ -107,11 +107,12 @@ constexpr double kLongDwell_s = 600.0;
 // One pass of the interpreter through the program, block by block.
 class ProgramServer::Run {
  public:
-  Run(const ProgramSetup& s, const std::vector<double>& start, bool validating)
+  Run(const ProgramSetup& s, const std::vector<double>& start, bool block_delete, bool validating)
       : builder_(builder_setup(s.builder, start),
                  [this](int32_t f) -> const std::string& { return interp_->file_names()[static_cast<size_t>(f)]; }),
         max_lines_(validating ? s.max_validation_lines : -1) {
     rs274::MachineSetup m = s.machine;
+    m.block_delete = block_delete;
     for (size_t i = 0; i < s.builder.axis_names.size() && i < start.size(); ++i) {
       static const char kAxes[] = "XYZABCUVW";
       const char* at = s.builder.axis_names[i].size() == 1 ? std::strchr(kAxes, s.builder.axis_names[i][0]) : nullptr;
@@ -170,7 +171,9 @@ ProgramSetup program_setup(const config::MachineConfig& cfg) {
   s.machine.digital_outputs = cfg.program.digital_outputs;
   s.machine.analog_outputs = cfg.program.analog_outputs;
   s.machine.block_delete = cfg.program.block_delete;
-  s.machine.optional_stop = cfg.program.optional_stop;
+  // Every M1 becomes an event: the interpolator holds there when its optional-stop
+  // switch (initially program.optional_stop) is on when the path gets there.
+  s.machine.optional_stop = true;
   s.builder.spindle_rpm = cfg.process.spindle_rpm;
   s.builder.process = program::ProcessParams{cfg.process.ball_radius_mm, cfg.process.flutes, cfg.process.pick_feed_mm,
                                              cfg.process.target_rmax_um};
@@ -206,7 +209,7 @@ const std::string& ProgramServer::path() const {
 }
 
 std::unique_ptr<ProgramServer::Run> ProgramServer::start_run(const Loaded& p, bool validating) const {
-  auto run = std::make_unique<Run>(setup_, p.start, validating);
+  auto run = std::make_unique<Run>(setup_, p.start, p.block_delete, validating);
   run->open(p.path);
   return run;
 }
@@ -216,6 +219,7 @@ LoadResult ProgramServer::load(const std::string& path, int64_t token, const std
   auto next = std::make_unique<Loaded>();
   next->path = path;
   next->token = token;
+  next->block_delete = setup_.machine.block_delete;
   next->start = start_position_mm.size() == setup_.builder.axis_names.size() ? start_position_mm
                                                                               : setup_.builder.start_position_mm;
   try {

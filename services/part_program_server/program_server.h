@@ -75,6 +75,10 @@ class ProgramServer {
   const std::string& serving_error() const { return serving_error_; }
 
   const ProgramSetup& setup() const { return setup_; }
+  // The block delete switch ('/' lines skipped when on) for the programs loaded from now
+  // on; a loaded program keeps the value it was loaded with.
+  void set_block_delete(bool on) { setup_.machine.block_delete = on; }
+  bool block_delete() const { return setup_.machine.block_delete; }
   // For tests and the benchmark.
   size_t num_checkpoints() const { return program_ ? program_->chunk_hashes.size() : 0; }
   int64_t chunk_reads() const { return chunk_reads_; }
@@ -86,6 +90,7 @@ class ProgramServer {
     std::string path;
     int64_t token = 0;
     std::vector<double> start;
+    bool block_delete = true;  // as loaded: the serving run reads the program the same way
     std::vector<uint64_t> chunk_hashes;
     int64_t num_blocks = 0;
     int64_t lines = 0;

@@ -141,8 +141,9 @@ CellView ProgramServerNode::view(double now_s) const {
 
 void ProgramServerNode::refuse(const cnc::lcmt_program_command& m, const std::string& why) {
   static const char* const kNames[] = {"?",    "LOAD", "START",         "HOLD",      "RESUME", "STOP", "OVERRIDE",
-                                       "RESET", "HOME", "JOG", "JOG_KEEPALIVE", "TOUCH_OFF", "MDI",    "HOMED"};
-  const char* name = m.command >= 1 && m.command <= 13 ? kNames[m.command] : "?";
+                                       "RESET", "HOME", "JOG", "JOG_KEEPALIVE", "TOUCH_OFF", "MDI",    "HOMED",
+                                       "SINGLE_BLOCK", "OPTIONAL_STOP", "BLOCK_DELETE"};
+  const char* name = m.command >= 1 && m.command <= 16 ? kNames[m.command] : "?";
   refusal_ = std::string(name) + (m.command == cnc::lcmt_program_command::LOAD ? " " + m.program_path : "") +
              " refused: " + why;
   refused_sender_ = m.sender;
@@ -165,12 +166,31 @@ void ProgramServerNode::poll(double now_s) {
 void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {
   using C = cnc::lcmt_program_command;
   using S = cnc::lcmt_program_state;
+  if (m.command != C::JOG_KEEPALIVE) {
+    answered_sender_ = m.sender;
+    answered_seq_ = m.seq;
+  }
   if (const std::string why = refusal(m, view(util::monotonic_s())); !why.empty()) {
     refuse(m, why);
     return;
   }
   switch (m.command) {
     case C::LOAD: load_program(m.program_path); break;
+    case C::BLOCK_DELETE: {
+      const bool on = m.value != 0;
+      const bool changed = on != core_.block_delete();
+      core_.set_block_delete(on);
+      spdlog::info("block delete {}", on ? "on" : "off");
+      // A program loaded and not started yet is read again with the new switch.
+      if (changed && program_ready_ && core_.loaded()) {
+        const std::string path = core_.path();
+        const bool mdi = path == mdi_file_;
+        load_program(path);
+        if (mdi && core_.path() == path) mdi_file_ = path;  // still the MDI line's file
+      }
+      publish_state(true);
+      break;
+    }
     case C::MDI: load_line(m, m.text); break;
     case C::TOUCH_OFF: {
       if (m.axis < 0 || m.axis >= static_cast<int32_t>(cfg_.axes.size())) {
@@ -185,6 +205,8 @@ void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {
       load_line(m, "G10 L20 P0 " + name + v);
       break;
     }
+    case C::SINGLE_BLOCK:
+    case C::OPTIONAL_STOP: publish_state(true); break;  // the interpolator's: answered here
     case C::START:
       if (core_.loaded()) {
         state_ = S::RUNNING;
@@ -415,6 +437,9 @@ void ProgramServerNode::publish_state(bool force) {
   s.refused_sender = refused_sender_;
   s.refused_seq = refused_seq_;
   s.refusals = refusals_;
+  s.block_delete = core_.block_delete() ? 1 : 0;
+  s.answered_sender = answered_sender_;
+  s.answered_seq = answered_seq_;
   bus_.publish(ch_state_, s);
 }
 

@@ -94,6 +94,8 @@ class ProgramServerNode {
   int32_t refused_sender_ = 0;
   int64_t refused_seq_ = -1;
   int64_t refusals_ = 0;
+  int32_t answered_sender_ = 0;
+  int64_t answered_seq_ = -1;
   service::BusHealth health_;
   std::string state_file_;
   bool restored_ = false;  // loaded again from the state file; not yet seen running (until a LOAD)

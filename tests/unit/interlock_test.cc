@@ -104,6 +104,10 @@ TEST(Interlock, OperatorCommandsInEveryState) {
       {C::RESUME, {"no program is held", "no program is held", "", "", "RESET first", "no program is held", "no program is held"}},
       {C::STOP, {"", "", "", "", "", "", ""}},
       {C::RESET, {"", "", "STOP it first", "STOP it first", "", kMove, kMove}},
+      {C::SINGLE_BLOCK, {"", "", "", "", "", "", ""}},
+      {C::OPTIONAL_STOP, {"", "", "", "", "", "", ""}},
+      {C::BLOCK_DELETE, {"", "", "p.ngc is running: block delete is read when a program is loaded",
+                         "p.ngc is held: block delete is read when a program is loaded", "", "", ""}},
   };
   for (const Row& r : rows) {
     for (int s = 0; s < 7; ++s) {
@@ -148,6 +152,16 @@ TEST(Interlock, OperatorCommandsInEveryState) {
   tool.value = 50;
   tool.jog_continuous = 2;
   EXPECT_NE(pps::refusal(tool, v).find("tool touch-off is not available yet"), std::string::npos);
+  // The switches take 1 (on) or 0 (off) only.
+  for (const int8_t sw : {C::SINGLE_BLOCK, C::OPTIONAL_STOP, C::BLOCK_DELETE}) {
+    lcmt_program_command c = cmd(sw);
+    c.value = 0;
+    EXPECT_EQ(pps::refusal(c, v), "");
+    c.value = 2;
+    EXPECT_NE(pps::refusal(c, v).find("the value is 1 (on) or 0 (off)"), std::string::npos);
+    c.value = std::nan("");
+    EXPECT_NE(pps::refusal(c, v).find("the value is 1 (on) or 0 (off)"), std::string::npos);
+  }
 }
 
 // ---- the bus -------------------------------------------------------------------------

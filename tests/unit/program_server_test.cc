@@ -537,19 +537,39 @@ TEST_F(NodeTest, ARestartedServerServesTheSameBlocksFromItsStateFile) {
   std::vector<cnc::lcmt_program_block> first;
   int64_t token = 0;
   {
-    ProgramServerNode node(cfg_, bus_);
+    // The first server on a bus of its own: its subscriptions end with it (the bus
+    // keeps a handler as long as it lives, and this server is gone before the next).
+    namespace ch = config::channels;
+    bus::Bus bus1("memq://", 78);
+    std::vector<cnc::lcmt_program_state> states1;
+    bus1.subscribe<cnc::lcmt_program_state>(cfg_.channel(ch::kProgramState), [&](const auto& m) { states1.push_back(m); });
+    bus1.subscribe<cnc::lcmt_program_block>(cfg_.channel(ch::kProgramBlocks), [&](const auto& m) { first.push_back(m); });
+    auto pump1 = [&] {
+      while (bus1.drain() > 0) {
+      }
+    };
+    ProgramServerNode node(cfg_, bus1);
     node.use_state_file(state);
     cnc::lcmt_interp_state at{};  // the machine stands off home: the start of the program
     at.num_axes = 3;
     at.position_mm = {12.5, -1.25, -3.0};
     at.program_token = 0;
-    bus_.publish(cfg_.channel(config::channels::kInterpState), at);
-    pump();
-    command(cnc::lcmt_program_command::LOAD, file.string());
-    ASSERT_EQ(states_.back().state, int8_t{cnc::lcmt_program_state::LOADED}) << states_.back().error;
-    token = states_.back().program_token;
-    request(token, 0, 32);
-    first = blocks_;
+    bus1.publish(cfg_.channel(ch::kInterpState), at);
+    pump1();
+    cnc::lcmt_program_command load{};
+    load.command = cnc::lcmt_program_command::LOAD;
+    load.program_path = file.string();
+    bus1.publish(cfg_.channel(ch::kProgramCmd), load);
+    pump1();
+    ASSERT_FALSE(states1.empty());
+    ASSERT_EQ(states1.back().state, int8_t{cnc::lcmt_program_state::LOADED}) << states1.back().error;
+    token = states1.back().program_token;
+    cnc::lcmt_block_request r{};
+    r.program_token = token;
+    r.first_block = 0;
+    r.count = 32;
+    bus1.publish(cfg_.channel(ch::kBlockRequest), r);
+    pump1();
     ASSERT_EQ(first.size(), 32u);
   }
   ASSERT_TRUE(fs::exists(state));

@@ -14,6 +14,11 @@
 //   cnc-ctl --machine M --do touch-off --axis X --value V   G10 L20 P0 (--tool: refused, not available yet)
 //   cnc-ctl --machine M --do mdi --line "G0 X10"   one line through the program server's interpreter
 //   cnc-ctl --machine M --do status [--timeout S]  the cell's services (host, pid, version, state)
+//   cnc-ctl --machine M --do single-block|optional-stop|block-delete --value on|off
+//                                                  the switches (at the next block boundary; block
+//                                                  delete at the next load). With single block on,
+//                                                  start and resume run one line and wait until the
+//                                                  path holds again (or the program ends)
 //
 // A command the cell refuses in its state (LOAD or START while a program runs, ...)
 // ends cnc-ctl at once with the reason from PROGRAM_STATE and exit 3.
@@ -137,8 +142,17 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
       std::printf("program: %s %s\n", view.program.state >= 0 && view.program.state <= 7 ? kProgram[view.program.state] : "?",
                   view.program.program_path.empty() ? "(none loaded)" : view.program.program_path.c_str());
     if (view.have_interp)
-      std::printf("interpolator: %s, feed override %.2f\n",
-                  view.interp.state >= 0 && view.interp.state <= 5 ? kInterp[view.interp.state] : "?", view.interp.feed_override);
+      std::printf("interpolator: %s, feed override %.2f, line %d, single block %s, optional stop %s\n",
+                  view.interp.state >= 0 && view.interp.state <= 5 ? kInterp[view.interp.state] : "?",
+                  view.interp.feed_override, view.interp.source_line, view.interp.single_block ? "on" : "off",
+                  view.interp.optional_stop ? "on" : "off");
+    if (view.have_interp) {
+      std::printf("position:");
+      for (int i = 0; i < view.interp.num_axes && static_cast<size_t>(i) < cfg.axes.size(); ++i)
+        std::printf(" %s %.4f", cfg.axes[static_cast<size_t>(i)].name.c_str(), view.interp.position_mm[static_cast<size_t>(i)]);
+      std::printf("\n");
+    }
+    if (view.have_program) std::printf("block delete %s\n", view.program.block_delete ? "on" : "off");
     std::printf("cnc-ctl %s: %zu services heard in %.1f s\n", cnc::util::version(), view.heartbeats.size(), now - t0);
     return view.heartbeats.empty() ? kExitTimeout : 0;
   }
@@ -251,6 +265,49 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
     std::printf("drives enabled\n");
     return 0;
   }
+  // The switches: sent until the state shows the value, or refused with the reason.
+  if (what == "single-block" || what == "optional-stop" || what == "block-delete") {
+    const std::string v = args.option("value");
+    if (v != "on" && v != "off" && v != "1" && v != "0") {
+      std::fprintf(stderr, "cnc-ctl: --do %s needs --value on or off\n", what.c_str());
+      return cnc::service::kExitBadInput;
+    }
+    const int8_t on = v == "on" || v == "1" ? 1 : 0;
+    const int8_t cmd = what == "single-block"    ? lcmt_program_command::SINGLE_BLOCK
+                       : what == "optional-stop" ? lcmt_program_command::OPTIONAL_STOP
+                                                 : lcmt_program_command::BLOCK_DELETE;
+    wait_for(bus, 0.5, [&] { return view.have_program && view.have_interp; });
+    auto shown = [&] {
+      if (cmd == lcmt_program_command::BLOCK_DELETE) return view.have_program && view.program.block_delete == on;
+      if (!view.have_interp) return false;
+      return (cmd == lcmt_program_command::SINGLE_BLOCK ? view.interp.single_block : view.interp.optional_stop) == on;
+    };
+    for (int attempt = 0; attempt < 5; ++attempt) {
+      lcmt_program_command c{};
+      c.command = cmd;
+      c.value = on;
+      c.axis = -1;
+      if (!bus.publish(cfg.channel(ch::kProgramCmd), c)) {
+        std::fprintf(stderr, "cnc-ctl: %s\n", bus.last_publish_error());
+        return kExitSendFailed;
+      }
+      sent_seq = c.seq;
+      // Answered (the server names the command it decided on), then shown in the state.
+      auto answered = [&] {
+        return view.have_program && view.program.answered_sender == bus.sender() && view.program.answered_seq == c.seq;
+      };
+      if (wait_for(bus, 0.7, [&] { return !refused().empty() || (answered() && shown()); }) && refused().empty()) {
+        std::printf("%s %s\n", what.c_str(), on ? "on" : "off");
+        return 0;
+      }
+      if (!refused().empty()) {
+        std::fprintf(stderr, "cnc-ctl: %s\n", refused().c_str());
+        return kExitRefused;
+      }
+    }
+    std::fprintf(stderr, "cnc-ctl: --do %s was sent 5 times and the cell does not show it\n", what.c_str());
+    return kExitTimeout;
+  }
   // Plain program commands: sent, and refused at once with the server's reason.
   const std::map<std::string, int8_t> plain = {{"start", lcmt_program_command::START},
                                                {"hold", lcmt_program_command::HOLD},
@@ -264,6 +321,32 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
     // the way, or the state report that answered it): a hold that was never seen is
     // not reported as done. Each command is idempotent in the state it asks for.
     const int8_t cmd = it->second;
+    const int64_t blocks0 = view.interp.blocks_done, cycle0 = view.interp.cycle;
+    const bool stepping = view.have_interp && view.interp.single_block &&
+                          (cmd == lcmt_program_command::START || cmd == lcmt_program_command::RESUME);
+    // Single block: START and RESUME run one line; done when the path holds again
+    // (or the program ended, or stopped).
+    auto step_end = [&]() -> int {
+      if (!stepping) return 0;
+      bool seen_active = false;
+      const bool fin = wait_for(bus, timeout_s, [&] {
+        const int8_t st = view.interp.state;
+        if (view.interp.cycle <= cycle0) return false;
+        if (st == cnc::lcmt_setpoint::RUNNING || st == cnc::lcmt_setpoint::STARVED) seen_active = true;
+        if (st == cnc::lcmt_setpoint::HELD || st == cnc::lcmt_setpoint::DONE) return view.interp.blocks_done != blocks0;
+        return st == cnc::lcmt_setpoint::FAULT || (st == cnc::lcmt_setpoint::IDLE && seen_active);
+      });
+      if (!fin) {
+        std::fprintf(stderr, "cnc-ctl: the line did not end within %.0f s\n", timeout_s);
+        return kExitTimeout;
+      }
+      static const char* const kInterp[] = {"idle", "running", "held", "done", "starved", "fault"};
+      const int8_t st = view.interp.state;
+      std::printf("single block: %s %s line %d (%lld blocks done)\n", st >= 0 && st <= 5 ? kInterp[st] : "?",
+                  st == cnc::lcmt_setpoint::HELD ? "before" : "at", view.interp.source_line,
+                  static_cast<long long>(view.interp.blocks_done));
+      return st == cnc::lcmt_setpoint::FAULT ? kExitFault : 0;
+    };
     auto effect_seen = [&] {
       if (!view.have_interp) return false;
       const int8_t st = view.interp.state;
@@ -271,7 +354,7 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
                           st == cnc::lcmt_setpoint::STARVED;
       switch (cmd) {
         case lcmt_program_command::HOLD: return !active || st == cnc::lcmt_setpoint::HELD;
-        case lcmt_program_command::RESUME: return st != cnc::lcmt_setpoint::HELD;
+        case lcmt_program_command::RESUME: return st != cnc::lcmt_setpoint::HELD || view.interp.blocks_done != blocks0;
         case lcmt_program_command::STOP: return !active;
         case lcmt_program_command::OVERRIDE: return std::fabs(view.interp.feed_override - value) < 1e-9;
         default: return true;  // START: answered by a refusal or by the run state
@@ -281,11 +364,11 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
       const std::string why = send_checked(cmd, attempt == 0 ? 0.5 : 0.3, "", value);
       if (!why.empty()) {
         // A copy sent again after a lost answer may be refused for what the first did.
-        if (attempt > 0 && wait_for(bus, 0.3, effect_seen)) return 0;
+        if (attempt > 0 && wait_for(bus, 0.3, effect_seen)) return step_end();
         std::fprintf(stderr, "cnc-ctl: %s\n", why.c_str());
         return kExitRefused;
       }
-      if (wait_for(bus, 0.7, effect_seen)) return 0;
+      if (wait_for(bus, 0.7, effect_seen)) return step_end();
     }
     std::fprintf(stderr, "cnc-ctl: --do %s was sent 5 times and the interpolator does not show it\n", what.c_str());
     return kExitTimeout;
@@ -417,7 +500,7 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
   const bool line_cmd = what == "mdi" || what == "touch-off";
   if (what != "run" && what != "load" && !line_cmd) {
     std::fprintf(stderr, "cnc-ctl: --do must be one of run load start hold resume stop override reset enable disable "
-                         "fault-reset home jog touch-off mdi status\n");
+                         "fault-reset home jog touch-off mdi status single-block optional-stop block-delete\n");
     return cnc::service::kExitBadInput;
   }
   const std::string program_arg = line_cmd ? std::string("(") + what + ")" : args.option("program");
