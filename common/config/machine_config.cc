@@ -149,6 +149,7 @@ MachineConfig read_machine(MapReader top) {
     c.hmi.read_only_without_login = r.get_bool("read_only_without_login", false);
     c.hmi.program_dir = resolve(r.get_string("program_dir", "../programs"));
     c.hmi.status_rate_hz = r.get_double("status_rate_hz", c.hmi.status_rate_hz, 20.0, 100.0);
+    c.hmi.runs_dir = resolve(r.get_string("runs_dir", ""));
     const bool local = c.hmi.listen == "127.0.0.1" || c.hmi.listen == "::1" || c.hmi.listen == "localhost";
     if (!local && c.hmi.users_file.empty())
       r.fail("users_file", "is required when hmi.listen is not a localhost address ('" + c.hmi.listen +

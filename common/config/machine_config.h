@@ -106,6 +106,7 @@ struct HmiConfig {
   bool read_only_without_login = false;  // a view-only page for a browser that has not logged in
   std::string program_dir;           // the only folder programs are loaded from ("" = ../programs beside the config)
   double status_rate_hz = 25;        // status pushed to each browser (>= 20)
+  std::string runs_dir;              // the recorded runs the page lists ("" = logger.directory)
 };
 
 struct ProcessConfig {

@@ -18,7 +18,9 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <algorithm>
 #include <cmath>
+#include <condition_variable>
 #include <cstdio>
 #include <deque>
 #include <filesystem>
@@ -45,6 +47,7 @@
 #include "common/util/install.h"
 #include "common/util/signals.h"
 #include "services/hmi/programs.h"
+#include "services/hmi/runs.h"
 #include "services/hmi/web.h"
 
 namespace ch = cnc::config::channels;
@@ -196,6 +199,145 @@ class DryRun {
   std::string result_;
 };
 
+// Runs a program to its end (a child process; its output to `log_file`): its exit
+// status, or -1 when it could not start or was cancelled.
+int run_child(const std::vector<std::string>& argv, const std::string& log_file, std::atomic<pid_t>* pid_slot) {
+  std::vector<char*> a;
+  for (const auto& s : argv) a.push_back(const_cast<char*>(s.c_str()));
+  a.push_back(nullptr);
+  const pid_t child = fork();
+  if (child == 0) {
+    const int out = open(log_file.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
+    if (out >= 0) {
+      dup2(out, 1);
+      dup2(out, 2);
+    }
+    execv(a[0], a.data());
+    _exit(127);
+  }
+  if (child < 0) return -1;
+  *pid_slot = child;
+  int status = 0;
+  waitpid(child, &status, 0);
+  *pid_slot = 0;
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+// The runs directory for the page (issue 17 item 3), on a thread of its own: a log is
+// read whole for its summary (cached by path, size and time), and a report is made by
+// the same two steps as ./cnc report (cnc-logexport, make_report.py). Nothing here
+// touches the machine.
+class RunsWorker {
+ public:
+  struct Job {
+    uint64_t client = 0;
+    json id;
+    std::string kind;  // "list" or "report"
+    std::string log;   // report: the log, relative to the runs directory (as listed)
+  };
+  RunsWorker(std::string dir, std::string logexport, std::string make_report)
+      : dir_(std::move(dir)), logexport_(std::move(logexport)), make_report_(std::move(make_report)) {
+    thread_ = std::thread([this] { loop(); });
+  }
+  ~RunsWorker() {
+    {
+      std::lock_guard<std::mutex> lk(mu_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    if (const pid_t p = child_.load(); p > 0) kill(p, SIGTERM);
+    thread_.join();
+  }
+  bool post(Job j) {
+    std::lock_guard<std::mutex> lk(mu_);
+    if (jobs_.size() >= 8) return false;
+    jobs_.push_back(std::move(j));
+    cv_.notify_one();
+    return true;
+  }
+  std::vector<std::pair<uint64_t, json>> take() {
+    std::lock_guard<std::mutex> lk(mu_);
+    std::vector<std::pair<uint64_t, json>> out;
+    out.swap(out_);
+    return out;
+  }
+
+ private:
+  static std::string report_dir(const cnc::hmi::RunEntry& r) {
+    if (r.log.find('/') != std::string::npos) return r.name + "/report";
+    return std::filesystem::path(r.name).stem().string() + "-report";
+  }
+  json list() {
+    json runs = json::array();
+    for (const auto& r : cnc::hmi::list_runs(dir_)) {
+      const std::string path = dir_ + "/" + r.log;
+      const std::string key = path + "|" + std::to_string(r.bytes) + "|" + std::to_string(r.mtime_s);
+      auto it = cache_.find(path);
+      if (it == cache_.end() || it->second.first != key) {
+        it = cache_.insert_or_assign(path, std::make_pair(key, cnc::hmi::summarize_log(path))).first;
+      }
+      const cnc::hmi::RunSummary& sum = it->second.second;
+      json row = {{"name", r.name},         {"log", r.log},         {"mtime", r.mtime_s},
+                  {"bytes", r.bytes},       {"report", r.report},   {"programs", sum.programs},
+                  {"mdi_lines", sum.mdi_lines}, {"duration_s", std::round(sum.duration_s * 10) / 10},
+                  {"start", sum.start_utime_s}, {"alarms", sum.alarms}, {"faults", sum.faults}};
+      if (!sum.ok) row["error"] = sum.error;
+      if (r.report) row["report_url"] = "/runs/" + report_dir(r) + "/index.html";
+      runs.push_back(row);
+    }
+    return {{"t", "runs"}, {"runs", runs}, {"dir", dir_}};
+  }
+  json report(const Job& j) {
+    const auto all = cnc::hmi::list_runs(dir_);
+    const auto it = std::find_if(all.begin(), all.end(), [&](const auto& r) { return r.log == j.log; });
+    if (it == all.end())
+      return {{"t", "result"}, {"id", j.id}, {"ok", false}, {"text", "report: no run '" + j.log + "' in " + dir_}};
+    const std::string out = dir_ + "/" + report_dir(*it);
+    std::filesystem::create_directories(out);
+    const std::string log = dir_ + "/" + it->log;
+    const std::string messages = out + "/make.log";
+    std::filesystem::remove(messages);
+    int rc = run_child({logexport_, "--log", log, "--out", out}, messages, &child_);
+    if (rc == 0) {
+      std::vector<std::string> mk = {"/usr/bin/python3", make_report_, out, "--title", it->name};
+      const std::string lat = std::filesystem::path(log).parent_path().string() + "/latency";
+      if (std::filesystem::is_directory(lat)) mk.insert(mk.end(), {"--latency-dir", lat});
+      rc = run_child(mk, messages, &child_);
+    }
+    if (rc != 0)
+      return {{"t", "result"}, {"id", j.id}, {"ok", false},
+              {"text", "report of " + it->log + " failed (status " + std::to_string(rc) + "): see " + messages}};
+    return {{"t", "result"}, {"id", j.id}, {"ok", true}, {"text", "report of " + it->log + " ready"},
+            {"report_url", "/runs/" + report_dir(*it) + "/index.html"}};
+  }
+  void loop() {
+    for (;;) {
+      Job j;
+      {
+        std::unique_lock<std::mutex> lk(mu_);
+        cv_.wait(lk, [&] { return stop_ || !jobs_.empty(); });
+        if (stop_) return;
+        j = std::move(jobs_.front());
+        jobs_.pop_front();
+      }
+      json r = j.kind == "report" ? report(j) : list();
+      std::lock_guard<std::mutex> lk(mu_);
+      out_.emplace_back(j.client, std::move(r));
+      if (j.kind == "report") out_.emplace_back(j.client, list());
+    }
+  }
+
+  std::string dir_, logexport_, make_report_;
+  std::map<std::string, std::pair<std::string, cnc::hmi::RunSummary>> cache_;
+  std::thread thread_;
+  std::atomic<pid_t> child_{0};
+  std::mutex mu_;
+  std::condition_variable cv_;
+  std::deque<Job> jobs_;
+  std::vector<std::pair<uint64_t, json>> out_;
+  bool stop_ = false;
+};
+
 // An action sent to the cell, waiting for its answer (a refusal, a load, a start).
 struct Pending {
   uint64_t client = 0;
@@ -235,7 +377,7 @@ int run_hmi(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
   wopt.port = args.option("port").empty() ? cfg.hmi.port : std::stoi(args.option("port"));
   wopt.read_only_without_login = cfg.hmi.read_only_without_login;
   wopt.www_dir = args.option("www", cnc::util::resource_path("services/hmi/www"));
-  wopt.runs_dir = args.option("runs", cfg.log_directory);
+  wopt.runs_dir = args.option("runs", cfg.hmi.runs_dir.empty() ? cfg.log_directory : cfg.hmi.runs_dir);
   if (args.flags.count("print-url")) {
     std::printf("http://%s:%d/\n", wopt.listen.c_str(), wopt.port);
     return 0;
@@ -366,6 +508,9 @@ int run_hmi(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
 
   cnc::service::Heartbeat hb(bus, cfg, "cnc-hmi");
   DryRun dry(args.machine_file, plan_exe);
+  std::string logexport_exe = cnc::util::executable_dir() + "/cnc-logexport";
+  if (!std::filesystem::exists(logexport_exe)) logexport_exe = cnc::util::executable_dir() + "/../tools/cnc-logexport";
+  RunsWorker runs(wopt.runs_dir, logexport_exe, cnc::util::resource_path("tools/report/make_report.py"));
   std::vector<Pending> pending;
   std::map<uint64_t, int> jogging;  // client -> axis of its continuous jog
   int64_t login_refusals = 0, logins = 0, refusals_alarmed = 0;
@@ -459,10 +604,7 @@ int run_hmi(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
         return;
       }
       if (action == "runs") {
-        json runs = json::array();
-        for (const auto& r : cnc::hmi::list_runs(wopt.runs_dir))
-          runs.push_back({{"name", r.name}, {"log", r.log}, {"mtime", r.mtime_s}, {"bytes", r.bytes}, {"report", r.report}});
-        send_to(e.client, {{"t", "runs"}, {"runs", runs}});
+        if (!runs.post({e.client, id, "list", ""})) result(e.client, id, false, "runs: busy, try again");
         return;
       }
       if (action == "ping") {
@@ -471,6 +613,10 @@ int run_hmi(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
       }
       if (!e.may_control) {
         result(e.client, id, false, "view only: log in to operate the machine");
+        return;
+      }
+      if (action == "report") {
+        if (!runs.post({e.client, id, "report", j.value("log", "")})) result(e.client, id, false, "report: busy, try again");
         return;
       }
       cnc::service::OperatorCommand c;
@@ -833,8 +979,10 @@ int run_hmi(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
       broadcast(preview_msg, false);
     }
 
+    for (auto& [client, msg] : runs.take()) send_to(client, msg);
     if (now >= next_status) {
-      next_status = now + status_period;
+      // On a fixed schedule (a late frame does not delay the next ones), restarted after a stall.
+      next_status = now - next_status > status_period ? now + status_period : next_status + status_period;
       if (web.clients() > 0) broadcast(status_json(now), true);
     }
     hb.tick(cnc::lcmt_heartbeat::RUNNING, 0,

@@ -430,8 +430,9 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
       return;
     }
     Response res = plain(req, http::status::ok, body, content_type(rel));
-    // The report's own page has inline scripts and styles: it runs sandboxed, no access to the HMI.
-    res.set("Content-Security-Policy", "sandbox allow-scripts; default-src 'self' 'unsafe-inline' data:");
+    // A report is HTML with its plots and an inline style sheet, no script: none may run.
+    res.set("Content-Security-Policy",
+            "default-src 'none'; img-src 'self' data:; style-src 'self' 'unsafe-inline'; frame-ancestors 'none'");
     send(std::move(res));
   }
 

@@ -290,7 +290,7 @@ try:
     wait("drives enabled again", lambda: all(text(f"dro-{a}-drive") == "enabled" for a in "XYZ"), 10)
     shot("07-reset")
 
-    # The display rate over the whole session.
+    # The display rate over the session so far (the report's page below leaves it).
     st = driver.execute_script("return {n: window.hmiStats.status, ms: performance.now() - window.hmiStats.since,"
                                " min: window.hmiStats.minRate || 0};")
     timings["status_frames"] = st["n"]
@@ -298,6 +298,37 @@ try:
     timings["display_rate_hz_min_1s_incl_screenshots"] = st["min"]
     note(f"position display: {st['n']} frames in {st['ms'] / 1000:.1f} s = {timings['display_rate_hz_mean']} Hz mean, "
          f"lowest 1 s window {st['min']} Hz (screenshots stall the page)")
+
+    # 11. Run analysis: the runs directory (this session's log, still being written), its
+    #     summary, and its report made and opened (./cnc report's steps), machine untouched.
+    driver.find_element(By.ID, "btn-runs").click()
+    row = "#runs-body tr[data-log='cell.lcmlog']"
+    wait("the session's run listed", lambda: driver.execute_script(f"return document.querySelector(\"{row}\") !== null"), 30)
+    cells = driver.execute_script(f"return [...document.querySelector(\"{row}\").children].map(c => c.textContent)")
+    note(f"run listed: {cells}")
+    if "square.ngc" not in cells[3] or "MDI" not in cells[3]:
+        fail(f"the run's programs should name square.ngc and the MDI lines: {cells[3]}")
+    if not cells[4].split(" ")[0].isdigit() or int(cells[4].split(" ")[0]) < 3 or "fault" not in cells[4]:
+        fail(f"the run's alarms should count the session's (a fault among them): {cells[4]}")
+    n0 = n_results()
+    t_rep = time.monotonic()
+    driver.execute_script(f"document.querySelector(\"{row} button.make-report\").click()")
+    wait_result(n0, "report of cell.lcmlog ready", timeout=90)
+    timings["report_made_s"] = round(time.monotonic() - t_rep, 1)
+    wait("the report link", lambda: driver.execute_script(
+        f"return document.querySelector(\"{row} a.report-link\") !== null"), 20)
+    shot("08-runs")
+    href = driver.execute_script(f"return document.querySelector(\"{row} a.report-link\").href")
+    driver.get(href)
+    wait("the report's plots shown", lambda: driver.execute_script(
+        "return [...document.images].filter(i => i.complete && i.naturalWidth > 0).length") >= 3, 20)
+    imgs_ok = driver.execute_script(
+        "return [...document.images].filter(i => i.complete && i.naturalWidth > 0).length")
+    note(f"report opened from the page: {href}, {imgs_ok} plots, made in {timings['report_made_s']} s")
+    shot("09-report")
+    driver.back()
+    wait("back on the page", lambda: text("conn") == "connected", 20)
+
 finally:
     with open(os.path.join(OUT, "timings.json"), "w") as f:
         json.dump(timings, f, indent=1)

@@ -7,7 +7,8 @@
 # heartbeat), home X, jog X by 10 mm, touch off X, load and start a program and see
 # the highlighted line move, hold (motion stands), resume, feed override 50 % and
 # back, stop, MDI, a fault injected from outside (DRIVE_CMD DISABLE) shown in the
-# alarm list, reset. Timings from the click to the change on the page and the
+# alarm list, reset; the session's run listed (programs, alarms) and its report made
+# and opened from the page. Timings from the click to the change on the page and the
 # position display rate, measured in the page; screenshots in
 # BUILD/test-output/hmi/ (timings.json beside them).
 #   hmi_test.sh BUILD_DIR SOURCE_DIR
@@ -53,6 +54,7 @@ hmi:
   port: 8093
   users_file: users
   program_dir: programs
+  runs_dir: .
 EOF2
 
 # Bad input: a shop-network address without a users file is a config error naming the key.

@@ -150,19 +150,31 @@ const handlers = {
   },
   programs(m) { fillPrograms(m.programs); },
   runs(m) {
+    $('runs-dir').textContent = m.dir;
     const body = $('runs-body'); body.innerHTML = '';
     for (const r of m.runs) {
       const tr = document.createElement('tr');
-      const date = new Date(r.mtime * 1000).toISOString().replace('T', ' ').slice(0, 19);
-      const cells = [r.name, date, `${(r.bytes / 1e6).toFixed(1)} MB`];
+      tr.dataset.log = r.log;
+      const t = r.start || r.mtime;
+      const date = new Date(t * 1000).toISOString().replace('T', ' ').slice(0, 19);
+      const progs = (r.programs || []).map((p) => p.split('/').pop()).join(', ') +
+        (r.mdi_lines ? ` (+${r.mdi_lines} MDI)` : '');
+      const cells = [r.name, date, `${r.duration_s} s`, progs || '—',
+        r.faults ? `${r.alarms} (${r.faults} fault)` : `${r.alarms}`];
       for (const c of cells) { const td = document.createElement('td'); td.textContent = c; tr.appendChild(td); }
       const td = document.createElement('td');
-      if (r.report) {
+      if (r.report_url) {
         const a = document.createElement('a');
-        a.href = `/runs/${r.log.includes('/') ? r.name + '/report' : r.name.replace(/\.lcmlog$/, '') + '-report'}/index.html`;
-        a.target = '_blank'; a.rel = 'noopener'; a.textContent = 'report';
+        a.href = r.report_url; a.target = '_blank'; a.rel = 'noopener'; a.textContent = 'open';
+        a.className = 'report-link';
         td.appendChild(a);
-      } else { td.textContent = `./cnc report runs/${r.log} --out …`; td.className = 'small'; }
+      }
+      const b = document.createElement('button');
+      b.textContent = r.report_url ? 'again' : 'make'; b.className = 'small make-report';
+      b.title = 'cnc-logexport and make_report.py on this log (as ./cnc report)';
+      b.disabled = !S.mayControl;
+      b.onclick = () => { b.disabled = true; b.textContent = '…'; send('report', { log: r.log }); };
+      td.appendChild(b);
       tr.appendChild(td);
       body.appendChild(tr);
     }

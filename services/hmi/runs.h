@@ -1,0 +1,25 @@
+#pragma once
+// Run analysis beside the HMI (issue 17 item 3): what a recorded run was, read from
+// its LCM log without touching the machine.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace cnc::hmi {
+
+struct RunSummary {
+  bool ok = false;
+  std::string error;                  // the log could not be read
+  double start_utime_s = 0;           // the first event (Unix seconds)
+  double duration_s = 0;              // the first event to the last
+  std::vector<std::string> programs;  // the programs loaded (PROGRAM_STATE LOADED), in order, MDI lines left out
+  int64_t mdi_lines = 0;              // MDI and touch-off lines run
+  int64_t alarms = 0;                 // ALARM messages
+  int64_t faults = 0;                 // ... of severity FAULT
+  int64_t events = 0;
+};
+
+// Reads the whole log once (its events' channels and times; PROGRAM_STATE and ALARM decoded).
+RunSummary summarize_log(const std::string& path);
+
+}  // namespace cnc::hmi
