@@ -10,7 +10,8 @@ std::optional<int8_t> program_command_by_name(const std::string& name) {
       {"load", C::LOAD},   {"start", C::START},   {"hold", C::HOLD},       {"resume", C::RESUME},
       {"stop", C::STOP},   {"override", C::OVERRIDE}, {"reset", C::RESET}, {"home", C::HOME},
       {"jog", C::JOG},     {"jog-keepalive", C::JOG_KEEPALIVE},            {"touch-off", C::TOUCH_OFF},
-      {"mdi", C::MDI}};
+      {"mdi", C::MDI},     {"single-block", C::SINGLE_BLOCK}, {"optional-stop", C::OPTIONAL_STOP},
+      {"block-delete", C::BLOCK_DELETE}};
   const auto it = kNames.find(name);
   if (it == kNames.end()) return std::nullopt;
   return it->second;

@@ -534,7 +534,7 @@ int run_hmi(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
                      {"program_dir", program_dir},
                      {"programs", cnc::hmi::list_programs(program_dir)},
                      // Commands the cell does not have yet: their controls stay disabled.
-                     {"unavailable", {"rapid_override", "single_block", "optional_stop", "block_delete", "run_from_line"}},
+                     {"unavailable", {"rapid_override", "run_from_line"}},
                      {"status_rate_hz", cfg.hmi.status_rate_hz}});
     send_to(client, program_msg);
     if (!preview_msg.is_null()) send_to(client, preview_msg);
@@ -640,6 +640,18 @@ int run_hmi(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
         c.command = *cnc::service::program_command_by_name(action);
         if (action == "stop") jogging.erase(e.client);
         if (send_cmd(e.client, id, action, c)) result(e.client, id, true, action + " sent");
+        return;
+      }
+      if (action == "single_block" || action == "optional_stop" || action == "block_delete") {
+        // The switches (1 on, 0 off): the interlock answers as for cnc-ctl --do single-block ...
+        std::string name = action;
+        std::replace(name.begin(), name.end(), '_', '-');
+        c.command = *cnc::service::program_command_by_name(name);
+        const bool on = j.value("value", false);
+        c.value = on ? 1 : 0;
+        c.axis = -1;
+        c.feed_override = 0;
+        if (send_cmd(e.client, id, action, c)) result(e.client, id, true, name + (on ? " on" : " off") + " sent");
         return;
       }
       if (action == "override") {
@@ -870,7 +882,10 @@ int run_hmi(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
                      {"feed_override", fin(interp.feed_override)},
                      {"token", interp.program_token},
                      {"blocks_done", interp.blocks_done},
-                     {"program_time_s", fin(interp.program_time_s)}};
+                     {"program_time_s", fin(interp.program_time_s)},
+                     {"single_block", interp.single_block != 0},
+                     {"optional_stop", interp.optional_stop != 0},
+                     {"source_line", interp.source_line}};
     }
     if (have_program) {
       s["program"] = {{"state", program_state_name(program.state)},
@@ -878,12 +893,16 @@ int run_hmi(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
                       {"token", program.program_token},
                       {"blocks", program.num_blocks},
                       {"error", program.error},
-                      {"refusal", program.refusal}};
+                      {"refusal", program.refusal},
+                      {"block_delete", program.block_delete != 0}};
     }
     if (have_setpoint) {
       s["feed"] = fin(setpoint.feed_mm_per_min);
       if (sp_is_program) {
-        s["line"] = setpoint.source_line;
+        // Held (single block, M1, a hold): the line the path stands before, from the interpolator.
+        const bool held = have_interp && interp.state == cnc::lcmt_setpoint::HELD && interp.source_line > 0 &&
+                          interp.program_token == setpoint.program_token;
+        s["line"] = held ? interp.source_line : setpoint.source_line;
         s["line_in_program"] = blk == nullptr || blk->in_program;
         s["block"] = setpoint.block_index;
       }

@@ -268,6 +268,42 @@ try:
     effect("stop_click_to_stopped", "btn-stop", "state-program", "contains", "stopped", timeout_s=10)
     wait("the interpolator stands", lambda: state("interp") in ("idle", "done"), 10)
 
+    # 9b. Single block from the page: switched on (the cell confirms it in INTERP_STATE),
+    #     the program loaded again; START runs one line and holds, each RESUME one more:
+    #     three single steps, the highlight one line further each.
+    def cell(path):
+        return driver.execute_script("let v = window.hmiStats.last; for (const k of arguments[0]) v = v && v[k];"
+                                     " return v === undefined ? null : v;", path)
+    n0 = n_results()
+    driver.find_element(By.ID, "sw-single-block").click()
+    wait_result(n0, "single-block on sent")
+    wait("single block on in the cell", lambda: cell(["interp", "single_block"]) is True, 10)
+    n0 = n_results()
+    driver.find_element(By.ID, "btn-load").click()
+    wait_result(n0, "loaded")
+    n0 = n_results()
+    driver.find_element(By.ID, "btn-start").click()
+    wait("the first line run, held", lambda: n_results() > n0 and state("interp") == "held" and text("line-no") != "—", 20)
+    line0 = int(text("line-no"))
+    steps = []
+    for k in (1, 2, 3):
+        t_step = time.monotonic()
+        driver.find_element(By.ID, "btn-resume").click()
+        wait(f"single step {k}", lambda: state("interp") == "held" and text("line-no") == str(line0 + k), 20)
+        hl = driver.execute_script("const e = document.querySelector('#program-text div.current'); return e ? e.id : null;")
+        if hl != f"L{line0 + k}":
+            fail(f"single step {k}: highlighted {hl}, not L{line0 + k}")
+        steps.append(round(time.monotonic() - t_step, 2))
+    timings["single_steps_s"] = steps
+    note(f"single block: held before line {line0}, then {line0 + 1}, {line0 + 2}, {line0 + 3} ({steps} s a step)")
+    shot("06-single-block")
+    n0 = n_results()
+    driver.find_element(By.ID, "sw-single-block").click()
+    wait_result(n0, "single-block off sent")
+    wait("single block off in the cell", lambda: cell(["interp", "single_block"]) is False, 10)
+    driver.find_element(By.ID, "btn-stop").click()
+    wait("stopped again", lambda: state("program") == "stopped" and state("interp") in ("idle", "done"), 10)
+
     # 10. MDI a slow move, a fault injected from outside during it (DRIVE_CMD DISABLE by
     #     cnc-ctl), the alarm shown; Reset from the page.
     driver.find_element(By.ID, "mdi-line").send_keys("G1 Y60 F300")
@@ -283,12 +319,12 @@ try:
     alarm = driver.execute_script("const r = document.querySelector('#alarms-body tr.fault'); return r.textContent;")
     note(f"alarm shown: {alarm}")
     wait("FAULT", lambda: state("interp") == "fault", 10)
-    shot("06-alarm")
+    shot("07-alarm")
     n0 = n_results()
     effect("reset_click_to_interp_idle", "btn-reset", "state-interp", "contains", "idle", timeout_s=30)
     wait_result(n0, "reset:")
     wait("drives enabled again", lambda: all(text(f"dro-{a}-drive") == "enabled" for a in "XYZ"), 10)
-    shot("07-reset")
+    shot("08-reset")
 
     # The display rate over the session so far (the report's page below leaves it).
     st = driver.execute_script("return {n: window.hmiStats.status, ms: performance.now() - window.hmiStats.since,"
@@ -317,7 +353,7 @@ try:
     timings["report_made_s"] = round(time.monotonic() - t_rep, 1)
     wait("the report link", lambda: driver.execute_script(
         f"return document.querySelector(\"{row} a.report-link\") !== null"), 20)
-    shot("08-runs")
+    shot("09-runs")
     href = driver.execute_script(f"return document.querySelector(\"{row} a.report-link\").href")
     driver.get(href)
     wait("the report's plots shown", lambda: driver.execute_script(
@@ -325,7 +361,7 @@ try:
     imgs_ok = driver.execute_script(
         "return [...document.images].filter(i => i.complete && i.naturalWidth > 0).length")
     note(f"report opened from the page: {href}, {imgs_ok} plots, made in {timings['report_made_s']} s")
-    shot("09-report")
+    shot("10-report")
     driver.back()
     wait("back on the page", lambda: text("conn") == "connected", 20)
 

@@ -6,8 +6,8 @@
 # wrong passwords refused alike (and counted: the hmi_login_refused ALARM, the
 # heartbeat), home X, jog X by 10 mm, touch off X, load and start a program and see
 # the highlighted line move, hold (motion stands), resume, feed override 50 % and
-# back, stop, MDI, a fault injected from outside (DRIVE_CMD DISABLE) shown in the
-# alarm list, reset; the session's run listed (programs, alarms) and its report made
+# back, stop, single block on and three single steps, MDI, a fault injected from
+# outside (DRIVE_CMD DISABLE) shown in the alarm list, reset; the session's run listed (programs, alarms) and its report made
 # and opened from the page. Timings from the click to the change on the page and the
 # position display rate, measured in the page; screenshots in
 # BUILD/test-output/hmi/ (timings.json beside them).

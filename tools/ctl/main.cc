@@ -283,18 +283,19 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
       return (cmd == lcmt_program_command::SINGLE_BLOCK ? view.interp.single_block : view.interp.optional_stop) == on;
     };
     for (int attempt = 0; attempt < 5; ++attempt) {
-      lcmt_program_command c{};
+      cnc::service::OperatorCommand c;
       c.command = cmd;
       c.value = on;
       c.axis = -1;
-      if (!bus.publish(cfg.channel(ch::kProgramCmd), c)) {
+      c.feed_override = 0;
+      sent_seq = cnc::service::send_program_command(bus, cfg, c);
+      if (sent_seq < 0) {
         std::fprintf(stderr, "cnc-ctl: %s\n", bus.last_publish_error());
         return kExitSendFailed;
       }
-      sent_seq = c.seq;
       // Answered (the server names the command it decided on), then shown in the state.
       auto answered = [&] {
-        return view.have_program && view.program.answered_sender == bus.sender() && view.program.answered_seq == c.seq;
+        return view.have_program && view.program.answered_sender == bus.sender() && view.program.answered_seq == sent_seq;
       };
       if (wait_for(bus, 0.7, [&] { return !refused().empty() || (answered() && shown()); }) && refused().empty()) {
         std::printf("%s %s\n", what.c_str(), on ? "on" : "off");

@@ -74,6 +74,7 @@ const handlers = {
     if (now - st.since > 1500 && !document.hidden) st.minRate = st.minRate ? Math.min(st.minRate, st.rate) : st.rate;
     $('rate').textContent = `${st.rate} Hz`;
     S.lastStatus = m;
+    st.last = m;
     m.axes.forEach((a, i) => {
       const set = (k, v) => { const el = $(`dro-${a.name}-${k}`); if (el) el.textContent = v; };
       set('cmd', fmt(a.cmd)); set('act', fmt(a.act)); set('fe', fmt(a.fe, 4));
@@ -99,6 +100,10 @@ const handlers = {
         $('feed-override').value = Math.round(it.feed_override * 100);
         $('feed-override-out').textContent = `${Math.round(it.feed_override * 100)} %`;
       }
+    }
+    for (const [id, on] of [['sw-single-block', it.single_block], ['sw-optional-stop', it.optional_stop],
+      ['sw-block-delete', pg.block_delete]]) {
+      if (typeof on === 'boolean' && document.activeElement !== $(id)) $(id).checked = on;
     }
     const line = typeof m.line === 'number' && m.line_in_program !== false ? m.line : -1;
     $('line-no').textContent = line >= 0 ? line : '—';
@@ -316,6 +321,10 @@ function wire() {
   $('btn-home-all').onclick = () => send('home');
   $('btn-load').onclick = () => send('load', { path: $('program-list').value });
   $('btn-refresh').onclick = () => send('programs');
+  for (const [id, action] of [['sw-single-block', 'single_block'], ['sw-optional-stop', 'optional_stop'],
+    ['sw-block-delete', 'block_delete']]) {
+    $(id).addEventListener('change', () => { send(action, { value: $(id).checked }); $(id).blur(); });
+  }
   $('btn-runs').onclick = () => send('runs');
   $('btn-touch-off').onclick = () => send('touch_off', { axis: $('to-axis').value, value: Number($('to-value').value) });
   $('mdi-form').onsubmit = (e) => {
