@@ -24,6 +24,7 @@ from selenium.webdriver.support.ui import WebDriverWait
 
 URL, OUT = sys.argv[1], sys.argv[2]
 CTL = sys.argv[3:]
+VIEW_URL = os.environ.get("HMI_VIEW_URL", "")  # a second cnc-hmi, read_only_without_login
 PASSWORD = os.environ["HMI_PASSWORD"]
 os.makedirs(OUT, exist_ok=True)
 timings = {}
@@ -365,6 +366,32 @@ try:
     driver.back()
     wait("back on the page", lambda: text("conn") == "connected", 20)
 
+    # 12. A second cnc-hmi with read_only_without_login (VIEW_URL): without a login the
+    #     page shows the machine, every control disabled, and an action sent anyway is refused.
+    if VIEW_URL:
+        driver.delete_all_cookies()
+        driver.get(VIEW_URL)
+        wait("the view-only page", lambda: text("conn") == "connected" and text("who") == "view only", 20)
+        wait("its status", lambda: num("dro-X-act") is not None, 10)
+        disabled = driver.execute_script(
+            "return [...document.querySelectorAll('[data-control]')].every(e => e.disabled)")
+        if not disabled:
+            fail("view only: some control is enabled")
+        x_before = num("dro-X-act")
+        r = driver.execute_async_script("""
+          const done = arguments[0];
+          const ws = new WebSocket(`ws://${location.host}/ws`);
+          ws.onmessage = (ev) => { const m = JSON.parse(ev.data); if (m.t === 'result') done(m.text); };
+          ws.onopen = () => ws.send(JSON.stringify({id: 1, action: 'jog', axis: 'X', value: 5}));
+          setTimeout(() => done('no answer'), 5000);""")
+        if r != "view only: log in to operate the machine":
+            fail(f"view only: a jog sent anyway was answered '{r}'")
+        s0 = driver.execute_script("return window.hmiStats.status")
+        wait("0.5 s of status", lambda: driver.execute_script("return window.hmiStats.status") >= s0 + 12, 10)
+        if abs((num("dro-X-act") or 1e9) - x_before) > 0.001:
+            fail(f"view only: X moved from {x_before} to {text('dro-X-act')}")
+        note(f"view only without login: controls disabled, a jog sent anyway refused ('{r}'), X stays {x_before:.3f}")
+        shot("11-view-only")
 finally:
     with open(os.path.join(OUT, "timings.json"), "w") as f:
         json.dump(timings, f, indent=1)

@@ -7,9 +7,11 @@
 # heartbeat), home X, jog X by 10 mm, touch off X, load and start a program and see
 # the highlighted line move, hold (motion stands), resume, feed override 50 % and
 # back, stop, single block on and three single steps, MDI, a fault injected from
-# outside (DRIVE_CMD DISABLE) shown in the alarm list, reset; the session's run listed (programs, alarms) and its report made
-# and opened from the page. Timings from the click to the change on the page and the
-# position display rate, measured in the page; screenshots in
+# outside (DRIVE_CMD DISABLE) shown in the alarm list, reset; the session's run listed
+# (programs, alarms) and its report made and opened from the page; a second cnc-hmi
+# with read_only_without_login: the page without a login shows the machine and
+# refuses actions. Timings from the click to the change on the page and the position
+# display rate, measured in the page; screenshots in
 # BUILD/test-output/hmi/ (timings.json beside them).
 #   hmi_test.sh BUILD_DIR SOURCE_DIR
 source "$(dirname "$0")/lib.sh"
@@ -75,8 +77,15 @@ grep -q "cnc-hmi: open http://127.0.0.1:8093/" "$WORK/up.log" || { cat "$WORK/up
 grep -q "the operator's page: http://127.0.0.1:8093/" "$WORK/up.log" || fail "./cnc up did not print the page's URL"
 "$BUILD/tools/cnc-ctl" --machine "$M" --do enable --timeout 30 >"$WORK/enable.out" 2>&1 || { cat "$WORK/enable.out" >&2; fail "the drives did not enable"; }
 
+# A second page on the same cell with a view-only page for browsers that have not logged in.
+sed -e 's/port: 8093/port: 8094/' -e 's/^  runs_dir: \.$/  runs_dir: .\n  read_only_without_login: true/' "$M" >"$WORK/view.yaml"
+grep -q 'read_only_without_login: true' "$WORK/view.yaml" || fail "view.yaml: no read_only_without_login"
+start hmi-view "$BUILD/services/cnc-hmi" --machine "$WORK/view.yaml"
+for _ in $(seq 1 300); do grep -q "open http://127.0.0.1:8094/" "$WORK/hmi-view.log" && break; sleep 0.1; done
+grep -q "open http://127.0.0.1:8094/" "$WORK/hmi-view.log" || { cat "$WORK/hmi-view.log" >&2; fail "the view-only cnc-hmi did not start"; }
+
 rc=0
-timeout 150 /usr/bin/python3 "$SRC/tests/integration/hmi_drive.py" "http://127.0.0.1:8093/" "$OUT" \
+HMI_VIEW_URL="http://127.0.0.1:8094/" timeout 150 /usr/bin/python3 "$SRC/tests/integration/hmi_drive.py" "http://127.0.0.1:8093/" "$OUT" \
   "$BUILD/tools/cnc-ctl" --machine "$M" 2>&1 | tee "$WORK/drive.log" >&2 || rc=$?
 [ "${PIPESTATUS[0]}" -eq 0 ] && [ "$rc" -eq 0 ] || { tail -40 "$WORK/up.log" >&2; fail "the browser session failed (screenshots in $OUT)"; }
 
@@ -87,6 +96,7 @@ grep -q "login refused for user 'operator'" "$WORK/up.log" || fail "the refused 
 grep -q "login refused for user 'nobody'" "$WORK/up.log" || fail "the refused unknown user is not in the log"
 "$BUILD/tools/cnc-ctl" --machine "$M" --do status >"$WORK/status.out" 2>&1 || true
 grep -q '^cnc-hmi ' "$WORK/status.out" || { cat "$WORK/status.out" >&2; fail "cnc-ctl --do status does not list cnc-hmi"; }
+stop hmi-view TERM
 stop up TERM
 grep -q "cnc-hmi: stopped (1 logins, 2 refused)" "$WORK/up.log" || { grep cnc-hmi "$WORK/up.log" >&2; fail "cnc-hmi's count of logins is not 1 accepted, 2 refused"; }
 note "timings: $(cat "$OUT/timings.json" | tr -d '\n ')"
