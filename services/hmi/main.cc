@@ -310,6 +310,23 @@ class RunsWorker {
     return {{"t", "result"}, {"id", j.id}, {"ok", true}, {"text", "report of " + it->log + " ready"},
             {"report_url", "/runs/" + report_dir(*it) + "/index.html"}};
   }
+  // The run's path for the page to play back in its preview (the page animates it: the
+  // machine is not involved).
+  json playback(const Job& j) {
+    const auto all = cnc::hmi::list_runs(dir_);
+    const auto it = std::find_if(all.begin(), all.end(), [&](const auto& r) { return r.log == j.log; });
+    if (it == all.end())
+      return {{"t", "result"}, {"id", j.id}, {"ok", false}, {"text", "playback: no run '" + j.log + "' in " + dir_}};
+    const cnc::hmi::RunPath p = cnc::hmi::log_path(dir_ + "/" + it->log);
+    if (!p.ok || p.t_s.empty())
+      return {{"t", "result"}, {"id", j.id}, {"ok", false},
+              {"text", "playback: " + (p.ok ? "no setpoints in " + it->log : p.error)}};
+    std::vector<double> xyz(p.xyz.size()), ts(p.t_s.size());
+    for (size_t i = 0; i < xyz.size(); ++i) xyz[i] = std::round(p.xyz[i] * 1000) / 1000;
+    for (size_t i = 0; i < ts.size(); ++i) ts[i] = std::round(p.t_s[i] * 1000) / 1000;
+    return {{"t", "playback"}, {"id", j.id}, {"log", it->log}, {"points", xyz}, {"times", ts}, {"lines", p.lines},
+            {"duration_s", p.duration_s}, {"setpoints", p.setpoints}};
+  }
   void loop() {
     for (;;) {
       Job j;
@@ -320,7 +337,7 @@ class RunsWorker {
         j = std::move(jobs_.front());
         jobs_.pop_front();
       }
-      json r = j.kind == "report" ? report(j) : list();
+      json r = j.kind == "report" ? report(j) : j.kind == "playback" ? playback(j) : list();
       std::lock_guard<std::mutex> lk(mu_);
       out_.emplace_back(j.client, std::move(r));
       if (j.kind == "report") out_.emplace_back(j.client, list());
@@ -613,6 +630,10 @@ int run_hmi(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
       }
       if (!e.may_control) {
         result(e.client, id, false, "view only: log in to operate the machine");
+        return;
+      }
+      if (action == "playback") {
+        if (!runs.post({e.client, id, "playback", j.value("log", "")})) result(e.client, id, false, "playback: busy, try again");
         return;
       }
       if (action == "report") {

@@ -355,6 +355,20 @@ try:
     wait("the report link", lambda: driver.execute_script(
         f"return document.querySelector(\"{row} a.report-link\") !== null"), 20)
     shot("09-runs")
+    # Playback of the run in the preview from its log, at 20x: the green dot goes along
+    # the recorded path to its end; the machine is not involved (the interpolator stays idle).
+    driver.execute_script("document.getElementById('play-speed').value = '20';")
+    driver.execute_script(f"document.querySelector(\"{row} button.play-run\").click()")
+    wait("the playback started", lambda: driver.execute_script("return (window.hmiStats.playbackFrames || 0) >= 10"), 30)
+    shot("09b-playback")
+    wait("the playback to its end", lambda: driver.execute_script("return window.hmiStats.playbackDone === true"), 60)
+    pb = driver.execute_script("return [window.hmiStats.playbackFrames, document.getElementById('playback').textContent]")
+    if pb[0] < 5:
+        fail(f"playback drew {pb[0]} frames")
+    if state("interp") not in ("idle", "done"):
+        fail(f"the playback moved the machine? interpolator {state('interp')}")
+    timings["playback_frames"] = pb[0]
+    note(f"playback of the run at 20x: {pb[0]} frames, '{pb[1]}', interpolator {state('interp')}")
     href = driver.execute_script(f"return document.querySelector(\"{row} a.report-link\").href")
     driver.get(href)
     wait("the report's plots shown", lambda: driver.execute_script(

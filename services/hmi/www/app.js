@@ -154,6 +154,15 @@ const handlers = {
     showMsg(m.ok, m.text);
   },
   programs(m) { fillPrograms(m.programs); },
+  playback(m) {
+    // The run's commanded path from its log, animated in the preview at the chosen speed.
+    S.preview = m.points; S.bounds = null; S.trail = [];
+    S.play = { log: m.log, pts: m.points, times: m.times, lines: m.lines, i: 0,
+      speed: Number($('play-speed').value) || 1, t0: performance.now(), duration: m.duration_s };
+    window.hmiStats.playbackFrames = 0; window.hmiStats.playbackDone = false;
+    $('btn-play-stop').disabled = false;
+    requestAnimationFrame(playFrame);
+  },
   runs(m) {
     $('runs-dir').textContent = m.dir;
     const body = $('runs-body'); body.innerHTML = '';
@@ -174,6 +183,12 @@ const handlers = {
         a.className = 'report-link';
         td.appendChild(a);
       }
+      const pb = document.createElement('button');
+      pb.textContent = 'play'; pb.className = 'small play-run';
+      pb.title = 'play the run back in the preview from its log (the machine is not involved)';
+      pb.disabled = !S.mayControl;
+      pb.onclick = () => send('playback', { log: r.log });
+      td.appendChild(pb);
       const b = document.createElement('button');
       b.textContent = r.report_url ? 'again' : 'make'; b.className = 'small make-report';
       b.title = 'cnc-logexport and make_report.py on this log (as ./cnc report)';
@@ -268,6 +283,26 @@ function stopJog() {
 }
 window.addEventListener('blur', stopJog);
 
+function playFrame() {
+  const p = S.play;
+  if (!p) return;
+  const t = (performance.now() - p.t0) / 1000 * p.speed;
+  while (p.i + 1 < p.times.length && p.times[p.i + 1] <= t) p.i++;
+  const k = p.i, done = k + 1 >= p.times.length;
+  let at = [p.pts[3 * k], p.pts[3 * k + 1]];
+  if (!done) {  // between two recorded points, by time
+    const f = Math.min(1, Math.max(0, (t - p.times[k]) / (p.times[k + 1] - p.times[k] || 1)));
+    at = [at[0] + f * (p.pts[3 * k + 3] - at[0]), at[1] + f * (p.pts[3 * k + 4] - at[1])];
+  }
+  S.playAt = at;
+  window.hmiStats.playbackFrames++;
+  $('playback').textContent = `${p.log}: ${Math.min(t, p.duration).toFixed(1)} / ${p.duration.toFixed(1)} s, line ${p.lines[k]}` +
+    (done ? ' (end)' : '');
+  drawPreview(null);
+  if (done) { window.hmiStats.playbackDone = true; S.play = null; $('btn-play-stop').disabled = true; return; }
+  requestAnimationFrame(playFrame);
+}
+
 function drawPreview(tool) {
   const cv = $('preview'), g = cv.getContext('2d');
   const w = cv.width, h = cv.height;
@@ -304,6 +339,9 @@ function drawPreview(tool) {
     for (const q of S.trail) g.lineTo(X(q[0]), Y(q[1]));
     g.stroke();
   }
+  if (S.playAt) {
+    g.fillStyle = '#4bd16b'; g.beginPath(); g.arc(X(S.playAt[0]), Y(S.playAt[1]), 6, 0, 2 * Math.PI); g.fill();
+  }
   if (tool) {
     g.fillStyle = '#ff4b4b'; g.beginPath(); g.arc(X(tool[0]), Y(tool[1]), 5, 0, 2 * Math.PI); g.fill();
   }
@@ -326,6 +364,7 @@ function wire() {
     $(id).addEventListener('change', () => { send(action, { value: $(id).checked }); $(id).blur(); });
   }
   $('btn-runs').onclick = () => send('runs');
+  $('btn-play-stop').onclick = () => { S.play = null; S.playAt = null; $('btn-play-stop').disabled = true; $('playback').textContent = ''; };
   $('btn-touch-off').onclick = () => send('touch_off', { axis: $('to-axis').value, value: Number($('to-value').value) });
   $('mdi-form').onsubmit = (e) => {
     e.preventDefault();
