@@ -366,6 +366,13 @@ bool Interpolator::apply_command(const Command& cmd) {
       dwell_left_ = -1;
       rest_next_ = false;
       state_ = RunState::kIdle;
+      // No block of the new program is under way until its first step: the
+      // setpoints until then name none (they carried the last path's block and u,
+      // which the monitor read on the new program's block 0: a false chord error
+      // of 22 mm after a homing and a touch-off, seen in integration.hmi).
+      out_.block_index = -1;
+      out_.source_line = 0;
+      out_.u = 0;
       break;
     case Command::Kind::kStart:
       if (state_ == RunState::kIdle || state_ == RunState::kDone) {

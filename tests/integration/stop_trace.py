@@ -2,16 +2,19 @@
 """A controlled stop of X in the servo simulator's trace, checked against the bridge's
 configured stop (deceleration a, jerk j).
 
-  stop_trace.py LABEL TRACE CAUSE_BEFORE CAUSE_AFTER DECEL JERK MIN_V MIN_FACTOR
+  stop_trace.py LABEL TRACE CAUSE_BEFORE CAUSE_AFTER DECEL JERK MIN_V MIN_FACTOR [ONSET_S]
 
 CAUSE_BEFORE, CAUSE_AFTER: wall times around the command that caused the stop (a
 command such as `ip route del` can itself take tens of milliseconds under load).
+JERK 0: a stop without a jerk limit (a drive's own quick stop). ONSET_S: the bound on
+the time from the cause to the braking (default 0.1 s: detection and reaction; a
+watchdog that waits adds its timeout).
 
 Measured on the simulated world's own time (world_s: wall time less the stalls the
 world stood through, see tools/servo_sim), so a stalled process is neither a spike
 nor a plateau in the speeds:
   * the onset of braking: the first row slower than 97 % of the speed at CAUSE_BEFORE;
-    it must come within 0.1 s of CAUSE_AFTER (detection and reaction);
+    it must come within ONSET_S of CAUSE_AFTER;
   * the braking distance from the row before the onset to rest, against the
     jerk-limited stop's v^2/(2a) + v*a/(2j), plus two rows' travel (20 ms: the
     braking begins somewhere between the row before the onset and the one after) and
@@ -47,6 +50,7 @@ def decel_fit(t, x):
 def main():
     label, path = sys.argv[1], sys.argv[2]
     before, after, a, j, min_v, min_factor = (float(v) for v in sys.argv[3:9])
+    onset_bound = float(sys.argv[9]) if len(sys.argv) > 9 else 0.1
     rows = [r for r in csv.DictReader(open(path)) if None not in r.values() and "" not in r.values()]
     world = lambda r: float(r.get("world_s") or r["wall_s"])
     # Rows written while the world stood: the first of each only.
@@ -62,7 +66,7 @@ def main():
     rest = next(k for k in range(onset, len(x)) if all(abs(x[m] - x[k]) < 1e-3 for m in range(k, min(len(x), k + 30))))
     start = max(i, onset - 1)
     dist = sign * (x[rest] - x[start])
-    bound = v0 ** 2 / (2 * a) + v0 * a / (2 * j) + v0 * 0.020 + 0.1
+    bound = v0 ** 2 / (2 * a) + (v0 * a / (2 * j) if j > 0 else 0.0) + v0 * 0.020 + 0.1
     latency = t[onset] - after
     band = [k for k in range(start, rest) if 0.1 * v0 < sign * v[k] < 0.9 * v0]
     fitted = sign * decel_fit(tw[band[0]:band[-1] + 2], x[band[0]:band[-1] + 2]) if len(band) >= 3 else 0.0
@@ -73,11 +77,11 @@ def main():
             break
         worst = max(worst, sign * (v[k] - v[m]) / (tw[m] - tw[k]))
     print(f"# {label}: X at {sign * v0:.1f} mm/s; braking began {latency * 1e3:.0f} ms after the cause "
-          f"(bound 100 ms; the cause took {(after - before) * 1e3:.0f} ms); braking distance {dist:.3f} mm "
+          f"(bound {onset_bound * 1e3:.0f} ms; the cause took {(after - before) * 1e3:.0f} ms); braking distance {dist:.3f} mm "
           f"(bound v^2/2a + v*a/2j + v*20 ms + 0.1 = {bound:.3f} mm); deceleration {fitted:.0f} mm/s^2 fitted "
           f"over {len(band) + 1} rows (configured {a:g}: within -{(1 - min_factor) * 100:.0f}/+10 %), largest over "
           f"50 ms {worst:.0f} mm/s^2 (within +25 %)", file=sys.stderr)
-    ok = (v0 > min_v and latency <= 0.1 and 0 <= dist <= bound and len(band) >= 3
+    ok = (v0 > min_v and latency <= onset_bound and 0 <= dist <= bound and len(band) >= 3
           and min_factor * a <= fitted <= 1.10 * a and worst <= 1.25 * a)
     sys.exit(0 if ok else 1)
 

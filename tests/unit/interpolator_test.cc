@@ -212,6 +212,35 @@ TEST(Interpolator, SingleLineEndsExactlyAtItsEndPoint) {
   expect_limits_held(sps, blocks);
 }
 
+TEST(Interpolator, ANewProgramNamesNoBlockUntilItsFirstStep) {
+  // After a program ends at u = 1 of its block 0, the next one is loaded and
+  // started: until its first step the setpoints name no block (index -1, u 0), not
+  // the last program's block and u, which would be read on the new program's
+  // block 0 (the monitor saw a 22 mm chord error there).
+  Interpolator ip(sim3());
+  ip.apply_command(cmd(Command::Kind::kStart));
+  load_all(ip, polyline({{0, 0, 0}, {10, 0, 0}}, BlockKind::kLine, 3000));
+  run_to_done(ip);
+  ip.apply_command(cmd(Command::Kind::kLoad));
+  ip.apply_command(cmd(Command::Kind::kStart));
+  const Setpoint& starved = ip.step();
+  EXPECT_EQ(starved.state, RunState::kStarved);
+  EXPECT_EQ(starved.block_index, -1);
+  EXPECT_EQ(starved.u, 0.0);
+  load_all(ip, polyline({{10, 0, 0}, {30, 10, 2}}, BlockKind::kRapid, 0));
+  bool moved = false;
+  for (int i = 0; i < 200 && !moved; ++i) {
+    const Setpoint& sp = ip.step();
+    if (sp.block_index == -1) {
+      expect_at(sp, {10, 0, 0}, 0);
+    } else {
+      EXPECT_EQ(sp.block_index, 0);
+      moved = true;
+    }
+  }
+  EXPECT_TRUE(moved);
+}
+
 TEST(Interpolator, LimitsHeldOnAMixedProgram) {
   // Corners, a Z reversal, rapids limited by one axis, blocks shorter than one
   // cycle's travel and a zero-length block.
