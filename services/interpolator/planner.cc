@@ -290,10 +290,12 @@ void Planner::plan_block(Planned& p) {
     }
     us.push_back(u1);
   }
-  // cutting.feed_limit: more samples (stations) and a force limit at each.
+  // cutting.feed_limit: more samples (stations) and a force limit at each (below).
   std::vector<double> v_force;
-  if (force_) force_limits(p, &us, &v_force);
-
+  // The limits at the samples us (and the force limits v_force, if any).
+  auto sample_limits = [&]() {
+  p.accel = cfg_.path_accel_mm_s2;
+  p.jerk = cfg_.path_jerk_mm_s3;
   // Per sample: speed limits from the local geometry.
   const size_t n = us.size();
   p.samples.assign(n, Sample{0, 0, kInf, Limit::kNone});
@@ -361,6 +363,37 @@ void Planner::plan_block(Planned& p) {
       if (v < smp.v_geo) {
         smp.v_geo = v;
         smp.limit = Limit::kCurvatureAccel;
+      }
+    }
+  }
+  // A knot where the curvature jumps (every knot of a degree-2 NURBS, a repeated
+  // knot of a cubic): the centripetal acceleration steps by v²·|Δk_a| within a cycle
+  // there, held within the curvature's share of a cycle's jerk per axis, as at a
+  // junction between blocks. The curvature's change along the interval that ends on
+  // the knot is taken from its left-hand limit (smeared over that interval, the jump
+  // gave a limit up to 2% too high: a G5.2 at 1.02x the jerk limit).
+  std::vector<AxisVec> kleft = kvec;
+  if (b.kind == program::BlockKind::kNurbs) {
+    const std::vector<double> bp = p.path.nurbs_breakpoints();
+    for (size_t k = 1; k + 1 < bp.size(); ++k) {
+      const auto it = std::lower_bound(us.begin(), us.end(), bp[k]);
+      if (it == us.end() || *it != bp[k]) continue;
+      const size_t i = static_cast<size_t>(it - us.begin());
+      const double h = 1e-7 * std::min(bp[k] - bp[k - 1], bp[k + 1] - bp[k]);
+      AxisVec P{}, d1{}, d2{}, t{}, kl{}, kr{};
+      p.path.eval(bp[k] - h, &P, &d1, &d2);
+      if (local_frame(d1, d2, naxes_, &t, &kl) <= sp_floor) continue;
+      p.path.eval(bp[k] + h, &P, &d1, &d2);
+      if (local_frame(d1, d2, naxes_, &t, &kr) <= sp_floor) continue;
+      kleft[i] = kl;
+      for (int a = 0; a < naxes_; ++a) {
+        const double dk = std::fabs(kr[a] - kl[a]);
+        if (!(dk > 0) || !std::isfinite(dk)) continue;
+        const double v = std::sqrt(kCentripetalShare * cfg_.axes[a].max_jerk_mm_s3 * period_s_ / dk);
+        if (v < p.samples[i].v_geo) {
+          p.samples[i].v_geo = v;
+          p.samples[i].limit = Limit::kCurvatureAccel;
+        }
       }
     }
   }
@@ -438,7 +471,7 @@ void Planner::plan_block(Planned& p) {
     const double ds = p.samples[i + 1].s - p.samples[i].s;
     if (ds <= 0) continue;
     for (int a = 0; a < naxes_; ++a) {
-      const double dk = std::fabs(kvec[i + 1][a] - kvec[i][a]) / ds;
+      const double dk = std::fabs(kleft[i + 1][a] - kvec[i][a]) / ds;
       if (dk <= 0) continue;
       const double v = std::cbrt(kCentripetalShare * cfg_.axes[a].max_jerk_mm_s3 / dk);
       for (size_t k : {i, i + 1}) {
@@ -449,6 +482,53 @@ void Planner::plan_block(Planned& p) {
       }
     }
   }
+  };
+  // Between two samples the cyclic side takes the limit as linear in the arc length,
+  // and the look-ahead brakes for the samples' own limits only. A limit that holds at
+  // one point (a curvature jump, a corner at a knot, the curvature changing fast over
+  // a short stretch) set on a sample whose neighbour is far (the refinement above
+  // skips stretches whose chord limit is above what the block can reach) made that
+  // line a slope the look-ahead did not see, down which the step's hard cap then
+  // braked without a jerk limit (a G6.2 with clustered knots: jerk 2.08x the limit).
+  // Such an interval gets samples closing in on its lower end by halving, so the
+  // low limit holds only at that end, and the look-ahead brakes for it.
+  if (!curved) {
+    if (force_) force_limits(p, &us, &v_force);
+    sample_limits();
+    return;
+  }
+  sample_limits();
+  double v_cap = 1.5 * p.v_prog;
+  for (int a = 0; a < naxes_; ++a) v_cap = std::min(v_cap, std::sqrt(3.0) * cfg_.axes[a].max_velocity_mm_s);
+  std::vector<double> extra;
+  for (size_t i = 0; i + 1 < us.size(); ++i) {
+    const double va = std::min(p.samples[i].v_geo, v_cap), vb = std::min(p.samples[i + 1].v_geo, v_cap);
+    const double lo = std::min(va, vb), hi = std::max(va, vb);
+    if (!(hi > 1.005 * lo) || !(hi > lo + 1e-3)) continue;
+    // From the far end towards the low one.
+    const double u_lo = va < vb ? us[i] : us[i + 1], u_far = va < vb ? us[i + 1] : us[i];
+    const AxisVec q = p.path.point(u_lo);
+    const double ramp = std::max(kMinChord, 1e-3 * lo * period_s_);
+    for (int k = 1; k <= kMaxGeoDepth; ++k) {
+      const double u = u_lo + (u_far - u_lo) * std::ldexp(1.0, -k);
+      if (!(u > us[i] && u < us[i + 1])) break;
+      const AxisVec r = p.path.point(u);
+      double d2 = 0;
+      for (int a = 0; a < naxes_; ++a) d2 += (r[a] - q[a]) * (r[a] - q[a]);
+      extra.push_back(u);
+      if (d2 < ramp * ramp) break;
+    }
+  }
+  if (!extra.empty()) {
+    std::sort(extra.begin(), extra.end());
+    std::vector<double> merged;
+    merged.reserve(us.size() + extra.size());
+    std::merge(us.begin(), us.end(), extra.begin(), extra.end(), std::back_inserter(merged));
+    merged.erase(std::unique(merged.begin(), merged.end()), merged.end());
+    us = std::move(merged);
+  }
+  if (force_) force_limits(p, &us, &v_force);
+  if (!extra.empty() || force_) sample_limits();
 }
 
 void Planner::plan_junction(const Planned& prev, Planned& next) const {
