@@ -470,6 +470,20 @@ double Interpolator::programmed_speed(const Planned& p) const {
   return p.v_prog * (p.block.kind == program::BlockKind::kRapid ? std::min(override_, 1.0) : override_);
 }
 
+bool Interpolator::own_limit(const Planned& p, size_t i) const {
+  // The planner's backward pass: v_bw[i] = min(cap, sqrt(v_bw[i+1]² + 2·A·ds)). Where
+  // the ramp is below the cap, the limit comes from the next sample's, and so on to
+  // a sample whose limit is its own (or zero: the end of the buffered path). The
+  // brake check (a jerk-limited brake that lands on a limit with no acceleration
+  // left) needs only those: landing on each ramp sample on the way braked early and
+  // in two steps (a raster's stop at a pass end: 26 cycles where 21 do).
+  const double v = p.v_bw[i];
+  if (!(v > 0)) return true;
+  double cap = rapid_at_full_speed(p) ? p.samples[i].v_geo : std::min(p.samples[i].v_geo, programmed_speed(p));
+  if (i == 0) cap = std::min(cap, p.live_entry);
+  return !(v < cap);
+}
+
 double Interpolator::cap_at(const Planned& p, double s, Limit* why, double* v_geo) const {
   const auto& sm = p.samples;
   size_t i = 0;
@@ -517,6 +531,7 @@ bool Interpolator::safe_plain(double v_n, double a_n, double s_n, double* v_targ
       const double d = offset + p.samples[i].s - s_n;
       if (d > horizon) return true;
       const double vt = p.v_bw[i];
+      if (!own_limit(p, i)) continue;
       if (vt < v_n + a_n * a_n / (2 * J) &&
           brake_distance(v_n, a_n, vt, A, J) + 0.5 * std::max(0.0, v_n - vt) * T > d + 1e-9) {
         if (v_target != nullptr) *v_target = vt;
@@ -584,7 +599,7 @@ bool Interpolator::safe_scan(double v_n, double a_n, double s_n, double* v_targe
       ++work_.safe_samples;
       if (d > horizon) return true;
       const double vt = p.v_bw[i];
-      if (vt < v_reach && ++work_.brake_evals > 0 &&
+      if (vt < v_reach && own_limit(p, i) && ++work_.brake_evals > 0 &&
           brake_distance(v_n, a_n, vt, A, J) + 0.5 * std::max(0.0, v_n - vt) * T > d + 1e-9) {
         if (v_target != nullptr) *v_target = vt;
         return false;
@@ -646,7 +661,7 @@ void Interpolator::build_look(double vn_lo, double a_lo, double sn_lo, double vn
         return;
       }
       if (p.v_min[i] >= theta) break;  // nothing under it to the block's end
-      if (p.v_bw[i] < theta) {
+      if (p.v_bw[i] < theta && own_limit(p, i)) {
         if (look_n_ == look_.size()) return;  // too many: full checks
         look_[look_n_++] = LookCand{offset, p.samples[i].s, p.v_bw[i], A, J};
       }

@@ -228,6 +228,10 @@ class Interpolator {
   void build_look(double vn_lo, double a_lo, double sn_lo, double vn_hi, double a_hi, double sn_hi);
   bool safe_cached(double v_n, double a_n, double s_n, double* v_target = nullptr);
   bool safe_scan(double v_n, double a_n, double s_n, double* v_target) const;
+  // Whether sample i's look-ahead limit is its own (its cap, the entry, a stop) rather
+  // than only the backward pass's acceleration ramp up from a later one, which the
+  // brake check meets by meeting that later limit.
+  bool own_limit(const Planned& p, size_t i) const;
   bool safe_gathered(double v_n, double a_n, double s_n, double* v_target);
   bool safe_plain(double v_n, double a_n, double s_n, double* v_target) const;
   void verify(bool r, double v_n, double a_n, double s_n, const double* v_target) const;
