@@ -134,6 +134,7 @@ MachineConfig read_machine(MapReader top) {
     c.operator_.homing_required = r.get_bool("homing_required", false);
     c.operator_.jog_keepalive_timeout_s = r.get_double("jog_keepalive_timeout_s", 0.2, 0.01, 10.0);
     c.operator_.mdi_directory = r.get_string("mdi_directory", "");
+    if (r.has("safe_z_mm")) c.operator_.safe_z_mm = r.get_double("safe_z_mm", 0.0, -1e6, 1e6);
     r.finish();
   }
   {

@@ -2,6 +2,7 @@
 // The configuration of one cell: plain structs with defaults, loaded strictly from
 // `config/machines/NAME.yaml`.
 #include <cstdint>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -96,6 +97,9 @@ struct OperatorConfig {
   double jog_keepalive_timeout_s = 0.2;
   // Where MDI lines and touch-offs are written as one-line programs ("" = the system's temp folder).
   std::string mdi_directory;
+  // Run from line N: the approach lifts Z to this height (machine coordinates, mm)
+  // before it moves across to the line's start point. NaN (default): Z's max_mm.
+  double safe_z_mm = std::numeric_limits<double>::quiet_NaN();
 };
 
 // The browser HMI cnc-hmi (section `hmi:`, issue 17): where it listens, who may use it.

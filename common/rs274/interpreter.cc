@@ -488,6 +488,7 @@ bool Interpreter::execute_next() {
     fail(0, "the file ended with no percent sign or program end (M2, M30)");
   }
   ++lines_executed_;
+  if (line_hook_) line_hook_(file_, line_no_);
   try {
     lex_line(text_, line_);
   } catch (const Error& e) {
@@ -502,6 +503,42 @@ bool Interpreter::execute_next() {
     fail(e.column(), e.detail());
   }
   return !ended_;
+}
+
+ModalState Interpreter::modal_state() const {
+  ModalState m;
+  m.motion = motion_;
+  m.plane = static_cast<int>(plane_);
+  m.incremental = incremental_;
+  m.arc_incremental = arc_incremental_;
+  m.feed_mode = static_cast<int>(feed_mode_);
+  m.units = static_cast<int>(units_);
+  m.comp = comp_;
+  m.comp_radius = comp_radius_;
+  m.tool_length = tool_length_;
+  m.coord = coord_;
+  m.retract_r = retract_r_;
+  m.path = static_cast<int>(path_);
+  m.path_p = path_p_;
+  m.path_q = path_q_;
+  m.feed = feed_;
+  m.speed = speed_;
+  m.spindle = spindle_;
+  m.mist = mist_;
+  m.flood = flood_;
+  m.feed_override = feed_override_;
+  m.speed_override = speed_override_;
+  m.adaptive_feed = adaptive_feed_;
+  m.feed_hold = feed_hold_;
+  m.tool = tool_;
+  m.selected_tool = selected_tool_;
+  m.tool_offset = tool_offset_;
+  m.g92 = g92_;
+  m.g92_active = g92_active_;
+  m.rotation_deg = rotation_deg_;
+  m.position = position_;
+  for (size_t i = 0; i < m.offsets.size(); ++i) m.offsets[i] = params_.get(5161 + static_cast<int>(i));
+  return m;
 }
 
 void Interpreter::execute_line() {

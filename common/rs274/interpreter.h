@@ -9,7 +9,9 @@
 // Errors: every refusal throws Error with the file, line and column of the word at
 // fault and the chain of subroutine calls that led there; the canonical calls of
 // the refused line are not made (the line is checked, then executed).
+#include <array>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <unordered_map>
@@ -49,6 +51,32 @@ struct MachineSetup {
   bool loop_on_main_m99 = false;
 };
 
+// The interpreter's state between two lines, as run from line N rebuilds it and its
+// test compares it field by field with a full run's (README "Run from line N").
+struct ModalState {
+  int motion = 800;           // G code in tenths (800 = G80)
+  int plane = 0;              // Plane
+  bool incremental = false, arc_incremental = true;
+  int feed_mode = 0, units = 0;
+  int comp = 400;
+  double comp_radius = 0;
+  int tool_length = 490, coord = 1;
+  bool retract_r = true;
+  int path = 0;
+  double path_p = 0, path_q = 0, feed = 0, speed = 0;
+  int spindle = 0;
+  bool mist = false, flood = false;
+  bool feed_override = true, speed_override = true, adaptive_feed = false, feed_hold = true;
+  int tool = 0, selected_tool = -1;
+  Pose tool_offset{}, g92{};
+  bool g92_active = false;
+  double rotation_deg = 0;
+  Pose position{};  // program coordinates and units
+  // Parameters 5161..5390: G28 and G30 homes, G92 offsets, G54..G59.3 and their rotations.
+  std::array<double, 230> offsets{};
+  bool operator==(const ModalState&) const = default;
+};
+
 class Interpreter {
  public:
   Interpreter(MachineSetup setup, Canon& canon);
@@ -73,6 +101,10 @@ class Interpreter {
   const MachineSetup& setup() const { return setup_; }
   // The raw text of the line being executed (for rs274's N field and error reports).
   const std::string& current_text() const { return text_; }
+  ModalState modal_state() const;
+  // Called before each line is executed (the state is the one after the line
+  // before): the file index (file_names()) and the line number. Run from line N.
+  void set_line_hook(std::function<void(int32_t file, int32_t line)> hook) { line_hook_ = std::move(hook); }
 
  private:
   struct SourceFile;
@@ -216,6 +248,7 @@ class Interpreter {
 
   // M70-M73: saved modal state.
   std::vector<SavedModes> saved_;
+  std::function<void(int32_t, int32_t)> line_hook_;
 };
 
 }  // namespace cnc::rs274

@@ -11,7 +11,7 @@ std::optional<int8_t> program_command_by_name(const std::string& name) {
       {"stop", C::STOP},   {"override", C::OVERRIDE}, {"reset", C::RESET}, {"home", C::HOME},
       {"jog", C::JOG},     {"jog-keepalive", C::JOG_KEEPALIVE},            {"touch-off", C::TOUCH_OFF},
       {"mdi", C::MDI},     {"single-block", C::SINGLE_BLOCK}, {"optional-stop", C::OPTIONAL_STOP},
-      {"block-delete", C::BLOCK_DELETE}};
+      {"block-delete", C::BLOCK_DELETE}, {"confirm", C::CONFIRM}};
   const auto it = kNames.find(name);
   if (it == kNames.end()) return std::nullopt;
   return it->second;
@@ -27,6 +27,7 @@ int64_t send_program_command(bus::Bus& bus, const config::MachineConfig& cfg, co
   c.feed_mm_per_min = op.feed_mm_per_min;
   c.jog_continuous = op.jog_continuous;
   c.text = op.text;
+  c.from_line = op.from_line;
   if (!bus.publish(cfg.channel(config::channels::kProgramCmd), c)) return -1;
   return c.seq;
 }

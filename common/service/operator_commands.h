@@ -25,6 +25,7 @@ struct OperatorCommand {
   double feed_mm_per_min = 0;   // JOG: 0 = the axis's jog feed
   int8_t jog_continuous = 0;    // JOG: 1 continuous; TOUCH_OFF: 2 = tool length
   std::string text;             // MDI: the line
+  int32_t from_line = 0;        // LOAD: run from this line (0: from the start)
 };
 
 // The command by its name as cnc-ctl's --do and the HMI's actions spell it ("hold",

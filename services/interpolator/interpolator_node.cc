@@ -75,6 +75,7 @@ void InterpolatorNode::on_command(const cnc::lcmt_program_command& m) { pending_
 
 void InterpolatorNode::on_program_state(const cnc::lcmt_program_state& m) {
   const bool loaded = m.state == cnc::lcmt_program_state::LOADED || m.state == cnc::lcmt_program_state::RUNNING;
+  if (m.program_token == token_ && m.approach_pending == 0) approach_pending_ = false;
   if (!loaded || m.program_token == token_) return;
   // In FAULT nothing new is taken; after it, no program loaded before it.
   if (fault_ || m.program_token <= retired_token_) return;
@@ -85,6 +86,7 @@ void InterpolatorNode::on_program_state(const cnc::lcmt_program_state& m) {
     return;
   }
   token_ = m.program_token;
+  approach_pending_ = m.approach_pending != 0;
   num_blocks_ = m.num_blocks;
   program_path_ = m.program_path;
   reorder_.clear();
@@ -362,6 +364,10 @@ void InterpolatorNode::run_cycle() {
       on_manual_command(m);
       continue;
     }
+    if (m.command == PC::CONFIRM) {
+      approach_pending_ = false;
+      continue;
+    }
     if (m.command == PC::HOMED) {
       spdlog::warn("HOMED from sender {} ignored: it is this interpolator's own input", m.sender);
       continue;
@@ -394,6 +400,10 @@ void InterpolatorNode::run_cycle() {
       const std::string why = manual_ != Manual::kNone ? manual_text_ + " runs: STOP it first" : unhomed() + ": HOME first";
       spdlog::warn("START refused: {}", why);
       alarm(cnc::lcmt_alarm::WARNING, "start_refused", "START refused: " + why);
+      continue;
+    }
+    if (c.kind == Command::Kind::kStart && approach_pending_) {
+      spdlog::warn("START refused: program {} runs from a line: its approach waits for CONFIRM", program_path_);
       continue;
     }
     if (c.kind == Command::Kind::kStart && core_.state() == RunState::kDone && token_ == done_token_) {

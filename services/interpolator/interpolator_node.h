@@ -111,7 +111,10 @@ class InterpolatorNode {
     double latch_mm = 0;  // the latch of the slow approach (drive)
   } home_;
   Manual last_manual_ = Manual::kNone;
-  int64_t done_token_ = 0;  // the program that ran to its end (a START again is not a new run)
+  int64_t done_token_ = 0;
+  // The loaded program runs from a line and its approach waits for CONFIRM: START is
+  // refused (set with the token from PROGRAM_STATE, cleared by CONFIRM or a state saying so).
+  bool approach_pending_ = false;  // the program that ran to its end (a START again is not a new run)
 
   config::MachineConfig cfg_;
   bus::Bus& bus_;

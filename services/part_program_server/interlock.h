@@ -36,6 +36,8 @@ struct CellView {
   std::string motion;   // kJogging, kHoming: what moves, e.g. "jog X+ continuous"
   // "" when program motion is allowed, else e.g. "axis Z is not homed" (operator.homing_required).
   std::string unhomed;
+  // kLoaded from line N: the approach waiting for CONFIRM ("" when none waits).
+  std::string approach;
 };
 
 // The operator commands (issue 17) in `v`: "" allowed, else why not.
@@ -79,6 +81,11 @@ inline std::string refusal(const cnc::lcmt_program_command& c, const CellView& v
   const std::string held = "program " + v.program + " is held";
   const std::string fault = "the cell is in FAULT (" + v.fault + "): RESET first";
   if (c.command >= C::HOME && c.command <= C::HOMED) return operator_refusal(c, v);
+  if (c.command == C::CONFIRM) {
+    if (v.state == CellState::kLoaded && !v.approach.empty()) return "";
+    if (v.state == CellState::kFault) return fault;
+    return "no approach waits for confirmation (LOAD with a line to run from makes one)";
+  }
   if (c.command == C::SINGLE_BLOCK || c.command == C::OPTIONAL_STOP || c.command == C::BLOCK_DELETE) {
     const char* name = c.command == C::SINGLE_BLOCK ? "single block" : c.command == C::OPTIONAL_STOP ? "optional stop"
                                                                                                       : "block delete";
@@ -117,7 +124,8 @@ inline std::string refusal(const cnc::lcmt_program_command& c, const CellView& v
         case CellState::kIdle: return "no program is loaded: LOAD one first";
         case CellState::kLoaded:
           if (!v.drives.empty()) return v.drives + ": enable the drives first";
-          return v.unhomed.empty() ? "" : v.unhomed + ": HOME first";
+          if (!v.unhomed.empty()) return v.unhomed + ": HOME first";
+          return v.approach.empty() ? "" : "program " + v.program + " runs " + v.approach + ": CONFIRM the approach first";
         case CellState::kRunning: return running + " already";
         case CellState::kHeld: return held + ": RESUME it";
         case CellState::kFault: return fault;

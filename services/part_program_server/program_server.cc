@@ -137,10 +137,25 @@ class ProgramServer::Run {
     }
     *out = std::move(q.front());
     q.pop_front();
+    ++pulled_;
     return true;
   }
 
   int64_t lines() const { return interp_->lines_executed(); }
+
+  // Run from line N: the state before the main file's line N is first reached, and
+  // the number of blocks made before it.
+  void watch(int from_line) {
+    interp_->set_line_hook([this, from_line](int32_t file, int32_t line) {
+      if (reached_ || file != 0 || line < from_line) return;
+      reached_ = true;
+      blocks_before_ = pulled_ + static_cast<int64_t>(builder_.blocks().size());
+      state_ = interp_->modal_state();
+    });
+  }
+  bool reached() const { return reached_; }
+  int64_t blocks_before() const { return blocks_before_; }
+  const rs274::ModalState& state() const { return state_; }
 
  private:
   static rs274::BuilderSetup builder_setup(rs274::BuilderSetup b, const std::vector<double>& start) {
@@ -151,6 +166,10 @@ class ProgramServer::Run {
   rs274::BlockBuilder builder_;
   std::unique_ptr<rs274::Interpreter> interp_;
   int64_t max_lines_;
+  int64_t pulled_ = 0;
+  bool reached_ = false;
+  int64_t blocks_before_ = 0;
+  rs274::ModalState state_;
 };
 
 ProgramSetup program_setup(const config::MachineConfig& cfg) {
@@ -190,6 +209,7 @@ ProgramSetup program_setup(const config::MachineConfig& cfg) {
       s.builder.corner_dv_mm_s = std::min(s.builder.corner_dv_mm_s, std::min(a.max_accel_mm_s2 * T, 0.5 * a.max_jerk_mm_s3 * T * T));
   }
   for (const auto& a : cfg.axes) s.travel_mm.emplace_back(a.min_mm, a.max_mm);
+  s.safe_z_mm = cfg.operator_.safe_z_mm;
   return s;
 }
 
@@ -208,17 +228,36 @@ const std::string& ProgramServer::path() const {
   return program_ ? program_->path : kNone;
 }
 
+const std::string& ProgramServer::approach_text() const {
+  static const std::string kNone;
+  return program_ ? program_->approach_text : kNone;
+}
+
 std::unique_ptr<ProgramServer::Run> ProgramServer::start_run(const Loaded& p, bool validating) const {
   auto run = std::make_unique<Run>(setup_, p.start, p.block_delete, validating);
+  if (p.from_line > 0) run->watch(p.from_line);
   run->open(p.path);
   return run;
 }
 
 LoadResult ProgramServer::load(const std::string& path, int64_t token, const std::vector<double>& start_position_mm) {
+  return load_from(path, token, start_position_mm, 0);
+}
+
+LoadResult ProgramServer::load_from(const std::string& path, int64_t token,
+                                    const std::vector<double>& start_position_mm, int from_line) {
   LoadResult r;
   auto next = std::make_unique<Loaded>();
   next->path = path;
   next->token = token;
+  next->from_line = std::max(0, from_line);
+  // Run from line N: the tool, spindle and coolant the program had set before it, and
+  // where line N's first block starts.
+  const program::Block* last_tool = nullptr;
+  const program::Block* last_spindle = nullptr;
+  const program::Block* last_coolant = nullptr;
+  program::Block tool_b, spindle_b, coolant_b;
+  std::vector<double> from_start;
   next->block_delete = setup_.machine.block_delete;
   next->start = start_position_mm.size() == setup_.builder.axis_names.size() ? start_position_mm
                                                                               : setup_.builder.start_position_mm;
@@ -228,6 +267,18 @@ LoadResult ProgramServer::load(const std::string& path, int64_t token, const std
     uint64_t h = 14695981039346656037ull;
     int64_t n = 0;
     while (run->next(&b)) {
+      if (next->from_line > 0) {
+        if (!run->reached() || n < run->blocks_before()) {
+          if (b.kind == program::BlockKind::kEvent && b.event.kind == program::EventKind::kToolChange)
+            last_tool = &(tool_b = b);
+          if (b.kind == program::BlockKind::kEvent && b.event.kind == program::EventKind::kSpindle)
+            last_spindle = &(spindle_b = b);
+          if (b.kind == program::BlockKind::kEvent && b.event.kind == program::EventKind::kCoolant)
+            last_coolant = &(coolant_b = b);
+        } else if (n == run->blocks_before()) {
+          from_start = b.start;
+        }
+      }
       if (std::string e = travel_error(b, setup_.travel_mm, setup_.builder.axis_names); !e.empty()) {
         r.error = (b.source_file.empty() ? path : b.source_file) + ":" + std::to_string(b.source_line) + ":" +
                   std::to_string(b.source_column) + ": " + e;
@@ -255,8 +306,29 @@ LoadResult ProgramServer::load(const std::string& path, int64_t token, const std
       }
     }
     if (n % limits_.blocks_per_chunk != 0) next->chunk_hashes.push_back(h);
-    next->num_blocks = n;
+    next->num_blocks = next->full_blocks = n;
     next->lines = run->lines();
+    if (next->from_line > 0) {
+      if (!run->reached() || from_start.empty()) {
+        r.error = path + ":" + std::to_string(next->from_line) + ":1: run from line " +
+                  std::to_string(next->from_line) + ": the program never gets there (it ends before, or the line makes no block after it)";
+        r.file = path;
+        r.line = next->from_line;
+        r.column = 1;
+        return r;
+      }
+      next->from_block = run->blocks_before();
+      next->state_at_from = run->state();
+      if (std::string e = make_approach(*next, from_start, last_tool, last_spindle, last_coolant); !e.empty()) {
+        r.error = path + ":" + std::to_string(next->from_line) + ":1: run from line " +
+                  std::to_string(next->from_line) + ": the approach: " + e;
+        r.file = path;
+        r.line = next->from_line;
+        r.column = 1;
+        return r;
+      }
+      next->num_blocks = static_cast<int64_t>(next->approach.size()) + n - next->from_block;
+    }
   } catch (const rs274::Error& e) {
     r.error = e.what();
     r.file = e.file_name().empty() ? path : e.file_name();
@@ -272,12 +344,104 @@ LoadResult ProgramServer::load(const std::string& path, int64_t token, const std
   serving_.reset();
   cache_.clear();
   serving_error_.clear();
+  serving_reached_ = false;
   r.ok = true;
   return r;
 }
 
+std::string ProgramServer::make_approach(Loaded& p, const std::vector<double>& target, const program::Block* tool,
+                                         const program::Block* spindle, const program::Block* coolant) const {
+  const auto& names = setup_.builder.axis_names;
+  const size_t n = names.size();
+  std::vector<double> cur = p.start;
+  int iz = -1;
+  for (size_t a = 0; a < n; ++a)
+    if (names[a] == "Z") iz = static_cast<int>(a);
+  auto add = [&](program::Block b) {
+    b.index = static_cast<int64_t>(p.approach.size());
+    b.source_file = p.path;
+    b.source_line = p.from_line;
+    b.source_column = 1;
+    p.approach.push_back(std::move(b));
+  };
+  char buf[160];
+  std::string text;
+  auto where = [&](const std::vector<double>& v) {
+    std::string s;
+    for (size_t a = 0; a < n; ++a) {
+      std::snprintf(buf, sizeof buf, "%s%s %.4f", a ? " " : "", names[a].c_str(), v[a]);
+      s += buf;
+    }
+    return s;
+  };
+  auto rapid = [&](const std::vector<double>& to, const char* what) -> std::string {
+    double d = 0;
+    for (size_t a = 0; a < n; ++a) d = std::max(d, std::fabs(to[a] - cur[a]));
+    if (!(d > 1e-9)) return "";
+    program::Block b;
+    b.kind = program::BlockKind::kRapid;
+    b.start = cur;
+    b.end = to;
+    if (std::string e = travel_error(b, setup_.travel_mm, names); !e.empty()) return e;
+    add(std::move(b));
+    text += (text.empty() ? "" : "; ") + std::string(what) + " to " + where(to);
+    cur = to;
+    return "";
+  };
+  auto event = [&](const program::Block* e, const std::string& what) {
+    if (e == nullptr) return;
+    program::Block b = *e;
+    b.start = b.end = cur;
+    add(std::move(b));
+    text += "; " + what;
+  };
+  if (iz >= 0) {
+    const double top = setup_.travel_mm.size() > static_cast<size_t>(iz) ? setup_.travel_mm[static_cast<size_t>(iz)].second : cur[static_cast<size_t>(iz)];
+    const double safe = std::isfinite(setup_.safe_z_mm) ? setup_.safe_z_mm : top;
+    std::vector<double> up = cur;
+    up[static_cast<size_t>(iz)] = std::max(cur[static_cast<size_t>(iz)], safe);
+    if (std::string e = rapid(up, "rapid up (safe height)"); !e.empty()) return e;
+    std::vector<double> across = target;
+    across[static_cast<size_t>(iz)] = up[static_cast<size_t>(iz)];
+    if (std::string e = rapid(across, "rapid across"); !e.empty()) return e;
+  }
+  if (tool != nullptr) event(tool, "tool change T" + std::to_string(tool->event.number) + " (holds until RESUME)");
+  if (spindle != nullptr) {
+    std::snprintf(buf, sizeof buf, "spindle %s %.0f rpm",
+                  spindle->event.number > 0 ? "cw" : spindle->event.number < 0 ? "ccw" : "off", spindle->event.value);
+    event(spindle, buf);
+  }
+  if (coolant != nullptr)
+    event(coolant, std::string("coolant ") + ((coolant->event.number & 3) == 0 ? "off"
+                                              : (coolant->event.number & 2) != 0 ? ((coolant->event.number & 1) ? "flood and mist" : "flood")
+                                                                                 : "mist"));
+  if (std::string e = rapid(target, "rapid down to the start of the line"); !e.empty()) return e;
+  program::Block rest;  // at rest on the start point: line N starts from a stop, as after an event
+  rest.kind = program::BlockKind::kDwell;
+  rest.start = rest.end = cur;
+  rest.dwell_s = 0;
+  add(std::move(rest));
+  p.approach_text = "from line " + std::to_string(p.from_line) + ": " + text;
+  return "";
+}
+
 const program::Block* ProgramServer::block(int64_t index) {
   if (!program_ || index < 0 || index >= program_->num_blocks) return nullptr;
+  if (program_->from_line > 0) {
+    // The approach, then the program's blocks from line N renumbered after it.
+    const auto a = static_cast<int64_t>(program_->approach.size());
+    if (index < a) return &program_->approach[static_cast<size_t>(index)];
+    const program::Block* b = full_block(index - a + program_->from_block);
+    if (b == nullptr) return nullptr;
+    renumbered_ = *b;
+    renumbered_.index = index;
+    return &renumbered_;
+  }
+  return full_block(index);
+}
+
+const program::Block* ProgramServer::full_block(int64_t index) {
+  if (!program_ || index < 0 || index >= program_->full_blocks) return nullptr;
   const Chunk* c = chunk_for(index);
   if (c == nullptr) return nullptr;
   const int64_t k = index - c->first;
@@ -305,7 +469,7 @@ const ProgramServer::Chunk* ProgramServer::chunk_for(int64_t index) {
     }
     Chunk fresh;
     program::Block b;
-    while (serving_next_ < first + per && serving_next_ < program_->num_blocks) {
+    while (serving_next_ < first + per && serving_next_ < program_->full_blocks) {
       const int64_t c = serving_next_ / per;
       if (serving_next_ % per == 0) {
         ++chunk_reads_;
@@ -320,9 +484,13 @@ const ProgramServer::Chunk* ProgramServer::chunk_for(int64_t index) {
         return nullptr;
       }
       chunk_hash_ = block_hash(b, chunk_hash_);
+      if (!serving_reached_ && serving_->reached()) {
+        serving_reached_ = true;
+        serving_state_ = serving_->state();
+      }
       ++serving_next_;
       if (serving_next_ > first) fresh.blocks.push_back(std::move(b));
-      if (serving_next_ % per == 0 || serving_next_ == program_->num_blocks) {
+      if (serving_next_ % per == 0 || serving_next_ == program_->full_blocks) {
         if (chunk_hash_ != program_->chunk_hashes[static_cast<size_t>(c)]) {
           serving_error_ = changed;
           program_.reset();

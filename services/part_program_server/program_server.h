@@ -12,6 +12,7 @@
 // interpreter's position (rare: the interpolator asks for blocks in order) restarts
 // it from the program's start. Memory is O(blocks / chunk) + a few chunks, whatever
 // the program's length or the number of times its loops run.
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -48,6 +49,8 @@ struct ProgramSetup {
   // Travel per axis (machine coordinates, mm), in the builder's axis order: the
   // validation run refuses a program whose path leaves it. Empty: not checked.
   std::vector<std::pair<double, double>> travel_mm;
+  // Run from line N: the approach's safe height (machine Z, mm; NaN: Z's travel maximum).
+  double safe_z_mm = std::numeric_limits<double>::quiet_NaN();
 };
 
 ProgramSetup program_setup(const config::MachineConfig& cfg);
@@ -61,6 +64,27 @@ class ProgramServer {
   // token: the caller's unique id of this load. start_position_mm: where the
   // machine stands (one entry per axis); empty: the config's home position.
   LoadResult load(const std::string& path, int64_t token, const std::vector<double>& start_position_mm = {});
+  // Run from line N (README "Run from line N"): the whole program is interpreted (and
+  // validated) as by load(), without motion up to the main file's line N; what is
+  // served is an approach from where the machine stands (Z up to the safe height,
+  // across to the start point of line N, the tool change, spindle and coolant the
+  // program had set there as events, down to the start point, a dwell of 0 s: at rest
+  // there) and then the program's blocks from line N on, numbered from the approach's
+  // end. from_line <= 0: load().
+  LoadResult load_from(const std::string& path, int64_t token, const std::vector<double>& start_position_mm,
+                       int from_line);
+  int from_line() const { return program_ ? program_->from_line : 0; }
+  // The approach (what an operator confirms), "" for a program run from its start.
+  const std::string& approach_text() const;
+  int64_t approach_blocks() const { return program_ ? static_cast<int64_t>(program_->approach.size()) : 0; }
+  // The interpreter's state before line N, as the validation run and the serving run
+  // reached it (the serving one once it has served that far; false before).
+  const rs274::ModalState& state_at_from() const { return program_->state_at_from; }
+  bool serving_state_at_from(rs274::ModalState* out) const {
+    if (!serving_reached_) return false;
+    *out = serving_state_;
+    return true;
+  }
   bool loaded() const { return program_ != nullptr; }
   int64_t token() const { return program_ ? program_->token : 0; }
   const std::string& path() const;
@@ -92,7 +116,13 @@ class ProgramServer {
     std::vector<double> start;
     bool block_delete = true;  // as loaded: the serving run reads the program the same way
     std::vector<uint64_t> chunk_hashes;
-    int64_t num_blocks = 0;
+    int64_t num_blocks = 0;   // served (the approach's and the program's from line N)
+    int64_t full_blocks = 0;  // of the whole program
+    int from_line = 0;
+    int64_t from_block = 0;   // the program's first block from line N
+    std::vector<program::Block> approach;
+    std::string approach_text;
+    rs274::ModalState state_at_from;
     int64_t lines = 0;
   };
   struct Chunk {
@@ -103,6 +133,10 @@ class ProgramServer {
 
   std::unique_ptr<Run> start_run(const Loaded& p, bool validating) const;
   const Chunk* chunk_for(int64_t index);
+  const program::Block* full_block(int64_t index);
+  // The approach of a run from line N into p.approach (and its text): "" or why not.
+  std::string make_approach(Loaded& p, const std::vector<double>& target, const program::Block* tool,
+                            const program::Block* spindle, const program::Block* coolant) const;
 
   ProgramSetup setup_;
   ServerLimits limits_;
@@ -115,6 +149,9 @@ class ProgramServer {
   int64_t chunk_reads_ = 0;
   int64_t restarts_ = 0;
   std::string serving_error_;
+  bool serving_reached_ = false;
+  rs274::ModalState serving_state_;
+  program::Block renumbered_;
 };
 
 // A hash of everything in a block that the interpolator uses (FNV-1a over the bits).

@@ -120,6 +120,7 @@ CellView ProgramServerNode::view(double now_s) const {
     v.state = CellState::kHeld;
   } else if (program_ready_ && core_.loaded()) {
     v.state = CellState::kLoaded;
+    if (approach_pending_) v.approach = core_.approach_text();
   } else {
     v.state = CellState::kIdle;
   }
@@ -142,8 +143,8 @@ CellView ProgramServerNode::view(double now_s) const {
 void ProgramServerNode::refuse(const cnc::lcmt_program_command& m, const std::string& why) {
   static const char* const kNames[] = {"?",    "LOAD", "START",         "HOLD",      "RESUME", "STOP", "OVERRIDE",
                                        "RESET", "HOME", "JOG", "JOG_KEEPALIVE", "TOUCH_OFF", "MDI",    "HOMED",
-                                       "SINGLE_BLOCK", "OPTIONAL_STOP", "BLOCK_DELETE"};
-  const char* name = m.command >= 1 && m.command <= 16 ? kNames[m.command] : "?";
+                                       "SINGLE_BLOCK", "OPTIONAL_STOP", "BLOCK_DELETE", "CONFIRM"};
+  const char* name = m.command >= 1 && m.command <= 17 ? kNames[m.command] : "?";
   refusal_ = std::string(name) + (m.command == cnc::lcmt_program_command::LOAD ? " " + m.program_path : "") +
              " refused: " + why;
   refused_sender_ = m.sender;
@@ -175,7 +176,12 @@ void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {
     return;
   }
   switch (m.command) {
-    case C::LOAD: load_program(m.program_path); break;
+    case C::LOAD: load_program(m.program_path, m.from_line); break;
+    case C::CONFIRM:
+      approach_pending_ = false;
+      spdlog::info("approach confirmed: {}", core_.approach_text());
+      publish_state(true);
+      break;
     case C::BLOCK_DELETE: {
       const bool on = m.value != 0;
       const bool changed = on != core_.block_delete();
@@ -185,7 +191,7 @@ void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {
       if (changed && program_ready_ && core_.loaded()) {
         const std::string path = core_.path();
         const bool mdi = path == mdi_file_;
-        load_program(path);
+        load_program(path, core_.from_line());
         if (mdi && core_.path() == path) mdi_file_ = path;  // still the MDI line's file
       }
       publish_state(true);
@@ -232,12 +238,14 @@ void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {
   }
 }
 
-void ProgramServerNode::load_program(const std::string& path) {
+void ProgramServerNode::load_program(const std::string& path, int from_line) {
   using S = cnc::lcmt_program_state;
   // The token must differ from every earlier one, also across restarts.
   const int64_t token = std::max(util::wall_utime(), core_.token() + 1);
-  const LoadResult r = core_.load(path, token, machine_position_);
+  const LoadResult r = core_.load_from(path, token, machine_position_, from_line);
   if (r.ok) {
+    approach_pending_ = core_.from_line() > 0;
+    if (approach_pending_) spdlog::info("{}: the approach waits for CONFIRM: {}", path, core_.approach_text());
     // The one-line program of an earlier MDI is not loaded any more: its file goes
     // (the folder would otherwise grow by a file a line for the life of the cell).
     if (!mdi_file_.empty() && mdi_file_ != path) {
@@ -309,6 +317,7 @@ void ProgramServerNode::write_state_file() const {
                       machine_position_.size()) > 0;
     for (double x : machine_position_) ok = ok && std::fprintf(f, " %a", x) > 0;  // exact (hex float)
     ok = ok && std::fprintf(f, "\npath %s\n", core_.path().c_str()) > 0;
+    if (core_.from_line() > 0) ok = ok && std::fprintf(f, "from %d\n", core_.from_line()) > 0;
     ok = (std::fclose(f) == 0) && ok;
   }
   if (!ok || std::rename(tmp.c_str(), state_file_.c_str()) != 0)
@@ -343,11 +352,14 @@ void ProgramServerNode::use_state_file(const std::string& path) {
     ok = line.rfind("path ", 0) == 0;
     program = line.substr(5);
   }
+  int from_line = 0;
+  if (ok && std::getline(in, line) && !line.empty())
+    ok = std::sscanf(line.c_str(), "from %d", &from_line) == 1 && from_line > 0;
   if (!ok || program.empty()) {
     spdlog::warn("state file {} is malformed: ignored", path);
     return;
   }
-  const LoadResult r = core_.load(program, token, start);
+  const LoadResult r = core_.load_from(program, token, start, from_line);
   if (!r.ok) {
     spdlog::warn("state file {}: program {} no longer loads ({}): not resumed", path, program, r.error);
     return;
@@ -440,6 +452,9 @@ void ProgramServerNode::publish_state(bool force) {
   s.block_delete = core_.block_delete() ? 1 : 0;
   s.answered_sender = answered_sender_;
   s.answered_seq = answered_seq_;
+  s.from_line = core_.from_line();
+  s.approach = core_.approach_text();
+  s.approach_pending = approach_pending_ && program_ready_ ? 1 : 0;
   bus_.publish(ch_state_, s);
 }
 

@@ -87,7 +87,8 @@ class ProgramServerNode {
   void load_line(const cnc::lcmt_program_command& m, const std::string& line);
   int64_t mdi_count_ = 0;
   std::string mdi_file_;  // the line loaded last: removed once another program is loaded
-  void load_program(const std::string& path);
+  void load_program(const std::string& path, int from_line = 0);
+  bool approach_pending_ = false;  // loaded from a line: START waits for CONFIRM
   cnc::lcmt_axis_status axes_{};
   double axes_s_ = -1e9;
   std::string refusal_;

@@ -108,6 +108,8 @@ TEST(Interlock, OperatorCommandsInEveryState) {
       {C::OPTIONAL_STOP, {"", "", "", "", "", "", ""}},
       {C::BLOCK_DELETE, {"", "", "p.ngc is running: block delete is read when a program is loaded",
                          "p.ngc is held: block delete is read when a program is loaded", "", "", ""}},
+      {C::CONFIRM, {"no approach waits", "no approach waits", "no approach waits", "no approach waits", "RESET first",
+                    "no approach waits", "no approach waits"}},
   };
   for (const Row& r : rows) {
     for (int s = 0; s < 7; ++s) {
@@ -152,6 +154,15 @@ TEST(Interlock, OperatorCommandsInEveryState) {
   tool.value = 50;
   tool.jog_continuous = 2;
   EXPECT_NE(pps::refusal(tool, v).find("tool touch-off is not available yet"), std::string::npos);
+  // Run from line N: START waits for CONFIRM of the approach, which is then allowed.
+  {
+    pps::CellView from;
+    from.state = CellState::kLoaded;
+    from.program = "p.ngc";
+    from.approach = "from line 8: rapid up";
+    EXPECT_EQ(pps::refusal(cmd(C::START), from), "program p.ngc runs from line 8: rapid up: CONFIRM the approach first");
+    EXPECT_EQ(pps::refusal(cmd(C::CONFIRM), from), "");
+  }
   // The switches take 1 (on) or 0 (off) only.
   for (const int8_t sw : {C::SINGLE_BLOCK, C::OPTIONAL_STOP, C::BLOCK_DELETE}) {
     lcmt_program_command c = cmd(sw);

@@ -14,6 +14,10 @@
 //   cnc-ctl --machine M --do touch-off --axis X --value V   G10 L20 P0 (--tool: refused, not available yet)
 //   cnc-ctl --machine M --do mdi --line "G0 X10"   one line through the program server's interpreter
 //   cnc-ctl --machine M --do status [--timeout S]  the cell's services (host, pid, version, state)
+//   cnc-ctl --machine M --do run|load --program P --from N [--confirm]
+//                                                  run from line N: the approach is printed; run waits
+//                                                  for a CONFIRM (--confirm: its own, or --do confirm)
+//   cnc-ctl --machine M --do confirm               accept the approach of a program loaded from a line
 //   cnc-ctl --machine M --do single-block|optional-stop|block-delete --value on|off
 //                                                  the switches (at the next block boundary; block
 //                                                  delete at the next load). With single block on,
@@ -159,11 +163,13 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
 
   // The seq of the last program command sent: the server names it when it refuses it.
   int64_t sent_seq = -1;
+  const int from_line = std::stoi(args.option("from", "0"));
   auto send = [&](int8_t command, const std::string& path = "", double value = 1.0) {
     cnc::service::OperatorCommand c;
     c.command = command;
     c.program_path = path;
     c.feed_override = value;
+    if (command == lcmt_program_command::LOAD) c.from_line = from_line;
     sent_seq = cnc::service::send_program_command(bus, cfg, c);
     if (sent_seq < 0) {
       std::fprintf(stderr, "cnc-ctl: %s\n", bus.last_publish_error());
@@ -263,6 +269,26 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
   if (what == "enable") {
     if (const int rc = enable_drives(std::min(timeout_s, 30.0)); rc != 0) return rc;
     std::printf("drives enabled\n");
+    return 0;
+  }
+  // CONFIRM: the approach of a program loaded from a line; done when no approach waits.
+  auto confirm = [&]() -> int {
+    for (int attempt = 0; attempt < 5; ++attempt) {
+      if (const std::string why = send_checked(lcmt_program_command::CONFIRM, 0.3); !why.empty()) {
+        if (attempt > 0 && view.have_program && !view.program.approach_pending) return 0;  // a copy after a lost answer
+        std::fprintf(stderr, "cnc-ctl: %s\n", why.c_str());
+        return kExitRefused;
+      }
+      if (wait_for(bus, 0.7, [&] { return view.have_program && !view.program.approach_pending; })) return 0;
+    }
+    std::fprintf(stderr, "cnc-ctl: CONFIRM was sent 5 times and the program server does not show it\n");
+    return kExitTimeout;
+  };
+  if (what == "confirm") {
+    wait_for(bus, 0.5, [&] { return view.have_program; });
+    const std::string approach = view.have_program ? view.program.approach : "";
+    if (const int rc = confirm(); rc != 0) return rc;
+    std::printf("approach confirmed: %s\n", approach.c_str());
     return 0;
   }
   // The switches: sent until the state shows the value, or refused with the reason.
@@ -501,7 +527,7 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
   const bool line_cmd = what == "mdi" || what == "touch-off";
   if (what != "run" && what != "load" && !line_cmd) {
     std::fprintf(stderr, "cnc-ctl: --do must be one of run load start hold resume stop override reset enable disable "
-                         "fault-reset home jog touch-off mdi status single-block optional-stop block-delete\n");
+                         "fault-reset home jog touch-off mdi status single-block optional-stop block-delete confirm\n");
     return cnc::service::kExitBadInput;
   }
   const std::string program_arg = line_cmd ? std::string("(") + what + ")" : args.option("program");
@@ -540,7 +566,10 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
       return view.have_program && view.program.program_path.ends_with(line_suffix) &&
              (view.program.state == cnc::lcmt_program_state::REFUSED ||
               (view.program.state == cnc::lcmt_program_state::LOADED && view.program.program_token != old_token));
-    return view.have_program && view.program.program_path == program &&
+    // Its own LOAD's answer (the server names the command it decided on): a refusal of
+    // an earlier LOAD of the same path is not this one's.
+    return view.have_program && view.program.program_path == program && view.program.answered_sender == bus.sender() &&
+           view.program.answered_seq == sent_seq &&
            (view.program.state == cnc::lcmt_program_state::REFUSED ||
             (view.program.state == cnc::lcmt_program_state::LOADED && view.program.program_token != old_token));
   };
@@ -576,7 +605,23 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
   }
   const int64_t token = view.program.program_token;
   std::printf("loaded %s: %lld blocks\n", program.c_str(), static_cast<long long>(view.program.num_blocks));
+  if (view.program.approach_pending) std::printf("approach %s\n", view.program.approach.c_str());
   if (what == "load") return 0;
+  if (view.program.approach_pending) {
+    // Run from a line: nothing moves before the approach is confirmed.
+    if (args.flags.count("confirm")) {
+      if (const int rc = confirm(); rc != 0) return rc;
+      std::printf("approach confirmed\n");
+    } else {
+      std::printf("waiting for the approach to be confirmed (cnc-ctl --do confirm)\n");
+      std::fflush(stdout);
+      if (!wait_for(bus, timeout_s, [&] { return view.program.program_token != token || !view.program.approach_pending; }) ||
+          view.program.program_token != token) {
+        std::fprintf(stderr, "cnc-ctl: the approach was not confirmed\n");
+        return kExitTimeout;
+      }
+    }
+  }
 
   if (!wait_for(bus, 5.0, [&] { return view.have_interp && view.interp.program_token == token; })) {
     std::fprintf(stderr, "cnc-ctl: the interpolator did not take the program\n");
@@ -716,7 +761,7 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
 int main(int argc, char** argv) {
   cnc::service::Spec spec{"cnc-ctl",
                           "operator commands to a running cell",
-                          {"do", "program", "value", "timeout", "axis", "feed", "hold", "line"},
-                          {"tool"}};
+                          {"do", "program", "value", "timeout", "axis", "feed", "hold", "line", "from"},
+                          {"tool", "confirm"}};
   return cnc::service::run(spec, argc, argv, run_ctl);
 }
