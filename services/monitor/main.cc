@@ -54,6 +54,8 @@ int main(int argc, char** argv) {
     bus.subscribe<cnc::lcmt_interp_input>(cfg.channel(ch::kInterpInput), [&](const cnc::lcmt_interp_input& m) {
       if (m.kind == cnc::lcmt_interp_input::COMMAND && m.command.command == cnc::lcmt_program_command::RESET)
         core.on_reset();
+      if (m.kind == cnc::lcmt_interp_input::COMMAND && m.command.command == cnc::lcmt_program_command::HOMED)
+        core.on_homed(m.command.axis, m.command.value);
       if (m.kind != cnc::lcmt_interp_input::BLOCK) return;
       cnc::program::Block b;
       if (cnc::program::from_msg(m.block, naxes, &b).empty()) core.on_block(b, m.block.program_token);

@@ -100,8 +100,14 @@ const Monitor::Known* Monitor::find(int64_t token, int64_t index) const {
   return it == blocks_.end() ? nullptr : &it->second;
 }
 
-double Monitor::step_chord_error(const SetpointIn& a, const SetpointIn& b) const {
-  if (a.program_token != b.program_token || b.block_index < 0) return kNaN;
+double Monitor::step_chord_error(const SetpointIn& sa, const SetpointIn& sb) const {
+  if (sa.program_token != sb.program_token || sb.block_index < 0) return kNaN;
+  // In machine coordinates, as the blocks are.
+  SetpointIn a = sa, b = sb;
+  for (int i = 0; i < naxes_; ++i) {
+    a.position_mm[i] -= drive_offset_[static_cast<size_t>(i)];
+    b.position_mm[i] -= drive_offset_[static_cast<size_t>(i)];
+  }
   if (a.block_index == b.block_index) {
     const Known* k = find(b.program_token, b.block_index);
     return k ? motion::chord_error(*k->path, a.u, b.u, a.position_mm, b.position_mm) : kNaN;

@@ -1,4 +1,5 @@
 #pragma once
+#include <cmath>
 #include <array>
 #include <limits>
 // Monitor core: from the blocks the interpolator applied, its setpoints and the
@@ -89,6 +90,15 @@ class Monitor {
     last_sp_.reset();
     cut_prev_valid_ = false;
   }
+  // A HOMED the interpolator applied (INTERP_INPUT): from then on the axis's
+  // setpoints are its machine position plus `offset_mm` (the drive's coordinates),
+  // while the blocks are in machine coordinates: the chord error is taken on the
+  // setpoints less the offsets. (Homing happens at rest, between blocks.) A monitor
+  // started after a homing does not know the offset and reads the setpoints as
+  // machine positions: an error of the offset itself, a few micrometres from a switch.
+  void on_homed(int axis, double offset_mm) {
+    if (axis >= 0 && axis < naxes_ && std::isfinite(offset_mm)) drive_offset_[static_cast<size_t>(axis)] = offset_mm;
+  }
   // An axis status (utime: when the bridge read the actual positions); returns the
   // report and appends raised alarms to *alarms. playback_cycle: the bridge's playback
   // position on the setpoint stream (fractional cycles; < 0 unknown: the newest
@@ -154,6 +164,7 @@ class Monitor {
   double actual_feed_ = 0;
   double largest_fe_ = 0;
   double largest_chord_ = 0;
+  motion::AxisVec drive_offset_{};  // per axis, from HOMED inputs (drive minus machine)
   bool rmax_alarm_ = false;
   bool chord_alarm_ = false;
   bool deflection_alarm_ = false;
