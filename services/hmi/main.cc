@@ -551,7 +551,7 @@ int run_hmi(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
                      {"program_dir", program_dir},
                      {"programs", cnc::hmi::list_programs(program_dir)},
                      // Commands the cell does not have yet: their controls stay disabled.
-                     {"unavailable", {"rapid_override", "run_from_line"}},
+                     {"unavailable", {"rapid_override"}},
                      {"status_rate_hz", cfg.hmi.status_rate_hz}});
     send_to(client, program_msg);
     if (!preview_msg.is_null()) send_to(client, preview_msg);
@@ -650,6 +650,13 @@ int run_hmi(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
         }
         c.command = lcmt_program_command::LOAD;
         c.program_path = path;
+        // Run from line N (0: from the start): the cell shows the approach and waits for a confirm.
+        const double from = number(j, "from_line", 0.0);
+        if (!(from >= 0 && from <= 1e7 && from == std::floor(from))) {
+          result(e.client, id, false, "load refused: from_line must be a line number >= 1");
+          return;
+        }
+        c.from_line = static_cast<int32_t>(from);
         if (Pending* p = send_cmd(e.client, id, action, c)) {
           p->path = path;
           p->old_token = have_program ? program.program_token : 0;
@@ -657,7 +664,7 @@ int run_hmi(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
         }
         return;
       }
-      if (action == "start" || action == "hold" || action == "resume" || action == "stop") {
+      if (action == "start" || action == "hold" || action == "resume" || action == "stop" || action == "confirm") {
         c.command = *cnc::service::program_command_by_name(action);
         if (action == "stop") jogging.erase(e.client);
         if (send_cmd(e.client, id, action, c)) result(e.client, id, true, action + " sent");
@@ -915,7 +922,10 @@ int run_hmi(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
                       {"blocks", program.num_blocks},
                       {"error", program.error},
                       {"refusal", program.refusal},
-                      {"block_delete", program.block_delete != 0}};
+                      {"block_delete", program.block_delete != 0},
+                      {"from_line", program.from_line},
+                      {"approach", program.approach},
+                      {"approach_pending", program.approach_pending != 0}};
     }
     if (have_setpoint) {
       s["feed"] = fin(setpoint.feed_mm_per_min);

@@ -305,6 +305,39 @@ try:
     driver.find_element(By.ID, "btn-stop").click()
     wait("stopped again", lambda: state("program") == "stopped" and state("interp") in ("idle", "done"), 10)
 
+    # 9c. Run from line 8 ("G1 X40" after the move to X0 Y10): the cell shows the approach
+    #     and waits; START is refused until Confirm; then the path runs lines 8 and 9 and
+    #     the program ends.
+    driver.find_element(By.ID, "rfl-line").clear()
+    driver.find_element(By.ID, "rfl-line").send_keys("8")
+    n0 = n_results()
+    t_rfl = time.monotonic()
+    driver.find_element(By.ID, "btn-run-from-line").click()
+    wait_result(n0, "loaded")
+    wait("the approach shown", lambda: driver.execute_script(
+        "return !document.getElementById('approach-box').hidden && !document.getElementById('btn-confirm').hidden"), 15)
+    timings["run_from_line_click_to_approach_shown_ms"] = round((time.monotonic() - t_rfl) * 1000, 1)
+    approach = text("approach")
+    note(f"run from line 8: approach shown: {approach}")
+    if text("approach-line") != "8":
+        fail(f"the approach names line {text('approach-line')}, not 8")
+    shot("06b-run-from-line-approach")
+    n0 = n_results()
+    driver.find_element(By.ID, "btn-start").click()
+    wait_result(n0, "start refused", ok=False)
+    if state("interp") == "running":
+        fail("START before the confirm moved the machine")
+    note(f"START before the confirm refused: {last_result()}")
+    n0 = n_results()
+    driver.find_element(By.ID, "btn-confirm").click()
+    wait_result(n0, "confirm sent")
+    wait("the confirm taken", lambda: driver.execute_script("return document.getElementById('btn-confirm').hidden"), 10)
+    driver.find_element(By.ID, "btn-start").click()
+    wait("line 9 runs", lambda: text("line-no") == "9", 60)
+    wait("the program from line 8 done", lambda: state("program") == "done", 60)
+    timings["run_from_line_total_s"] = round(time.monotonic() - t_rfl, 1)
+    note(f"run from line 8 ran to its end ({timings['run_from_line_total_s']} s from the click)")
+
     # 10. MDI a slow move, a fault injected from outside during it (DRIVE_CMD DISABLE by
     #     cnc-ctl), the alarm shown; Reset from the page.
     driver.find_element(By.ID, "mdi-line").send_keys("G1 Y100 F300")

@@ -94,6 +94,12 @@ const handlers = {
     addState('program', pg.state || '—', pg.state === 'fault' || pg.state === 'refused' ? 'bad' : pg.state === 'running' ? 'ok' : '');
     addState('interp', it.state || '—', it.state === 'fault' ? 'bad' : it.state === 'held' ? 'warn' : it.state === 'running' ? 'ok' : '');
     $('program-state').textContent = pg.state || '';
+    // Run from line: the approach the cell will make, until it is confirmed.
+    const pending = pg.approach_pending === true;
+    $('approach-box').hidden = !(pg.from_line > 0 && pg.approach);
+    $('approach-line').textContent = pg.from_line || '';
+    $('approach').textContent = pg.approach || '';
+    $('btn-confirm').hidden = !pending;
     if (typeof it.feed_override === 'number') {
       $('feed-override-cell').textContent = `${Math.round(it.feed_override * 100)} %`;
       if (!S.sliderBusy && document.activeElement !== $('feed-override')) {
@@ -359,6 +365,11 @@ function wire() {
   $('btn-home-all').onclick = () => send('home');
   $('btn-load').onclick = () => send('load', { path: $('program-list').value });
   $('btn-refresh').onclick = () => send('programs');
+  $('btn-run-from-line').onclick = () => {
+    const n = Number($('rfl-line').value);
+    if (Number.isInteger(n) && n >= 1) send('load', { path: $('program-list').value, from_line: n });
+  };
+  $('btn-confirm').onclick = () => send('confirm');
   for (const [id, action] of [['sw-single-block', 'single_block'], ['sw-optional-stop', 'optional_stop'],
     ['sw-block-delete', 'block_delete']]) {
     $(id).addEventListener('change', () => { send(action, { value: $(id).checked }); $(id).blur(); });
