@@ -424,7 +424,11 @@ main() {
     conformance) [ -x "$(bin cnc-rs274)" ] || build; cmd_conformance "$@" ;;
     bench) cmd_bench "$@" ;;
     key) cmd_key "$@" ;;
-    *) awk 'NR > 1 && /^#/ {sub(/^# ?/, ""); print; next} NR > 1 {exit}' "$0"; [ -z "$cmd" ] || exit 2 ;;
+    --version) [ -x "$(bin cnc-ctl)" ] || die "--version: not built yet (./cnc build)"
+               echo "cnc $("$(bin cnc-ctl)" --version | cut -d' ' -f2)" ;;
+    -h|--help) awk 'NR > 1 && /^#/ {sub(/^# ?/, ""); print; next} NR > 1 {exit}' "$0" ;;
+    *) [ -z "$cmd" ] || say "unknown command '$cmd' (see cnc --help)"
+       awk 'NR > 1 && /^#/ {sub(/^# ?/, ""); print; next} NR > 1 {exit}' "$0"; [ -z "$cmd" ] || exit 2 ;;
   esac
 }
 

@@ -2,12 +2,12 @@
 
 #include <spdlog/spdlog.h>
 
+#include <cmath>
 #include <cstdio>
 #include <exception>
 
-#include <CLI/CLI.hpp>
-
 #include "common/config/yaml_reader.h"
+#include "common/util/cli.h"
 #include "common/util/install.h"
 #include "common/util/signals.h"
 
@@ -16,6 +16,15 @@ namespace cnc::service {
 std::string Args::option(const std::string& key, const std::string& fallback) const {
   auto it = options.find(key);
   return it == options.end() ? fallback : it->second;
+}
+
+double Args::number(const std::string& key, double fallback) const {
+  auto it = options.find(key);
+  if (it == options.end()) return fallback;
+  double v = 0;
+  if (!CLI::detail::lexical_cast(it->second, v) || !std::isfinite(v))
+    throw FlagError("--" + key + ": " + it->second + " is not a number");
+  return v;
 }
 
 bus::Security bus_security(const config::MachineConfig& cfg, const std::string& who) {
@@ -33,32 +42,26 @@ bus::Security bus_security(const config::MachineConfig& cfg, const std::string& 
   return sec;
 }
 
-// The flags by CLI11: --help and --version on every service in one style, and an
-// error naming the flag for an unknown or malformed one (exit 2).
+// The flags by CLI11 in the style of every program (util/cli.h): --help and
+// --version, an error naming the flag for an unknown or malformed one (exit 2).
 int run(const Spec& spec, int argc, char** argv,
         const std::function<int(const config::MachineConfig&, const Args&)>& body) {
   Args args;
   CLI::App app{spec.summary, spec.name};
-  app.set_version_flag("--version", spec.name + " " + util::version());
+  util::cli::setup(app);
   app.add_option("--machine", args.machine_file, "the cell's machine config (YAML)")
       ->type_name("FILE")
       ->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
   for (const auto& o : spec.options) {
-    app.add_option_function<std::string>("--" + o, [&args, o](const std::string& v) { args.options[o] = v; })
-        ->type_name("VALUE")
-        ->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
+    CLI::Option* opt =
+        app.add_option_function<std::string>("--" + o.name, [&args, o](const std::string& v) { args.options[o.name] = v; },
+                                             o.help)
+            ->type_name(o.value.empty() ? "VALUE" : o.value)
+            ->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
+    if (o.number) opt->check(CLI::Number);
   }
-  for (const auto& f : spec.flags) app.add_flag_callback("--" + f, [&args, f] { args.flags.insert(f); });
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::CallForHelp& e) {
-    return app.exit(e);
-  } catch (const CLI::CallForVersion& e) {
-    return app.exit(e);
-  } catch (const CLI::ParseError& e) {
-    std::fprintf(stderr, "%s: %s (see %s --help)\n", spec.name.c_str(), e.what(), spec.name.c_str());
-    return kExitBadInput;
-  }
+  for (const auto& f : spec.flags) app.add_flag_callback("--" + f.name, [&args, f] { args.flags.insert(f.name); }, f.help);
+  if (const int rc = util::cli::parse(app, argc, argv); rc >= 0) return rc;
   spdlog::set_pattern("%H:%M:%S.%e %n[%l] %v");
   spdlog::default_logger()->set_level(spdlog::level::info);
   util::install_stop_handlers();
@@ -72,6 +75,8 @@ int run(const Spec& spec, int argc, char** argv,
       cfg = config::load_machine_config(args.machine_file);
     }
     return body(cfg, args);
+  } catch (const FlagError& e) {
+    return util::cli::bad_flag(app, e.what());
   } catch (const config::ConfigError& e) {
     std::fprintf(stderr, "%s: config error: %s\n", spec.name.c_str(), e.what());
     return kExitBadInput;

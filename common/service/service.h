@@ -4,6 +4,7 @@
 #include <functional>
 #include <map>
 #include <set>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -12,18 +13,34 @@
 
 namespace cnc::service {
 
+// A flag's value that the program itself finds malformed (e.g. a number or a word):
+// run() exits 2 with "NAME: what (see NAME --help)", as for the flags CLI11 checks.
+struct FlagError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
 struct Args {
   std::string machine_file;
   std::map<std::string, std::string> options;  // --key value
   std::set<std::string> flags;                 // --flag
   std::string option(const std::string& key, const std::string& fallback = "") const;
+  // --key's value as a number (fallback when not given); FlagError naming it when it is none.
+  double number(const std::string& key, double fallback) const;
+};
+
+// One accepted flag: --NAME (VALUE shown in --help; empty for a switch) and what it does.
+struct Flag {
+  std::string name;
+  std::string value;
+  std::string help;
+  bool number = false;  // a malformed number is refused naming the flag (exit 2)
 };
 
 struct Spec {
   std::string name;                    // e.g. "cnc-interpolator"
   std::string summary;                 // one line for --help
-  std::set<std::string> options;       // accepted --key value options besides --machine
-  std::set<std::string> flags;         // accepted --flag switches
+  std::vector<Flag> options;           // accepted --key value options besides --machine
+  std::vector<Flag> flags;             // accepted --flag switches
   bool needs_machine = true;
 };
 

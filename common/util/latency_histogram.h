@@ -78,35 +78,9 @@ class LatencyHistogram {
 
   // {"count":..,"min_us":..,"mean_us":..,"p50_us":..,"p99_us":..,"p999_us":..,"max_us":..,
   //  "overflow":..,"negative":..,"bins":[[lower_us, upper_us, count], ...]} with the
-  // non-empty bins only (the overflow bin as [20000, null, n]). Allocates: call it at the end.
-  std::string to_json() const {
-    std::string s;
-    char buf[160];
-    std::snprintf(buf, sizeof buf,
-                  "{\"count\": %lld, \"min_us\": %.3f, \"mean_us\": %.3f, \"p50_us\": %.3f, \"p99_us\": %.3f, "
-                  "\"p999_us\": %.3f, \"max_us\": %.3f, ",
-                  static_cast<long long>(count_), min_us(), mean_us(), percentile_us(0.5), percentile_us(0.99),
-                  percentile_us(0.999), max_us());
-    s += buf;
-    std::snprintf(buf, sizeof buf, "\"overflow\": %lld, \"negative\": %lld, \"bins\": [",
-                  static_cast<long long>(overflow_), static_cast<long long>(negative_));
-    s += buf;
-    bool first = true;
-    for (int i = 0; i < kBins; ++i) {
-      if (bins_[static_cast<size_t>(i)] == 0) continue;
-      std::snprintf(buf, sizeof buf, "%s[%lld, %lld, %lld]", first ? "" : ", ", static_cast<long long>(lower_us(i)),
-                    static_cast<long long>(upper_us(i)), static_cast<long long>(bins_[static_cast<size_t>(i)]));
-      s += buf;
-      first = false;
-    }
-    if (overflow_ > 0) {
-      std::snprintf(buf, sizeof buf, "%s[%lld, null, %lld]", first ? "" : ", ", static_cast<long long>(kRangeUs),
-                    static_cast<long long>(overflow_));
-      s += buf;
-    }
-    s += "]}";
-    return s;
-  }
+  // non-empty bins only (the overflow bin as [20000, null, n]); times to 1 ns.
+  // Allocates: call it at the end. (nlohmann-json, in realtime.cc.)
+  std::string to_json() const;
 
  private:
   std::array<int64_t, kBins> bins_{};

@@ -7,6 +7,7 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <cmath>
 #include <cerrno>
 #include <cstdio>
 #include <cstdlib>
@@ -14,26 +15,34 @@
 #include <filesystem>
 #include <fstream>
 
+#include <nlohmann/json.hpp>
+
 namespace cnc::util {
 namespace {
 
 std::atomic<bool> g_memory_locked{false};
 
-std::string json_string(const std::string& s) {
-  std::string out = "\"";
-  for (const char c : s) {
-    if (c == '"' || c == '\\') {
-      out += '\\';
-      out += c;
-    } else if (static_cast<unsigned char>(c) < 0x20) {
-      char buf[8];
-      std::snprintf(buf, sizeof buf, "\\u%04x", c);
-      out += buf;
-    } else {
-      out += c;
-    }
-  }
-  return out + "\"";
+// A time in µs to the ns, as the file always gave it ("%.3f"); finite, or null.
+nlohmann::ordered_json us(double v) {
+  return std::isfinite(v) ? nlohmann::ordered_json(std::round(v * 1e3) / 1e3) : nlohmann::ordered_json();
+}
+
+nlohmann::ordered_json histogram_json(const LatencyHistogram& h) {
+  nlohmann::ordered_json j;
+  j["count"] = h.count();
+  j["min_us"] = us(h.min_us());
+  j["mean_us"] = us(h.mean_us());
+  j["p50_us"] = us(h.percentile_us(0.5));
+  j["p99_us"] = us(h.percentile_us(0.99));
+  j["p999_us"] = us(h.percentile_us(0.999));
+  j["max_us"] = us(h.max_us());
+  j["overflow"] = h.overflow();
+  j["negative"] = h.negative();
+  auto& bins = j["bins"] = nlohmann::ordered_json::array();
+  for (int i = 0; i < LatencyHistogram::kBins; ++i)
+    if (h.bin_count(i) != 0) bins.push_back({LatencyHistogram::lower_us(i), LatencyHistogram::upper_us(i), h.bin_count(i)});
+  if (h.overflow() > 0) bins.push_back({LatencyHistogram::kRangeUs, nullptr, h.overflow()});
+  return j;
 }
 
 std::vector<int> current_cpus() {
@@ -47,6 +56,8 @@ std::vector<int> current_cpus() {
 }
 
 }  // namespace
+
+std::string LatencyHistogram::to_json() const { return histogram_json(*this).dump(); }
 
 std::string make_realtime(int priority) {
   if (priority <= 0) return "";
@@ -208,15 +219,21 @@ void report_latency(const LatencyReport& r, const std::string& dir) {
     const std::string path = dir + "/" + r.service + ".json";
     const std::string tmp = path + ".tmp";
     {
+      nlohmann::ordered_json j;
+      j["service"] = r.service;
+      j["loop"] = r.loop;
+      j["period_us"] = us(r.period_s * 1e6);
+      j["cycles"] = r.cycles;
+      j["overruns"] = r.overruns;
+      j["overruns_what"] = r.overruns_what;
+      j["scheduling"] = sched;
+      j["pid"] = getpid();
+      j["wake_what"] = r.wake_what;
+      j["compute_what"] = r.compute_what;
+      j["wake"] = histogram_json(w);
+      j["compute"] = histogram_json(c);
       std::ofstream f(tmp);
-      char period[32];
-      std::snprintf(period, sizeof period, "%.3f", r.period_s * 1e6);
-      f << "{\"service\": " << json_string(r.service) << ",\n \"loop\": " << json_string(r.loop)
-        << ",\n \"period_us\": " << period << ",\n \"cycles\": " << r.cycles << ",\n \"overruns\": " << r.overruns
-        << ",\n \"overruns_what\": " << json_string(r.overruns_what) << ",\n \"scheduling\": " << json_string(sched)
-        << ",\n \"pid\": " << getpid() << ",\n \"wake_what\": " << json_string(r.wake_what)
-        << ",\n \"compute_what\": " << json_string(r.compute_what) << ",\n \"wake\": " << w.to_json()
-        << ",\n \"compute\": " << c.to_json() << "}\n";
+      f << j.dump(1) << "\n";
       if (!f) throw std::runtime_error("write failed");
     }
     std::filesystem::rename(tmp, path);

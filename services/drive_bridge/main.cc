@@ -15,7 +15,7 @@
 int main(int argc, char** argv) {
   // --latency-dir DIR (or $CNC_LATENCY_DIR): where the servo loop's timing goes at the end (cnc-drive-bridge.json).
   cnc::service::Spec spec{"cnc-drive-bridge", "fine interpolation, safety and Modbus I/O to the servo drives",
-                          {"latency-dir"}, {}};
+                          {{"latency-dir", "DIR", "where the servo loop's timing goes at the end (cnc-drive-bridge.json; default $CNC_LATENCY_DIR)"}}, {}};
   return cnc::service::run(spec, argc, argv, [](const cnc::config::MachineConfig& cfg, const cnc::service::Args& args) {
     // First, so the threads LCM starts (its receive thread) inherit the scheduling,
     // and the Modbus I/O threads too. One priority above the other cyclic services:

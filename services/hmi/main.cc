@@ -1058,8 +1058,11 @@ int run_hmi(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
 int main(int argc, char** argv) {
   cnc::service::Spec spec{"cnc-hmi",
                           "the operator's page in a browser (HTTP and WebSocket), a client of the cell like cnc-ctl",
-                          {"www", "runs", "port", "hash-password"},
-                          {"print-url"}};
+                          {{"www", "DIR", "the page's files (default: services/hmi/www, installed under /usr/share/cnc)"},
+                           {"runs", "DIR", "where the run logs are listed from (default: the config's logger.directory)"},
+                           {"port", "P", "the HTTP port (default: the config's hmi.port)", true},
+                           {"hash-password", "USER", "print a line for hmi.users_file from a password on standard input"}},
+                          {{"print-url", "", "print the page's address from the config and exit"}}};
   // --hash-password needs no machine: a users file is made before the cell is configured.
   for (int i = 1; i < argc; ++i)
     if (std::string(argv[i]) == "--hash-password") spec.needs_machine = false;

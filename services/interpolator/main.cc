@@ -13,7 +13,7 @@
 int main(int argc, char** argv) {
   // --latency-dir DIR (or $CNC_LATENCY_DIR): where the cycle timing goes at the end (cnc-interpolator.json).
   cnc::service::Spec spec{"cnc-interpolator", "coarse interpolation of program blocks into axis setpoints",
-                          {"latency-dir"}, {}};
+                          {{"latency-dir", "DIR", "where the cycle timing goes at the end (cnc-interpolator.json; default $CNC_LATENCY_DIR)"}}, {}};
   return cnc::service::run(spec, argc, argv, [](const cnc::config::MachineConfig& cfg, const cnc::service::Args& args) {
     // First, so the threads LCM starts (its receive thread) inherit the scheduling and the CPUs.
     cnc::util::apply_realtime("cnc-interpolator", cfg.realtime_priority, cfg.realtime_cpus);

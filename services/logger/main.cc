@@ -21,7 +21,9 @@ constexpr int64_t kReceiveBufferBytes = 8 * 1024 * 1024;
 }  // namespace
 
 int main(int argc, char** argv) {
-  cnc::service::Spec spec{"cnc-logger", "records every channel of the cell into LCM log files", {"out"}, {}};
+  cnc::service::Spec spec{"cnc-logger", "records every channel of the cell into LCM log files", 
+                          {{"out", "BASE", "the log's path without .lcmlog (default: the config's DIR/CELL-YYYYmmdd-HHMMSS)"}},
+                          {}};
   return cnc::service::run(spec, argc, argv, [](const cnc::config::MachineConfig& cfg, const cnc::service::Args& args) {
     // --out BASE (without .lcmlog) overrides DIR/CELL-YYYYmmdd-HHMMSS from the config.
     std::string base = args.option("out");

@@ -28,7 +28,7 @@ namespace ch = cnc::config::channels;
 int main(int argc, char** argv) {
   // --latency-dir DIR (or $CNC_LATENCY_DIR): where the timing of its status handling goes at the end (cnc-monitor.json).
   cnc::service::Spec spec{"cnc-monitor", "feed, chord error, predicted roughness and following error, with alarms",
-                          {"latency-dir"}, {}};
+                          {{"latency-dir", "DIR", "where the status handling's timing goes at the end (cnc-monitor.json; default $CNC_LATENCY_DIR)"}}, {}};
   return cnc::service::run(spec, argc, argv, [](const cnc::config::MachineConfig& cfg, const cnc::service::Args& args) {
     // Below the cyclic services, above ordinary load: a starved monitor loses messages.
     // Not pinned: it is event-driven, and may use whatever CPU the cyclic services leave.

@@ -10,7 +10,10 @@
 int main(int argc, char** argv) {
   // --state FILE: the loaded program's path, token and start, so that a restarted
   // server serves the same blocks to the interpolator that still runs them.
-  cnc::service::Spec spec{"cnc-program-server", "parses part programs and serves their blocks", {"state"}, {}};
+  cnc::service::Spec spec{"cnc-program-server", "parses part programs and serves their blocks", 
+                          {{"state", "FILE",
+                            "keeps the loaded program's path, token and start, so that a restarted server resumes it"}},
+                          {}};
   return cnc::service::run(spec, argc, argv, [](const cnc::config::MachineConfig& cfg, const cnc::service::Args& args) {
     cnc::bus::Bus bus(cfg.lcm_url, 0, 1000, cnc::service::bus_security(cfg, "cnc-program-server"));
     cnc::pps::ProgramServerNode node(cfg, bus);

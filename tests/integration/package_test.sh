@@ -11,11 +11,12 @@
 #     (/usr/libexec/cnc/cnc-service NAME; logger and monitor as the cnc user, the
 #     cyclic ones as root: see svc below), `cnc-ctl --do status` lists them
 #     with host and version, reset enables the drives, and the demo's program runs
-#     to its end; the log verifies and names each service's version.
+#     to its end (its end writes the parameters into program.var_file,
+#     /var/lib/cnc/cell.var); the log verifies and names each service's version.
 #  4. Restart policy (what systemd's Restart= does, done by hand: there is no systemd
 #     here): a killed logger started again writes a new file, the cell runs on; a
 #     killed interpolator started again refuses to run until RESET, then runs.
-#  5. An upgrade in place keeps the edited cell file and the key; removal keeps the
+#  5. An upgrade in place keeps the edited cell file, the key and the parameters; removal keeps the
 #     configuration, purge removes it with the state directory.
 #
 # Needs root (dpkg -i on this machine; CI's machine is fresh). Skipped (77) without it
@@ -129,6 +130,9 @@ ctl --do reset --timeout 20 >&2 || fail "reset"
 t=$SECONDS
 ctl --do run --program /usr/share/cnc/config/programs/demo.ngc --timeout 120 >"$WORK/demo.txt" 2>&1 || { cat "$WORK/demo.txt"; fail "the demo's program did not run to its end"; }
 note "demo.ngc from the installed files: done in $((SECONDS - t)) s ($(grep -o 'largest following error[^,]*' "$WORK/demo.txt" | head -1))"
+# The installed cell keeps the interpreter's parameters (program.var_file): written at the program's end.
+grep -q "^5221"$'\t' /var/lib/cnc/cell.var 2>/dev/null || fail "the demo's end wrote no parameter file /var/lib/cnc/cell.var (program.var_file)"
+note "parameters kept: /var/lib/cnc/cell.var, $(wc -l </var/lib/cnc/cell.var) persistent parameters, owner $(stat -c %U /var/lib/cnc/cell.var)"
 
 # Restart policy, by hand: the logger (Restart=always) comes back with a new file.
 kill_hard logger
@@ -172,6 +176,7 @@ dpkg-deb -b "$WORK/up" "$WORK/cnc_next.deb" >/dev/null
 dpkg -i "$WORK/cnc_next.deb" >"$WORK/dpkg-up.log" 2>&1 || { cat "$WORK/dpkg-up.log"; fail "upgrade failed"; }
 [ "$(dpkg-query -W -f='${Version}' cnc)" = "$NEXT" ] || fail "upgrade: version $(dpkg-query -W -f='${Version}' cnc)"
 tail -1 /etc/cnc/cell.yaml | grep -q 'changed on this site' || fail "the upgrade lost the site's change to cell.yaml"
+[ -s /var/lib/cnc/cell.var ] || fail "the upgrade lost the parameter file /var/lib/cnc/cell.var"
 [ "$(sha256sum /etc/cnc/cell.key | cut -d' ' -f1)" = "$key_sum" ] || fail "the upgrade changed the key"
 [ "$(stat -c '%U %a' /etc/cnc/cell.key)" = "cnc 600" ] || fail "upgrade: key $(stat -c '%U %a' /etc/cnc/cell.key)"
 note "upgrade $VERSION -> $NEXT: cell.yaml kept the site's change, key unchanged"

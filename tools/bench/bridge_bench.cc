@@ -37,6 +37,7 @@
 #include "common/drive/modbus_link.h"
 #include "common/util/clock.h"
 #include "services/drive_bridge/drive_bridge_node.h"
+#include "common/util/cli.h"
 
 extern char** environ;
 
@@ -288,8 +289,10 @@ void transports(const std::string& dir, double seconds) {
 
 int main(int argc, char** argv) {
   double seconds = 3.0;
-  for (int i = 1; i + 1 < argc; ++i)
-    if (std::string(argv[i]) == "--seconds") seconds = std::stod(argv[i + 1]);
+  CLI::App app{"the drive bridge: setpoint-to-Modbus latency, TCP exchange times, RTU update rate", "cnc-bench-bridge"};
+  cnc::util::cli::setup(app);
+  app.add_option("--seconds", seconds, "how long each measurement runs")->type_name("S")->check(cnc::util::cli::positive());
+  if (const int rc = cnc::util::cli::parse(app, argc, argv); rc >= 0) return rc;
   spdlog::set_level(spdlog::level::warn);
   const std::string dir = fs::temp_directory_path() / ("cnc-bench-bridge." + std::to_string(getpid()));
   fs::create_directories(dir);

@@ -456,8 +456,11 @@ int bench(const cnc::config::MachineConfig& machine, const cnc::service::Args& a
 }  // namespace
 
 int main(int argc, char** argv) {
-  cnc::service::Spec spec{"cnc-bench-interpolator", "interpolator compute time and feed fluctuation", {"blocks"},
-                          {"paced", "slowest", "cyclic-only"}};
+  cnc::service::Spec spec{"cnc-bench-interpolator", "interpolator compute time and feed fluctuation", 
+                          {{"blocks", "N", "blocks of the dense NURBS program", true}},
+                          {{"paced", "", "every cycle on a 1 ms absolute deadline (real time)"},
+                           {"slowest", "", "what the slowest cycles did"},
+                           {"cyclic-only", "", "stop after the planner-thread run and the noise floor"}}};
   if (argc == 1) {
     static char a0[] = "cnc-bench-interpolator", a1[] = "--machine", a2[] = CNC_SOURCE_DIR "/config/machines/sim3.yaml";
     static char* def[] = {a0, a1, a2, nullptr};

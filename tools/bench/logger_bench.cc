@@ -322,8 +322,13 @@ int run_bench(const cnc::config::MachineConfig&, const cnc::service::Args& args)
 int main(int argc, char** argv) {
   cnc::service::Spec spec{"cnc-bench-logger",
                           "messages the logger loses at a given rate, and its CPU share",
-                          {"seconds", "rate-hz", "rotate-mb", "logger", "work", "max-lost"},
-                          {"keep"},
+                          {{"seconds", "S", "how long to publish (default 600)", true},
+                           {"rate-hz", "HZ", "messages per second and channel (default 1000)", true},
+                           {"rotate-mb", "MB", "the logger's file rotation size (default 64)", true},
+                           {"logger", "EXE", "the logger to run (default: this build's)"},
+                           {"work", "DIR", "where the logs go (default: a temporary directory)"},
+                           {"max-lost", "N", "exit 1 when more are lost", true}},
+                          {{"keep", "", "keep the logs"}},
                           false};
   return cnc::service::run(spec, argc, argv, run_bench);
 }

@@ -20,6 +20,7 @@
 #include <string>
 
 #include "tests/unit/interpolator_property.h"
+#include "common/util/cli.h"
 
 namespace {
 
@@ -61,18 +62,14 @@ int main(int argc, char** argv) {
   uint32_t classes = kAllClasses;
   bool verbose = false;
   std::string program;  // --program FILE: check that program alone and print its figures
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "--seed" && i + 1 < argc) seed = std::strtoull(argv[++i], nullptr, 0);
-    else if (a == "--seconds" && i + 1 < argc) seconds = std::strtod(argv[++i], nullptr);
-    else if (a == "--classes" && i + 1 < argc) classes = static_cast<uint32_t>(std::strtoul(argv[++i], nullptr, 0));
-    else if (a == "--verbose") verbose = true;
-    else if (a == "--program" && i + 1 < argc) program = argv[++i];
-    else {
-      std::fprintf(stderr, "usage: cnc-path-property [--seed N] [--seconds S] [--classes MASK] [--verbose] | --program FILE\n");
-      return 2;
-    }
-  }
+  CLI::App app{"the interpolator's randomized path property check, for as long as asked", "cnc-path-property"};
+  cnc::util::cli::setup(app);
+  app.add_option("--seed", seed, "the first program's seed")->type_name("N");
+  app.add_option("--seconds", seconds, "how long to generate and check programs")->type_name("S");
+  app.add_option("--classes", classes, "the program classes to generate, a bit mask (0x.. allowed)")->type_name("MASK");
+  app.add_flag("--verbose", verbose, "every program's figures");
+  app.add_option("--program", program, "check this program alone and print its figures")->type_name("FILE");
+  if (const int rc = cnc::util::cli::parse(app, argc, argv); rc >= 0) return rc;
   const cnc::config::MachineConfig cfg = sim3();
   if (!program.empty()) {
     std::FILE* f = std::fopen(program.c_str(), "r");

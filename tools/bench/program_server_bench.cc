@@ -61,6 +61,7 @@
 #include "common/rs274/canon_printer.h"
 #include "common/rs274/interpreter.h"
 #include "services/part_program_server/program_server.h"
+#include "common/util/cli.h"
 
 extern char** environ;
 
@@ -507,27 +508,19 @@ int main(int argc, char** argv) {
   int64_t lines = 200'000, repeat = 1'000'000, iterations = 100'000;
   std::string only, profile, rs274 = "/usr/bin/rs274";
   bool keep = false, no_rs274 = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    const bool has_value = i + 1 < argc;
-    if (a == "--runs" && has_value) runs = std::max(1, std::atoi(argv[++i]));
-    else if (a == "--lines" && has_value) lines = std::max<int64_t>(10, std::atoll(argv[++i]));
-    else if (a == "--repeat" && has_value) repeat = std::max<int64_t>(1, std::atoll(argv[++i]));
-    else if (a == "--iterations" && has_value) iterations = std::max<int64_t>(2, std::atoll(argv[++i]));
-    else if (a == "--only" && has_value) only = argv[++i];
-    else if (a == "--profile" && has_value) profile = argv[++i];
-    else if (a == "--rs274" && has_value) rs274 = argv[++i];
-    else if (a == "--no-rs274") no_rs274 = true;
-    else if (a == "--keep") keep = true;
-    else {
-      std::fprintf(stderr,
-                   "usage: cnc-bench-program-server [--runs N] [--lines N] [--repeat N] [--iterations N] "
-                   "[--only lines|repeat|while|sub] [--no-rs274] [--rs274 PATH] [--keep]\n"
-                   "       [--profile count|builder|server|printer]: one run of that case per program, in this\n"
-                   "       process, no table (for valgrind --tool=callgrind)\n");
-      return 2;
-    }
-  }
+  CLI::App app{"throughput and peak memory of the interpreter and the program server, against LinuxCNC's rs274", "cnc-bench-program-server"};
+  cnc::util::cli::setup(app);
+  app.add_option("--runs", runs, "runs per case; the best counts")->type_name("N")->check(CLI::Range(1, 1000));
+  app.add_option("--lines", lines, "lines of the straight-line program")->type_name("N")->check(CLI::Range(int64_t{10}, int64_t{1} << 40));
+  app.add_option("--repeat", repeat, "iterations of the O-repeat program")->type_name("N")->check(CLI::Range(int64_t{1}, int64_t{1} << 40));
+  app.add_option("--iterations", iterations, "iterations of the while and sub programs")->type_name("N")->check(CLI::Range(int64_t{2}, int64_t{1} << 40));
+  app.add_option("--only", only, "one case")->check(CLI::IsMember({"lines", "repeat", "while", "sub"}));
+  app.add_option("--profile", profile, "one run of that stage per program, in this process, no table (for callgrind)")
+      ->check(CLI::IsMember({"count", "builder", "server", "printer"}));
+  app.add_option("--rs274", rs274, "LinuxCNC's rs274")->type_name("PATH");
+  app.add_flag("--no-rs274", no_rs274, "without rs274's figures");
+  app.add_flag("--keep", keep, "keep the generated programs");
+  if (const int rc = cnc::util::cli::parse(app, argc, argv); rc >= 0) return rc;
   const auto t_start = Clock::now();
   char tmpl[] = "/tmp/cnc-bench-program-XXXXXX";
   if (mkdtemp(tmpl) == nullptr) {

@@ -21,6 +21,7 @@
 #include "cnc/lcmt_setpoint.hpp"
 #include "common/bus/auth.h"
 #include "common/bus/bus.h"
+#include "common/util/cli.h"
 
 namespace {
 using Clock = std::chrono::steady_clock;
@@ -72,16 +73,11 @@ cnc::lcmt_setpoint setpoint() {
 
 int main(int argc, char** argv) {
   int n = 200000, reps = 7;
-  for (int i = 1; i + 1 < argc; i += 2) {
-    const std::string a = argv[i];
-    if (a == "--iterations") n = std::atoi(argv[i + 1]);
-    else if (a == "--repeats") reps = std::atoi(argv[i + 1]);
-    else {
-      std::fprintf(stderr, "usage: cnc-bench-sign [--iterations N] [--repeats R]\n");
-      return 2;
-    }
-  }
-  if (n < 1 || reps < 1) return 2;
+  CLI::App app{"what signing costs per message (sign, verify) against the plain encode", "cnc-bench-sign"};
+  cnc::util::cli::setup(app);
+  app.add_option("--iterations", n, "messages per measurement")->type_name("N")->check(CLI::Range(1, 1 << 30));
+  app.add_option("--repeats", reps, "measurements; the median counts")->type_name("R")->check(CLI::Range(1, 1000));
+  if (const int rc = cnc::util::cli::parse(app, argc, argv); rc >= 0) return rc;
   cnc::bus::KeySet keys;
   keys.add(cnc::bus::generate_key());
   const cnc::bus::Key& key = keys.keys[0];

@@ -16,19 +16,19 @@
 #include <string>
 #include <thread>
 
+#include "common/util/cli.h"
+
 int main(int argc, char** argv) {
-  if (argc != 5) {
-    std::fprintf(stderr, "usage: cnc-stall-inject PID STOP_MS PERIOD_MS COUNT\n");
-    return 2;
-  }
-  const pid_t pid = static_cast<pid_t>(std::atol(argv[1]));
-  const double stop_ms = std::atof(argv[2]);
-  const double period_ms = std::atof(argv[3]);
-  const int count = std::atoi(argv[4]);
-  if (pid <= 0 || stop_ms <= 0 || period_ms < 0 || count <= 0) {
-    std::fprintf(stderr, "cnc-stall-inject: PID, STOP_MS and COUNT must be positive, PERIOD_MS not negative\n");
-    return 2;
-  }
+  pid_t pid = 0;
+  double stop_ms = 0, period_ms = 0;
+  int count = 0;
+  CLI::App app{"stalls a process (SIGSTOP, STOP_MS, SIGCONT, PERIOD_MS running) COUNT times", "cnc-stall-inject"};
+  cnc::util::cli::setup(app);
+  app.add_option("pid", pid, "the process to stall")->type_name("PID")->required()->check(cnc::util::cli::positive());
+  app.add_option("stop_ms", stop_ms, "how long each stall lasts, ms")->type_name("STOP_MS")->required()->check(cnc::util::cli::positive());
+  app.add_option("period_ms", period_ms, "how long it runs between stalls, ms")->type_name("PERIOD_MS")->required()->check(cnc::util::cli::non_negative());
+  app.add_option("count", count, "how many stalls")->type_name("COUNT")->required()->check(CLI::Range(1, 1 << 30));
+  if (const int rc = cnc::util::cli::parse(app, argc, argv); rc >= 0) return rc;
   using Clock = std::chrono::steady_clock;
   double longest = 0, sum = 0;
   int done = 0;

@@ -14,7 +14,6 @@
 // figures are also given as CPU µs per point (the thread's CPU clock), which a loaded
 // machine does not inflate; the index/brute ratio is given on both clocks.
 // --out-dir keeps each mesh's STL and points CSV (for OpenCAMLib side by side).
-#include <CLI/CLI.hpp>
 
 #include <algorithm>
 #include <chrono>
@@ -30,6 +29,7 @@
 #include "common/cam/points_csv.h"
 #include "common/cam/stl.h"
 #include "common/cam/terrain.h"
+#include "common/util/cli.h"
 
 namespace {
 
@@ -166,7 +166,8 @@ void bench_load(std::size_t triangles, const std::string& dir) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"cnc-cam-bench: drop-cutter CL points/s against brute force, and STL load speed"};
+  CLI::App app{"drop-cutter CL points/s against brute force, and STL load speed", "cnc-cam-bench"};
+  cnc::util::cli::setup(app);
   std::vector<std::string> stls;
   double step = 0.2;
   int repeats = 5, threads = 2;
@@ -181,7 +182,7 @@ int main(int argc, char** argv) {
   app.add_option("--load-triangles", load_triangles, "STL load test size (0: skip)");
   app.add_option("--out-dir", out_dir, "keep each mesh as STL and its points as CSV here");
   app.add_flag("--no-terrain", no_terrain, "skip the generated terrain");
-  CLI11_PARSE(app, argc, argv);
+  if (const int rc = cnc::util::cli::parse(app, argc, argv); rc >= 0) return rc;
   try {
     const std::string dir = out_dir.empty() ? std::filesystem::temp_directory_path().string() : out_dir;
     if (!out_dir.empty()) std::filesystem::create_directories(out_dir);

@@ -12,7 +12,6 @@
 #include <CGAL/AABB_tree.h>
 #include <CGAL/AABB_triangle_primitive.h>
 #include <CGAL/Simple_cartesian.h>
-#include <CLI/CLI.hpp>
 
 #include <chrono>
 #include <cmath>
@@ -24,6 +23,7 @@
 #include "common/cam/drop_cutter.h"
 #include "common/cam/stl.h"
 #include "common/cam/terrain.h"
+#include "common/util/cli.h"
 
 namespace {
 
@@ -113,14 +113,15 @@ void run(const std::string& name, const Mesh& mesh, double step, int repeats) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"cnc-cam-index-bench: the drop-cutter's grid index against CGAL's AABB tree"};
+  CLI::App app{"the drop-cutter's grid index against CGAL's AABB tree", "cnc-cam-index-bench"};
+  cnc::util::cli::setup(app);
   std::vector<std::string> stls;
   double step = 0.2;
   int repeats = 3;
   app.add_option("--stl", stls, "more meshes");
   app.add_option("--step", step, "grid step, mm");
   app.add_option("--repeats", repeats, "runs; the best counts")->check(CLI::Range(1, 100));
-  CLI11_PARSE(app, argc, argv);
+  if (const int rc = cnc::util::cli::parse(app, argc, argv); rc >= 0) return rc;
   TerrainSpec spec;
   spec.cols = 272;
   spec.rows = 269;

@@ -47,7 +47,6 @@
 // NURBS fitted to its CL points within TOL (GcodeWriter::cut_nurbs), not as G1 lines.
 // --png: the CL surface on a grid of --png-cells (200) over the mesh's bounds as a
 // shaded height map with the cuts and their CL points, in the mesh's coordinates.
-#include <CLI/CLI.hpp>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -74,6 +73,7 @@
 #include "common/cam/shapes.h"
 #include "common/cam/points_csv.h"
 #include "common/cam/stl.h"
+#include "common/util/cli.h"
 #include "common/util/install.h"
 
 namespace {
@@ -520,7 +520,8 @@ int run_part(const PartArgs& a) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"cnc-cam: offline CAM on triangle meshes (drop-cutter by inverse offset)"};
+  CLI::App app{"offline CAM on triangle meshes (drop-cutter by inverse offset)", "cnc-cam"};
+  cnc::util::cli::setup(app);
   app.require_subcommand(1);
   DropArgs drop;
   CLI::App* d = app.add_subcommand("drop", "CL heights of a cutter dropped onto a mesh at given points");
@@ -534,14 +535,14 @@ int main(int argc, char** argv) {
   CLI::App* r = app.add_subcommand("raster", "parallel finishing passes with a fixed step, as G-code");
   r->add_option("--stl", raster.stl, "mesh, ASCII or binary STL")->required();
   r->add_option("--tool", raster.tool, "ball:D, flat:D or bull:D:r (mm)")->required();
-  r->add_option("--pick", raster.pick, "distance between passes, mm")->required()->check(CLI::PositiveNumber);
-  r->add_option("--step", raster.step, "largest distance between CL points along a pass, mm")->required()->check(CLI::PositiveNumber);
+  r->add_option("--pick", raster.pick, "distance between passes, mm")->required()->check(cnc::util::cli::positive());
+  r->add_option("--step", raster.step, "largest distance between CL points along a pass, mm")->required()->check(cnc::util::cli::positive());
   r->add_option("--angle", raster.angle, "direction of the passes, degrees from +X");
   r->add_option("--out", raster.out, "G-code file to write")->required();
   r->add_option("--tol-beta", raster.beta, "step control: largest deviation of the path from the CL surface, mm")
-      ->check(CLI::PositiveNumber);
+      ->check(cnc::util::cli::positive());
   r->add_option("--tol-alpha", raster.alpha, "the mesh's tolerance against the design surface, mm (reported)");
-  r->add_option("--min-step", raster.min_step, "smallest step of the step control, mm")->check(CLI::PositiveNumber);
+  r->add_option("--min-step", raster.min_step, "smallest step of the step control, mm")->check(cnc::util::cli::positive());
   r->add_flag("--compare-fixed", raster.compare_fixed, "also find the fixed step that is as accurate");
   r->add_flag("--no-corner-search", raster.no_corner_search,
               "step control without seed 003's concave corner search (the halving alone closes in on corners)");
@@ -549,11 +550,11 @@ int main(int argc, char** argv) {
   r->add_option("--png-cells", raster.png_cells, "the picture's CL grid: cells along the longer side")
       ->check(CLI::Range(10, 2000));
   r->add_option("--nurbs", raster.nurbs, "write each cut as G6.2 cubic NURBS fitted within this tolerance, mm")
-      ->check(CLI::PositiveNumber);
+      ->check(cnc::util::cli::positive());
   r->add_option("--origin", raster.origin, "corner: zero at the mesh's min x, min y, max z; mesh: as is");
-  r->add_option("--feed", raster.feed, "cutting feed, mm/min")->check(CLI::PositiveNumber);
-  r->add_option("--plunge", raster.plunge, "plunge feed, mm/min")->check(CLI::PositiveNumber);
-  r->add_option("--spindle", raster.spindle, "spindle speed, rpm")->check(CLI::PositiveNumber);
+  r->add_option("--feed", raster.feed, "cutting feed, mm/min")->check(cnc::util::cli::positive());
+  r->add_option("--plunge", raster.plunge, "plunge feed, mm/min")->check(cnc::util::cli::positive());
+  r->add_option("--spindle", raster.spindle, "spindle speed, rpm")->check(cnc::util::cli::positive());
   r->add_option("--safe-z", raster.safe_z, "retract height above the part's top, mm");
   r->add_option("--threads", raster.threads, "worker threads (default: all cores)")->check(CLI::Range(1, 256));
   RoughArgs rough;
@@ -562,20 +563,20 @@ int main(int argc, char** argv) {
   g->add_option("--stock", rough.stock, "box (the mesh's bounds) or margin[:MM] (grown by MM in x, y and top; 2)");
   g->add_option("--tool", rough.tool, "ball:D, flat:D or bull:D:r (mm)")->required();
   g->add_option("--cusp", rough.cusp, "largest cusp height between levels, normal to the surface, mm")
-      ->required()->check(CLI::PositiveNumber);
+      ->required()->check(cnc::util::cli::positive());
   g->add_option("--out", rough.out, "G-code file to write")->required();
   g->add_option("--png", rough.png, "picture of the levels to write (matplotlib)");
   g->add_option("--compare", rough.compare, "tools to compare, e.g. flat:10,bull:10:2,ball:10");
   g->add_option("--stepover", rough.stepover, "ring spacing as a fraction of the diameter (default 0.4)")
       ->check(CLI::Range(0.01, 0.9));
   g->add_option("--max-stepdown", rough.max_stepdown, "largest z-step, mm (default: the flute length)")
-      ->check(CLI::PositiveNumber);
+      ->check(cnc::util::cli::positive());
   g->add_option("--origin", rough.origin, "corner: zero at the stock's min x, min y and top; mesh: as is");
-  g->add_option("--feed", rough.feed, "cutting feed, mm/min")->check(CLI::PositiveNumber);
-  g->add_option("--plunge", rough.plunge, "plunge feed, mm/min")->check(CLI::PositiveNumber);
-  g->add_option("--rapid", rough.rapid, "rapid speed of the time model, mm/min")->check(CLI::PositiveNumber);
-  g->add_option("--spindle", rough.spindle, "spindle speed, rpm")->check(CLI::PositiveNumber);
-  g->add_option("--safe-z", rough.safe_z, "clearance plane above the stock's top, mm")->check(CLI::NonNegativeNumber);
+  g->add_option("--feed", rough.feed, "cutting feed, mm/min")->check(cnc::util::cli::positive());
+  g->add_option("--plunge", rough.plunge, "plunge feed, mm/min")->check(cnc::util::cli::positive());
+  g->add_option("--rapid", rough.rapid, "rapid speed of the time model, mm/min")->check(cnc::util::cli::positive());
+  g->add_option("--spindle", rough.spindle, "spindle speed, rpm")->check(cnc::util::cli::positive());
+  g->add_option("--safe-z", rough.safe_z, "clearance plane above the stock's top, mm")->check(cnc::util::cli::non_negative());
   g->add_option("--ramp", rough.ramp, "enter each chain down its first ring at this angle, degrees (0: plunge)")
       ->check(CLI::Range(0.0, 90.0));
   g->add_option("--threads", rough.threads, "levels planned side by side (default: all cores)")->check(CLI::Range(1, 256));
@@ -584,7 +585,7 @@ int main(int argc, char** argv) {
   pa->add_option("--shape", part.shape, "table1-a, table1-b, hemisphere or frustum")->required();
   pa->add_option("--out", part.out, "STL file to write")->required();
   pa->add_option("--cells", part.cells, "grid cells per side")->check(CLI::Range(4, 4000));
-  CLI11_PARSE(app, argc, argv);
+  if (const int rc = cnc::util::cli::parse(app, argc, argv); rc >= 0) return rc;
   try {
     if (d->parsed()) return run_drop(drop);
     if (r->parsed()) return run_raster(raster);

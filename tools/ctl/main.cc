@@ -343,7 +343,7 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
                                                {"override", lcmt_program_command::OVERRIDE}};
   if (auto it = plain.find(what); it != plain.end()) {
     wait_for(bus, 0.5, [&] { return view.have_program && view.have_interp; });  // the states first
-    const double value = what == "override" ? std::stod(args.option("value", "1.0")) : 1.0;
+    const double value = what == "override" ? args.number("value", 1.0) : 1.0;
     // Sent again until the interpolator's state shows its effect (a datagram lost on
     // the way, or the state report that answered it): a hold that was never seen is
     // not reported as done. Each command is idempotent in the state it asks for.
@@ -466,7 +466,7 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
         std::fprintf(stderr, "cnc-ctl: --do jog needs --axis\n");
         return cnc::service::kExitBadInput;
       }
-      send_op(lcmt_program_command::JOG, axis, std::stod(args.option("value", "0")),
+      send_op(lcmt_program_command::JOG, axis, args.number("value", 0),
               std::stod(args.option("feed", "0")), continuous ? 1 : 0, "");
     }
     auto op_refused = [&] {
@@ -583,7 +583,7 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
         std::fprintf(stderr, "cnc-ctl: --do touch-off needs --axis\n");
         return cnc::service::kExitBadInput;
       }
-      send_op(lcmt_program_command::TOUCH_OFF, axis, std::stod(args.option("value", "0")), 0.0,
+      send_op(lcmt_program_command::TOUCH_OFF, axis, args.number("value", 0), 0.0,
               args.flags.count("tool") ? 2 : 0, "");
     } else {
       send(lcmt_program_command::LOAD, program);
@@ -761,7 +761,19 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
 int main(int argc, char** argv) {
   cnc::service::Spec spec{"cnc-ctl",
                           "operator commands to a running cell",
-                          {"do", "program", "value", "timeout", "axis", "feed", "hold", "line", "from"},
-                          {"tool", "confirm"}};
+                          {{"do", "CMD",
+                            "run (default), load, start, hold, resume, stop, override, enable, disable, fault-reset, "
+                            "reset, home, jog, touch-off, mdi, status, single-block, optional-stop, block-delete, confirm"},
+                           {"program", "FILE", "the part program of run and load"},
+                           {"value", "X",
+                            "override factor, jog distance or direction (+1|-1), touch-off value; on|off for the switches"},
+                           {"timeout", "S", "how long run, enable, reset and status wait (default 600)", true},
+                           {"axis", "NAME", "the axis of home, jog and touch-off"},
+                           {"feed", "F", "jog feed, mm/min", true},
+                           {"hold", "S", "continuous jog held for S s, then STOP", true},
+                           {"line", "TEXT", "the line of mdi (e.g. \"G0 X10\")"},
+                           {"from", "N", "run or load from line N (an approach first, confirmed before START)", true}},
+                          {{"tool", "", "touch-off of the tool (refused: not available yet)"},
+                           {"confirm", "", "run --from: confirm the approach itself"}}};
   return cnc::service::run(spec, argc, argv, run_ctl);
 }

@@ -22,17 +22,10 @@
 #include "common/bus/auth.h"
 #include "common/config/machine_config.h"
 #include "common/config/yaml_reader.h"
+#include "common/util/cli.h"
 #include "common/util/clock.h"
 
 namespace {
-int usage() {
-  std::fprintf(stderr,
-               "usage: cnc-key gen    (--machine FILE | --file KEYFILE) [--if-missing] [--force]\n"
-               "       cnc-key rotate (--machine FILE | --file KEYFILE) [--grace S] [--activate-in S]\n"
-               "       cnc-key show   (--machine FILE | --file KEYFILE)\n");
-  return 2;
-}
-
 std::string when(int64_t utime) {
   if (utime == 0) return "-";
   const std::time_t t = static_cast<std::time_t>(utime / 1'000'000);
@@ -60,38 +53,31 @@ void show(const std::string& path, const cnc::bus::KeySet& ks) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc < 2) return usage();
-  const std::string cmd = argv[1];
   std::string machine, file;
   bool if_missing = false, force = false;
   double grace_s = 60.0, activate_s = 3.0;
-  for (int i = 2; i < argc; ++i) {
-    const std::string a = argv[i];
-    const auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw std::runtime_error(a + " needs a value");
-      return argv[++i];
-    };
-    try {
-      if (a == "--machine") machine = value();
-      else if (a == "--file") file = value();
-      else if (a == "--if-missing") if_missing = true;
-      else if (a == "--force") force = true;
-      else if (a == "--grace") grace_s = std::stod(value());
-      else if (a == "--activate-in") activate_s = std::stod(value());
-      else {
-        std::fprintf(stderr, "cnc-key: unknown argument '%s'\n", a.c_str());
-        return usage();
-      }
-    } catch (const std::exception& e) {
-      std::fprintf(stderr, "cnc-key: %s: %s\n", a.c_str(), e.what());
-      return 2;
-    }
-  }
-  if (machine.empty() == file.empty()) return usage();
-  if (grace_s < 0 || activate_s < 0) {
-    std::fprintf(stderr, "cnc-key: --grace and --activate-in must not be negative\n");
-    return 2;
-  }
+  CLI::App app{"the cell's signing keys: gen, rotate, show", "cnc-key"};
+  cnc::util::cli::setup(app);
+  app.require_subcommand(1, 1);
+  const auto key_file = [&](CLI::App* c) {
+    auto* m = c->add_option("--machine", machine, "the cell's machine config: its security.key_file")->type_name("FILE");
+    auto* f = c->add_option("--file", file, "the key file")->type_name("KEYFILE");
+    m->excludes(f);
+    f->excludes(m);
+    return c;
+  };
+  CLI::App* gen = key_file(app.add_subcommand("gen", "write one new key (mode 0600)"));
+  gen->add_flag("--if-missing", if_missing, "do nothing when the key file exists");
+  gen->add_flag("--force", force, "replace an existing key file");
+  CLI::App* rotate = key_file(app.add_subcommand("rotate", "add a new key; the ones before it stay accepted a while"));
+  rotate->add_option("--grace", grace_s, "seconds the keys before the new one stay accepted after it signs")
+      ->type_name("S")->check(cnc::util::cli::non_negative());
+  rotate->add_option("--activate-in", activate_s, "seconds until the new key signs (every PC must know it by then)")
+      ->type_name("S")->check(cnc::util::cli::non_negative());
+  key_file(app.add_subcommand("show", "the key ids and their times, never a secret"));
+  if (const int rc = cnc::util::cli::parse(app, argc, argv); rc >= 0) return rc;
+  const std::string cmd = app.get_subcommands().front()->get_name();
+  if (machine.empty() == file.empty()) return cnc::util::cli::bad_flag(app, cmd + ": --machine FILE or --file KEYFILE is required");
   try {
     if (!machine.empty()) {
       const auto cfg = cnc::config::load_machine_config(machine);
@@ -130,11 +116,8 @@ int main(int argc, char** argv) {
       show(file, ks);
       return 0;
     }
-    if (cmd == "show") {
-      show(file, cnc::bus::read_key_file(file));
-      return 0;
-    }
-    return usage();
+    show(file, cnc::bus::read_key_file(file));
+    return 0;
   } catch (const cnc::config::ConfigError& e) {
     std::fprintf(stderr, "cnc-key: config error: %s\n", e.what());
     return 2;

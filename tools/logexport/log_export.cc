@@ -8,6 +8,8 @@
 #include <limits>
 #include <stdexcept>
 
+#include <nlohmann/json.hpp>
+
 namespace cnc::logexport {
 namespace {
 
@@ -81,30 +83,13 @@ std::string csv_text(const std::string& s) {
   return out + "\"";
 }
 
-std::string json_text(const std::string& s) {
-  std::string out = "\"";
-  for (char c : s) {
-    switch (c) {
-      case '"': out += "\\\""; break;
-      case '\\': out += "\\\\"; break;
-      case '\n': out += "\\n"; break;
-      case '\r': out += "\\r"; break;
-      case '\t': out += "\\t"; break;
-      default:
-        if (static_cast<unsigned char>(c) < 0x20) {
-          char buf[8];
-          std::snprintf(buf, sizeof buf, "\\u%04x", c);
-          out += buf;
-        } else {
-          out += c;
-        }
-    }
-  }
-  return out + "\"";
+// A number of summary.json: full precision, null when not finite (JSON has no NaN).
+nlohmann::ordered_json json_num(double v) { return std::isfinite(v) ? nlohmann::ordered_json(v) : nlohmann::ordered_json(); }
+
+// A text, null when empty.
+nlohmann::ordered_json str_or_null(const std::string& s) {
+  return s.empty() ? nlohmann::ordered_json() : nlohmann::ordered_json(s);
 }
-
-std::string json_num(double v) { return std::isfinite(v) ? num(v) : "null"; }
-
 
 bool positive(double v) { return std::isfinite(v) && v > 0; }
 
@@ -332,69 +317,62 @@ void LogExport::write(const std::string& dir, const std::vector<std::string>& lo
     target_source = "INTERP_CONFIG";
   }
 
-  File f(dir + "/summary.json");
-  auto str_or_null = [](const std::string& s) { return s.empty() ? std::string("null") : json_text(s); };
-  std::string files_json;
-  for (const auto& p : log_files) files_json += (files_json.empty() ? "" : ", ") + json_text(p);
-  std::string axes_json;
-  for (const auto& n : names) axes_json += (axes_json.empty() ? "" : ", ") + json_text(n);
-  f.line("{");
-  f.line("  \"log_files\": [" + files_json + "],");
-  f.line("  \"prefix\": " + json_text(prefix) + ",");
-  f.line("  \"axes\": [" + axes_json + "],");
-  f.line("  \"config_file\": " + str_or_null(config_source_) + ",");
-  f.line("  \"program\": " + (program_ ? json_text(program_->program_path) : "null") + ",");
-  f.line("  \"program_state\": " + (program_ ? json_text(program_state_name(program_->state)) : "null") + ",");
-  f.line("  \"interpolator_state\": " + (interp_ ? json_text(state_name(interp_->state)) : "null") + ",");
-  f.line("  \"program_time_s\": " + (interp_ ? json_num(interp_->program_time_s) : "null") + ",");
-  f.line("  \"blocks_done\": " + (interp_ ? std::to_string(interp_->blocks_done) : "null") + ",");
-  f.line("  \"blocks_total\": " + (program_ ? std::to_string(program_->num_blocks) : "null") + ",");
-  f.line("  \"blocks_resent\": " + (program_ ? std::to_string(program_->blocks_resent) : "null") + ",");
-  f.line("  \"period_s\": " + json_num(T) + ",");
-  f.line("  \"setpoints\": " + std::to_string(setpoints_.size()) + ",");
-  f.line("  \"running_setpoints\": " + std::to_string(running) + ",");
-  f.line("  \"monitor_reports\": " + std::to_string(monitor_.size()) + ",");
-  f.line("  \"axis_status_reports\": " + std::to_string(axis_status_.size()) + ",");
-  f.line("  \"largest_following_error_mm\": " + (largest_fe_axis.empty() ? "null" : json_num(largest_fe)) + ",");
-  f.line("  \"largest_following_error_axis\": " + str_or_null(largest_fe_axis) + ",");
-  f.line("  \"drive_fault_reports\": " + std::to_string(faults) + ",");
-  f.line("  \"max_chord_error_mm\": " + json_num(max_chord) + ",");
-  f.line("  \"max_predicted_rmax_um\": " + json_num(max_rmax) + ",");
-  f.line("  \"chord_tolerance_mm\": " + json_num(tolerance) + ",");
-  f.line("  \"chord_tolerance_source\": " + str_or_null(tolerance_source) + ",");
-  f.line("  \"target_rmax_um\": " + json_num(target) + ",");
-  f.line("  \"target_rmax_source\": " + str_or_null(target_source) + ",");
-  f.line("  \"alarms\": " + std::to_string(alarms_.size()) + ",");
-  f.line("  \"channels\": {");
-  size_t i = 0;
-  for (const auto& [ch, c] : channels) {
-    f.line("    " + json_text(ch) + ": {\"events\": " + std::to_string(c.events) +
-           ", \"senders\": " + std::to_string(c.senders) + ", \"seq_gaps\": " + std::to_string(c.seq_gaps) +
-           ", \"seq_restarts\": " + std::to_string(c.seq_restarts) + "}" + (++i < channels.size() ? "," : ""));
-  }
-  f.line("  },");
+  using Json = nlohmann::ordered_json;  // the keys in the order written
+  Json j;
+  j["log_files"] = log_files;
+  j["prefix"] = prefix;
+  j["axes"] = names;
+  j["config_file"] = str_or_null(config_source_);
+  j["program"] = program_ ? Json(program_->program_path) : Json();
+  j["program_state"] = program_ ? Json(program_state_name(program_->state)) : Json();
+  j["interpolator_state"] = interp_ ? Json(state_name(interp_->state)) : Json();
+  j["program_time_s"] = interp_ ? json_num(interp_->program_time_s) : Json();
+  j["blocks_done"] = interp_ ? Json(interp_->blocks_done) : Json();
+  j["blocks_total"] = program_ ? Json(program_->num_blocks) : Json();
+  j["blocks_resent"] = program_ ? Json(program_->blocks_resent) : Json();
+  j["period_s"] = json_num(T);
+  j["setpoints"] = setpoints_.size();
+  j["running_setpoints"] = running;
+  j["monitor_reports"] = monitor_.size();
+  j["axis_status_reports"] = axis_status_.size();
+  j["largest_following_error_mm"] = largest_fe_axis.empty() ? Json() : json_num(largest_fe);
+  j["largest_following_error_axis"] = str_or_null(largest_fe_axis);
+  j["drive_fault_reports"] = faults;
+  j["max_chord_error_mm"] = json_num(max_chord);
+  j["max_predicted_rmax_um"] = json_num(max_rmax);
+  j["chord_tolerance_mm"] = json_num(tolerance);
+  j["chord_tolerance_source"] = str_or_null(tolerance_source);
+  j["target_rmax_um"] = json_num(target);
+  j["target_rmax_source"] = str_or_null(target_source);
+  j["alarms"] = alarms_.size();
+  Json& ch_json = j["channels"] = Json::object();
+  for (const auto& [ch, c] : channels)
+    ch_json[ch] = {{"events", c.events}, {"senders", c.senders}, {"seq_gaps", c.seq_gaps}, {"seq_restarts", c.seq_restarts}};
   if (const auto* st = own_logger_stats(log_files)) {
-    f.line("  \"logger\": {");
-    f.line("    \"path\": " + json_text(st->path) + ", \"files\": " + std::to_string(st->files) +
-           ", \"events\": " + std::to_string(st->events) + ", \"bytes\": " + std::to_string(st->bytes) + ",");
-    f.line("    \"events_dropped\": " + std::to_string(st->events_dropped) +
-           ", \"write_errors\": " + std::to_string(st->write_errors) +
-           ", \"socket_drops\": " + std::to_string(st->socket_drops) + ", \"max_io_s\": " + json_num(st->max_io_s) +
-           ", \"max_loop_gap_s\": " + json_num(st->max_loop_gap_s) + ", \"closing\": " +
-           (st->closing ? "true" : "false") + ",");
-    f.line("    \"channels\": {");
+    Json lg;
+    lg["path"] = st->path;
+    lg["files"] = st->files;
+    lg["events"] = st->events;
+    lg["bytes"] = st->bytes;
+    lg["events_dropped"] = st->events_dropped;
+    lg["write_errors"] = st->write_errors;
+    lg["socket_drops"] = st->socket_drops;
+    lg["max_io_s"] = json_num(st->max_io_s);
+    lg["max_loop_gap_s"] = json_num(st->max_loop_gap_s);
+    lg["closing"] = static_cast<bool>(st->closing);
+    Json& lch = lg["channels"] = Json::object();
     for (int k = 0; k < st->num_channels; ++k) {
       const auto u = static_cast<size_t>(k);
-      f.line("      " + json_text(st->channel[u]) + ": {\"received\": " + std::to_string(st->received[u]) +
-             ", \"logged\": " + std::to_string(st->logged[u]) + ", \"seq_gaps\": " + std::to_string(st->seq_gaps[u]) +
-             ", \"dropped\": " + std::to_string(st->dropped[u]) + "}" + (k + 1 < st->num_channels ? "," : ""));
+      lch[st->channel[u]] = {{"received", st->received[u]}, {"logged", st->logged[u]}, {"seq_gaps", st->seq_gaps[u]},
+                             {"dropped", st->dropped[u]}};
     }
-    f.line("    }");
-    f.line("  }");
+    j["logger"] = std::move(lg);
   } else {
-    f.line("  \"logger\": null");
+    j["logger"] = nullptr;
   }
-  f.line("}");
+  // Texts from the log that are not UTF-8 are written with U+FFFD, not refused.
+  File f(dir + "/summary.json");
+  f.line(j.dump(2, ' ', false, Json::error_handler_t::replace));
 }
 
 }  // namespace cnc::logexport

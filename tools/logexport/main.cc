@@ -125,6 +125,11 @@ int run_export(const cnc::config::MachineConfig&, const cnc::service::Args& args
 
 int main(int argc, char** argv) {
   cnc::service::Spec spec{"cnc-logexport", "CSV tables and a summary of a recorded run, for the report",
-                          {"log", "out", "prefix"}, {}, false};
+                          
+                          {{"log", "LOG", "the cell's log (its rotated parts are read too)"},
+                           {"out", "DIR", "where the CSV tables and summary.json go"},
+                           {"prefix", "P", "the cell's channel prefix (default: the first SETPOINTS channel's)"}},
+                          {},
+                          false};
   return cnc::service::run(spec, argc, argv, run_export);
 }

@@ -283,6 +283,12 @@ int run_logstat(const cnc::config::MachineConfig& cfg, const cnc::service::Args&
 
 int main(int argc, char** argv) {
   cnc::service::Spec spec{"cnc-logstat", "per-channel statistics and run summary of a cell log",
-                          {"log", "require-no-gaps", "compare-monitor", "key"}, {"summary"}, false};
+                          
+                          {{"log", "FILE", "the cell's log"},
+                           {"require-no-gaps", "CHANNEL", "exit 1 when CHANNEL is empty or has sequence gaps"},
+                           {"compare-monitor", "OTHER_LOG", "check that OTHER_LOG's monitor reports equal the log's"},
+                           {"key", "KEYFILE", "verify every message's MAC (or the key of --machine's config)"}},
+                          {{"summary", "", "the run's summary: program time, blocks, setpoints, gaps, versions"}},
+                          false};
   return cnc::service::run(spec, argc, argv, run_logstat);
 }

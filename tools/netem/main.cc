@@ -48,6 +48,7 @@
 #include <string>
 #include <vector>
 
+#include "common/util/cli.h"
 #include "common/util/signals.h"
 #include "tools/netem/impairment.h"
 
@@ -58,13 +59,8 @@ using cnc::netem::DelayQueue;
 using cnc::netem::Impairment;
 using cnc::netem::Params;
 
-int usage(const std::string& why) {
-  if (!why.empty()) std::fprintf(stderr, "cnc-netem: %s\n", why.c_str());
-  std::fprintf(stderr,
-               "usage: cnc-netem --group ADDR:PORT --from NETNS[,IF] --to NETNS[,IF] [--both]\n"
-               "                 [--loss PCT] [--delay MS] [--jitter MS] [--keep-order] [--seed N]\n"
-               "                 [--queue N] [--slot-bytes N] [--ttl N] [--realtime-priority N (50; 0 = none)]\n"
-               "  NETNS: /proc/PID/ns/net, /run/netns/NAME or . (this process's namespace)\n");
+int bad(const std::string& why) {
+  std::fprintf(stderr, "cnc-netem: %s (see cnc-netem --help)\n", why.c_str());
   return 2;
 }
 
@@ -72,13 +68,6 @@ int64_t now_ns() {
   timespec ts{};
   clock_gettime(CLOCK_MONOTONIC, &ts);
   return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
-
-bool parse_double(const std::string& s, double* out) {
-  char* end = nullptr;
-  errno = 0;
-  *out = std::strtod(s.c_str(), &end);
-  return errno == 0 && end != s.c_str() && *end == '\0';
 }
 
 bool parse_u64(const std::string& s, uint64_t* out) {
@@ -274,66 +263,39 @@ int main(int argc, char** argv) {
   std::string group_arg, from_arg, to_arg;
   Params p;
   bool both = false;
+  double loss_pct = 0;
   uint64_t queue_slots = 4096, slot_bytes = 65536, ttl = 1, rt_prio = 50;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto value = [&](std::string* out) {
-      if (i + 1 >= argc) return false;
-      *out = argv[++i];
-      return true;
-    };
-    std::string v;
-    double d = 0;
-    if (a == "--both") {
-      both = true;
-    } else if (a == "--keep-order") {
-      p.keep_order = true;
-    } else if (a == "--help" || a == "-h") {
-      usage("");
-      return 0;
-    } else if (!value(&v)) {
-      return usage(a.rfind("--", 0) == 0 ? a + " needs a value" : "unexpected argument '" + a + "'");
-    } else if (a == "--group") {
-      group_arg = v;
-    } else if (a == "--from") {
-      from_arg = v;
-    } else if (a == "--to") {
-      to_arg = v;
-    } else if (a == "--loss") {
-      if (!parse_double(v, &d)) return usage("--loss '" + v + "' is not a number");
-      p.loss = d / 100.0;
-    } else if (a == "--delay") {
-      if (!parse_double(v, &p.delay_ms)) return usage("--delay '" + v + "' is not a number");
-    } else if (a == "--jitter") {
-      if (!parse_double(v, &p.jitter_ms)) return usage("--jitter '" + v + "' is not a number");
-    } else if (a == "--seed") {
-      if (!parse_u64(v, &p.seed)) return usage("--seed '" + v + "' is not an unsigned integer");
-    } else if (a == "--queue") {
-      if (!parse_u64(v, &queue_slots) || queue_slots < 1 || queue_slots > 65536)
-        return usage("--queue '" + v + "' must be from 1 to 65536 datagrams");
-    } else if (a == "--slot-bytes") {
-      if (!parse_u64(v, &slot_bytes) || slot_bytes < 64 || slot_bytes > 65536)
-        return usage("--slot-bytes '" + v + "' must be from 64 to 65536");
-    } else if (a == "--ttl") {
-      if (!parse_u64(v, &ttl) || ttl > 255) return usage("--ttl '" + v + "' must be from 0 to 255");
-    } else if (a == "--realtime-priority") {
-      if (!parse_u64(v, &rt_prio) || rt_prio > 98) return usage("--realtime-priority '" + v + "' must be 0..98");
-    } else {
-      return usage("unknown flag '" + a + "'");
-    }
-  }
-  if (group_arg.empty() || from_arg.empty() || to_arg.empty()) return usage("--group, --from and --to are required");
-  if (const std::string bad = cnc::netem::validate(p); !bad.empty()) return usage(bad);
+  CLI::App app{"a loss-and-delay forwarder for a cell's UDP multicast between network namespaces", "cnc-netem"};
+  cnc::util::cli::setup(app);
+  app.footer("NETNS: /proc/PID/ns/net, /run/netns/NAME or . (this process's namespace); IF: the interface to use");
+  app.add_option("--group", group_arg, "the multicast group, e.g. 239.255.76.67:7667")->type_name("ADDR:PORT")->required();
+  app.add_option("--from", from_arg, "the side the datagrams are received on")->type_name("NETNS[,IF]")->required();
+  app.add_option("--to", to_arg, "the side they are sent again on")->type_name("NETNS[,IF]")->required();
+  app.add_flag("--both", both, "forward the other way too (the same parameters, the seed + 1)");
+  app.add_option("--loss", loss_pct, "datagrams dropped at random, percent")->type_name("PCT");
+  app.add_option("--delay", p.delay_ms, "delay, ms")->type_name("MS");
+  app.add_option("--jitter", p.jitter_ms, "delay varies by up to ± this, ms")->type_name("MS");
+  app.add_flag("--keep-order", p.keep_order, "never reorder (a datagram waits for the ones before it)");
+  app.add_option("--seed", p.seed, "the random generator's seed")->type_name("N");
+  app.add_option("--queue", queue_slots, "datagrams held at most")->type_name("N")->check(CLI::Range(1, 65536));
+  app.add_option("--slot-bytes", slot_bytes, "largest datagram, bytes")->type_name("N")->check(CLI::Range(64, 65536));
+  app.add_option("--ttl", ttl, "the multicast TTL of what it sends")->type_name("N")->check(CLI::Range(0, 255));
+  app.add_option("--realtime-priority", rt_prio, "SCHED_FIFO priority (0: normal priority)")
+      ->type_name("N")
+      ->check(CLI::Range(0, 98));
+  if (const int rc = cnc::util::cli::parse(app, argc, argv); rc >= 0) return rc;
+  p.loss = loss_pct / 100.0;
+  if (const std::string why = cnc::netem::validate(p); !why.empty()) return bad(why);
   const auto colon = group_arg.rfind(':');
   in_addr group{};
   uint64_t port = 0;
   if (colon == std::string::npos || inet_pton(AF_INET, group_arg.substr(0, colon).c_str(), &group) != 1 ||
       !parse_u64(group_arg.substr(colon + 1), &port) || port < 1 || port > 65535 ||
       !IN_MULTICAST(ntohl(group.s_addr)))
-    return usage("--group '" + group_arg + "' is not a multicast ADDR:PORT (e.g. 239.255.76.67:7667)");
+    return bad("--group '" + group_arg + "' is not a multicast ADDR:PORT (e.g. 239.255.76.67:7667)");
   Side from, to;
   std::string err;
-  if (!parse_side("--from", from_arg, &from, &err) || !parse_side("--to", to_arg, &to, &err)) return usage(err);
+  if (!parse_side("--from", from_arg, &from, &err) || !parse_side("--to", to_arg, &to, &err)) return bad(err);
 
   const int home = open("/proc/self/ns/net", O_RDONLY | O_CLOEXEC);
   if (home < 0) {

@@ -170,6 +170,13 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
 
 int main(int argc, char** argv) {
   cnc::service::Spec spec{"cnc-plan", "dry run of a part program: setpoints to CSV, program time",
-                          {"program", "csv", "override", "param-update", "subroutine-path", "tool-table"}, {}};
+                          
+                          {{"program", "FILE", "the part program"},
+                           {"csv", "OUT", "where the setpoint stream goes (CSV)"},
+                           {"override", "F", "feed override factor (default 1.0)", true},
+                           {"param-update", "LAW", "the parameter update (first_order, taylor2, corrected)"},
+                           {"subroutine-path", "DIR:DIR", "where O-word subroutines are looked for"},
+                           {"tool-table", "FILE", "the tool table (default: the config's)"}},
+                          {}};
   return cnc::service::run(spec, argc, argv, run_plan);
 }

@@ -214,9 +214,23 @@ int bench_calibration() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  const std::string what = argc > 1 ? argv[1] : "all";
+  CLI::App app{"figures of the force model (seed 004) and the Z-map (seed 000)", "cnc-predict-bench"};
+  cnc::util::cli::setup(app);
+  std::string what = "all";
+  app.add_option("what", what, "force, deflection, calibration, zmap, zmap-converge or all")
+      ->check(CLI::IsMember({"all", "force", "deflection", "calibration", "zmap", "zmap-converge"}));
+  cnc::predict::Args args;
+  args.text(&app, "material", "FILE", "force: the work material (default al7075_t6)")
+      .number(&app, "flutes", "N", "force: flutes (default 4)")
+      .number(&app, "diameter", "D", "force: tool diameter, mm (default 6)")
+      .number(&app, "helix", "DEG", "force: helix angle (default 30)")
+      .number(&app, "axial-depth", "A", "force: axial depth, mm (default 3)")
+      .number(&app, "feed-per-tooth", "C", "force: feed per tooth, mm (default 0.05)")
+      .number(&app, "window", "MM", "zmap: window side, mm (default 5)")
+      .number(&app, "pitch", "MM", "zmap: pitch, mm (default 0.002)")
+      .number(&app, "alpha", "DEG", "zmap: inclination, degrees (default 10)");
+  if (const int rc = cnc::util::cli::parse(app, argc, argv); rc >= 0) return rc;
   try {
-    const cnc::predict::Args args(argc, argv, 2);
     if (what == "force" || what == "all") bench_force(args);
     if (what == "deflection" || what == "all") bench_deflection();
     if (what == "calibration" || what == "all") bench_calibration();

@@ -47,19 +47,6 @@ namespace {
 using namespace cnc::process;
 using cnc::predict::Args;
 
-constexpr const char* kUsage =
-    "usage: cnc-predict slot --material FILE --flutes N --diameter D --helix DEG --axial-depth A "
-    "--feed-per-tooth C [--discs M] [--model linear_edge|chip_thickness_law]\n"
-    "       cnc-predict wall --tool FILE --material FILE --radial-depth AE --axial-depth A --feed-per-tooth C "
-    "[--mode up|down] [--points N]\n"
-    "       cnc-predict zmap --alpha DEG --feed-per-tooth C [--pick-feed P] [--radius R] [--flutes N] [--pass-phase-deg D] [--window MM] "
-    "[--pitch MM] [--threads N] [--out DIR]\n"
-    "       cnc-predict zmap-check --out DIR [--pitch MM] [--threads N]\n"
-    "       cnc-predict program --csv SETPOINTS --tool FILE [--material FILE] --out DIR [--program NGC] "
-    "[--spindle-rpm S] [--pitch MM] [--stock-top Z]\n"
-    "       cnc-predict calibrate --tool FILE --csv HISTORY --radial-depth AE --axial-depth A "
-    "--feed-per-tooth C --steps-per-rev N [--mode up|down] [--min-sin S]\n";
-
 int cmd_slot(const Args& a) {
   const Material mat = load_material(a.require("material"));
   const ForceModel model = a.has("model") ? force_model_from_string(a.str("model")) : mat.model;
@@ -251,25 +238,90 @@ int cmd_calibrate(const Args& a) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc < 2) {
-    std::fputs(kUsage, stderr);
-    return 2;
-  }
-  const std::string cmd = argv[1];
+  CLI::App app{"offline prediction of cutting force, tool deflection and the machined surface", "cnc-predict"};
+  cnc::util::cli::setup(app);
+  app.require_subcommand(1, 1);
+  Args a;
+  const bool req = true;
+  const auto model = [&](CLI::App* c) {
+    a.text(c, "model", "linear_edge|chip_thickness_law", "the force model (default: the material's)");
+  };
+  CLI::App* slot = app.add_subcommand("slot", "the disc simulation's per-revolution mean forces of a full slot");
+  a.text(slot, "material", "FILE", "the work material (config/materials/*.yaml)", req)
+      .number(slot, "flutes", "N", "flutes", req)
+      .number(slot, "diameter", "D", "tool diameter, mm", req)
+      .number(slot, "helix", "DEG", "helix angle, degrees", req)
+      .number(slot, "axial-depth", "A", "axial depth of cut, mm", req)
+      .number(slot, "feed-per-tooth", "C", "feed per tooth, mm", req)
+      .number(slot, "discs", "M", "discs along the flutes (default 200)");
+  model(slot);
+  CLI::App* wall = app.add_subcommand("wall", "the wall's surface error (tool deflection when it is generated)");
+  a.text(wall, "tool", "FILE", "the end mill (config/tools/*.yaml)", req)
+      .text(wall, "material", "FILE", "the work material", req)
+      .number(wall, "radial-depth", "AE", "radial depth of cut, mm", req)
+      .number(wall, "axial-depth", "A", "axial depth of cut, mm", req)
+      .number(wall, "feed-per-tooth", "C", "feed per tooth, mm", req)
+      .text(wall, "mode", "up|down", "up or down milling (default down)")
+      .number(wall, "points", "N", "heights along the wall (default 12)")
+      .number(wall, "discs", "M", "discs along the flutes (default 100)");
+  model(wall);
+  const auto zmap_case = [&](CLI::App* c) {
+    a.number(c, "alpha", "DEG", "the plane's inclination, degrees (default 0)")
+        .number(c, "feed-per-tooth", "C", "feed per tooth, mm (default 0.5)")
+        .number(c, "pick-feed", "P", "pick feed, mm (default 0.5)")
+        .number(c, "radius", "R", "ball radius, mm (default 5)")
+        .number(c, "flutes", "N", "flutes (default 2)")
+        .number(c, "window", "MM", "the map's window side, mm (default 1)")
+        .number(c, "pitch", "MM", "the map's pitch, mm (default 0.0025)")
+        .number(c, "step-deg", "DEG", "the edge's largest rotation step, degrees (default 0.5)")
+        .number(c, "pass-phase-deg", "DEG", "spindle phase added from one pass to the next, degrees (default 0)")
+        .number(c, "threads", "N", "threads (default 2)");
+  };
+  CLI::App* zmap = app.add_subcommand("zmap", "seed 000's inclined-plane case on a Z-map: R_max against the model");
+  zmap_case(zmap);
+  a.text(zmap, "out", "DIR", "write the surface and its R_max map into DIR")
+      .number(zmap, "block", "MM", "the R_max map's block, mm (default 0.25)");
+  CLI::App* check = app.add_subcommand("zmap-check", "the digest's cases and an (alpha, f_t) grid into DIR");
+  a.text(check, "out", "DIR", "where rmax_cases.csv, rmax_grid.csv and the surfaces go", req)
+      .number(check, "grid-alpha-max", "DEG", "the grid's largest alpha, degrees (default 20)")
+      .number(check, "grid-alpha-step", "DEG", "the grid's alpha step, degrees (default 1)");
+  zmap_case(check);
+  CLI::App* program = app.add_subcommand("program", "force, deflection and surface along a dry run's setpoints");
+  a.text(program, "csv", "SETPOINTS", "the dry run's setpoints (cnc-plan --csv)", req)
+      .text(program, "tool", "FILE", "the end mill", req)
+      .text(program, "out", "DIR", "where predict.csv and the maps go", req)
+      .text(program, "material", "FILE", "the work material (flat end mills)")
+      .text(program, "program", "NGC", "the program (its rapid moves and spindle speed)")
+      .number(program, "spindle-rpm", "S", "spindle speed (default: the program's, else 10000)")
+      .number(program, "pitch", "MM", "the stock's Z-map pitch, mm (default: from --max-cells)")
+      .number(program, "max-cells", "N", "the Z-map's largest cell count (default 4e6)")
+      .number(program, "stock-top", "Z", "the stock's top (default: the highest cutting move)")
+      .number(program, "margin", "MM", "stock beyond the tool's envelope, mm (default 1)")
+      .text(program, "window", "X0,Y0,X1,Y1", "a ball's Z-map over this window only, R_max against the model")
+      .number(program, "pick-feed", "P", "the passes' pick feed of --window, mm (default 0.5)")
+      .number(program, "block", "MM", "the R_max map's block, mm (default 0.5)")
+      .number(program, "station-mm", "MM", "travel between force stations, mm (default 0.05)")
+      .number(program, "step-deg", "DEG", "the edge's largest rotation step, degrees (default 2)")
+      .number(program, "threads", "N", "threads (default 2)");
+  model(program);
+  CLI::App* calib = app.add_subcommand("calibrate", "K_T(h), K_R(h) and the linear edge coefficients from a force history");
+  a.text(calib, "tool", "FILE", "the end mill", req)
+      .text(calib, "csv", "HISTORY", "measured forces: columns fx,fy, one sample per rotation step", req)
+      .number(calib, "radial-depth", "AE", "radial depth of cut, mm", req)
+      .number(calib, "axial-depth", "A", "axial depth of cut, mm", req)
+      .number(calib, "feed-per-tooth", "C", "feed per tooth, mm", req)
+      .number(calib, "steps-per-rev", "N", "samples per revolution", req)
+      .text(calib, "mode", "up|down", "up or down milling (default up)")
+      .number(calib, "min-sin", "S", "samples with a smaller sine of the immersion are left out (default 0.25)");
+  if (const int rc = cnc::util::cli::parse(app, argc, argv); rc >= 0) return rc;
+  const std::string cmd = app.get_subcommands().front()->get_name();
   try {
-    const Args a(argc, argv, 2);
     if (cmd == "slot") return cmd_slot(a);
     if (cmd == "calibrate") return cmd_calibrate(a);
     if (cmd == "wall") return cmd_wall(a);
     if (cmd == "zmap") return cmd_zmap(a);
     if (cmd == "zmap-check") return cmd_zmap_check(a);
-    if (cmd == "program") return cnc::predict::cmd_program(a);
-    if (cmd == "--help" || cmd == "-h") {
-      std::fputs(kUsage, stdout);
-      return 0;
-    }
-    std::fprintf(stderr, "cnc-predict: unknown command '%s'\n%s", cmd.c_str(), kUsage);
-    return 2;
+    return cnc::predict::cmd_program(a);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "cnc-predict %s: %s\n", cmd.c_str(), e.what());
     return 2;

@@ -272,6 +272,11 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
 
 int main(int argc, char** argv) {
   cnc::service::Spec spec{"cnc-replay", "deterministic re-run of the interpolator from a log, compared bit for bit",
-                          {"log", "program", "key"}, {}, false};
+                          
+                          {{"log", "LOG", "the recorded run"},
+                           {"program", "FILE", "replay with this version of a recorded program (same file name)"},
+                           {"key", "KEYFILE", "verify every message's MAC first; a log that does not verify is refused"}},
+                          {},
+                          false};
   return cnc::service::run(spec, argc, argv, replay);
 }

@@ -5,7 +5,7 @@
 //             [--table-units inch|mm] [--axes XYZABCUVW] PROGRAM [OUT]
 // Exit status 0 when the program ran to its end, 1 on an interpreter error (the
 // message on stderr as "file:line:column: what", then the offending line), 2 on bad
-// flags. Like rs274, lengths in the tool table and var file are read as inches unless
+// flags (util/cli.h). --subroutine-path overrides the INI file's SUBROUTINE_PATH. Like rs274, lengths in the tool table and var file are read as inches unless
 // --table-units mm.
 #include <cctype>
 #include <cstdio>
@@ -17,6 +17,7 @@
 
 #include "common/rs274/canon_printer.h"
 #include "common/rs274/interpreter.h"
+#include "common/util/cli.h"
 
 namespace {
 
@@ -61,12 +62,6 @@ std::string ini_rs274ngc(const std::string& ini, const std::string& wanted, bool
   return {};
 }
 
-int usage(const char* why) {
-  std::fprintf(stderr, "cnc-rs274: %s\nusage: cnc-rs274 [-g] [-i INI] [-t TOOLTABLE] [-v VARFILE] [-b] "
-               "[--subroutine-path DIR:DIR] [--table-units inch|mm] [--axes XYZABCUVW] PROGRAM [OUT]\n", why);
-  return 2;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -74,49 +69,41 @@ int main(int argc, char** argv) {
   setup.axes = "XYZABCUVW";
   setup.machine_units = cnc::rs274::Units::kInch;  // rs274's reading of table and var file
   setup.block_delete = false;                      // rs274's default; -b toggles
-  std::string program, out_path, sub_path;
-  bool have_ini = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) throw std::runtime_error(a + " needs a value");
-      return argv[++i];
-    };
-    try {
-      if (a == "-g") continue;
-      if (a == "-b") setup.block_delete = !setup.block_delete;
-      else if (a == "-i") {
-        const std::string ini = next();
-        bool cut = false;
-        sub_path = ini_rs274ngc(ini, "SUBROUTINE_PATH", &cut);
-        if (cut)
-          std::fprintf(stderr, "cnc-rs274: %s: the SUBROUTINE_PATH line is longer than 255 characters; "
-                       "as LinuxCNC, only \"%s\" is read\n", ini.c_str(), sub_path.c_str());
-        // LinuxCNC's findBoolV: 1/0, true/false, yes/no, on/off (any case).
-        std::string v = ini_rs274ngc(ini, "DISABLE_FANUC_STYLE_SUB");
-        for (char& c : v) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-        setup.fanuc_subs = !(v == "1" || v == "true" || v == "yes" || v == "on");
-        have_ini = true;
-      }
-      else if (a == "-t") setup.tool_table = next();
-      else if (a == "-v") setup.var_file = next();
-      else if (a == "--subroutine-path") sub_path = next();
-      else if (a == "--axes") setup.axes = next();
-      else if (a == "--table-units") {
-        const std::string u = next();
-        if (u != "inch" && u != "mm") return usage("--table-units takes inch or mm");
-        setup.machine_units = u == "mm" ? cnc::rs274::Units::kMm : cnc::rs274::Units::kInch;
-      } else if (a == "-n" || a == "-s") {
-        if (a == "-n") next();
-      } else if (!a.empty() && a[0] == '-') return usage(("unknown flag " + a).c_str());
-      else if (program.empty()) program = a;
-      else if (out_path.empty()) out_path = a;
-      else return usage("too many arguments");
-    } catch (const std::exception& e) {
-      return usage(e.what());
-    }
+  std::string program, out_path, sub_path, ini, table_units = "inch", ignored;
+  int block_delete = 0, ignored_flags = 0;
+  CLI::App app{"the project's RS274NGC interpreter, printing rs274's canonical calls", "cnc-rs274"};
+  cnc::util::cli::setup(app);
+  app.add_flag("-g", ignored_flags, "ignored (rs274's graphical mode)");
+  app.add_option("-i", ini, "LinuxCNC INI file: [RS274NGC] SUBROUTINE_PATH, DISABLE_FANUC_STYLE_SUB")
+      ->type_name("INI");
+  app.add_option("-t", setup.tool_table, "tool table")->type_name("TOOLTABLE");
+  app.add_option("-v", setup.var_file, "parameter (var) file")->type_name("VARFILE");
+  app.add_flag("-b", block_delete, "toggle block delete (off by default; each -b toggles)");
+  app.add_option("-n", ignored, "ignored (rs274's tool-change mode)");
+  app.add_flag("-s", ignored_flags, "ignored (rs274's silent mode)");
+  app.add_option("--subroutine-path", sub_path, "where O-word subroutines are looked for (overrides the INI's)")
+      ->type_name("DIR:DIR");
+  app.add_option("--table-units", table_units, "lengths of the tool table and var file")
+      ->check(CLI::IsMember({"inch", "mm"}));
+  app.add_option("--axes", setup.axes, "the machine's axes");
+  app.add_option("program", program, "the RS274NGC program")->required()->type_name("PROGRAM");
+  app.add_option("out", out_path, "where the canonical calls go (default: stdout)")->type_name("OUT");
+  if (const int rc = cnc::util::cli::parse(app, argc, argv); rc >= 0) return rc;
+  if (block_delete % 2 == 1) setup.block_delete = !setup.block_delete;
+  setup.machine_units = table_units == "mm" ? cnc::rs274::Units::kMm : cnc::rs274::Units::kInch;
+  const bool have_ini = !ini.empty();
+  if (have_ini) {
+    bool cut = false;
+    const std::string ini_path = ini_rs274ngc(ini, "SUBROUTINE_PATH", &cut);
+    if (cut)
+      std::fprintf(stderr, "cnc-rs274: %s: the SUBROUTINE_PATH line is longer than 255 characters; "
+                   "as LinuxCNC, only \"%s\" is read\n", ini.c_str(), ini_path.c_str());
+    if (sub_path.empty()) sub_path = ini_path;
+    // LinuxCNC's findBoolV: 1/0, true/false, yes/no, on/off (any case).
+    std::string v = ini_rs274ngc(ini, "DISABLE_FANUC_STYLE_SUB");
+    for (char& c : v) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    setup.fanuc_subs = !(v == "1" || v == "true" || v == "yes" || v == "on");
   }
-  if (program.empty()) return usage("no program given");
   setup.subroutine_path = split_path(sub_path);
   std::FILE* out = stdout;
   if (!out_path.empty()) {

@@ -43,6 +43,8 @@
 #include <thread>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "common/config/yaml_reader.h"
 #include "common/drive/drive_profile.h"
 #include "common/service/service.h"
@@ -123,33 +125,30 @@ void written_range(const uint8_t* pdu, int* addr, int* n) {
   }
 }
 
+// The persisted positions ({"X": mm, ...}); an axis missing or not a number starts
+// where the config says. A file that is not JSON is refused naming it.
 std::map<std::string, double> read_positions(const std::string& file) {
   std::map<std::string, double> out;
   std::ifstream in(file);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  const std::string s = ss.str();
-  size_t at = 0;
-  while ((at = s.find('"', at)) != std::string::npos) {
-    const size_t end = s.find('"', at + 1);
-    if (end == std::string::npos) break;
-    const std::string name = s.substr(at + 1, end - at - 1);
-    const size_t colon = s.find(':', end);
-    if (colon == std::string::npos) break;
-    out[name] = std::strtod(s.c_str() + colon + 1, nullptr);
-    at = colon;
+  if (!in || in.peek() == std::ifstream::traits_type::eof()) return out;
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(in);
+  } catch (const nlohmann::json::parse_error& e) {
+    throw std::runtime_error(file + ": not the simulator's positions: " + e.what());
   }
+  if (!j.is_object()) throw std::runtime_error(file + ": not the simulator's positions (a JSON object)");
+  for (const auto& [name, v] : j.items())
+    if (v.is_number()) out[name] = v.get<double>();
   return out;
 }
 
+// {"X": mm, ...} to 0.1 nm (as "%.7f" gave them), finite.
 std::string positions_json(const std::vector<std::string>& names, const double* pos) {
-  std::string report = "{";
-  for (size_t i = 0; i < names.size(); ++i) {
-    char buf[96];
-    std::snprintf(buf, sizeof buf, "%s\"%s\": %.7f", i ? ", " : "", names[i].c_str(), pos[i]);
-    report += buf;
-  }
-  return report + "}";
+  nlohmann::ordered_json j = nlohmann::ordered_json::object();
+  for (size_t i = 0; i < names.size(); ++i)
+    j[names[i]] = std::isfinite(pos[i]) ? nlohmann::ordered_json(std::round(pos[i] * 1e7) / 1e7) : nlohmann::ordered_json();
+  return j.dump();
 }
 
 std::string positions_json(const std::vector<SimDrive*>& drives) {
@@ -799,8 +798,19 @@ int run_sim(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
 int main(int argc, char** argv) {
   cnc::service::Spec spec{"cnc-servo-sim",
                           "Modbus TCP / RTU servo drive simulator",
-                          {"port", "bind", "device", "rtu-timing", "control", "inject", "trace", "persist",
-                           "final-state", "latency-dir", "master-stall-pause-s"},
+                          {{"port", "P", "the TCP axes' port (default: the config's)", true},
+                           {"bind", "ADDR", "the TCP address to listen on (default 127.0.0.1)"},
+                           {"device", "PTY", "the RTU axes' serial line (the simulator's end)"},
+                           {"rtu-timing", "real|none", "hold RTU replies as long as a real line takes (default real)"},
+                           {"control", "FIFO", "fault injection commands read from FIFO"},
+                           {"inject", "\"T:CMD; ...\"", "fault injection at given times"},
+                           {"trace", "CSV", "the axes every 10 ms"},
+                           {"persist", "FILE", "keep the positions in FILE (every 50 ms) and start from them"},
+                           {"final-state", "FILE", "the final positions (JSON) at the end"},
+                           {"latency-dir", "DIR", "where the simulation loop's timing goes at the end (cnc-servo-sim.json; default $CNC_LATENCY_DIR)"},
+                           {"master-stall-pause-s", "S",
+                            "how long a master's dry stream stops the simulated world (default "
+                            "timing.setpoint_timeout_s; 0: never)", true}},
                           {}};
   return cnc::service::run(spec, argc, argv, run_sim);
 }
