@@ -32,4 +32,15 @@ rc=0
 grep -qE '\.ngc:[0-9]+:[0-9]+: ' "$WORK/bad.err" || { cat "$WORK/bad.err" >&2; fail "refusal without file:line:column"; }
 [ ! -s "$WORK/bad.csv" ] || fail "a refused program wrote setpoints"
 note "malformed program refused: $(cat "$WORK/bad.err")"
+
+# A dry run reads the machine's parameters (program.var_file) but never writes them:
+# a program that sets a work offset (G10 L2 P1 X5: parameter 5221) leaves the file as it was.
+{ cat "$M"; printf 'program:\n  var_file: %s\n' "$WORK/cell.var"; } >"$WORK/var.yaml"
+printf '5221\t-7.000000\n' >"$WORK/cell.var"
+cp "$WORK/cell.var" "$WORK/cell.var.before"
+printf 'G21 G90\nG10 L2 P1 X5\nG0 X10\nM2\n' >"$WORK/g10.ngc"
+"$BUILD/tools/cnc-plan" --machine "$WORK/var.yaml" --program "$WORK/g10.ngc" --csv "$WORK/g10.csv" >"$WORK/g10.out" 2>&1 \
+  || { cat "$WORK/g10.out" >&2; fail "the G10 program's dry run failed"; }
+cmp -s "$WORK/cell.var" "$WORK/cell.var.before" || { cat "$WORK/cell.var" >&2; fail "the dry run wrote the parameter file"; }
+note "dry run with program.var_file: the parameter file unchanged ($(wc -l <"$WORK/cell.var") line)"
 echo PASS

@@ -4,6 +4,7 @@
 //
 //   cnc-plan --machine M --program P --csv OUT [--override 1.0] [--param-update corrected]
 //            [--subroutine-path DIR:DIR] [--tool-table FILE]
+#include <utility>
 #include <array>
 #include <chrono>
 #include <cinttypes>
@@ -41,7 +42,12 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
     }
   }
   if (!args.option("tool-table").empty()) program_cfg.program.tool_table = args.option("tool-table");
-  cnc::pps::ProgramServer server(program_cfg);
+  // A dry run reads the parameters (program.var_file) but never writes them: the
+  // parameters are the machine's, kept by the runs that move it (the HMI's preview
+  // is a dry run of every program loaded).
+  cnc::pps::ProgramSetup setup = cnc::pps::program_setup(program_cfg);
+  setup.machine.write_var_file = false;
+  cnc::pps::ProgramServer server(std::move(setup), cnc::pps::ServerLimits{});
   const cnc::pps::LoadResult loaded = server.load(program_path, 1);
   if (!loaded.ok) {
     std::fprintf(stderr, "cnc-plan: program refused: %s\n", loaded.error.c_str());
