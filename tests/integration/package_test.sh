@@ -130,6 +130,10 @@ ctl --do reset --timeout 20 >&2 || fail "reset"
 t=$SECONDS
 ctl --do run --program /usr/share/cnc/config/programs/demo.ngc --timeout 120 >"$WORK/demo.txt" 2>&1 || { cat "$WORK/demo.txt"; fail "the demo's program did not run to its end"; }
 note "demo.ngc from the installed files: done in $((SECONDS - t)) s ($(grep -o 'largest following error[^,]*' "$WORK/demo.txt" | head -1))"
+# The HMI's program directory in the installed cell file holds the shipped programs.
+hmi_dir=$(sed -n 's/^ *program_dir: *\([^ #]*\).*/\1/p' /etc/cnc/cell.yaml)
+[ "$hmi_dir" = /usr/share/cnc/config/programs ] && [ -f "$hmi_dir/demo.ngc" ] \
+  || fail "the installed cell file's hmi.program_dir ('$hmi_dir') does not hold the shipped programs"
 # The installed cell keeps the interpreter's parameters (program.var_file): written at the program's end.
 grep -q "^5221"$'\t' /var/lib/cnc/cell.var 2>/dev/null || fail "the demo's end wrote no parameter file /var/lib/cnc/cell.var (program.var_file)"
 note "parameters kept: /var/lib/cnc/cell.var, $(wc -l </var/lib/cnc/cell.var) persistent parameters, owner $(stat -c %U /var/lib/cnc/cell.var)"
