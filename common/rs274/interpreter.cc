@@ -362,6 +362,15 @@ void Interpreter::open(const std::string& path) {
   canon_.set_xy_rotation(r0, rotation_deg_);
   canon_.set_feed_reference(r0);
   canon_.on_reset(r0);
+  if (setup_.tool_in_var_file) {
+    // The tool the last program left in the spindle (#5400, kept in the var file); a
+    // number the tool table does not have any more leaves the spindle empty.
+    params_.make_persistent(5400);
+    const long t = std::lround(params_.get(5400));
+    tool_ = t > 0 && tools_.find(static_cast<int>(t)) != nullptr ? static_cast<int>(t) : 0;
+    if (tool_ > 0) canon_.change_tool_number(r0, tool_);
+    set_tool_params();
+  }
   update_position_params();
 }
 
@@ -554,7 +563,7 @@ void Interpreter::execute_line() {
     if (percent_open_) {
       canon_.finish(ref());
       ended_ = true;
-      if (!setup_.var_file.empty() && setup_.write_var_file) params_.write_var_file(setup_.var_file);
+      persist();
       return;
     }
   }
@@ -2068,6 +2077,7 @@ void Interpreter::g10(Words& w) {
     if (w.on('J')) t.back_angle = w['J'];
     if (w.on('Q')) t.orientation = static_cast<int>(std::lround(w['Q']));
     tools_.put(t);
+    tools_changed_ = true;
     // LinuxCNC hands the changed entry to the canon, and again as entry 0 when the
     // tool is in the spindle (a non-random tool changer).
     int index = 0;
@@ -2674,7 +2684,22 @@ void Interpreter::end_program(bool m30) {
     if (!closed) canon_.comment(r, "interpreter: percent sign missing from end of file");
   }
   ended_ = true;
-  if (!setup_.var_file.empty() && setup_.write_var_file) params_.write_var_file(setup_.var_file);
+  persist();
+}
+
+void Interpreter::persist() {
+  if (!setup_.write_var_file) return;
+  if (!setup_.var_file.empty()) params_.write_var_file(setup_.var_file);
+  if (tools_changed_ && setup_.write_tool_table && !setup_.tool_table.empty()) {
+    std::vector<Tool> out = tools_.tools();
+    for (Tool& t : out) {  // back to machine units
+      for (int i = 0; i < kNumAxes; ++i)
+        if (i < 3 || i >= 6) t.offset[static_cast<size_t>(i)] /= mu_;
+      t.diameter /= mu_;
+    }
+    write_tool_table(setup_.tool_table, out);
+    tools_changed_ = false;
+  }
 }
 
 }  // namespace cnc::rs274

@@ -32,6 +32,13 @@ struct MachineSetup {
   std::string tool_table;                  // LinuxCNC tool table; empty: no tools
   std::string var_file;                    // LinuxCNC var file; empty: parameters are not kept
   bool write_var_file = true;              // at program end (M2/M30/%), atomically
+  // The tool in the spindle (#5400) is kept in the var file: a program starts with the
+  // tool the last one that ended left there (LinuxCNC's task keeps it across
+  // programs), G49 still in effect. False: every program starts with no tool (rs274).
+  bool tool_in_var_file = false;
+  // A tool table changed by G10 L1/L10/L11 is written back at program end (with the
+  // var file, when write_var_file), atomically, as LinuxCNC writes its table.
+  bool write_tool_table = false;
   bool has_probe = false;                  // G38.x needs one
   int digital_inputs = 0;                  // M66 needs them
   int analog_inputs = 0;
@@ -162,6 +169,7 @@ class Interpreter {
   void spline(Words& w, bool cubic, int col);
   void set_coord_system(int index);
   void end_program(bool m30);
+  void persist();  // the var file and (when changed) the tool table, at program end
   void update_position_params();
 
   Pose axis_target(const Words& w, bool machine) const;  // G53: machine coordinates
@@ -226,6 +234,7 @@ class Interpreter {
   bool mist_ = false, flood_ = false;
   bool feed_override_ = true, speed_override_ = true, adaptive_feed_ = false, feed_hold_ = true;
   int tool_ = 0;                  // in the spindle
+  bool tools_changed_ = false;    // G10 L1/L10/L11 changed the table
   int selected_tool_ = -1;        // T word given
   Pose tool_offset_{};
   Pose g92_{};

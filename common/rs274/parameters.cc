@@ -211,19 +211,11 @@ void Parameters::read_var_file(const std::string& path) {
   }
 }
 
-// LinuxCNC's line format "number<TAB>value"; written to a temporary file in the
-// same folder, synced, renamed over the old one, and the folder synced so the
-// rename itself survives a power loss.
-void Parameters::write_var_file(const std::string& path) const {
-  std::string data;
-  for (int i = 1; i <= kMaxParameter; ++i) {
-    if (!persistent_[static_cast<size_t>(i)]) continue;
-    data += std::to_string(i);
-    data += '\t';
-    data += value_text(numbered_[static_cast<size_t>(i)]);
-    data += '\n';
-  }
+void Parameters::make_persistent(int index) {
+  if (index >= 1 && index <= kMaxParameter) persistent_[static_cast<size_t>(index)] = true;
+}
 
+void write_file_atomically(const std::string& path, const std::string& data) {
   const size_t slash = path.rfind('/');
   const std::string dir = slash == std::string::npos ? "." : (slash == 0 ? "/" : path.substr(0, slash));
   std::string tmp = path + ".tmp.XXXXXX";
@@ -244,6 +236,22 @@ void Parameters::write_var_file(const std::string& path) const {
   }
   Fd d(::open(dir.c_str(), O_RDONLY | O_DIRECTORY));
   if (d.get() < 0 || ::fsync(d.get()) != 0) throw std::runtime_error(errno_text("cannot sync the folder of", path));
+}
+
+// LinuxCNC's line format "number<TAB>value"; written to a temporary file in the
+// same folder, synced, renamed over the old one, and the folder synced so the
+// rename itself survives a power loss.
+void Parameters::write_var_file(const std::string& path) const {
+  std::string data;
+  for (int i = 1; i <= kMaxParameter; ++i) {
+    if (!persistent_[static_cast<size_t>(i)]) continue;
+    data += std::to_string(i);
+    data += '\t';
+    data += value_text(numbered_[static_cast<size_t>(i)]);
+    data += '\n';
+  }
+
+  write_file_atomically(path, data);
 }
 
 }  // namespace cnc::rs274

@@ -18,6 +18,11 @@ namespace cnc::rs274 {
 
 constexpr int kMaxParameter = 5601;  // LinuxCNC: RS274NGC_MAX_PARAMETERS - 1
 
+// Writes `data` to `path` atomically: a temporary file in the same folder (with the
+// old file's mode), synced, renamed over the old one, and the folder synced so the
+// rename itself survives a power loss. Throws std::runtime_error with the path.
+void write_file_atomically(const std::string& path, const std::string& data);
+
 class Parameters {
  public:
   Parameters();
@@ -46,6 +51,8 @@ class Parameters {
   // (5161-5186 G28/G30 homes, 5211-5230 G92, 5220-5390 coordinate systems) plus any
   // number listed in a var file that is read.
   bool persistent(int index) const;
+  // Makes `index` persistent (kept in the var file written next).
+  void make_persistent(int index);
 
   // Reads a var file; a line that starts with a number must hold a parameter index
   // in range and a finite value, else throws Error naming "file:line". Lines must be

@@ -1,5 +1,9 @@
 #include "common/rs274/tool_table.h"
 
+#include <cstdio>
+
+#include "common/rs274/parameters.h"
+
 #include <algorithm>
 #include <cctype>
 #include <cmath>
@@ -94,6 +98,34 @@ void ToolTable::put(const Tool& t) {
     return;
   }
   tools_.push_back(t);
+}
+
+void write_tool_table(const std::string& path, const std::vector<Tool>& tools) {
+  static const char kAxes[] = "XYZABCUVW";
+  std::string data;
+  char buf[64];
+  for (const Tool& t : tools) {
+    std::snprintf(buf, sizeof buf, "T%d P%d", t.number, t.pocket);
+    data += buf;
+    for (int i = 0; i < kNumAxes; ++i) {
+      const double v = t.offset[static_cast<size_t>(i)];
+      if (v == 0) continue;
+      std::snprintf(buf, sizeof buf, " %c%+.6f", kAxes[i], v);
+      data += buf;
+    }
+    std::snprintf(buf, sizeof buf, " D%+.6f", t.diameter);
+    data += buf;
+    if (t.front_angle != 0 || t.back_angle != 0 || t.orientation != 0) {
+      std::snprintf(buf, sizeof buf, " I%+.6f J%+.6f Q%d", t.front_angle, t.back_angle, t.orientation);
+      data += buf;
+    }
+    if (!t.comment.empty()) {
+      data.append(" ;");
+      data.append(t.comment);
+    }
+    data += '\n';
+  }
+  write_file_atomically(path, data);
 }
 
 }  // namespace cnc::rs274

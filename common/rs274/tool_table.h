@@ -33,4 +33,9 @@ class ToolTable {
   std::vector<Tool> tools_;
 };
 
+// Writes `tools` in the table's format (machine units, as given), in their order,
+// atomically (a temporary file in the same folder, synced, renamed over the old one).
+// Throws std::runtime_error with the path and errno text on failure.
+void write_tool_table(const std::string& path, const std::vector<Tool>& tools);
+
 }  // namespace cnc::rs274

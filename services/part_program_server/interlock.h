@@ -54,9 +54,9 @@ inline std::string operator_refusal(const cnc::lcmt_program_command& c, const Ce
   if (c.command == C::JOG && !(std::isfinite(c.feed_mm_per_min) && c.feed_mm_per_min >= 0))
     return "jog feed " + std::to_string(c.feed_mm_per_min) + " mm/min is not a speed";
   if (c.command == C::TOUCH_OFF && !std::isfinite(c.value)) return "touch-off: the value is not a number";
-  if (c.command == C::TOUCH_OFF && c.jog_continuous == 2)
-    return "tool touch-off is not available yet: the tool table is not written back, and a line starts with no "
-           "tool in the spindle";
+  if (c.command == C::TOUCH_OFF && c.jog_continuous != 0 && c.jog_continuous != 2)
+    return "touch-off: jog_continuous " + std::to_string(c.jog_continuous) +
+           " is neither 0 (the work offset) nor 2 (the tool's length)";
   if (c.command == C::MDI && c.text.empty()) return "MDI: the line is empty";
   if (c.command == C::MDI && c.text.find_first_of("\n\r") != std::string::npos) return "MDI: one line only";
   switch (v.state) {

@@ -184,6 +184,10 @@ ProgramSetup program_setup(const config::MachineConfig& cfg) {
   s.machine.subroutine_path = cfg.program.subroutine_path;
   s.machine.tool_table = cfg.program.tool_table;
   s.machine.var_file = cfg.program.var_file;
+  // The tool in the spindle stays there across programs (#5400 in the var file), and a
+  // G10 L1/L10/L11 (tool touch-off among them) is written back to the tool table.
+  s.machine.tool_in_var_file = !cfg.program.var_file.empty();
+  s.machine.write_tool_table = true;
   s.machine.has_probe = cfg.program.probe;
   s.machine.digital_inputs = cfg.program.digital_inputs;
   s.machine.analog_inputs = cfg.program.analog_inputs;

@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
@@ -17,6 +18,8 @@
 #include "cnc/lcmt_program_state.hpp"
 #include "cnc/lcmt_setpoint.hpp"
 #include "common/program/block_msg.h"
+#include "common/rs274/parameters.h"
+#include "common/rs274/tool_table.h"
 #include "common/util/clock.h"
 
 namespace cnc::pps {
@@ -206,9 +209,22 @@ void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {
       char v[64];
       std::snprintf(v, sizeof v, "%.6f", m.value);
       const std::string& name = cfg_.axes[static_cast<size_t>(m.axis)].name;
-      // LinuxCNC's touch-off: G10 L20 P0 (the active work offset) so that the current
-      // position reads the value. (The tool's, G10 L10, is refused by the interlock.)
-      load_line(m, "G10 L20 P0 " + name + v);
+      if (m.jog_continuous != 2) {
+        // LinuxCNC's touch-off: G10 L20 P0 (the active work offset) so that the current
+        // position reads the value.
+        load_line(m, "G10 L20 P0 " + name + v);
+        break;
+      }
+      // The tool's length (LinuxCNC's G10 L10): the tool in the spindle's offset so that
+      // the current position reads the value with it, written back to the tool table at
+      // the line's end. The tool in the spindle is #5400 of the var file (the last
+      // program that ended left it there: M6, M61).
+      const std::string why = tool_touch_off_refusal();
+      if (!why.empty()) {
+        refuse(m, why);
+        return;
+      }
+      load_line(m, "G10 L10 P" + std::to_string(spindle_tool_) + " " + name + v);
       break;
     }
     case C::SINGLE_BLOCK:
@@ -236,6 +252,36 @@ void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {
       break;
     default: break;
   }
+}
+
+std::string ProgramServerNode::tool_touch_off_refusal() {
+  spindle_tool_ = 0;
+  if (cfg_.program.tool_table.empty()) return "tool touch-off: the cell has no tool table (program.tool_table)";
+  if (cfg_.program.var_file.empty())
+    return "tool touch-off: the cell keeps no var file (program.var_file), where the tool in the spindle is kept";
+  std::error_code ec;
+  if (std::filesystem::exists(cfg_.program.var_file, ec)) {
+    rs274::Parameters p;
+    try {
+      p.read_var_file(cfg_.program.var_file);
+    } catch (const std::exception& e) {
+      return std::string("tool touch-off: ") + e.what();
+    }
+    spindle_tool_ = static_cast<int>(std::lround(p.get(5400)));
+  }
+  if (spindle_tool_ <= 0)
+    return "tool touch-off: no tool in the spindle (put one there first: MDI T1 M6, or M61 Q1 when it is "
+           "there already)";
+  rs274::ToolTable t;
+  try {
+    t.read(cfg_.program.tool_table);
+  } catch (const std::exception& e) {
+    return std::string("tool touch-off: ") + e.what();
+  }
+  if (t.find(spindle_tool_) == nullptr)
+    return "tool touch-off: tool T" + std::to_string(spindle_tool_) + " in the spindle is not in the tool table " +
+           cfg_.program.tool_table;
+  return "";
 }
 
 void ProgramServerNode::load_program(const std::string& path, int from_line) {

@@ -86,6 +86,10 @@ class ProgramServerNode {
   // loaded like one; cnc-ctl starts it.
   void load_line(const cnc::lcmt_program_command& m, const std::string& line);
   int64_t mdi_count_ = 0;
+  // Tool touch-off: "" when a tool is in the spindle (#5400 of the var file, then in
+  // spindle_tool_) and in the tool table, else why not.
+  std::string tool_touch_off_refusal();
+  int spindle_tool_ = 0;
   std::string mdi_file_;  // the line loaded last: removed once another program is loaded
   void load_program(const std::string& path, int from_line = 0);
   bool approach_pending_ = false;  // loaded from a line: START waits for CONFIRM

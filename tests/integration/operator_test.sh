@@ -4,7 +4,8 @@
 # axis and all in order (Z first) on the simulator's home switches, the repeatability
 # of the latched position, incremental jogs (to the soft limit and refused there),
 # a continuous jog whose client is SIGKILLed (the stop distance against its bound),
-# touch-off (G10 L20, in the var file), MDI through the program server, the
+# touch-off (G10 L20, in the var file; the tool's length, G10 L10, in the tool
+# table, used by G43 in the next program), MDI through the program server, the
 # refusals while something moves, and the log replayed bit for bit.
 #   operator_test.sh BUILD_DIR SOURCE_DIR     (HOMINGS=20: the repeatability figure)
 source "$(dirname "$0")/lib.sh"
@@ -17,7 +18,9 @@ make_machine "$SRC/config/machines/sim3.yaml" "$WORK/base.yaml"
 M="$WORK/machine.yaml"
 /usr/bin/python3 "$SRC/tests/integration/operator_machine.py" "$WORK/base.yaml" "$M" "$WORK/mdi"
 # Parameters persist in the var file (LinuxCNC's), as a program's do.
-printf '\nprogram:\n  var_file: %s\n' "$WORK/cnc.var" >>"$M"
+# The tool table: G10 L10 (tool touch-off) writes it back.
+printf 'T1 P1 Z0 D6 ;end mill\n' >"$WORK/tools.tbl"
+printf '\nprogram:\n  var_file: %s\n  tool_table: %s\n' "$WORK/cnc.var" "$WORK/tools.tbl" >>"$M"
 CTL=("$BUILD/tools/cnc-ctl" --machine "$M")
 
 start logger "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/run"
@@ -171,7 +174,7 @@ PY
 ok touch_x "${CTL[@]}" --do touch-off --axis X --value 100 --timeout 20
 grep -qE "^5221[[:space:]]+-100" "$WORK/cnc.var" || { grep -E "^52(2|4)" "$WORK/cnc.var" >&2; fail "G54 X offset (#5221) is not -100 in the var file"; }
 note "var file: $(grep -E '^5221' "$WORK/cnc.var")"
-expect_refused touch_tool "tool touch-off is not available yet" "${CTL[@]}" --do touch-off --axis Z --value 50 --tool
+expect_refused touch_tool "no tool in the spindle" "${CTL[@]}" --do touch-off --axis Z --value 50 --tool
 rc=0; "${CTL[@]}" --do touch-off --axis Q --value 1 >"$WORK/touch_q.out" 2>&1 || rc=$?
 [ "$rc" -eq 2 ] && grep -q "no such axis" "$WORK/touch_q.out" || fail "touch-off of axis Q: exit $rc, expected 2"
 
@@ -182,6 +185,48 @@ ok jog_probe "${CTL[@]}" --do jog --axis Z --value 1 --timeout 20
 axis_at jog_probe X 5
 axis_at jog_probe Y 3
 expect_refused mdi_bad "Q word" "${CTL[@]}" --do mdi --line "G1 X1 Q7 F100"
+
+# 6b. Tool-length touch-off (G10 L10): the tool in the spindle (M61 Q1: it is there,
+#     kept as #5400 in the var file) gets the length that makes Z read 0 where it
+#     touches (machine Z -2.5 here); the tool table is written back, and a program
+#     with T1 M6 G43 H1 G0 Z0 ends there.
+ok jog_z_surface "${CTL[@]}" --do jog --axis Z --value -2.5 --timeout 20
+z_s=$(grep -o "jogged:.* Z -\?[0-9.]*" "$WORK/jog_z_surface.out" | tail -1 | grep -o -- "-\?[0-9.]*$")
+[ -n "$z_s" ] || fail "no Z position after the jog"
+ok tool_in_spindle "${CTL[@]}" --do mdi --line "M61 Q1" --timeout 20
+grep -qE "^5400[[:space:]]+1(\.0+)?$" "$WORK/cnc.var" || { grep -E "^54" "$WORK/cnc.var" >&2; fail "the tool in the spindle (#5400) is not 1 in the var file"; }
+ok touch_tool "${CTL[@]}" --do touch-off --axis Z --value 0 --tool --timeout 20
+note "tool table after the touch-off at machine Z $z_s: $(cat "$WORK/tools.tbl")"
+/usr/bin/python3 - "$WORK/tools.tbl" "$WORK/cnc.var" "$z_s" <<'PY' || fail "tool 1's length in the tool table is not Z where it touched"
+import re, sys
+table = open(sys.argv[1]).read()
+g54z = float(re.search(r"^5223\s+(\S+)", open(sys.argv[2]).read(), re.M).group(1))
+m = re.fullmatch(r"T1 P1 Z(\S+) D\+6\.000000 ;end mill\n", table)
+sys.exit(0 if m and abs(float(m.group(1)) - (float(sys.argv[3]) - g54z)) <= 1e-6 else 1)
+PY
+ok jog_z_up "${CTL[@]}" --do jog --axis Z --value 3 --timeout 20
+cat >"$WORK/tool.ngc" <<'NGC'
+T1 M6
+G43 H1
+G0 Z0
+M2
+NGC
+"${CTL[@]}" --do run --program "$WORK/tool.ngc" --timeout 60 >"$WORK/tool_run.out" 2>&1 &
+TEST_PIDS[tool]=$!
+# The tool change holds until RESUME (RESUME while it runs is allowed and does nothing:
+# wait for the hold).
+for ((i = 0; i < 150; i++)); do
+  "${CTL[@]}" --do status --timeout 0.2 >"$WORK/tool_status.out" 2>&1 || true
+  grep -q "^interpolator: held," "$WORK/tool_status.out" && break
+done
+grep -q "^interpolator: held," "$WORK/tool_status.out" || { cat "$WORK/tool_status.out" >&2; fail "the tool change did not hold"; }
+ok tool_resume "${CTL[@]}" --do resume
+rc=0; wait "${TEST_PIDS[tool]}" || rc=$?; unset "TEST_PIDS[tool]"
+[ "$rc" -eq 0 ] || { cat "$WORK/tool_run.out" >&2; fail "the program with G43 H1 did not complete ($rc)"; }
+ok jog_after_tool "${CTL[@]}" --do jog --axis Z --value 1 --timeout 20
+z_end=$(/usr/bin/python3 -c "print(f'{$z_s + 1:.4f}')")
+axis_at jog_after_tool Z "$z_end"
+note "G43 H1 G0 Z0 ended at machine Z $z_s (+1 jogged: $z_end), where the tool touched"
 # A program runs now that the axes are homed; MDI, jog and homing are refused while it runs.
 cat >"$WORK/long.ngc" <<'NGC'
 G21 G90 G53 G1 X5 Y3 Z0 F600

@@ -153,7 +153,10 @@ TEST(Interlock, OperatorCommandsInEveryState) {
   lcmt_program_command tool = cmd(C::TOUCH_OFF);
   tool.value = 50;
   tool.jog_continuous = 2;
-  EXPECT_NE(pps::refusal(tool, v).find("tool touch-off is not available yet"), std::string::npos);
+  // Allowed here; the program server refuses it without a tool in the spindle (integration.operator).
+  EXPECT_EQ(pps::refusal(tool, v), "");
+  tool.jog_continuous = 3;
+  EXPECT_NE(pps::refusal(tool, v).find("neither 0 (the work offset) nor 2"), std::string::npos);
   // Run from line N: START waits for CONFIRM of the approach, which is then allowed.
   {
     pps::CellView from;

@@ -406,6 +406,35 @@ TEST(Rs274Subprogram, G10L10InARotatedSystemAndTheToolTableEntry) {
   EXPECT_NEAR(r.param(2), 0.0, 1e-9);
 }
 
+// The cell's tool touch-off (README "Tool-length touch-off"): the tool in the spindle is
+// #5400 of the var file, a program starts with it, and G10 L10 is written back to the
+// tool table at the program's end, where the next program's G43 finds it.
+TEST(Rs274Subprogram, ToolInTheSpindleFromTheVarFileAndTheTableWrittenBack) {
+  TempDir dir;
+  MachineSetup s;
+  s.tool_table = dir.write("t.tbl", "T1 P1 Z0 D6 ;end mill\nT2 P2 Z4 ;two\n");
+  s.var_file = dir.write("v.var", "5400\t1.000000\n");
+  s.tool_in_var_file = true;
+  s.write_tool_table = true;
+  s.start_position[2] = -1.5;  // machine Z where the tool touches
+  Outcome touch;
+  run(touch, "#1 = #5400\nG10 L10 P#5400 Z0\nM2\n", s, 100000, &dir);
+  EXPECT_NEAR(touch.param(1), 1.0, 0);  // the tool the var file had in the spindle
+  std::ifstream in(s.tool_table);
+  const std::string table((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(table, "T1 P1 Z-1.500000 D+6.000000 ;end mill\nT2 P2 Z+4.000000 D+0.000000 ;two\n");
+  // The next program: G43 (no H: the tool in the spindle) makes Z read 0 at machine -1.5.
+  s.start_position[2] = 0;
+  Outcome next;
+  run(next, "G43\n#1 = #5422\nG0 Z0\n#2 = #5400\nM61 Q0\nM2\n", s, 100000, &dir);
+  EXPECT_NEAR(next.param(1), 1.5, 1e-9);
+  EXPECT_NEAR(next.param(2), 1.0, 0);
+  // M61 Q0 emptied the spindle: kept in the var file for the next program.
+  Outcome empty;
+  run(empty, "#1 = #5400\nM2\n", s, 100000, &dir);
+  EXPECT_EQ(empty.param(1), 0.0);
+}
+
 // Found by fuzz_gcode (UBSan): M98 L333...3 (98 digits) converted the count to int64_t, beyond its range.
 TEST(Rs274Subprogram, RepeatCountBeyondInt32IsRefused) {
   const Error e = refusal("G90\nM98 P1000 L3333333333333333333333\nM30\nO1000\nM99\n");

@@ -11,7 +11,7 @@
 //   cnc-ctl --machine M --do jog --axis X --value +1|-1 --hold S [--feed F]
 //                                                  continuous jog, held for S s (a keepalive every
 //                                                  50 ms; SIGINT/SIGTERM releases it), then STOP
-//   cnc-ctl --machine M --do touch-off --axis X --value V   G10 L20 P0 (--tool: refused, not available yet)
+//   cnc-ctl --machine M --do touch-off --axis X --value V   G10 L20 P0 (--tool: G10 L10, the length of the tool in the spindle)
 //   cnc-ctl --machine M --do mdi --line "G0 X10"   one line through the program server's interpreter
 //   cnc-ctl --machine M --do status [--timeout S]  the cell's services (host, pid, version, state)
 //   cnc-ctl --machine M --do run|load --program P --from N [--confirm]
