@@ -371,6 +371,39 @@ void Interpreter::open(const std::string& path) {
     if (tool_ > 0) canon_.change_tool_number(r0, tool_);
     set_tool_params();
   }
+  if (setup_.initial_modes) {
+    // An MDI line goes on in the modes the last one left (LinuxCNC's MDI shares the
+    // interpreter's state between lines), through the calls that set them.
+    const ModalState& m = *setup_.initial_modes;
+    if (m.units != static_cast<int>(units_)) {
+      units_ = static_cast<Units>(m.units);
+      canon_.use_length_units(r0, units_);
+    }
+    if (m.plane != static_cast<int>(plane_)) {
+      plane_ = static_cast<Plane>(m.plane);
+      canon_.select_plane(r0, plane_);
+    }
+    incremental_ = m.incremental;
+    arc_incremental_ = m.arc_incremental;
+    motion_ = m.motion;
+    if (m.feed_mode != static_cast<int>(feed_mode_)) {
+      feed_mode_ = static_cast<FeedMode>(m.feed_mode);
+      canon_.set_feed_mode(r0, feed_mode_);
+    }
+    if (m.feed != feed_) {
+      feed_ = m.feed;
+      canon_.set_feed_rate(r0, feed_);
+    }
+    if (m.coord >= 1 && m.coord <= 9 && m.coord != coord_) set_coord_system(m.coord);
+    if (m.tool_length != 490) {  // G43 (H: the offset then), G43.1, G43.2 stay in effect
+      tool_length_ = m.tool_length;
+      tool_offset_ = m.tool_offset;
+      Pose shown{};
+      for (size_t i = 0; i < shown.size(); ++i) shown[i] = i < 3 || i >= 6 ? to_program(tool_offset_[i]) : tool_offset_[i];
+      canon_.use_tool_length_offset(r0, shown);
+    }
+    position_ = program_of(setup_.start_position, coord_);
+  }
   update_position_params();
 }
 

@@ -13,6 +13,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -24,6 +25,32 @@
 #include "common/rs274/tool_table.h"
 
 namespace cnc::rs274 {
+
+// The interpreter's state between two lines, as run from line N rebuilds it and its
+// test compares it field by field with a full run's (README "Run from line N").
+struct ModalState {
+  int motion = 800;           // G code in tenths (800 = G80)
+  int plane = 0;              // Plane
+  bool incremental = false, arc_incremental = true;
+  int feed_mode = 0, units = 0;
+  int comp = 400;
+  double comp_radius = 0;
+  int tool_length = 490, coord = 1;
+  bool retract_r = true;
+  int path = 0;
+  double path_p = 0, path_q = 0, feed = 0, speed = 0;
+  int spindle = 0;
+  bool mist = false, flood = false;
+  bool feed_override = true, speed_override = true, adaptive_feed = false, feed_hold = true;
+  int tool = 0, selected_tool = -1;
+  Pose tool_offset{}, g92{};
+  bool g92_active = false;
+  double rotation_deg = 0;
+  Pose position{};  // program coordinates and units
+  // Parameters 5161..5390: G28 and G30 homes, G92 offsets, G54..G59.3 and their rotations.
+  std::array<double, 230> offsets{};
+  bool operator==(const ModalState&) const = default;
+};
 
 struct MachineSetup {
   std::string axes = "XYZ";                // axis letters the machine has (of XYZABCUVW)
@@ -56,32 +83,10 @@ struct MachineSetup {
   // standalone rs274, and what lets a program be validated to its end); true loops
   // back to its first line, as LinuxCNC's task does (the program then never ends).
   bool loop_on_main_m99 = false;
-};
-
-// The interpreter's state between two lines, as run from line N rebuilds it and its
-// test compares it field by field with a full run's (README "Run from line N").
-struct ModalState {
-  int motion = 800;           // G code in tenths (800 = G80)
-  int plane = 0;              // Plane
-  bool incremental = false, arc_incremental = true;
-  int feed_mode = 0, units = 0;
-  int comp = 400;
-  double comp_radius = 0;
-  int tool_length = 490, coord = 1;
-  bool retract_r = true;
-  int path = 0;
-  double path_p = 0, path_q = 0, feed = 0, speed = 0;
-  int spindle = 0;
-  bool mist = false, flood = false;
-  bool feed_override = true, speed_override = true, adaptive_feed = false, feed_hold = true;
-  int tool = 0, selected_tool = -1;
-  Pose tool_offset{}, g92{};
-  bool g92_active = false;
-  double rotation_deg = 0;
-  Pose position{};  // program coordinates and units
-  // Parameters 5161..5390: G28 and G30 homes, G92 offsets, G54..G59.3 and their rotations.
-  std::array<double, 230> offsets{};
-  bool operator==(const ModalState&) const = default;
+  // MDI (README "MDI"): the modes a line starts in, the ones the last MDI line left
+  // (units, distance modes, plane, motion mode, feed mode and rate, coordinate system,
+  // tool length offset); nullopt: a program's start.
+  std::optional<ModalState> initial_modes;
 };
 
 class Interpreter {

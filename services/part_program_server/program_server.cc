@@ -107,12 +107,14 @@ constexpr double kLongDwell_s = 600.0;
 // One pass of the interpreter through the program, block by block.
 class ProgramServer::Run {
  public:
-  Run(const ProgramSetup& s, const std::vector<double>& start, bool block_delete, bool validating)
+  Run(const ProgramSetup& s, const std::vector<double>& start, bool block_delete, bool validating,
+      const std::optional<rs274::ModalState>& modes)
       : builder_(builder_setup(s.builder, start),
                  [this](int32_t f) -> const std::string& { return interp_->file_names()[static_cast<size_t>(f)]; }),
         max_lines_(validating ? s.max_validation_lines : -1) {
     rs274::MachineSetup m = s.machine;
     m.block_delete = block_delete;
+    m.initial_modes = modes;
     for (size_t i = 0; i < s.builder.axis_names.size() && i < start.size(); ++i) {
       static const char kAxes[] = "XYZABCUVW";
       const char* at = s.builder.axis_names[i].size() == 1 ? std::strchr(kAxes, s.builder.axis_names[i][0]) : nullptr;
@@ -238,8 +240,9 @@ const std::string& ProgramServer::approach_text() const {
 }
 
 std::unique_ptr<ProgramServer::Run> ProgramServer::start_run(const Loaded& p, bool validating) const {
-  auto run = std::make_unique<Run>(setup_, p.start, p.block_delete, validating);
+  auto run = std::make_unique<Run>(setup_, p.start, p.block_delete, validating, p.modes_in);
   if (p.from_line > 0) run->watch(p.from_line);
+  if (p.line) run->watch(2);  // MDI: the state after the line (before its M2)
   run->open(p.path);
   return run;
 }
@@ -255,6 +258,10 @@ LoadResult ProgramServer::load_from(const std::string& path, int64_t token,
   next->path = path;
   next->token = token;
   next->from_line = std::max(0, from_line);
+  next->line = next_is_line_;
+  next->modes_in = std::move(next_modes_);
+  next_is_line_ = false;
+  next_modes_.reset();
   // Run from line N: the tool, spindle and coolant the program had set before it, and
   // where line N's first block starts.
   const program::Block* last_tool = nullptr;
@@ -312,6 +319,7 @@ LoadResult ProgramServer::load_from(const std::string& path, int64_t token,
     if (n % limits_.blocks_per_chunk != 0) next->chunk_hashes.push_back(h);
     next->num_blocks = next->full_blocks = n;
     next->lines = run->lines();
+    if (next->line && run->reached()) next->modes_after = run->state();
     if (next->from_line > 0) {
       if (!run->reached() || from_start.empty()) {
         r.error = path + ":" + std::to_string(next->from_line) + ":1: run from line " +

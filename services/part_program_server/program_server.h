@@ -14,6 +14,7 @@
 // the program's length or the number of times its loops run.
 #include <limits>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -85,6 +86,17 @@ class ProgramServer {
     *out = serving_state_;
     return true;
   }
+  // MDI: the next load is one line (then M2) that starts in `modes` (nullptr: as a
+  // program starts); once it is loaded, modes_after() is the state after the line.
+  void next_load_is_line(const rs274::ModalState* modes) {
+    next_is_line_ = true;
+    next_modes_.reset();
+    if (modes != nullptr) next_modes_ = *modes;
+  }
+  const std::optional<rs274::ModalState>& modes_after() const {
+    static const std::optional<rs274::ModalState> kNone;
+    return program_ ? program_->modes_after : kNone;
+  }
   bool loaded() const { return program_ != nullptr; }
   int64_t token() const { return program_ ? program_->token : 0; }
   const std::string& path() const;
@@ -124,6 +136,8 @@ class ProgramServer {
     std::string approach_text;
     rs274::ModalState state_at_from;
     int64_t lines = 0;
+    bool line = false;  // MDI
+    std::optional<rs274::ModalState> modes_in, modes_after;
   };
   struct Chunk {
     int64_t first = -1;
@@ -152,6 +166,8 @@ class ProgramServer {
   bool serving_reached_ = false;
   rs274::ModalState serving_state_;
   program::Block renumbered_;
+  bool next_is_line_ = false;
+  std::optional<rs274::ModalState> next_modes_;
 };
 
 // A hash of everything in a block that the interpolator uses (FNV-1a over the bits).

@@ -179,7 +179,10 @@ void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {
     return;
   }
   switch (m.command) {
-    case C::LOAD: load_program(m.program_path, m.from_line); break;
+    case C::LOAD:
+      mdi_modes_.reset();  // a program: the next MDI line starts as a program does
+      load_program(m.program_path, m.from_line);
+      break;
     case C::CONFIRM:
       approach_pending_ = false;
       spdlog::info("approach confirmed: {}", core_.approach_text());
@@ -246,6 +249,7 @@ void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {
       // before (from where the machine stood then) is not started any more.
       own_fault_ = false;
       own_fault_text_.clear();
+      mdi_modes_.reset();
       program_ready_ = false;
       state_ = S::IDLE;
       publish_state(true);
@@ -336,9 +340,12 @@ void ProgramServerNode::load_line(const cnc::lcmt_program_command& m, const std:
     }
   }
   spdlog::info("MDI {}: {}", ++mdi_count_, line);
+  core_.next_load_is_line(mdi_modes_ ? &*mdi_modes_ : nullptr);
   load_program(file.string());
   if (core_.path() == file.string()) {
     mdi_file_ = file.string();
+    // The modes the line leaves are the next line's (until a program or a RESET).
+    if (core_.modes_after()) mdi_modes_ = core_.modes_after();
   } else {
     std::filesystem::remove(file, ec);  // refused: not kept
   }

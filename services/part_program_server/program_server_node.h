@@ -90,6 +90,8 @@ class ProgramServerNode {
   // spindle_tool_) and in the tool table, else why not.
   std::string tool_touch_off_refusal();
   int spindle_tool_ = 0;
+  // MDI: the modes the last accepted line left (README "MDI"); reset by LOAD and RESET.
+  std::optional<rs274::ModalState> mdi_modes_;
   std::string mdi_file_;  // the line loaded last: removed once another program is loaded
   void load_program(const std::string& path, int from_line = 0);
   bool approach_pending_ = false;  // loaded from a line: START waits for CONFIRM

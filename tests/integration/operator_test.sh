@@ -184,6 +184,16 @@ grep -q "program done" "$WORK/mdi_g0.out" || fail "MDI did not run"
 ok jog_probe "${CTL[@]}" --do jog --axis Z --value 1 --timeout 20
 axis_at jog_probe X 5
 axis_at jog_probe Y 3
+# MDI lines share their modes (LinuxCNC's): G91 in one line stays for the next, and a
+# line of only X5 moves in the G0 of the line before it (incremental: X 5 -> 10).
+ok mdi_g91 "${CTL[@]}" --do mdi --line "G91" --timeout 20
+ok mdi_x5 "${CTL[@]}" --do mdi --line "X5" --timeout 20
+grep -q "program done" "$WORK/mdi_x5.out" || fail "MDI X5 did not run"
+ok jog_probe_rel "${CTL[@]}" --do jog --axis Z --value -1 --timeout 20
+axis_at jog_probe_rel X 10
+ok mdi_g90 "${CTL[@]}" --do mdi --line "G90 X105" --timeout 20
+ok jog_probe_abs "${CTL[@]}" --do jog --axis Z --value 1 --timeout 20
+axis_at jog_probe_abs X 5
 expect_refused mdi_bad "Q word" "${CTL[@]}" --do mdi --line "G1 X1 Q7 F100"
 
 # 6b. Tool-length touch-off (G10 L10): the tool in the spindle (M61 Q1: it is there,
@@ -246,6 +256,9 @@ expect_refused home_running "long.ngc is running: STOP it first" "${CTL[@]}" --d
 expect_refused touch_running "long.ngc is running: STOP it first" "${CTL[@]}" --do touch-off --axis X --value 0
 rc=0; wait "${TEST_PIDS[long]}" || rc=$?; unset "TEST_PIDS[long]"
 [ "$rc" -eq 0 ] || { cat "$WORK/long.out" >&2; fail "the program after homing did not complete ($rc)"; }
+
+# A program was loaded since: the next MDI line starts as a program does (G80: no motion mode).
+expect_refused mdi_after_program "motion mode is G80" "${CTL[@]}" --do mdi --line "X1"
 
 # The one-line programs of MDI and touch-off do not pile up: each goes when another program is loaded.
 n_mdi=$(find "$WORK/mdi" -name 'mdi-*.ngc' | wc -l)

@@ -241,5 +241,34 @@ TEST(RunFromLine, ALineNeverReachedIsRefusedWithItsPlace) {
   EXPECT_NE(r.error.find("p.ngc:99:1: run from line 99: the program never gets there"), std::string::npos) << r.error;
 }
 
+// MDI (README "MDI"): consecutive lines share their modes: G91 in one line stays for
+// the next, and a line of only X5 moves in the G0 of the line before.
+TEST(RunFromLine, MdiLinesKeepTheirModes) {
+  Files f;
+  pps::ProgramServer server(f.setup, {});
+  const auto line = [&](const std::string& name, const std::string& text, int64_t token) {
+    const std::string path = f.dir.write(name, text + "\nM2\n");
+    const std::optional<rs274::ModalState> modes = server.modes_after();
+    server.next_load_is_line(modes ? &*modes : nullptr);
+    return server.load(path, token, {0, 0, 0});
+  };
+  ASSERT_TRUE(line("a.ngc", "G0 X1", 1).ok);
+  ASSERT_TRUE(server.modes_after().has_value());
+  EXPECT_EQ(server.modes_after()->motion, 0);
+  ASSERT_TRUE(line("b.ngc", "G91", 2).ok);
+  EXPECT_TRUE(server.modes_after()->incremental);
+  EXPECT_EQ(server.modes_after()->motion, 0);
+  const pps::LoadResult r = line("c.ngc", "X5", 3);
+  ASSERT_TRUE(r.ok) << r.error;
+  const program::Block* b = server.block(0);
+  ASSERT_NE(b, nullptr);
+  EXPECT_EQ(b->kind, program::BlockKind::kRapid);
+  EXPECT_NEAR(b->end[0], 5.0, 1e-9);  // from X 0 (the start given), incremental
+  // A program load is not a line: the modes it starts in are a program's.
+  const pps::LoadResult p = server.load(f.dir.write("d.ngc", "X5\nM2\n"), 4, {0, 0, 0});
+  EXPECT_FALSE(p.ok);
+  EXPECT_NE(p.error.find("motion mode is G80"), std::string::npos) << p.error;
+}
+
 }  // namespace
 }  // namespace cnc
