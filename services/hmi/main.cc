@@ -551,7 +551,7 @@ int run_hmi(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
                      {"program_dir", program_dir},
                      {"programs", cnc::hmi::list_programs(program_dir)},
                      // Commands the cell does not have yet: their controls stay disabled.
-                     {"unavailable", {"rapid_override"}},
+                     {"unavailable", json::array()},
                      {"status_rate_hz", cfg.hmi.status_rate_hz}});
     send_to(client, program_msg);
     if (!preview_msg.is_null()) send_to(client, preview_msg);
@@ -682,10 +682,11 @@ int run_hmi(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
         if (send_cmd(e.client, id, action, c)) result(e.client, id, true, name + (on ? " on" : " off") + " sent");
         return;
       }
-      if (action == "override") {
-        c.command = lcmt_program_command::OVERRIDE;
+      if (action == "override" || action == "rapid_override") {
+        const bool rapid = action == "rapid_override";
+        c.command = rapid ? lcmt_program_command::RAPID_OVERRIDE : lcmt_program_command::OVERRIDE;
         c.feed_override = number(j, "value", 1.0);
-        if (send_cmd(e.client, id, action, c)) result(e.client, id, true, "override sent");
+        if (send_cmd(e.client, id, action, c)) result(e.client, id, true, action + " sent");
         return;
       }
       if (action == "enable" || action == "disable") {

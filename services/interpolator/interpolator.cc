@@ -439,15 +439,19 @@ bool Interpolator::apply_command(const Command& cmd) {
       break;
     }
     case Command::Kind::kOverride:
+    case Command::Kind::kRapidOverride:
       if (std::isfinite(cmd.feed_override)) {
         // The cap follows at once; the look-ahead over the buffer is re-planned by
         // the planner and follows when that plan is taken.
         PlanRequest r;
         r.kind = PlanRequest::Kind::kOverride;
         r.epoch = epoch_;
-        r.feed_override = std::clamp(cmd.feed_override, 0.0, 1.5);
+        const bool rapid = cmd.kind == Command::Kind::kRapidOverride;
+        r.feed_override = rapid ? override_ : std::clamp(cmd.feed_override, 0.0, 1.5);
+        r.rapid_override = rapid ? std::clamp(cmd.feed_override, 0.0, 1.0) : rapid_override_;
         if (!push_request(r)) return false;
         override_ = r.feed_override;
+        rapid_override_ = r.rapid_override;
         if (inline_) {
           int64_t used = 0;
           apply_plans(std::numeric_limits<int64_t>::max(), &used);
@@ -462,12 +466,13 @@ bool Interpolator::apply_command(const Command& cmd) {
 // ---- motion ----------------------------------------------------------------------
 
 bool Interpolator::rapid_at_full_speed(const Planned& p) const {
-  return p.block.kind == program::BlockKind::kRapid && override_ >= 1.0;
+  return p.block.kind == program::BlockKind::kRapid && override_ >= 1.0 && rapid_override_ >= 1.0;
 }
 
 double Interpolator::programmed_speed(const Planned& p) const {
   // Override above 1 speeds up feed moves only; a rapid already runs at its axes' limit.
-  return p.v_prog * (p.block.kind == program::BlockKind::kRapid ? std::min(override_, 1.0) : override_);
+  return p.v_prog *
+         (p.block.kind == program::BlockKind::kRapid ? std::min(override_, 1.0) * rapid_override_ : override_);
 }
 
 bool Interpolator::own_limit(const Planned& p, size_t i) const {

@@ -59,10 +59,13 @@ struct Command {
     // line boundary ahead it can still stop at, jerk-limited) and holds there until a
     // RESUME (or the program's START) lets it run the next line. Optional stop: an M1
     // holds the path (else the path only rests there, as at any program event).
-    kSingleBlock = 14, kOptionalStop = 15
+    kSingleBlock = 14, kOptionalStop = 15,
+    // The rapids' speed scale (feed_override, 0.0 .. 1.0), on top of the feed override's
+    // (which a rapid takes up to 1): a G0 runs at v * min(feed, 1) * rapid.
+    kRapidOverride = 18
   };
   Kind kind = Kind::kStart;
-  double feed_override = 1.0;  // kOverride: 0.0 .. 1.5
+  double feed_override = 1.0;  // kOverride: 0.0 .. 1.5; kRapidOverride: 0.0 .. 1.0
   // kReset: the program is dropped, the path is at rest at this position (where
   // the drives stand, as the node took it from AXIS_STATUS); one finite value per axis.
   std::array<double, program::kMaxAxes> position_mm{};
@@ -156,6 +159,7 @@ class Interpolator {
   // policy bounds what it takes per cycle (see motion.plan_budget_samples).
   int64_t planned_samples() const { return planned_samples_; }
   double feed_override() const { return override_; }
+  double rapid_override() const { return rapid_override_; }
   bool single_block() const { return single_block_; }
   bool optional_stop() const { return optional_stop_; }
   // Held by single block at the start of a line (a RESUME runs that line).
@@ -260,6 +264,7 @@ class Interpolator {
   bool auto_resume_pauses_ = false;
   bool stopping_ = false;
   double override_ = 1.0;
+  double rapid_override_ = 1.0;
   bool single_block_ = false;
   bool optional_stop_ = true;
   bool single_block_held_ = false;           // hold_ was set by single block

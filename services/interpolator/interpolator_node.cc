@@ -424,6 +424,12 @@ void InterpolatorNode::run_cycle() {
       spdlog::warn("feed override {} outside 0..1.5: ignored (seq {})", m.feed_override, m.seq);
       continue;
     }
+    if (c.kind == Command::Kind::kRapidOverride &&
+        (!std::isfinite(m.feed_override) || m.feed_override < 0 || m.feed_override > 1)) {
+      spdlog::warn("rapid override {} outside 0..1: ignored (seq {})", m.feed_override, m.seq);
+      continue;
+    }
+    if (c.kind == Command::Kind::kRapidOverride) spdlog::info("rapid override {}", m.feed_override);
     if (c.kind == Command::Kind::kStart) spdlog::info("START {} (token {})", program_path_, token_);
     apply_command(c, m);
     if (c.kind == Command::Kind::kSingleBlock || c.kind == Command::Kind::kOptionalStop) {

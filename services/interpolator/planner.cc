@@ -671,12 +671,13 @@ void Planner::backward_pass(bool full, PlanUpdate* u) {
 }
 
 bool Planner::rapid_at_full_speed(const Planned& p) const {
-  return p.block.kind == program::BlockKind::kRapid && override_ >= 1.0;
+  return p.block.kind == program::BlockKind::kRapid && override_ >= 1.0 && rapid_override_ >= 1.0;
 }
 
 double Planner::programmed_speed(const Planned& p) const {
   // Override above 1 speeds up feed moves only; a rapid already runs at its axes' limit.
-  return p.v_prog * (p.block.kind == program::BlockKind::kRapid ? std::min(override_, 1.0) : override_);
+  return p.v_prog *
+         (p.block.kind == program::BlockKind::kRapid ? std::min(override_, 1.0) * rapid_override_ : override_);
 }
 
 PlanUpdate* Planner::fresh_update() {
@@ -718,6 +719,7 @@ PlanUpdate* Planner::process(const PlanRequest& r) {
       return nullptr;
     case PlanRequest::Kind::kOverride: {
       override_ = r.feed_override;
+      rapid_override_ = r.rapid_override;
       PlanUpdate* u = fresh_update();
       backward_pass(true, u);
       return u;

@@ -69,6 +69,7 @@ struct PlanRequest {
   uint64_t serial = 0;              // kBlock: the block's submission number
   program::Block* block = nullptr;  // kBlock: owned by the planner from the push on
   double feed_override = 1.0;       // kOverride
+  double rapid_override = 1.0;      // kOverride: the rapids' scale (0 .. 1)
 };
 
 // From the planner to the cyclic side: one per block or override request, in order.
@@ -133,6 +134,7 @@ class Planner {
   double period_s_;
   int naxes_;
   double override_ = 1.0;
+  double rapid_override_ = 1.0;  // the rapids' scale (0 .. 1)
   uint64_t epoch_ = 0;
   uint64_t retired_below_ = 0;
   std::deque<Entry> list_;  // this epoch's blocks not yet retired, and always the newest

@@ -157,6 +157,10 @@ inline std::string refusal(const cnc::lcmt_program_command& c, const CellView& v
       if (!std::isfinite(c.feed_override) || c.feed_override < 0 || c.feed_override > 1.5)
         return "feed override " + std::to_string(c.feed_override) + " is outside 0 .. 1.5";
       return "";
+    case C::RAPID_OVERRIDE:
+      if (!std::isfinite(c.feed_override) || c.feed_override < 0 || c.feed_override > 1)
+        return "rapid override " + std::to_string(c.feed_override) + " is outside 0 .. 1";
+      return "";
     case C::RESET:
       switch (v.state) {
         case CellState::kIdle:

@@ -146,8 +146,8 @@ CellView ProgramServerNode::view(double now_s) const {
 void ProgramServerNode::refuse(const cnc::lcmt_program_command& m, const std::string& why) {
   static const char* const kNames[] = {"?",    "LOAD", "START",         "HOLD",      "RESUME", "STOP", "OVERRIDE",
                                        "RESET", "HOME", "JOG", "JOG_KEEPALIVE", "TOUCH_OFF", "MDI",    "HOMED",
-                                       "SINGLE_BLOCK", "OPTIONAL_STOP", "BLOCK_DELETE", "CONFIRM"};
-  const char* name = m.command >= 1 && m.command <= 17 ? kNames[m.command] : "?";
+                                       "SINGLE_BLOCK", "OPTIONAL_STOP", "BLOCK_DELETE", "CONFIRM", "RAPID_OVERRIDE"};
+  const char* name = m.command >= 1 && m.command <= 18 ? kNames[m.command] : "?";
   refusal_ = std::string(name) + (m.command == cnc::lcmt_program_command::LOAD ? " " + m.program_path : "") +
              " refused: " + why;
   refused_sender_ = m.sender;

@@ -187,13 +187,25 @@ axis_at jog_probe Y 3
 # MDI lines share their modes (LinuxCNC's): G91 in one line stays for the next, and a
 # line of only X5 moves in the G0 of the line before it (incremental: X 5 -> 10).
 ok mdi_g91 "${CTL[@]}" --do mdi --line "G91" --timeout 20
+# Rapid override (a recorded interpolator input): X5 in G0 at 5 % of the rapids' speed.
+expect_refused rapid_bad "rapid override 1.500000 is outside 0 .. 1" "${CTL[@]}" --do rapid-override --value 1.5
+ok rapid_5 "${CTL[@]}" --do rapid-override --value 0.05
 ok mdi_x5 "${CTL[@]}" --do mdi --line "X5" --timeout 20
 grep -q "program done" "$WORK/mdi_x5.out" || fail "MDI X5 did not run"
+ok rapid_100 "${CTL[@]}" --do rapid-override --value 1
 ok jog_probe_rel "${CTL[@]}" --do jog --axis Z --value -1 --timeout 20
 axis_at jog_probe_rel X 10
 ok mdi_g90 "${CTL[@]}" --do mdi --line "G90 X105" --timeout 20
 ok jog_probe_abs "${CTL[@]}" --do jog --axis Z --value 1 --timeout 20
 axis_at jog_probe_abs X 5
+# The same 5 mm rapid: program time (interpolator cycles, not wall time) at 5 % at least
+# 5 mm / (0.05 * 250 mm/s) = 0.4 s; at 100 % it took 0.2 s.
+/usr/bin/python3 - "$WORK/mdi_x5.out" "$WORK/mdi_g90.out" <<'PY' || fail "the rapid override did not slow the rapid"
+import re, sys
+t = [float(re.search(r"program done: ([0-9.]+) s program time", open(f).read()).group(1)) for f in sys.argv[1:]]
+print(f"# rapid override: X 5 mm in G0 at 5 %: {t[0]:.3f} s program time, at 100 %: {t[1]:.3f} s", file=sys.stderr)
+sys.exit(0 if t[0] >= 5 / 12.5 and t[1] < 0.3 else 1)
+PY
 expect_refused mdi_bad "Q word" "${CTL[@]}" --do mdi --line "G1 X1 Q7 F100"
 
 # 6b. Tool-length touch-off (G10 L10): the tool in the spindle (M61 Q1: it is there,

@@ -155,6 +155,13 @@ TEST(Interlock, OperatorCommandsInEveryState) {
   tool.jog_continuous = 2;
   // Allowed here; the program server refuses it without a tool in the spindle (integration.operator).
   EXPECT_EQ(pps::refusal(tool, v), "");
+  {
+    lcmt_program_command r = cmd(C::RAPID_OVERRIDE);
+    r.feed_override = 0.25;
+    EXPECT_EQ(pps::refusal(r, v), "");
+    r.feed_override = 1.5;
+    EXPECT_EQ(pps::refusal(r, v), "rapid override 1.500000 is outside 0 .. 1");
+  }
   tool.jog_continuous = 3;
   EXPECT_NE(pps::refusal(tool, v).find("neither 0 (the work offset) nor 2"), std::string::npos);
   // Run from line N: START waits for CONFIRM of the approach, which is then allowed.

@@ -217,6 +217,32 @@ struct Run {
   }
 };
 
+// Rapid override (README "Rapid override"): a G0's top speed scales by it (and by the
+// feed override up to 1); a feed move's does not.
+double top_speed(const std::vector<Block>& blocks, double feed, double rapid) {
+  Run r(blocks);
+  if (feed != 1.0) r.ip.apply_command({Command::Kind::kOverride, feed});
+  if (rapid != 1.0) r.ip.apply_command({Command::Kind::kRapidOverride, rapid});
+  for (int i = 0; i < 400'000 && r.ip.state() != RunState::kDone; ++i) r.step();
+  EXPECT_EQ(r.ip.state(), RunState::kDone);
+  double v = 0;
+  for (size_t k = 1; k < r.sps.size(); ++k) v = std::max(v, r.v_end(k));
+  return v;
+}
+
+TEST(InterpolatorStop, RapidOverrideScalesRapidsOnly) {
+  const std::vector<Block> rapid = program_of("rapid"), line = program_of("line");
+  const double v_rapid = top_speed(rapid, 1.0, 1.0);
+  const double v_half = top_speed(rapid, 1.0, 0.5);
+  const double v_both = top_speed(rapid, 0.5, 0.5);
+  const double v_line = top_speed(line, 1.0, 1.0), v_line_r = top_speed(line, 1.0, 0.25);
+  std::printf("rapid override: G0 top %.2f mm/s, at 50 %% %.2f, with feed 50 %% too %.2f; G1 %.2f, at rapid 25 %% %.2f\n",
+              v_rapid, v_half, v_both, v_line, v_line_r);
+  EXPECT_NEAR(v_half / v_rapid, 0.5, 0.01);
+  EXPECT_NEAR(v_both / v_rapid, 0.25, 0.01);
+  EXPECT_NEAR(v_line_r, v_line, 1e-9);
+}
+
 enum class Phase { kAccelerating, kCruising, kDecelerating };
 enum class Order { kHold, kOverride0, kOverride150Then0, kStop };
 const char* name(Phase p) {

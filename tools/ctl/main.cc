@@ -3,6 +3,7 @@
 //
 //   cnc-ctl --machine M --do run --program P [--timeout S]
 //   cnc-ctl --machine M --do load --program P | start | hold | resume | stop | override --value 0.8
+//   cnc-ctl --machine M --do rapid-override --value 0.25    G0 at a quarter of its speed (0 .. 1)
 //   cnc-ctl --machine M --do enable [--timeout S] | disable | fault-reset    (drive bridge, DRIVE_CMD)
 //   cnc-ctl --machine M --do reset [--timeout S]   after a fault: enable the drives (DRIVE_CMD), then
 //                                                  RESET (the interpolator takes their position)
@@ -340,10 +341,11 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
                                                {"hold", lcmt_program_command::HOLD},
                                                {"resume", lcmt_program_command::RESUME},
                                                {"stop", lcmt_program_command::STOP},
-                                               {"override", lcmt_program_command::OVERRIDE}};
+                                               {"override", lcmt_program_command::OVERRIDE},
+                                               {"rapid-override", lcmt_program_command::RAPID_OVERRIDE}};
   if (auto it = plain.find(what); it != plain.end()) {
     wait_for(bus, 0.5, [&] { return view.have_program && view.have_interp; });  // the states first
-    const double value = what == "override" ? args.number("value", 1.0) : 1.0;
+    const double value = what == "override" || what == "rapid-override" ? args.number("value", 1.0) : 1.0;
     // Sent again until the interpolator's state shows its effect (a datagram lost on
     // the way, or the state report that answered it): a hold that was never seen is
     // not reported as done. Each command is idempotent in the state it asks for.
@@ -526,8 +528,8 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
   }
   const bool line_cmd = what == "mdi" || what == "touch-off";
   if (what != "run" && what != "load" && !line_cmd) {
-    std::fprintf(stderr, "cnc-ctl: --do must be one of run load start hold resume stop override reset enable disable "
-                         "fault-reset home jog touch-off mdi status single-block optional-stop block-delete confirm\n");
+    std::fprintf(stderr, "cnc-ctl: --do must be one of run load start hold resume stop override rapid-override reset enable "
+                         "disable fault-reset home jog touch-off mdi status single-block optional-stop block-delete confirm\n");
     return cnc::service::kExitBadInput;
   }
   const std::string program_arg = line_cmd ? std::string("(") + what + ")" : args.option("program");

@@ -391,6 +391,9 @@ function wire() {
     S.sliderBusy = false;
     send('override', { value: Number(slider.value) / 100 });
   });
+  const rapid = $('rapid-override');
+  rapid.addEventListener('input', () => { $('rapid-override-out').textContent = `${rapid.value} %`; });
+  rapid.addEventListener('change', () => send('rapid_override', { value: Number(rapid.value) / 100 }));
 }
 
 window.addEventListener('DOMContentLoaded', () => { wire(); drawPreview(null); connect(); });
