@@ -264,6 +264,14 @@ try:
     if text("feed-override-cell") != "50 %":
         wait("the cell's override 50 %", lambda: text("feed-override-cell") == "50 %", 5)
     effect("override_100_to_feed_600", "override:100", "feed", "near", 600, 3.0, timeout_s=10)
+    # 8b. The rapid override slider is enabled and sends RAPID_OVERRIDE (50 %, back to 100 %).
+    if not driver.find_element(By.ID, "rapid-override").is_enabled():
+        fail("the rapid override slider is disabled")
+    for pct in (50, 100):
+        n0 = n_results()
+        driver.execute_script("const s = document.getElementById('rapid-override'); s.value = arguments[0];"
+                              "s.dispatchEvent(new Event('input')); s.dispatchEvent(new Event('change'));", pct)
+        wait_result(n0, "rapid_override sent", 10)
 
     # 9. Stop.
     effect("stop_click_to_stopped", "btn-stop", "state-program", "contains", "stopped", timeout_s=10)

@@ -89,6 +89,8 @@ HMI_VIEW_URL="http://127.0.0.1:8094/" timeout 150 /usr/bin/python3 "$SRC/tests/i
   "$BUILD/tools/cnc-ctl" --machine "$M" 2>&1 | tee "$WORK/drive.log" >&2 || rc=$?
 [ "${PIPESTATUS[0]}" -eq 0 ] && [ "$rc" -eq 0 ] || { tail -40 "$WORK/up.log" >&2; fail "the browser session failed (screenshots in $OUT)"; }
 
+# The rapid slider's RAPID_OVERRIDE reached the interpolator (50 %, then 100 %).
+grep -q "rapid override 0.5" "$WORK/up.log" || fail "the page's rapid override 50 % did not reach the interpolator"
 # The touch-off reached the var file (G10 L20 P0 X0 at X = 10: the G54 X offset 10).
 grep -qE '^5221[[:space:]]+10\.0' "$WORK/cnc.var" || { cat "$WORK/cnc.var" >&2 2>/dev/null; fail "the touch-off is not in the var file (5221 10.0)"; }
 # The refused logins counted: in the log and in the heartbeat's detail.
