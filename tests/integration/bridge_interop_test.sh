@@ -39,6 +39,14 @@ for profile in leadshine_el sim; do
   esac
   M="$WORK/$profile.yaml"
   make_machine "$SRC/config/machines/$cfg" "$M"
+  # The pymodbus drive is a Python asyncio process of normal priority: on a loaded
+  # machine it answers late, with positions as old as the stall (2.3 mm behind at
+  # 50 mm/s in 1 of 10 loaded suite runs: a following-error fault over 2 mm that was
+  # the emulator's). This test is about the register maps and word orders of an
+  # implementation nobody here wrote, so its copy allows 20 mm; the end point is
+  # still checked to 1 um, and the simulator's runs keep 2 mm.
+  sed -i -E 's/^( *max_following_error_mm:) *[0-9.]+/\1 20.0/' "$M"
+  [ "$(grep -c 'max_following_error_mm: 20.0' "$M")" -eq 3 ] || fail "cannot set the following-error limit in $M"
   start pymodbus /usr/bin/python3 "$SRC/tests/integration/bridge_pymodbus_drive.py" --port "$TEST_MODBUS_PORT" \
     --profile "$SRC/config/drives/$profile.yaml" --units 1,2,3 --final "$WORK/$profile.final.json"
   for ((i = 0; i < 100; i++)); do grep -q "pymodbus drive:" "$WORK/pymodbus.log" && break; sleep 0.1; done
