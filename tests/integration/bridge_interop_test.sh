@@ -49,8 +49,15 @@ for profile in leadshine_el sim; do
   [ "$(grep -c 'max_following_error_mm: 20.0' "$M")" -eq 3 ] || fail "cannot set the following-error limit in $M"
   start pymodbus /usr/bin/python3 "$SRC/tests/integration/bridge_pymodbus_drive.py" --port "$TEST_MODBUS_PORT" \
     --profile "$SRC/config/drives/$profile.yaml" --units 1,2,3 --final "$WORK/$profile.final.json"
-  for ((i = 0; i < 100; i++)); do grep -q "pymodbus drive:" "$WORK/pymodbus.log" && break; sleep 0.1; done
-  grep -q "pymodbus drive:" "$WORK/pymodbus.log" || { cat "$WORK/pymodbus.log" >&2; fail "the pymodbus drive did not start"; }
+  # Ready when it says so; a Python start (imports of pymodbus and yaml) took over 10 s
+  # in 1 of 12 suite runs while a build loaded both cores. A drive that died says why.
+  for ((i = 0; i < 600; i++)); do
+    grep -q "pymodbus drive:" "$WORK/pymodbus.log" && break
+    kill -0 "${TEST_PIDS[pymodbus]}" 2>/dev/null || break
+    sleep 0.1
+  done
+  grep -q "pymodbus drive:" "$WORK/pymodbus.log" ||
+    { cat "$WORK/pymodbus.log" >&2; fail "the pymodbus drive did not start within $((i / 10)) s"; }
   start drive-bridge "$BUILD/services/cnc-drive-bridge" --machine "$M"
   start program-server "$BUILD/services/cnc-program-server" --machine "$M"
   start interpolator "$BUILD/services/cnc-interpolator" --machine "$M"

@@ -62,6 +62,7 @@ int main(int argc, char** argv) {
   uint32_t classes = kAllClasses;
   bool verbose = false;
   std::string program;  // --program FILE: check that program alone and print its figures
+  std::string machine;  // --machine FILE: another machine than sim3 (its axes and path limits)
   CLI::App app{"the interpolator's randomized path property check, for as long as asked", "cnc-path-property"};
   cnc::util::cli::setup(app);
   app.add_option("--seed", seed, "the first program's seed")->type_name("N");
@@ -69,8 +70,15 @@ int main(int argc, char** argv) {
   app.add_option("--classes", classes, "the program classes to generate, a bit mask (0x.. allowed)")->type_name("MASK");
   app.add_flag("--verbose", verbose, "every program's figures");
   app.add_option("--program", program, "check this program alone and print its figures")->type_name("FILE");
+  app.add_option("--machine", machine, "the machine file (default: config/machines/sim3.yaml)")->type_name("FILE");
   if (const int rc = cnc::util::cli::parse(app, argc, argv); rc >= 0) return rc;
-  const cnc::config::MachineConfig cfg = sim3();
+  cnc::config::MachineConfig cfg;
+  try {
+    cfg = machine.empty() ? sim3() : cnc::config::load_machine_config(machine);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "cnc-path-property: %s\n", e.what());
+    return 2;
+  }
   if (!program.empty()) {
     std::FILE* f = std::fopen(program.c_str(), "r");
     if (f == nullptr) {
