@@ -272,7 +272,7 @@ void Planner::plan_block(Planned& p) {
         return r;
       }
       const double kappa = norm(k, naxes_);
-      r.v = kappa > 1e-12 ? geometry::chord_step_length(1.0 / kappa, eps) / period_s_ : kInf;
+      r.v = kappa > 1e-12 ? std::max(geometry::chord_step_length(1.0 / kappa, eps), 2.0 * eps) / period_s_ : kInf;
       if (rough && naxes_ >= 3)
         r.v = std::min(r.v, law.feed_mm_per_min(b.spindle_rpm, process::feed_inclination_angle(
                                                                     Eigen::Vector3d(r.t[0], r.t[1], r.t[2]))) /
@@ -334,7 +334,11 @@ void Planner::plan_block(Planned& p) {
         take(std::sqrt(kCentripetalShare * cfg_.axes[a].max_accel_mm_s2 / std::fabs(kvec[i][a])),
              Limit::kCurvatureAccel);
     }
-    if (kappa > 1e-12) v_chord[i] = geometry::chord_step_length(1.0 / kappa, eps) / period_s_;
+    // A step of arc length 2ε never leaves its chord by more than ε (each of its points
+    // is within half its length of an end): the chord limit's floor, where the circle
+    // formula gives 2ρ for a radius ρ < ε (a near-cusp of an extreme-weight G5.2, ρ
+    // ~1e-9 mm, crawled at 3e-7 mm/s and never finished).
+    if (kappa > 1e-12) v_chord[i] = std::max(geometry::chord_step_length(1.0 / kappa, eps), 2.0 * eps) / period_s_;
     if (rough && naxes_ >= 3) {
       const double alpha = process::feed_inclination_angle(Eigen::Vector3d(t[0], t[1], t[2]));
       take(law.feed_mm_per_min(b.spindle_rpm, alpha) / 60.0, Limit::kRoughness);

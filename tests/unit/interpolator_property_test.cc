@@ -99,5 +99,35 @@ TEST(InterpolatorProperty, NurbsFoundByLongRunsKeepTheJerkLimit) {
   EXPECT_LE(r5.jerk.value, 1.01);
 }
 
+// Found by a 60 s run of seed 7 (program 1,0xx): a G5.2 with weights from 0.05 to 17.5
+// has a near-cusp of radius ~1e-9 mm. The circle's chord formula gives a step of 2ρ
+// there, so the path crawled at 3e-7 mm/s and the program never finished (a machine
+// standing still with its program running). A step of arc length 2ε never leaves its
+// chord by more than ε: the chord limit's floor.
+TEST(InterpolatorProperty, AnExtremeWeightNearCuspDoesNotStallTheProgram) {
+  const config::MachineConfig cfg = sim3();
+  const std::string g5 =
+      "G21 G90 G91.1 G17 G94\n"
+      "G0 X238.487209 Y294.999549 Z-144.999458\n"
+      "G17 F4316\n"
+      "G5.2 X230.272426 Y295.000000 P7.537042 L4\n"
+      "X238.408318 Y295.000000 P0.799587\n"
+      "X214.955385 Y295.000000 P0.050000\n"
+      "X224.635180 Y291.958053 P0.050000\n"
+      "X204.708154 Y295.000000 P2.456023\n"
+      "X216.056647 Y295.000000 P0.053852\n"
+      "X227.374410 Y295.000000 P10.369841\n"
+      "X214.772881 Y295.000000 P17.546620\n"
+      "X189.115699 Y295.000000 P7.064191\n"
+      "G5.3\n"
+      "M2\n";
+  // Before: not done after 15 million cycles (16.7 hours). Now: 1,722 setpoints.
+  const Result r = run_and_check(cfg, g5, V3{189.115699, 295.0, -144.999458}, 20000);
+  EXPECT_TRUE(r.done) << "stuck on line " << r.stuck_line;
+  EXPECT_EQ(violations(r), "");
+  EXPECT_LE(r.chord.value, 1.0);
+  EXPECT_LE(r.jerk.value, 1.0);
+}
+
 }  // namespace
 }  // namespace cnc::proptest
