@@ -70,8 +70,8 @@ wait_x() {
   done
   fail "X did not pass $1 mm"
 }
-# expect_refused OUT_FILE PATTERN CMD...: cnc-ctl exits 3 within 3 s, its reason matching PATTERN.
-expect_refused() {
+# refused_within_3s OUT_FILE PATTERN CMD...: cnc-ctl exits 3 within 3 s, its reason matching PATTERN.
+refused_within_3s() {
   local out="$1" pat="$2" rc=0 t0 t1; shift 2
   t0=$(date +%s.%N)
   "$@" >"$out" 2>&1 || rc=$?
@@ -105,7 +105,7 @@ grep -q "fault: the bus failed" "$WORK/drive-bridge.log" || fail "the bridge did
 grep -q "fault: publish on" "$WORK/interpolator.log" || fail "the interpolator did not fault on its failed publishes"
 
 # In FAULT: a new program is refused with the reason.
-expect_refused "$WORK/refused1.out" "FAULT" "${CTL[@]}" --do run --program "$WORK/short.ngc" --timeout 10
+refused_within_3s "$WORK/refused1.out" "FAULT" "${CTL[@]}" --do run --program "$WORK/short.ngc" --timeout 10
 "${CTL[@]}" --do reset --timeout 20 >&2 || fail "cnc-ctl --do reset failed after the publish failure"
 "${CTL[@]}" --do run --program "$WORK/short.ngc" --timeout 30 >&2 || fail "no program ran after the reset"
 
@@ -113,9 +113,9 @@ expect_refused "$WORK/refused1.out" "FAULT" "${CTL[@]}" --do run --program "$WOR
 "${CTL[@]}" --do run --program "$WORK/diag.ngc" --timeout 30 >"$WORK/ctl.out" 2>&1 &
 ctl_pid=$!
 wait_x 60 >/dev/null
-expect_refused "$WORK/refused2.out" "diag.ngc is running" "${CTL[@]}" --do load --program "$WORK/short.ngc"
-expect_refused "$WORK/refused3.out" "diag.ngc is running" "${CTL[@]}" --do run --program "$WORK/short.ngc" --timeout 30
-expect_refused "$WORK/refused4.out" "diag.ngc is running" "${CTL[@]}" --do start
+refused_within_3s "$WORK/refused2.out" "diag.ngc is running" "${CTL[@]}" --do load --program "$WORK/short.ngc"
+refused_within_3s "$WORK/refused3.out" "diag.ngc is running" "${CTL[@]}" --do run --program "$WORK/short.ngc" --timeout 30
+refused_within_3s "$WORK/refused4.out" "diag.ngc is running" "${CTL[@]}" --do start
 
 # ---- 3. drive fault -----------------------------------------------------------
 x=$(wait_x 120)
@@ -136,7 +136,7 @@ all_alive "after the drive fault"
 # or already slowing for diag.ngc's corner (74 mm/s seen once); from 50 mm/s on.
 /usr/bin/python3 "$HERE/stop_trace.py" "drive fault on Y" "$WORK/trace.csv" "$fault_before" "$fault_after" "$DECEL" "$JERK_X" 50 0.6 \
   || fail "X did not come to a controlled stop after Y's drive fault"
-expect_refused "$WORK/refused5.out" "FAULT" "${CTL[@]}" --do run --program "$WORK/short.ngc" --timeout 10
+refused_within_3s "$WORK/refused5.out" "FAULT" "${CTL[@]}" --do run --program "$WORK/short.ngc" --timeout 10
 "${CTL[@]}" --do reset --timeout 20 >&2 || fail "cnc-ctl --do reset failed after the drive fault"
 "${CTL[@]}" --do run --program "$WORK/short.ngc" --timeout 30 >&2 || fail "no program ran after the second reset"
 

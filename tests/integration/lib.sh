@@ -132,3 +132,33 @@ netns_host() {
   NETNS_PID[$name]=$(cat "$ready")
   HOST[$name]="nsenter -t ${NETNS_PID[$name]} -n -u --"
 }
+
+# Operator commands through cnc-ctl (the array CTL holds its command and --machine).
+# expect_refused NAME PATTERN CMD...: cnc-ctl exits 3 with PATTERN in its message.
+expect_refused() {
+  local name="$1" pattern="$2"; shift 2
+  local rc=0
+  "$@" >"$WORK/$name.out" 2>&1 || rc=$?
+  [ "$rc" -eq 3 ] || { cat "$WORK/$name.out" >&2; fail "$name: cnc-ctl exit $rc, expected 3 (refused)"; }
+  grep -q -- "$pattern" "$WORK/$name.out" || { cat "$WORK/$name.out" >&2; fail "$name: no '$pattern' in the refusal"; }
+  note "$name refused: $(grep -- "$pattern" "$WORK/$name.out" | head -1)"
+}
+# ok NAME CMD...: cnc-ctl exits 0; its output in $WORK/NAME.out.
+ok() {
+  local name="$1"; shift
+  local rc=0
+  "$@" >"$WORK/$name.out" 2>&1 || rc=$?
+  [ "$rc" -eq 0 ] || { cat "$WORK/$name.out" >&2; fail "$name: cnc-ctl exit $rc"; }
+  note "$name: $(grep -vE '^ALARM' "$WORK/$name.out" | tail -1)"
+}
+# wait_state STATE: the interpolator reports STATE in `cnc-ctl --do status` (at most
+# 100 tries of 0.2 s).
+wait_state() {
+  local i
+  for ((i = 0; i < 100; i++)); do
+    "${CTL[@]}" --do status --timeout 0.2 >"$WORK/status.out" 2>&1 || true
+    grep -q "^interpolator: $1," "$WORK/status.out" && return 0
+  done
+  cat "$WORK/status.out" >&2
+  fail "the interpolator did not report $1"
+}

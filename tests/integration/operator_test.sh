@@ -29,23 +29,6 @@ start drive-bridge "$BUILD/services/cnc-drive-bridge" --machine "$M"
 start program-server "$BUILD/services/cnc-program-server" --machine "$M"
 start interpolator "$BUILD/services/cnc-interpolator" --machine "$M"
 
-# expect_refused NAME PATTERN CMD...: cnc-ctl exits 3 with PATTERN in its message.
-expect_refused() {
-  local name="$1" pattern="$2"; shift 2
-  local rc=0
-  "$@" >"$WORK/$name.out" 2>&1 || rc=$?
-  [ "$rc" -eq 3 ] || { cat "$WORK/$name.out" >&2; fail "$name: cnc-ctl exit $rc, expected 3 (refused)"; }
-  grep -q -- "$pattern" "$WORK/$name.out" || { cat "$WORK/$name.out" >&2; fail "$name: no '$pattern' in the refusal"; }
-  note "$name refused: $(grep -- "$pattern" "$WORK/$name.out" | head -1)"
-}
-# ok NAME CMD...: cnc-ctl exits 0; its output in $WORK/NAME.out.
-ok() {
-  local name="$1"; shift
-  local rc=0
-  "$@" >"$WORK/$name.out" 2>&1 || rc=$?
-  [ "$rc" -eq 0 ] || { cat "$WORK/$name.out" >&2; fail "$name: cnc-ctl exit $rc"; }
-  note "$name: $(grep -vE '^ALARM' "$WORK/$name.out" | tail -1)"
-}
 # axis_at NAME AXIS VALUE: the position cnc-ctl printed for AXIS within 1e-4 mm of VALUE.
 axis_at() {
   /usr/bin/python3 - "$WORK/$1.out" "$2" "$3" <<'PY' || fail "$1: axis $2 not at $3"

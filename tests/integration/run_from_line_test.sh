@@ -58,30 +58,6 @@ start drive-bridge "$BUILD/services/cnc-drive-bridge" --machine "$M"
 start program-server "$BUILD/services/cnc-program-server" --machine "$M"
 start interpolator "$BUILD/services/cnc-interpolator" --machine "$M"
 
-expect_refused() {
-  local name="$1" pattern="$2"; shift 2
-  local rc=0
-  "$@" >"$WORK/$name.out" 2>&1 || rc=$?
-  [ "$rc" -eq 3 ] || { cat "$WORK/$name.out" >&2; fail "$name: cnc-ctl exit $rc, expected 3 (refused)"; }
-  grep -q -- "$pattern" "$WORK/$name.out" || { cat "$WORK/$name.out" >&2; fail "$name: no '$pattern' in the refusal"; }
-  note "$name refused: $(grep -- "$pattern" "$WORK/$name.out" | head -1)"
-}
-ok() {
-  local name="$1"; shift
-  local rc=0
-  "$@" >"$WORK/$name.out" 2>&1 || rc=$?
-  [ "$rc" -eq 0 ] || { cat "$WORK/$name.out" >&2; fail "$name: cnc-ctl exit $rc"; }
-  note "$name: $(grep -vE '^ALARM' "$WORK/$name.out" | tail -1)"
-}
-wait_state() {
-  local i
-  for ((i = 0; i < 100; i++)); do
-    "${CTL[@]}" --do status --timeout 0.2 >"$WORK/status.out" 2>&1 || true
-    grep -q "^interpolator: $1," "$WORK/status.out" && return 0
-  done
-  cat "$WORK/status.out" >&2
-  fail "the interpolator did not report $1"
-}
 # The machine position from the status (X Y Z).
 position() { sed -n 's/^position: //p' "$WORK/status.out"; }
 
