@@ -909,6 +909,7 @@ int run_hmi(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
                      {"mode", interp.mode >= 0 && interp.mode <= 2 ? kModes[interp.mode] : "?"},
                      {"mode_text", interp.mode_text},
                      {"feed_override", fin(interp.feed_override)},
+                     {"rapid_override", fin(interp.rapid_override)},
                      {"token", interp.program_token},
                      {"blocks_done", interp.blocks_done},
                      {"program_time_s", fin(interp.program_time_s)},

@@ -556,6 +556,7 @@ void InterpolatorNode::publish_state(bool force) {
   m.setpoints_published = setpoints_published_;
   m.starved_cycles = core_.starved_cycles();
   m.feed_override = core_.feed_override();
+  m.rapid_override = core_.rapid_override();
   m.program_time_s = core_.program_time_s();
   m.num_axes = core_.last().num_axes > 0 ? core_.last().num_axes : static_cast<int32_t>(cfg_.axes.size());
   // Machine coordinates (the setpoints are the drives', which differ by a homed axis's offset).

@@ -272,6 +272,8 @@ try:
         driver.execute_script("const s = document.getElementById('rapid-override'); s.value = arguments[0];"
                               "s.dispatchEvent(new Event('input')); s.dispatchEvent(new Event('change'));", pct)
         wait_result(n0, "rapid_override sent", 10)
+        # The cell reports it back (INTERP_STATE.rapid_override), shown beside the slider.
+        wait("the cell's rapid override %d %%" % pct, lambda: text("rapid-override-cell") == "%d %%" % pct, 5)
 
     # 9. Stop.
     effect("stop_click_to_stopped", "btn-stop", "state-program", "contains", "stopped", timeout_s=10)

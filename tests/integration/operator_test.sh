@@ -173,6 +173,8 @@ ok mdi_g91 "${CTL[@]}" --do mdi --line "G91" --timeout 20
 # Rapid override (a recorded interpolator input): X5 in G0 at 5 % of the rapids' speed.
 expect_refused rapid_bad "rapid override 1.500000 is outside 0 .. 1" "${CTL[@]}" --do rapid-override --value 1.5
 ok rapid_5 "${CTL[@]}" --do rapid-override --value 0.05
+ok rapid_status "${CTL[@]}" --do status --timeout 1
+grep -q "rapid override 0.05," "$WORK/rapid_status.out" || { cat "$WORK/rapid_status.out" >&2; fail "INTERP_STATE does not report the rapid override 0.05"; }
 ok mdi_x5 "${CTL[@]}" --do mdi --line "X5" --timeout 20
 grep -q "program done" "$WORK/mdi_x5.out" || fail "MDI X5 did not run"
 ok rapid_100 "${CTL[@]}" --do rapid-override --value 1

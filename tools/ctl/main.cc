@@ -147,9 +147,9 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
       std::printf("program: %s %s\n", view.program.state >= 0 && view.program.state <= 7 ? kProgram[view.program.state] : "?",
                   view.program.program_path.empty() ? "(none loaded)" : view.program.program_path.c_str());
     if (view.have_interp)
-      std::printf("interpolator: %s, feed override %.2f, line %d, single block %s, optional stop %s\n",
+      std::printf("interpolator: %s, feed override %.2f, rapid override %.2f, line %d, single block %s, optional stop %s\n",
                   view.interp.state >= 0 && view.interp.state <= 5 ? kInterp[view.interp.state] : "?",
-                  view.interp.feed_override, view.interp.source_line, view.interp.single_block ? "on" : "off",
+                  view.interp.feed_override, view.interp.rapid_override, view.interp.source_line, view.interp.single_block ? "on" : "off",
                   view.interp.optional_stop ? "on" : "off");
     if (view.have_interp) {
       std::printf("position:");
@@ -386,6 +386,7 @@ int run_ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
         case lcmt_program_command::RESUME: return st != cnc::lcmt_setpoint::HELD || view.interp.blocks_done != blocks0;
         case lcmt_program_command::STOP: return !active;
         case lcmt_program_command::OVERRIDE: return std::fabs(view.interp.feed_override - value) < 1e-9;
+        case lcmt_program_command::RAPID_OVERRIDE: return std::fabs(view.interp.rapid_override - value) < 1e-9;
         default: return true;  // START: answered by a refusal or by the run state
       }
     };

@@ -107,6 +107,13 @@ const handlers = {
         $('feed-override-out').textContent = `${Math.round(it.feed_override * 100)} %`;
       }
     }
+    if (typeof it.rapid_override === 'number') {
+      $('rapid-override-cell').textContent = `${Math.round(it.rapid_override * 100)} %`;
+      if (document.activeElement !== $('rapid-override')) {
+        $('rapid-override').value = Math.round(it.rapid_override * 100);
+        $('rapid-override-out').textContent = `${Math.round(it.rapid_override * 100)} %`;
+      }
+    }
     for (const [id, on] of [['sw-single-block', it.single_block], ['sw-optional-stop', it.optional_stop],
       ['sw-block-delete', pg.block_delete]]) {
       if (typeof on === 'boolean' && document.activeElement !== $(id)) $(id).checked = on;
