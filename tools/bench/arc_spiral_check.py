@@ -212,7 +212,7 @@ def main():
         ax.legend(fontsize=7, loc="upper left")
         fig.tight_layout()
         png = os.path.join(a.out, "arc_spiral.png")
-        fig.savefig(png, dpi=110)
+        fig.savefig(png, dpi=80)
         print("plot: %s" % png)
     except ImportError:
         pass
