@@ -87,6 +87,7 @@ class InterpolatorNode {
   void start_move(int axis, double target_mm, double feed_mm_per_min, const std::string& label);
   void manual_cycle();
   void home_next_axis();
+  void start_search();  // the homing search of home_.axis
   void manual_stop(const std::string& why);
   void manual_refuse(const char* what, const std::string& why);
   bool limits_apply(int axis) const;
@@ -105,7 +106,8 @@ class InterpolatorNode {
     std::vector<int> axes;  // in order
     size_t next = 0;
     int axis = -1;
-    int phase = 0;  // 0 search, 1 stopping on the switch, 2 back off, 3 latch, 4 stopping on the latch, 5 to home
+    int phase = 0;  // 0 search, 1 stopping on the switch, 2 back off, 3 latch, 4 stopping on the latch, 5 to home,
+                    // 6 off the switch before the search (it was closed)
     int32_t count0 = 0;
     double seen_mm = 0;   // where the search found the switch (drive)
     double latch_mm = 0;  // the latch of the slow approach (drive)

@@ -101,6 +101,15 @@ rc=0; wait "${TEST_PIDS[home_abort]}" || rc=$?; unset "TEST_PIDS[home_abort]"
   || { cat "$WORK/home_abort.out" >&2; fail "STOP while homing: cnc-ctl exit $rc, expected 5 (aborted)"; }
 note "home aborted: $(grep 'homing aborted' "$WORK/home_abort.out" | tail -1)"
 ok home_y_again "${CTL[@]}" --do home --axis Y --timeout 30
+# Homing from past the switch, where it is closed (a homing stopped there, as the STOP
+# above may leave it): Y at -4.5 mm, beyond its switch at -4; the search alone would
+# see no closing edge and run into the travel's end. It backs off first.
+ok jog_y_past_switch "${CTL[@]}" --do jog --axis Y --value -4.5 --timeout 20
+axis_at jog_y_past_switch Y -4.5
+ok home_y_from_switch "${CTL[@]}" --do home --axis Y --timeout 30
+grep -q "Y 0.0000 (homed)" "$WORK/home_y_from_switch.out" || { cat "$WORK/home_y_from_switch.out" >&2; fail "Y not homed from past its switch"; }
+grep -q "home Y: off the switch" "$WORK/interpolator.log" || fail "the homing from past the switch did not back off first"
+note "homing from past the switch: $(grep -o 'home Y: off the switch.*' "$WORK/interpolator.log" | head -1)"
 
 # 3. Jogging: incremental, clamped at the soft limit, refused there.
 ok jog_x10 "${CTL[@]}" --do jog --axis X --value 10 --feed 3000 --timeout 20
