@@ -3,7 +3,20 @@
 # and helpers to start and stop the real executables.
 set -euo pipefail
 
-fail() { echo "FAIL: $*" >&2; exit 1; }
+# fail MESSAGE: the test fails; the last warnings and errors of each service's log in
+# $WORK go with it (CI keeps only the test's output, and a flake must be diagnosable
+# from that: a following-error fault under load said only "did not report held").
+fail() {
+  echo "FAIL: $*" >&2
+  if [ -n "${WORK:-}" ] && [ -d "$WORK" ]; then
+    local f
+    for f in "$WORK"/*.log; do
+      [ -f "$f" ] || continue
+      grep -E "\[(warning|error|critical)\]" "$f" | tail -n 5 | sed "s#^#  $(basename "$f"): #" >&2 || true
+    done
+  fi
+  exit 1
+}
 note() { echo "# $*" >&2; }
 
 # Re-executes the calling script inside a new network namespace with multicast on
