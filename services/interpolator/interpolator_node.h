@@ -110,6 +110,7 @@ class InterpolatorNode {
                     // 6 off the switch before the search (it was closed)
     int32_t count0 = 0;
     double seen_mm = 0;   // where the search found the switch (drive)
+    double search_end_s = 0;  // monotonic time the search stood without a latch (0: not yet)
     double latch_mm = 0;  // the latch of the slow approach (drive)
   } home_;
   Manual last_manual_ = Manual::kNone;

@@ -15,6 +15,12 @@
 namespace cnc::interp {
 
 namespace {
+// A homing search that ended without a latch waits this long for one still on its
+// way over the bus before it says there is no switch.
+constexpr double kLatchGraceS = 0.5;
+}  // namespace
+
+namespace {
 using PC = cnc::lcmt_program_command;
 constexpr double kStatusFresh_s = 0.5;
 bool active(RunState s) { return s == RunState::kRunning || s == RunState::kHeld || s == RunState::kStarved; }
@@ -196,9 +202,19 @@ void InterpolatorNode::start_search() {
   const int n = static_cast<int>(cfg_.axes.size());
   home_.phase = 0;
   home_.count0 = axis_status_.num_latches == n ? axis_status_.home_latch_count[i] : 0;
+  home_.search_end_s = 0;
   manual_text_ = "home " + cfg_.axes[i].name + ": search";
-  const double span = 1.5 * (cfg_.axes[i].max_mm - cfg_.axes[i].min_mm);
-  start_move(a, core_.machine_position(a) + h.direction * span, h.search_velocity_mm_s * 60.0, manual_text_);
+  const auto& ax = cfg_.axes[i];
+  // At most the travel and a half, and never past the travel the drive bridge checks
+  // on the setpoints (the drive's coordinates, as a jog's clamp): the latch reaches
+  // the interpolator over the bus, tens of ms after the switch closed, and the stop
+  // follows. A 10 mm/s search ran 1.04 mm past a switch 1 mm inside the travel on a
+  // loaded machine (a travel fault, integration.operator in 1 of 10 suite runs); now
+  // it stands at the travel's end at worst, and the homing goes on from the latch.
+  const double off = core_.drive_offset(a);
+  const double span = 1.5 * (ax.max_mm - ax.min_mm);
+  const double target = std::clamp(core_.machine_position(a) + h.direction * span, ax.min_mm - off, ax.max_mm - off);
+  start_move(a, target, h.search_velocity_mm_s * 60.0, manual_text_);
 }
 
 void InterpolatorNode::home_next_axis() {
@@ -298,7 +314,12 @@ void InterpolatorNode::manual_cycle() {
         stop();
         home_.phase = 1;
       } else if (!moving) {
-        manual_stop("axis " + ax.name + ": no home switch within " + mm(1.5 * (ax.max_mm - ax.min_mm)) + " mm");
+        // At the end of the search: a latch may still be on its way (AXIS_STATUS).
+        const double now = util::monotonic_s();
+        if (home_.search_end_s == 0) home_.search_end_s = now;
+        if (now - home_.search_end_s > kLatchGraceS)
+          manual_stop("axis " + ax.name + ": no home switch up to the end of its travel (" +
+                      mm(core_.machine_position(a)) + " mm)");
       }
       break;
     case 1:  // braking on the switch; then off it, from where it closed
