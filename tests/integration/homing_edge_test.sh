@@ -32,7 +32,7 @@ start interpolator "$BUILD/services/cnc-interpolator" --machine "$M"
 for ((i = 0; i < 100; i++)); do
   rc=0
   "${CTL[@]}" --do home --axis X --timeout 30 >"$WORK/home_x.out" 2>&1 || rc=$?
-  [ "$rc" -eq 3 ] && grep -qE "is not enabled|no AXIS_STATUS|is lost" "$WORK/home_x.out" || break
+  [ "$rc" -eq 3 ] && grep -qE "enable the drives first|no AXIS_STATUS|is lost" "$WORK/home_x.out" || break
   sleep 0.1
 done
 cat "$WORK/home_x.out" >&2
