@@ -88,6 +88,12 @@ class InterpolatorNode {
   void manual_cycle();
   void home_next_axis();
   void start_search();  // the homing search of home_.axis
+  // The travel the drive bridge checks on the setpoints, in machine coordinates (the
+  // drive's coordinates, which a homed axis's offset shifts): [*lo, *hi].
+  void drive_travel(int axis, double* lo, double* hi) const;
+  // Where a homing backs off to from the switch that closed at latch_drive_mm (the
+  // drive's coordinates): the backoff distance against the search direction.
+  double backoff_target(int axis, double latch_drive_mm) const;
   void manual_stop(const std::string& why);
   void manual_refuse(const char* what, const std::string& why);
   bool limits_apply(int axis) const;

@@ -173,8 +173,10 @@ void InterpolatorNode::on_manual_command(const cnc::lcmt_program_command& m) {
     // The travel, in machine coordinates; and the drive bridge checks it on the
     // setpoints (the drive's coordinates, which a homed axis's offset shifts): the
     // jog stays within both.
-    const double off = core_.drive_offset(m.axis);
-    const double lo = std::max(ax.min_mm, ax.min_mm - off), hi = std::min(ax.max_mm, ax.max_mm - off);
+    double lo = 0, hi = 0;
+    drive_travel(m.axis, &lo, &hi);
+    lo = std::max(lo, ax.min_mm);
+    hi = std::min(hi, ax.max_mm);
     target = std::clamp(target, lo, hi);
     if (std::fabs(target - here) < 1e-6)
       return manual_refuse(what, "axis " + ax.name + " stands at its soft limit " + mm(dir > 0 ? hi : lo) + " mm");
@@ -194,6 +196,18 @@ void InterpolatorNode::on_manual_command(const cnc::lcmt_program_command& m) {
   start_move(m.axis, target, feed, manual_text_);
 }
 
+void InterpolatorNode::drive_travel(int axis, double* lo, double* hi) const {
+  const auto& ax = cfg_.axes[static_cast<size_t>(axis)];
+  const double off = core_.drive_offset(axis);
+  *lo = ax.min_mm - off;
+  *hi = ax.max_mm - off;
+}
+
+double InterpolatorNode::backoff_target(int axis, double latch_drive_mm) const {
+  const auto& h = cfg_.axes[static_cast<size_t>(axis)].home;
+  return latch_drive_mm - core_.drive_offset(axis) - h.direction * h.backoff_mm;
+}
+
 void InterpolatorNode::start_search() {
   // Search: towards the switch, at most the travel and a half.
   const int a = home_.axis;
@@ -211,9 +225,10 @@ void InterpolatorNode::start_search() {
   // follows. A 10 mm/s search ran 1.04 mm past a switch 1 mm inside the travel on a
   // loaded machine (a travel fault, integration.operator in 1 of 10 suite runs); now
   // it stands at the travel's end at worst, and the homing goes on from the latch.
-  const double off = core_.drive_offset(a);
+  double lo = 0, hi = 0;
+  drive_travel(a, &lo, &hi);
   const double span = 1.5 * (ax.max_mm - ax.min_mm);
-  const double target = std::clamp(core_.machine_position(a) + h.direction * span, ax.min_mm - off, ax.max_mm - off);
+  const double target = std::clamp(core_.machine_position(a) + h.direction * span, lo, hi);
   start_move(a, target, h.search_velocity_mm_s * 60.0, manual_text_);
 }
 
@@ -253,8 +268,7 @@ void InterpolatorNode::home_next_axis() {
         manual_text_ = "home " + cfg_.axes[i].name + ": off the switch";
         spdlog::info("{}: the switch closed at {} mm (drive) and the axis stands at {} mm: backing off first",
                      manual_text_, mm(latch_drive), mm(drive_pos));
-        start_move(a, latch_drive - core_.drive_offset(a) - h.direction * h.backoff_mm,
-                   h.search_velocity_mm_s * 60.0, manual_text_);
+        start_move(a, backoff_target(a, latch_drive), h.search_velocity_mm_s * 60.0, manual_text_);
         return;
       }
     }
@@ -326,8 +340,7 @@ void InterpolatorNode::manual_cycle() {
       if (moving) break;
       home_.phase = 2;
       manual_text_ = "home " + ax.name + ": back off";
-      start_move(a, home_.seen_mm - core_.drive_offset(a) - h.direction * h.backoff_mm, h.search_velocity_mm_s * 60.0,
-                 manual_text_);
+      start_move(a, backoff_target(a, home_.seen_mm), h.search_velocity_mm_s * 60.0, manual_text_);
       break;
     case 2:  // backed off; the slow approach, up to twice the back-off
       if (moving) break;

@@ -224,6 +224,14 @@ void Planner::plan_block(Planned& p) {
   // 1 % below the tolerance: the circle formula is exact for constant curvature;
   // where the curvature changes within a step the error runs up to ~0.5 % over it.
   const double eps = 0.99 * cfg_.chord_tolerance_mm;
+  // The chord limit at curvature kappa: the step whose chord stays within eps, and
+  // never below a step of arc length 2*eps, which never leaves its chord by more than
+  // eps (each of its points is within half its length of an end): where the circle
+  // formula gives 2*rho for a radius rho < eps (a near-cusp of an extreme-weight G5.2,
+  // rho ~1e-9 mm, crawled at 3e-7 mm/s and never finished).
+  auto chord_speed = [&](double kappa) {
+    return kappa > 1e-12 ? std::max(geometry::chord_step_length(1.0 / kappa, eps), 2.0 * eps) / period_s_ : kInf;
+  };
   // The roughness law is for cutting moves; a rapid does not cut.
   const bool rough = b.process.active() && b.spindle_rpm > 0 && b.kind != program::BlockKind::kRapid;
   const process::RoughnessLaw law{b.process.ball_radius_mm, b.process.flutes, b.process.pick_feed_mm,
@@ -272,7 +280,7 @@ void Planner::plan_block(Planned& p) {
         return r;
       }
       const double kappa = norm(k, naxes_);
-      r.v = kappa > 1e-12 ? std::max(geometry::chord_step_length(1.0 / kappa, eps), 2.0 * eps) / period_s_ : kInf;
+      r.v = chord_speed(kappa);
       if (rough && naxes_ >= 3)
         r.v = std::min(r.v, law.feed_mm_per_min(b.spindle_rpm, process::feed_inclination_angle(
                                                                     Eigen::Vector3d(r.t[0], r.t[1], r.t[2]))) /
@@ -334,11 +342,7 @@ void Planner::plan_block(Planned& p) {
         take(std::sqrt(kCentripetalShare * cfg_.axes[a].max_accel_mm_s2 / std::fabs(kvec[i][a])),
              Limit::kCurvatureAccel);
     }
-    // A step of arc length 2ε never leaves its chord by more than ε (each of its points
-    // is within half its length of an end): the chord limit's floor, where the circle
-    // formula gives 2ρ for a radius ρ < ε (a near-cusp of an extreme-weight G5.2, ρ
-    // ~1e-9 mm, crawled at 3e-7 mm/s and never finished).
-    if (kappa > 1e-12) v_chord[i] = std::max(geometry::chord_step_length(1.0 / kappa, eps), 2.0 * eps) / period_s_;
+    v_chord[i] = chord_speed(kappa);
     if (rough && naxes_ >= 3) {
       const double alpha = process::feed_inclination_angle(Eigen::Vector3d(t[0], t[1], t[2]));
       take(law.feed_mm_per_min(b.spindle_rpm, alpha) / 60.0, Limit::kRoughness);

@@ -79,9 +79,7 @@ done
 M="$WORK/sim3.yaml"
 make_machine "$SRC/config/machines/sim3.yaml" "$M"
 start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M"
-start drive-bridge "$BUILD/services/cnc-drive-bridge" --machine "$M"
-start program-server "$BUILD/services/cnc-program-server" --machine "$M"
-start interpolator "$BUILD/services/cnc-interpolator" --machine "$M"
+start_cell --no-monitor
 "$BUILD/tools/cnc-ctl" --machine "$M" --do run --program "$WORK/part.ngc" --timeout 60 >&2 || fail "program on the simulator failed"
 sleep 0.5
 for unit in 1 2 3; do

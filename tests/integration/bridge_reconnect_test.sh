@@ -36,9 +36,7 @@ PY
 }
 
 sim 1
-start drive-bridge "$BUILD/services/cnc-drive-bridge" --machine "$M"
-start program-server "$BUILD/services/cnc-program-server" --machine "$M"
-start interpolator "$BUILD/services/cnc-interpolator" --machine "$M"
+start_cell --no-monitor
 "${CTL[@]}" --do run --program "$WORK/long.ngc" --timeout 30 >"$WORK/ctl.out" 2>&1 &
 ctl_pid=$!
 for ((i = 0; i < 200; i++)); do

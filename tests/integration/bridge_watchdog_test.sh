@@ -22,9 +22,7 @@ M30
 NGC
 
 start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M" --trace "$WORK/trace.csv"
-start drive-bridge "$BUILD/services/cnc-drive-bridge" --machine "$M"
-start program-server "$BUILD/services/cnc-program-server" --machine "$M"
-start interpolator "$BUILD/services/cnc-interpolator" --machine "$M"
+start_cell --no-monitor
 "$BUILD/tools/cnc-ctl" --machine "$M" --do run --program "$WORK/long.ngc" --timeout 30 >"$WORK/ctl.out" 2>&1 &
 ctl_pid=$!
 # Wait until X is past 100 mm (cruising), then kill the interpolator outright.

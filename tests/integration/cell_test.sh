@@ -36,10 +36,7 @@ NGC
 
 start logger "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/run"
 start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M" --final-state "$WORK/final.json"
-start drive-bridge "$BUILD/services/cnc-drive-bridge" --machine "$M"
-start monitor "$BUILD/services/cnc-monitor" --machine "$M"
-start program-server "$BUILD/services/cnc-program-server" --machine "$M"
-start interpolator "$BUILD/services/cnc-interpolator" --machine "$M"
+start_cell
 
 # A malformed program: refused with its place, nothing of it sent.
 rc=0

@@ -49,10 +49,7 @@ NGC
 
 start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M" --trace "$WORK/trace.csv" --control "$WORK/sim.ctl"
 start logger "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/cell"
-start drive-bridge "$BUILD/services/cnc-drive-bridge" --machine "$M"
-start monitor "$BUILD/services/cnc-monitor" --machine "$M"
-start program-server "$BUILD/services/cnc-program-server" --machine "$M"
-start interpolator "$BUILD/services/cnc-interpolator" --machine "$M"
+start_cell
 
 all_alive() {
   local name

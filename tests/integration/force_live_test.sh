@@ -36,10 +36,7 @@ NGC
 
 start logger "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/run"
 start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M"
-start drive-bridge "$BUILD/services/cnc-drive-bridge" --machine "$M"
-start monitor "$BUILD/services/cnc-monitor" --machine "$M"
-start program-server "$BUILD/services/cnc-program-server" --machine "$M"
-start interpolator "$BUILD/services/cnc-interpolator" --machine "$M"
+start_cell
 
 rc=0
 "$BUILD/tools/cnc-ctl" --machine "$M" --do run --program "$WORK/corner.ngc" --timeout 90 >"$WORK/ctl.out" 2>&1 || rc=$?

@@ -65,6 +65,17 @@ start() {
   TEST_PIDS[$name]=$!
 }
 
+# start_cell [--no-monitor]: the cell's services on machine $M, as every live test
+# starts them: the drive bridge, the monitor (unless --no-monitor), the program server
+# and the interpolator. The logger and the drives (servo-sim, with each test's own
+# options) come first, from the test itself.
+start_cell() {
+  start drive-bridge "$BUILD/services/cnc-drive-bridge" --machine "$M"
+  [ "${1:-}" = --no-monitor ] || start monitor "$BUILD/services/cnc-monitor" --machine "$M"
+  start program-server "$BUILD/services/cnc-program-server" --machine "$M"
+  start interpolator "$BUILD/services/cnc-interpolator" --machine "$M"
+}
+
 # stop NAME SIGNAL: signals the process and checks that it exits 0 within 10 s.
 stop() {
   local name="$1" sig="${2:-TERM}" pid="${TEST_PIDS[$1]}"

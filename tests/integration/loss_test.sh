@@ -27,10 +27,7 @@ cp "$SRC/tests/integration/loss_program.ngc" "$WORK/loss.ngc"
 start logger "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/run"
 sleep 0.2
 start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M" --final-state "$WORK/final.json"
-start drive-bridge "$BUILD/services/cnc-drive-bridge" --machine "$M"
-start monitor "$BUILD/services/cnc-monitor" --machine "$M"
-start program-server "$BUILD/services/cnc-program-server" --machine "$M"
-start interpolator "$BUILD/services/cnc-interpolator" --machine "$M"
+start_cell
 
 # Loss on the cell's LCM port only (Modbus TCP stays clean: TCP's own retransmission
 # timeout, 200 ms at least, is a different problem).

@@ -25,9 +25,7 @@ CTL=("$BUILD/tools/cnc-ctl" --machine "$M")
 
 start logger "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/run"
 start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M" --final-state "$WORK/final.json"
-start drive-bridge "$BUILD/services/cnc-drive-bridge" --machine "$M"
-start program-server "$BUILD/services/cnc-program-server" --machine "$M"
-start interpolator "$BUILD/services/cnc-interpolator" --machine "$M"
+start_cell --no-monitor
 
 # axis_at NAME AXIS VALUE: the position cnc-ctl printed for AXIS within 1e-4 mm of VALUE.
 axis_at() {

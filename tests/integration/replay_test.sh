@@ -17,10 +17,7 @@ make_machine "$SRC/config/machines/sim3.yaml" "$M"
 start logger "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/run"
 sleep 0.2
 start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M"
-start drive-bridge "$BUILD/services/cnc-drive-bridge" --machine "$M"
-start monitor "$BUILD/services/cnc-monitor" --machine "$M"
-start program-server "$BUILD/services/cnc-program-server" --machine "$M"
-start interpolator "$BUILD/services/cnc-interpolator" --machine "$M"
+start_cell
 for p in lines butterfly fig11_valley; do
   rc=0
   "$BUILD/tools/cnc-ctl" --machine "$M" --do run --program "$SRC/config/programs/$p.ngc" --timeout 90 >"$WORK/ctl.out" 2>&1 || rc=$?

@@ -54,9 +54,7 @@ NGC
 
 start logger "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/run"
 start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M"
-start drive-bridge "$BUILD/services/cnc-drive-bridge" --machine "$M"
-start program-server "$BUILD/services/cnc-program-server" --machine "$M"
-start interpolator "$BUILD/services/cnc-interpolator" --machine "$M"
+start_cell --no-monitor
 
 # The machine position from the status (X Y Z).
 position() { sed -n 's/^position: //p' "$WORK/status.out"; }

@@ -75,7 +75,7 @@ def main():
         sys.exit(1)
     tw = [tw[0] + (w - tw[0]) / rate for w in tw]
     v = [(x[k + 1] - x[k]) / (tw[k + 1] - tw[k]) for k in range(len(x) - 1)]
-    i = max(k for k in range(len(v)) if t[k] <= before)
+    i = min(k_cause, len(v) - 1)  # the last velocity before the cause
     v0 = abs(v[i])
     sign = 1.0 if v[i] >= 0 else -1.0
     onset = next(k for k in range(i, len(v)) if sign * v[k] < 0.97 * v0)

@@ -47,10 +47,7 @@ chmod 600 "$TEST_KEY"
 
 start logger "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/run"
 start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M" --final-state "$WORK/final.json"
-start drive-bridge "$BUILD/services/cnc-drive-bridge" --machine "$M"
-start monitor "$BUILD/services/cnc-monitor" --machine "$M"
-start program-server "$BUILD/services/cnc-program-server" --machine "$M"
-start interpolator "$BUILD/services/cnc-interpolator" --machine "$M"
+start_cell
 sleep 0.5
 
 python3 "$SRC/tests/integration/stranger.py" attack --port "$TEST_LCM_PORT" --prefix "$TEST_PREFIX" --py "$WORK/py" \

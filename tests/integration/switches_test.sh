@@ -19,9 +19,7 @@ CTL=("$BUILD/tools/cnc-ctl" --machine "$M")
 
 start logger "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/run"
 start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M"
-start drive-bridge "$BUILD/services/cnc-drive-bridge" --machine "$M"
-start program-server "$BUILD/services/cnc-program-server" --machine "$M"
-start interpolator "$BUILD/services/cnc-interpolator" --machine "$M"
+start_cell --no-monitor
 
 # step NAME CMD EXPECT: start or resume under single block; its report names EXPECT.
 step() {
