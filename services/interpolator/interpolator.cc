@@ -193,6 +193,8 @@ void Interpolator::take(PlanUpdate& u) {
     // arriving after the buffer ran out starts from a stop).
     if (blocks_.empty()) p->live_entry = v_;
     p->planned_v0 = 0;
+    p->live_accel = p->accel;
+    p->live_jerk = p->jerk;
     // Single block: a new line's start is a stop. The path can always stop there: the
     // buffer's end, where the block is appended, is a stop in the look-ahead.
     const bool sb = single_block_ && p->line_start && !blocks_.empty() && !p->stop_block() && p->live_entry > 0;
@@ -212,6 +214,15 @@ void Interpolator::take(PlanUpdate& u) {
     if (pt.from == 0 && !p.v_bw.empty()) p.planned_v0 = p.v_bw[0];
     if (pt.from == 0 && p.live_entry < p.v_entry && !p.v_bw.empty()) p.v_bw[0] = std::min(p.v_bw[0], p.live_entry);
     update_suffix_min(p, pt.from, pt.from + pt.count);
+  }
+  // Free limits: only for a block the cyclic side enters no faster than the planner
+  // planned (a block taken on an empty buffer starts from the speed the path has).
+  for (const PlanUpdate::Limits& l : u.limits) {
+    if (l.serial < first || l.serial - first >= blocks_.size()) continue;
+    Planned& p = blocks_[static_cast<size_t>(l.serial - first)];
+    if (p.live_entry > p.v_entry) continue;
+    p.live_accel = std::max(p.live_accel, l.accel);
+    p.live_jerk = std::max(p.live_jerk, l.jerk);
   }
 }
 
@@ -513,18 +524,38 @@ double Interpolator::cap_at(const Planned& p, double s, Limit* why, double* v_ge
   return v;
 }
 
+void Interpolator::horizon_limits(double* A, double* J) const {
+  // A brake to a sample uses the least limits of the blocks up to it; the horizon,
+  // beyond which no sample is checked, must be what a brake with the least limits of
+  // every block it could reach needs. Taken from the front block alone, a block of low
+  // limits further on (a 0.1 mm G19 arc: 97 mm/s² after a G0's 1500) came into the
+  // check only within the front block's brake distance, too late for its own: the
+  // junction planned at 0.165 mm/s was crossed at 0.59 mm/s, jerk 1.19x the limit.
+  *A = kInf;
+  *J = kInf;
+  double offset = 0;
+  for (size_t b = 0; b < blocks_.size(); ++b) {
+    const Planned& p = blocks_[b];
+    *A = std::min(*A, p.live_accel);
+    *J = std::min(*J, p.live_jerk);
+    if (p.stop_block() || (p.live_entry == 0 && offset > 0)) return;
+    offset += p.length;
+  }
+}
+
 bool Interpolator::safe_plain(double v_n, double a_n, double s_n, double* v_target) const {
   // The look-ahead check as it was before safe() skipped and safe_cached() gathered:
   // every sample from s_n to the horizon (the reference of set_verify_lookahead).
   double A = kInf, J = kInf;
   const double T = period_s_;
   double offset = 0;
-  double horizon = -1;
+  double A_h = kInf, J_h = kInf;
+  horizon_limits(&A_h, &J_h);
+  const double horizon = brake_distance(v_n, a_n, 0.0, A_h, J_h) + v_n * period_s_ + 1e-9;
   for (size_t b = 0; b < blocks_.size(); ++b) {
     const Planned& p = blocks_[b];
-    A = std::min(A, p.accel);
-    J = std::min(J, p.jerk);
-    if (horizon < 0) horizon = brake_distance(v_n, a_n, 0.0, A, J) + v_n * period_s_ + 1e-9;
+    A = std::min(A, p.live_accel);
+    J = std::min(J, p.live_jerk);
     if (p.stop_block() || (p.live_entry == 0 && offset > 0)) {
       if (v_target != nullptr) *v_target = 0;
       return brake_distance(v_n, a_n, 0.0, A, J) + 0.5 * v_n * T <= offset - s_n + 1e-9;
@@ -573,13 +604,14 @@ bool Interpolator::safe_scan(double v_n, double a_n, double s_n, double* v_targe
   // cycle's travel at the speed it sheds more room.
   const double T = period_s_;
   double offset = 0;  // arc length of the front block's start relative to its start
-  double horizon = -1;
+  double A_h = kInf, J_h = kInf;
+  horizon_limits(&A_h, &J_h);
+  const double horizon = brake_distance(v_n, a_n, 0.0, A_h, J_h) + v_n * period_s_ + 1e-9;
   ++work_.safe_calls;
   for (size_t b = 0; b < blocks_.size(); ++b) {
     const Planned& p = blocks_[b];
-    A = std::min(A, p.accel);
-    J = std::min(J, p.jerk);
-    if (horizon < 0) horizon = brake_distance(v_n, a_n, 0.0, A, J) + v_n * period_s_ + 1e-9;
+    A = std::min(A, p.live_accel);
+    J = std::min(J, p.live_jerk);
     if (p.stop_block() || (p.live_entry == 0 && offset > 0)) {
       if (v_target != nullptr) *v_target = 0;
       return brake_distance(v_n, a_n, 0.0, A, J) + 0.5 * v_n * T <= offset - s_n + 1e-9;
@@ -629,8 +661,8 @@ void Interpolator::build_look(double vn_lo, double a_lo, double sn_lo, double vn
   if (blocks_.empty()) return;
   ++work_.look_builds;
   {
-    const Planned& p0 = blocks_.front();
-    const double A0 = std::min(kInf, p0.accel), J0 = std::min(kInf, p0.jerk);
+    double A0 = kInf, J0 = kInf;
+    horizon_limits(&A0, &J0);
     const double h_lo = brake_distance(vn_lo, a_lo, 0.0, A0, J0) + vn_lo * period_s_ + 1e-9;
     const double h_hi = brake_distance(vn_hi, a_hi, 0.0, A0, J0) + vn_hi * period_s_ + 1e-9;
     look_H_ = std::max(h_lo, h_hi);
@@ -646,8 +678,8 @@ void Interpolator::build_look(double vn_lo, double a_lo, double sn_lo, double vn
   double offset = 0;
   for (size_t b = 0; b < blocks_.size(); ++b) {
     const Planned& p = blocks_[b];
-    A = std::min(A, p.accel);
-    J = std::min(J, p.jerk);
+    A = std::min(A, p.live_accel);
+    J = std::min(J, p.live_jerk);
     if (p.stop_block() || (p.live_entry == 0 && offset > 0)) {
       look_term_ = true;
       look_term_off_ = offset;
@@ -682,8 +714,8 @@ void Interpolator::build_look(double vn_lo, double a_lo, double sn_lo, double vn
 }
 
 bool Interpolator::safe_gathered(double v_n, double a_n, double s_n, double* v_target) {
-  const Planned& p0 = blocks_.front();
-  const double A0 = std::min(kInf, p0.accel), J0 = std::min(kInf, p0.jerk);
+  double A0 = kInf, J0 = kInf;
+  if (look_ok_) horizon_limits(&A0, &J0);
   const double horizon = look_ok_ ? brake_distance(v_n, a_n, 0.0, A0, J0) + v_n * period_s_ + 1e-9 : 0.0;
   if (!look_ok_ || !(horizon <= look_H_) || !(s_n >= look_sn_lo_ && s_n <= look_sn_hi_) || !(v_n <= look_vn_hi_) ||
       !(a_n * a_n <= look_m2_)) {
@@ -956,7 +988,7 @@ bool Interpolator::creep_to_stop() {
   // J below is at most the front block's: a path faster than that allows cannot
   // creep, and is told so without walking the buffer (the walk gives the same false).
   if (!blocks_.empty() && !blocks_.front().stop_block()) {
-    const double J0 = blocks_.front().jerk;
+    const double J0 = blocks_.front().live_jerk;
     if (v_ > 0.5 * J0 * T * T || std::fabs(a_) > J0 * T) return false;
   }
   double d = -s_;
@@ -966,7 +998,7 @@ bool Interpolator::creep_to_stop() {
     const Planned& p = blocks_[b];
     if (p.stop_block() || (!first && p.live_entry == 0)) break;
     first = false;
-    J = std::min(J, p.jerk);
+    J = std::min(J, p.live_jerk);
     d += p.length;
     if (d > 0.5 * J * T * T * T) return false;  // only grows while the bound only falls
   }
@@ -1004,8 +1036,8 @@ void Interpolator::mark_single_block_stops() {
       if (!reachable) reachable = p.stop_at_start() || brake_distance(v_, a_, 0.0, A, J) + 1.5 * v_ * T + 1e-9 <= offset - s_;
       if (reachable && p.line_start && !p.stop_at_start()) single_block_stop(p);
     }
-    A = std::min(A, p.accel);
-    J = std::min(J, p.jerk);
+    A = std::min(A, p.live_accel);
+    J = std::min(J, p.live_jerk);
     offset += p.length;
   }
 }
@@ -1120,7 +1152,7 @@ const Setpoint& Interpolator::step() {
       Limit why = Limit::kNone;
       double geo_here = kInf;
       const double cap = pausing ? 0.0 : cap_at(p, s_, &why, &geo_here);
-      const double A = p.accel, J = p.jerk;
+      const double A = p.live_accel, J = p.live_jerk;
       const double a_lo = std::max(-A, a_ - J * T), a_hi = std::min(A, a_ + J * T);
       // Acceleration that approaches the cap and lands on it within the jerk limit.
       double a_n = std::clamp(landing_accel(cap - v_, A, J, T), a_lo, a_hi);
@@ -1157,9 +1189,12 @@ const Setpoint& Interpolator::step() {
       }
       double v_n = next_v(a_n);
       // Approaching the cap from below, the discrete ramp must not overshoot it by
-      // its rounding. (A cap that dropped under a running ramp, by an override,
-      // is overshot and returned to within the jerk limit instead.)
-      if (v_ <= cap && v_n > cap && v_n - cap <= J * T * T) v_n = cap;
+      // its rounding, as far as the jerk limit lets the acceleration drop this cycle.
+      // (A cap that dropped under a running ramp, by an override, is overshot and
+      // returned to within the jerk limit instead: clipped onto it, the acceleration
+      // fell by up to 2·J·T in one cycle, 1.2x an axis's jerk limit once the path's
+      // jerk was the axis's.)
+      if (v_ <= cap && v_n > cap && v_n - cap <= J * T * T) v_n = std::max(cap, v_ + a_lo * T);
       // Hard geometric caps over the step (chord error, axis velocity) bound its
       // mean speed; the programmed feed and override are followed jerk-limited.
       const double v_avg = 0.5 * (v_ + v_n);

@@ -238,6 +238,9 @@ class Interpolator {
   bool own_limit(const Planned& p, size_t i) const;
   bool safe_gathered(double v_n, double a_n, double s_n, double* v_target);
   bool safe_plain(double v_n, double a_n, double s_n, double* v_target) const;
+  // The least acceleration and jerk limits of the blocks up to the next stop point:
+  // the brake check's horizon is what a brake with them needs (see its definition).
+  void horizon_limits(double* A, double* J) const;
   void verify(bool r, double v_n, double a_n, double s_n, const double* v_target) const;
   double advance(double ds, bool* reached_stop);
   // p.path.eval(u, ...), or the result of the last call when it was for the same

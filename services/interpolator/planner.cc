@@ -15,6 +15,21 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 // Share of each axis's acceleration and jerk left to the centripetal terms on
 // curved blocks; the tangential planning gets the rest.
 constexpr double kCentripetalShare = 0.5;
+// Share of each axis's acceleration and jerk a line leaves to the velocity step of a
+// junction crossed at speed (corner_speed gives it half a cycle's jerk, and the
+// tangential jerk may fall into the same cycle): with the path's limits at the axes'
+// (sim3 since the raster of issue 13), lines at all of them ran G61 micro-segment
+// corners at up to 1.58x the jerk limit. A line between two stops gets it back
+// (Planned::accel_free).
+constexpr double kJunctionShare = 0.5;
+// The free limits of a NURBS take its centripetal terms at this margin over their
+// sampled values (the curvature may peak between samples).
+constexpr double kFreeMargin = 1.25;
+// The share of each axis's limits the free limits may take at most: the cyclic side's
+// discrete brake onto a stop point (its last step and the creep onto the point) can
+// exceed the path's jerk by a little (1.3 % measured, with random holds and
+// overrides), which the fixed shares of half the limits had hidden.
+constexpr double kFreeShare = 0.97;
 // Samples per knot span of a NURBS and per radian of an arc.
 constexpr int kSamplesPerSpan = 16;
 constexpr double kArcSamplesPerRad = 24.0;
@@ -220,7 +235,7 @@ void Planner::plan_block(Planned& p) {
   if (p.stop_block()) return;
 
   const bool curved = p.path.curved();
-  const double share = curved ? 1.0 - kCentripetalShare : 1.0;
+  const double share = curved ? 1.0 - kCentripetalShare : 1.0 - kJunctionShare;
   // 1 % below the tolerance: the circle formula is exact for constant curvature;
   // where the curvature changes within a step the error runs up to ~0.5 % over it.
   const double eps = 0.99 * cfg_.chord_tolerance_mm;
@@ -304,6 +319,10 @@ void Planner::plan_block(Planned& p) {
   auto sample_limits = [&]() {
   p.accel = cfg_.path_accel_mm_s2;
   p.jerk = cfg_.path_jerk_mm_s3;
+  p.accel_free = cfg_.path_accel_mm_s2;
+  p.jerk_free = cfg_.path_jerk_mm_s3;
+  bool inner_corner = false;  // an unresolved turn inside the block (crossed at speed)
+  std::vector<std::pair<AxisVec, AxisVec>> knot_corners;  // tangents either side of each knot
   // Per sample: speed limits from the local geometry.
   const size_t n = us.size();
   p.samples.assign(n, Sample{0, 0, kInf, Limit::kNone});
@@ -337,6 +356,8 @@ void Planner::plan_block(Planned& p) {
         v_rapid = std::min(v_rapid, v_axis);
         p.accel = std::min(p.accel, share * cfg_.axes[a].max_accel_mm_s2 / ta);
         p.jerk = std::min(p.jerk, share * cfg_.axes[a].max_jerk_mm_s3 / ta);
+        p.accel_free = std::min(p.accel_free, kFreeShare * cfg_.axes[a].max_accel_mm_s2 / ta);
+        p.jerk_free = std::min(p.jerk_free, kFreeShare * cfg_.axes[a].max_jerk_mm_s3 / ta);
       }
       if (std::fabs(kvec[i][a]) > 0)
         take(std::sqrt(kCentripetalShare * cfg_.axes[a].max_accel_mm_s2 / std::fabs(kvec[i][a])),
@@ -363,8 +384,9 @@ void Planner::plan_block(Planned& p) {
       p.path.eval(bp[k] + h, &P, &tr, &d2);
       if (!(norm(tl, naxes_) > 0 && norm(tr, naxes_) > 0)) continue;
       bool stop = false;
-      const double v = std::max(corner_speed(tl, tr, p.accel, &stop), 1e-3);
+      const double v = std::max(corner_speed(tl, tr, p.accel, p.jerk, &stop), 1e-3);
       if (!std::isfinite(v)) continue;
+      knot_corners.emplace_back(tl, tr);
       const auto it = std::lower_bound(us.begin(), us.end(), bp[k]);
       if (it == us.end() || *it != bp[k]) continue;  // the grid holds every knot
       Sample& smp = p.samples[static_cast<size_t>(it - us.begin())];
@@ -381,6 +403,7 @@ void Planner::plan_block(Planned& p) {
   // the knot is taken from its left-hand limit (smeared over that interval, the jump
   // gave a limit up to 2% too high: a G5.2 at 1.02x the jerk limit).
   std::vector<AxisVec> kleft = kvec;
+  AxisVec c_jump{};  // per axis: the largest v²·|Δk_a|/T at a curvature jump (jerk)
   if (b.kind == program::BlockKind::kNurbs) {
     const std::vector<double> bp = p.path.nurbs_breakpoints();
     for (size_t k = 1; k + 1 < bp.size(); ++k) {
@@ -402,6 +425,8 @@ void Planner::plan_block(Planned& p) {
           p.samples[i].v_geo = v;
           p.samples[i].limit = Limit::kCurvatureAccel;
         }
+        const double vs = std::min(p.samples[i].v_geo, 1.5 * p.v_prog);
+        if (std::isfinite(vs)) c_jump[a] = std::max(c_jump[a], vs * vs * dk / period_s_);
       }
     }
   }
@@ -416,7 +441,8 @@ void Planner::plan_block(Planned& p) {
     }
     if (!(n0 > 0 && n1 > 0) || dot >= kCornerTurnCos) continue;
     bool stop = false;
-    const double v = std::max(corner_speed(tvec[i], tvec[i + 1], p.accel, &stop), 1e-3);
+    const double v = std::max(corner_speed(tvec[i], tvec[i + 1], p.accel, p.jerk, &stop), 1e-3);
+    inner_corner = true;
     for (size_t k : {i, i + 1})
       if (v < p.samples[k].v_geo) {
         p.samples[k].v_geo = v;
@@ -490,6 +516,67 @@ void Planner::plan_block(Planned& p) {
       }
     }
   }
+  // Free limits (between two stops, no junction crossed at speed). A line has them
+  // from its axes alone (above). An arc keeps its shares. A NURBS without corners
+  // inside gets the tangential share of each axis's limits that its curvature leaves,
+  // not a fixed half: on a nearly straight curve (a CAM pass fitted under G64 P) the
+  // centripetal terms use almost nothing of the axes, and holding the tangential
+  // limits to half of them slowed every start and stop (the raster at 117.5 % of its
+  // length over the feed). Per axis, over each interval between samples at the
+  // fastest speed the interval allows (its samples' limits, at most 1.5 x F):
+  //   acceleration: v²·|k_a|, the centripetal part;
+  //   jerk: v³·|dk_a/ds| + 3·v·A·|k_a|, the curvature's change and the tangential
+  //   acceleration A turning with the tangent and growing the centripetal term, and
+  //   v²·|Δk_a|/T at a curvature jump;
+  // each taken kFreeMargin x, and the rest, never less than the fixed share, divided
+  // by the largest |t_a|, bounds the block's free limits, within the path's.
+  if (curved) {
+    p.accel_free = p.accel;
+    p.jerk_free = p.jerk;
+  }
+  if (b.kind == program::BlockKind::kNurbs && !inner_corner && n >= 2) {
+    double v_top = 1.5 * p.v_prog;
+    for (int a = 0; a < naxes_; ++a) v_top = std::min(v_top, std::sqrt(3.0) * cfg_.axes[a].max_velocity_mm_s);
+    AxisVec c_acc{}, c_dk{}, c_k{}, t_max{};
+    for (size_t i = 0; i + 1 < n; ++i) {
+      const double v = std::min(std::max(p.samples[i].v_geo, p.samples[i + 1].v_geo), v_top);
+      const double ds = p.samples[i + 1].s - p.samples[i].s;
+      for (int a = 0; a < naxes_; ++a) {
+        const double k =
+            std::max({std::fabs(kvec[i][a]), std::fabs(kleft[i + 1][a]), std::fabs(kvec[i + 1][a])});
+        c_acc[a] = std::max(c_acc[a], v * v * k);
+        c_k[a] = std::max(c_k[a], v * k);
+        if (ds > 0) c_dk[a] = std::max(c_dk[a], v * v * v * std::fabs(kleft[i + 1][a] - kvec[i][a]) / ds);
+        t_max[a] = std::max({t_max[a], std::fabs(tvec[i][a]), std::fabs(tvec[i + 1][a])});
+      }
+    }
+    double accel = cfg_.path_accel_mm_s2;
+    for (int a = 0; a < naxes_; ++a) {
+      if (!(t_max[a] > 0)) continue;
+      const double amax = cfg_.axes[a].max_accel_mm_s2;
+      const double budget = std::max((1.0 - kCentripetalShare) * amax, kFreeShare * amax - kFreeMargin * c_acc[a]);
+      accel = std::min(accel, budget / t_max[a]);
+    }
+    double jerk = cfg_.path_jerk_mm_s3;
+    for (int a = 0; a < naxes_; ++a) {
+      if (!(t_max[a] > 0)) continue;
+      const double jmax = cfg_.axes[a].max_jerk_mm_s3;
+      const double used = kFreeMargin * (c_dk[a] + 3.0 * accel * c_k[a]) + c_jump[a];
+      const double budget = std::max((1.0 - kCentripetalShare) * jmax, kFreeShare * jmax - used);
+      jerk = std::min(jerk, budget / t_max[a]);
+    }
+    // A tangent that turns at a knot (by rounding, or a real corner) is crossed at
+    // speed: the raised limits hold only where that corner's speed with them stays
+    // above the fastest the block can go.
+    bool corners_ok = std::isfinite(accel) && std::isfinite(jerk);
+    for (const auto& [tl, tr] : knot_corners) {
+      bool stop = false;
+      if (!corners_ok) break;
+      corners_ok = corner_speed(tl, tr, accel, jerk, &stop) >= v_top && !stop;
+    }
+    if (corners_ok && accel > p.accel_free) p.accel_free = accel;
+    if (corners_ok && jerk > p.jerk_free) p.jerk_free = jerk;
+  }
   };
   // Between two samples the cyclic side takes the limit as linear in the arc length,
   // and the look-ahead brakes for the samples' own limits only. A limit that holds at
@@ -540,6 +627,7 @@ void Planner::plan_block(Planned& p) {
 }
 
 void Planner::plan_junction(const Planned& prev, Planned& next) const {
+  next.entry_free_ok = true;  // a stop; otherwise decided below
   if (prev.stop_block() || next.stop_block() || prev.path.degenerate() || next.path.degenerate()) {
     next.v_entry = 0;
     return;
@@ -585,7 +673,7 @@ void Planner::plan_junction(const Planned& prev, Planned& next) const {
   direction(prev.path, false, &t0);
   direction(next.path, true, &t1);
   bool stop = false;
-  const double v = corner_speed(t0, t1, std::min(prev.accel, next.accel), &stop);
+  const double v = corner_speed(t0, t1, std::min(prev.accel, next.accel), std::max(prev.jerk, next.jerk), &stop);
   // No direction found (a block that does not move away from its end): a stop.
   next.v_entry = stop || !(norm(t0, naxes_) > 0 && norm(t1, naxes_) > 0) || std::isnan(v) ? 0 : v;
   // The curvature may jump at the junction (arc to arc in another plane, line to
@@ -609,9 +697,42 @@ void Planner::plan_junction(const Planned& prev, Planned& next) const {
     }
     if (next.v_entry < 1e-3) next.v_entry = 0;  // a crawl across a junction: a stop there
   }
+  // Crossed at speed, the junction still allows the blocks' free limits where what
+  // falls into its cycle stays within each axis's limits with them: their tangential
+  // jerk and the acceleration turning (as in corner_speed), and the velocity step and
+  // the step of the centripetal acceleration, taken twice (two opposite steps in a
+  // row). A tangent- and curvature-continuous junction, as between a line and a G64
+  // blend, does (its rounding leaves steps of ~1e-9 of the limits: 0.1 % is allowed).
+  if (next.v_entry > 0) {
+    const double a_free = std::max({prev.accel, prev.accel_free, next.accel, next.accel_free});
+    const double j_free = std::max({prev.jerk, prev.jerk_free, next.jerk, next.jerk_free});
+    AxisVec q{}, d1{}, dd2{}, tt{}, k0{}, k1{};
+    if (prev.path.curved()) {
+      prev.path.eval(prev.path.u_end(), &q, &d1, &dd2);
+      local_frame(d1, dd2, naxes_, &tt, &k0);
+    }
+    if (next.path.curved()) {
+      next.path.eval(next.path.u_begin(), &q, &d1, &dd2);
+      local_frame(d1, dd2, naxes_, &tt, &k1);
+    }
+    // The fastest the path can cross it (the junction's own limit may be infinite).
+    double ve = std::min(next.v_entry, 1.5 * std::max(prev.v_prog, next.v_prog));
+    for (int a = 0; a < naxes_; ++a) ve = std::min(ve, std::sqrt(3.0) * cfg_.axes[a].max_velocity_mm_s);
+    const double n0 = norm(t0, naxes_), n1 = norm(t1, naxes_), T = period_s_;
+    for (int a = 0; a < naxes_; ++a) {
+      const double dt = std::fabs(t1[a] / n1 - t0[a] / n0);
+      const double tmax = std::max(std::fabs(t0[a]) / n0, std::fabs(t1[a]) / n1);
+      const double dk = std::fabs(k1[a] - k0[a]);
+      const double step_v = dt > 0 ? ve * dt : 0.0, step_a = dk > 0 ? ve * ve * dk : 0.0;
+      const double jerk = j_free * tmax + a_free * dt / T + 2.0 * (step_v / (T * T) + step_a / T);
+      const double accel = a_free * tmax + step_v / T + step_a;
+      if (!(jerk <= 1.001 * cfg_.axes[a].max_jerk_mm_s3) || !(accel <= 1.001 * cfg_.axes[a].max_accel_mm_s2))
+        next.entry_free_ok = false;
+    }
+  }
 }
 
-double Planner::corner_speed(const AxisVec& t0, const AxisVec& t1, double a_path, bool* stop) const {
+double Planner::corner_speed(const AxisVec& t0, const AxisVec& t1, double a_path, double j_path, bool* stop) const {
   const double n0 = norm(t0, naxes_), n1 = norm(t1, naxes_);
   const double T = period_s_;
   double v = kInf;
@@ -622,13 +743,23 @@ double Planner::corner_speed(const AxisVec& t0, const AxisVec& t1, double a_path
     dt2 += dt * dt;
     if (dt < 1e-12) continue;
     const auto& ax = cfg_.axes[a];
-    // The direction change happens within one cycle. It turns the path
-    // acceleration by the same angle: where that alone would step the axis's
-    // acceleration by more than half its jerk budget, the corner is a stop.
-    if (a_path * dt > 0.5 * ax.max_jerk_mm_s3 * T) *stop = true;
-    // Otherwise its velocity step must stay within one cycle's acceleration and
-    // half a cycle's jerk (the tangential acceleration changes across it too).
-    v = std::min(v, std::min(ax.max_accel_mm_s2 * T, 0.5 * ax.max_jerk_mm_s3 * T * T) / dt);
+    const double tmax = std::max(std::fabs(t0[a]) / n0, std::fabs(t1[a]) / n1);
+    // The direction change happens within one cycle, and three things may fall into
+    // that cycle on this axis: the path's own jerk (j_path along the tangent), the
+    // path acceleration turning by the same angle (a_path * dt within the cycle) and
+    // the velocity step (v * dt, a jerk of v * dt / T² in finite differences). The
+    // step gets half of what the first two leave of the axis's jerk limit: on CAM
+    // micro-segments rounded to 3 decimals a corner comes every cycle, turning back
+    // and forth, and two opposite steps in a row make twice the jerk of one. Where
+    // nothing is left, the corner is a stop. (With the path's limits at the axes', a
+    // flat half of the jerk limit per step ran G61 micro-segments at up to 1.58x it.)
+    const double jerk_left = ax.max_jerk_mm_s3 - j_path * tmax - a_path * dt / T;
+    const double accel_left = ax.max_accel_mm_s2 - a_path * tmax;
+    if (!(jerk_left > 0) || !(accel_left > 0)) {
+      *stop = true;
+      continue;
+    }
+    v = std::min(v, std::min(0.5 * accel_left * T, 0.5 * jerk_left * T * T) / dt);
   }
   if (dt2 > 0) v = std::min(v, std::min(cfg_.path_accel_mm_s2 * T, 0.5 * cfg_.path_jerk_mm_s3 * T * T) / std::sqrt(dt2));
   return v;
@@ -665,14 +796,15 @@ void Planner::backward_pass(bool full, PlanUpdate* u) {
       double cap = feed_binds ? std::min(p.samples[i].v_geo, vp) : p.samples[i].v_geo;
       if (i == 0) cap = std::min(cap, p.v_entry);
       const double ds = i + 1 < n ? p.samples[i + 1].s - p.samples[i].s : 0.0;
-      const double v = std::min(cap, std::sqrt(carry * carry + 2.0 * p.accel * ds));
-      if (!full && !fresh && !last && v == e.v_bw[i]) {
+      const double v = std::min(cap, std::sqrt(carry * carry + 2.0 * e.accel * ds));
+      if (!full && !fresh && !e.recompute && !last && v == e.v_bw[i]) {
         patch(e, i + 1);
         return;
       }
       e.v_bw[i] = v;
       carry = v;
     }
+    e.recompute = false;
     patch(e, 0);
     last = false;
   }
@@ -746,8 +878,12 @@ PlanUpdate* Planner::process(const PlanRequest& r) {
     p->serial = r.serial;
     plan_block(*p);
     // The path starts from rest after a clear; otherwise the junction with the block before.
-    if (!list_.empty()) plan_junction(*list_.back().p, *p);
-    else p->v_entry = 0;
+    if (!list_.empty()) {
+      plan_junction(*list_.back().p, *p);
+    } else {
+      p->v_entry = 0;
+      p->entry_free_ok = true;
+    }
     p->line_start = list_.empty() || list_.back().p->block.source_line != p->block.source_line ||
                     list_.back().p->block.source_file != p->block.source_file;
     p->live_entry = p->v_entry;
@@ -755,7 +891,23 @@ PlanUpdate* Planner::process(const PlanRequest& r) {
     p->v_min.assign(p->samples.size(), -1.0);
     u->samples = static_cast<int64_t>(p->samples.size());
     u->block = p.get();
-    list_.push_back(Entry{std::move(p), {}});
+    // The block before now has both of its junctions known: where each is a stop (a
+    // corner too sharp to cross, a stop block) or allows the free limits at its speed
+    // (Planned::entry_free_ok), it runs with them (Planned::accel_free) from the
+    // cyclic side's next cycle on.
+    if (!list_.empty()) {
+      Entry& prev = list_.back();
+      const Planned& q = *prev.p;
+      if (!prev.free && !q.stop_block() && q.entry_free_ok && p->entry_free_ok &&
+          (q.accel_free > q.accel || q.jerk_free > q.jerk)) {
+        prev.free = true;
+        prev.accel = std::max(q.accel, q.accel_free);
+        prev.recompute = true;
+        u->limits.push_back({q.serial, prev.accel, std::max(q.jerk, q.jerk_free)});
+      }
+    }
+    const double accel = p->accel;
+    list_.push_back(Entry{std::move(p), {}, accel, false, false});
   } catch (const std::exception& e) {
     u->error = std::string("block ") + std::to_string(block->index) + ": " + e.what();
     return u;

@@ -43,6 +43,16 @@ struct Planned {
   double length = 0;
   double v_prog = 0;            // programmed feed in mm/s (rapids: the axis-limited speed)
   double accel = 0, jerk = 0;   // tangential limits over the block
+  // The tangential limits the block may use where no junction of it is crossed at
+  // speed with a velocity step (both are stops, or tangent-continuous): the share of
+  // each axis's limits kept for that step goes to the tangential planning too (lines:
+  // all of it; NURBS without corners inside: what their curvature leaves).
+  // The planner hands them over in a limits patch once the block's end is known to be
+  // a stop; until then the block runs with accel and jerk.
+  double accel_free = 0, jerk_free = 0;
+  // Its entry junction allows free limits on both sides: a stop, or crossed at a speed
+  // the corner rule would allow with them (tangent- and curvature-continuous).
+  bool entry_free_ok = false;
   double v_entry = 0;           // junction limit with the previous block (planner's)
   uint64_t serial = 0;          // submission number (monotonic over the core's life)
   // The first block of a program line (its source file or line differs from the block
@@ -56,6 +66,7 @@ struct Planned {
   double live_entry = 0;        // the entry limit the cyclic side uses
   bool single_block_stop = false;  // live_entry made 0 by the single-block switch
   double planned_v0 = 0;        // the planner's v_bw[0] before the cyclic side lowered it to live_entry
+  double live_accel = 0, live_jerk = 0;  // the tangential limits the cyclic side uses
   bool stop_at_start() const { return stop_block() || live_entry == 0; }
 
   Planned(program::Block b, motion::PathSegment p) : block(std::move(b)), path(std::move(p)) {}
@@ -85,6 +96,13 @@ struct PlanUpdate {
   };
   std::vector<Patch> patches;
   std::vector<double> values;
+  // Raised tangential limits for a block the cyclic side may hold (its accel_free and
+  // jerk_free: both of its ends turned out to be stops).
+  struct Limits {
+    uint64_t serial;
+    double accel, jerk;
+  };
+  std::vector<Limits> limits;
   std::string error;  // kBlock: the block could not be planned (block is null)
   void clear() {
     epoch = 0;
@@ -92,6 +110,7 @@ struct PlanUpdate {
     samples = 0;
     patches.clear();
     values.clear();
+    limits.clear();
     error.clear();
   }
 };
@@ -115,6 +134,9 @@ class Planner {
   struct Entry {
     std::unique_ptr<Planned> p;
     std::vector<double> v_bw;  // the planner's own look-ahead values
+    double accel = 0;          // the acceleration its look-ahead values use (raised once free)
+    bool free = false;         // runs with accel_free and jerk_free (both ends are stops)
+    bool recompute = false;    // its look-ahead values changed without its end's
   };
   void plan_block(Planned& p);
   // The force feed limit (cutting.feed_limit): adds stations to *us and returns the
@@ -122,9 +144,11 @@ class Planner {
   void force_limits(const Planned& p, std::vector<double>* us, std::vector<double>* v_force);
   void reset_stock();
   void plan_junction(const Planned& prev, Planned& next) const;
-  // The speed at which the path may turn from tangent t0 to t1 within one cycle;
-  // *stop when turning the path acceleration a_path alone would break the jerk limit.
-  double corner_speed(const motion::AxisVec& t0, const motion::AxisVec& t1, double a_path, bool* stop) const;
+  // The speed at which the path may turn from tangent t0 to t1 within one cycle, with
+  // the path's tangential limits a_path and j_path on either side; *stop when these
+  // alone would use up an axis's jerk or acceleration limit in that cycle.
+  double corner_speed(const motion::AxisVec& t0, const motion::AxisVec& t1, double a_path, double j_path,
+                      bool* stop) const;
   void backward_pass(bool full, PlanUpdate* u);
   double programmed_speed(const Planned& p) const;
   bool rapid_at_full_speed(const Planned& p) const;

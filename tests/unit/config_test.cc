@@ -60,7 +60,8 @@ TEST(MachineConfig, LoadsSim3) {
   EXPECT_EQ(c.channel(channels::kSetpoints), "SIM3.SETPOINTS");
   EXPECT_DOUBLE_EQ(c.ipo_period_s, 0.004);
   EXPECT_DOUBLE_EQ(c.servo_period_s, 0.001);
-  EXPECT_DOUBLE_EQ(c.path_accel_mm_s2, 1500.0);
+  EXPECT_DOUBLE_EQ(c.path_accel_mm_s2, 3000.0);
+  EXPECT_DOUBLE_EQ(c.path_jerk_mm_s3, 60000.0);
   ASSERT_EQ(c.axes.size(), 3u);
   EXPECT_EQ(c.axes[0].name, "X");
   EXPECT_EQ(c.axes[1].name, "Y");

@@ -160,7 +160,9 @@ TEST(G64Path, CornersBetweenLinesAreRoundedWithinP) {
     EXPECT_NEAR(g64.path.back()[1], g61.path.back()[1], 1e-9);
     std::printf("%d-gon: G64 P0.05 %.3f s, G61 %.3f s\n", sides, g64.time_s, g61.time_s);
     if (sides == 18) {
-      EXPECT_LT(g64.time_s, 0.85 * g61.time_s);
+      // (0.80 before lines between two stops ran with their axes' whole limits,
+      // which made G61 here 10 % faster: 5.96 -> 5.37 s, G64 4.78 -> 4.62 s.)
+      EXPECT_LT(g64.time_s, 0.9 * g61.time_s);
     } else {
       EXPECT_LT(g64.time_s, 1.02 * g61.time_s);
     }

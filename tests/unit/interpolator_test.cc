@@ -182,7 +182,8 @@ int64_t cycles_in_block(const std::vector<Setpoint>& sps, int64_t block_index) {
 TEST(Interpolator, Sim3Limits) {
   // The expectations below are derived from these values.
   EXPECT_DOUBLE_EQ(sim3().ipo_period_s, 0.004);
-  EXPECT_DOUBLE_EQ(sim3().path_accel_mm_s2, 1500);
+  EXPECT_DOUBLE_EQ(sim3().path_accel_mm_s2, 3000);
+  EXPECT_DOUBLE_EQ(sim3().path_jerk_mm_s3, 60000);
   ASSERT_EQ(sim3().axes.size(), 3u);
   for (const auto& a : sim3().axes) EXPECT_EQ(a.home_mm, 0.0);
 }
@@ -336,12 +337,17 @@ TEST(Interpolator, RapidIsLimitedByTheAxes) {
 }
 
 TEST(Interpolator, LongLineTakesTheTrapezoidTime) {
-  // Jerk-limited: the S-curve time L/v + v/a + a/j.
-  const double L = 300, v = 6000.0 / 60.0, a = 1500, j = sim3().path_jerk_mm_s3;
+  // Jerk-limited: the S-curve time L/v + v/a + a/j, or L/v + 2·sqrt(v/j) where the
+  // ramp never reaches a (v < a²/j). The line starts and ends at rest, so it runs
+  // with X's own limits (no junction of it is crossed at speed).
+  const double L = 300, v = 6000.0 / 60.0;
+  const double a = std::min(sim3().path_accel_mm_s2, sim3().axes[0].max_accel_mm_s2);
+  const double j = std::min(sim3().path_jerk_mm_s3, sim3().axes[0].max_jerk_mm_s3);
   const auto blocks = polyline({{0, 0, 0}, {L, 0, 0}}, BlockKind::kLine, 6000);
   const auto sps = run_program(blocks);
   const double T = sim3().ipo_period_s;
-  const double expected_cycles = (L / v + v / a + a / j) / T;
+  const double ramp = v < a * a / j ? 2.0 * std::sqrt(v / j) : v / a + a / j;
+  const double expected_cycles = (L / v + ramp) / T;
   EXPECT_NEAR(static_cast<double>(cycles_in_block(sps, 0)), expected_cycles, 4.0);  // discrete ramps and the creep onto the end
   EXPECT_NEAR(peak_speed(sps, 0), v, v * 1e-9);
   expect_limits_held(sps, blocks);
