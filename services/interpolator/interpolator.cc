@@ -604,9 +604,8 @@ bool Interpolator::safe_scan(double v_n, double a_n, double s_n, double* v_targe
   // cycle's travel at the speed it sheds more room.
   const double T = period_s_;
   double offset = 0;  // arc length of the front block's start relative to its start
-  double A_h = kInf, J_h = kInf;
-  horizon_limits(&A_h, &J_h);
-  const double horizon = brake_distance(v_n, a_n, 0.0, A_h, J_h) + v_n * period_s_ + 1e-9;
+  // (hz_A_, hz_J_: horizon_limits() of this cycle's buffer, taken once before its checks.)
+  const double horizon = brake_distance(v_n, a_n, 0.0, hz_A_, hz_J_) + v_n * period_s_ + 1e-9;
   ++work_.safe_calls;
   for (size_t b = 0; b < blocks_.size(); ++b) {
     const Planned& p = blocks_[b];
@@ -661,10 +660,8 @@ void Interpolator::build_look(double vn_lo, double a_lo, double sn_lo, double vn
   if (blocks_.empty()) return;
   ++work_.look_builds;
   {
-    double A0 = kInf, J0 = kInf;
-    horizon_limits(&A0, &J0);
-    const double h_lo = brake_distance(vn_lo, a_lo, 0.0, A0, J0) + vn_lo * period_s_ + 1e-9;
-    const double h_hi = brake_distance(vn_hi, a_hi, 0.0, A0, J0) + vn_hi * period_s_ + 1e-9;
+    const double h_lo = brake_distance(vn_lo, a_lo, 0.0, hz_A_, hz_J_) + vn_lo * period_s_ + 1e-9;
+    const double h_hi = brake_distance(vn_hi, a_hi, 0.0, hz_A_, hz_J_) + vn_hi * period_s_ + 1e-9;
     look_H_ = std::max(h_lo, h_hi);
   }
   look_sn_lo_ = sn_lo;
@@ -714,9 +711,7 @@ void Interpolator::build_look(double vn_lo, double a_lo, double sn_lo, double vn
 }
 
 bool Interpolator::safe_gathered(double v_n, double a_n, double s_n, double* v_target) {
-  double A0 = kInf, J0 = kInf;
-  if (look_ok_) horizon_limits(&A0, &J0);
-  const double horizon = look_ok_ ? brake_distance(v_n, a_n, 0.0, A0, J0) + v_n * period_s_ + 1e-9 : 0.0;
+  const double horizon = look_ok_ ? brake_distance(v_n, a_n, 0.0, hz_A_, hz_J_) + v_n * period_s_ + 1e-9 : 0.0;
   if (!look_ok_ || !(horizon <= look_H_) || !(s_n >= look_sn_lo_ && s_n <= look_sn_hi_) || !(v_n <= look_vn_hi_) ||
       !(a_n * a_n <= look_m2_)) {
     ++work_.look_fallbacks;
@@ -1156,6 +1151,7 @@ const Setpoint& Interpolator::step() {
       const double a_lo = std::max(-A, a_ - J * T), a_hi = std::min(A, a_ + J * T);
       // Acceleration that approaches the cap and lands on it within the jerk limit.
       double a_n = std::clamp(landing_accel(cap - v_, A, J, T), a_lo, a_hi);
+      horizon_limits(&hz_A_, &hz_J_);  // the brake checks' horizon, for this cycle's buffer
       auto next_v = [&](double a) { return std::max(0.0, v_ + a * T); };
       auto ok = [&](double a, double* v_target = nullptr) {
         const double vn = next_v(a);

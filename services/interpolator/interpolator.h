@@ -241,6 +241,7 @@ class Interpolator {
   // The least acceleration and jerk limits of the blocks up to the next stop point:
   // the brake check's horizon is what a brake with them needs (see its definition).
   void horizon_limits(double* A, double* J) const;
+  double hz_A_ = 0, hz_J_ = 0;  // horizon_limits() of the cycle's buffer, for its brake checks
   void verify(bool r, double v_n, double a_n, double s_n, const double* v_target) const;
   double advance(double ds, bool* reached_stop);
   // p.path.eval(u, ...), or the result of the last call when it was for the same

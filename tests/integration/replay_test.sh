@@ -34,7 +34,10 @@ n=$(sed -E 's/^identical: ([0-9]+) setpoints.*/\1/' "$WORK/replay.out" | head -1
 [ "$n" -gt 3000 ] || fail "only $n setpoints compared"
 
 # A changed config: one unit of path acceleration.
-sed 's/path_accel_mm_s2: 1500/path_accel_mm_s2: 1499/' "$M" >"$WORK/changed.yaml"
+pa=$(sed -n 's/^ *path_accel_mm_s2: *\([0-9]*\) *$/\1/p' "$M")
+[ -n "$pa" ] || fail "no path_accel_mm_s2 in $M"
+sed "s/path_accel_mm_s2: $pa\$/path_accel_mm_s2: $((pa - 1))/" "$M" >"$WORK/changed.yaml"
+cmp -s "$M" "$WORK/changed.yaml" && fail "the changed config is not changed"
 rc=0; "$BUILD/tools/cnc-replay" --log "$WORK/run.lcmlog" --machine "$WORK/changed.yaml" >"$WORK/c.out" 2>&1 || rc=$?
 [ "$rc" -eq 1 ] || { cat "$WORK/c.out" >&2; fail "changed config: exit $rc, expected 1"; }
 grep -qE "^diverges at cycle [0-9]+ \(t = [0-9.]+ s, block [0-9]+, line [0-9]+\): position_mm\[[0-9]\]" "$WORK/c.out" \

@@ -243,9 +243,9 @@ int cmd_program(const Args& a) {
     Eigen::Vector3d prev = sp[0].p;
     for (size_t k = 1; k < sp.size(); ++k) {
       const Setpoint& s = sp[k];
-      if (k >= next_report) {
+      if (k >= next_report && k + 1 < sp.size()) {
         std::fprintf(stderr, "cnc-predict program: %3.0f %%\n", 100.0 * static_cast<double>(k) / static_cast<double>(sp.size()));
-        next_report += sp.size() / 10;
+        next_report += std::max<size_t>(sp.size() / 10, 1);
       }
       if (!s.cutting) {
         prev = s.p;
@@ -304,6 +304,9 @@ int cmd_program(const Args& a) {
       remove_flat_envelope(stock, prev, s.p, r);
       prev = s.p;
     }
+    // (Reported after the loop: the last report inside it came at 10 x (n / 10) of n
+    // setpoints, 100 % only where that rounded up, and never where n is a multiple of 10.)
+    std::fprintf(stderr, "cnc-predict program: 100 %%\n");
     std::vector<char> final_wall(rows.size(), 0);
     for (const WallPoint& w : walls) {
       const double zs = stock.sample(w.beyond.x(), w.beyond.y());
