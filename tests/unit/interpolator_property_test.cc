@@ -130,5 +130,35 @@ TEST(InterpolatorProperty, AnExtremeWeightNearCuspDoesNotStallTheProgram) {
   EXPECT_LE(r.jerk.value, 1.0 + 1e-9) << std::setprecision(12) << r.jerk.value;
 }
 
+// Found on the G61 raster of the micro-segment bench once lines between two stops ran
+// with free limits: the brake check looked as far as the front block's brake needs.
+// With a free block in front (0.97 of the axes' jerk; here on the second pass) the
+// stop at the program's end came into the check too late for the brake of the lines
+// before it (half the limits): acceleration 1.72x and jerk 19x the limits there. The
+// horizon is now the brake distance with the least limits up to the next stop point.
+TEST(InterpolatorProperty, AStopBehindBlocksOfLowerLimitsIsSeenInTime) {
+  const config::MachineConfig cfg = sim3();
+  std::string prog = "G21 G17 G90 G61\nG0 X14.200 Y17 Z-8.0\nF3000\n";
+  const double z0[] = {-8.135, -8.163, -8.192, -8.222, -8.253, -8.284, -8.316,
+                       -8.348, -8.382, -8.416, -8.450, -8.485, -8.521, -8.558};
+  const double z1[] = {-8.570, -8.536, -8.502, -8.468, -8.435, -8.403, -8.372, -8.341, -8.311, -8.281, -8.252};
+  char buf[96];
+  for (int i = 0; i < 14; ++i) {  // 0.3 mm steps from X13.9 to X10, rounded to 3 decimals as a post writes them
+    std::snprintf(buf, sizeof buf, "G1 X%.3f Y17.000 Z%.3f\n", 13.9 - 0.3 * i, z0[i]);
+    prog += buf;
+  }
+  prog += "G1 X10.000 Y18.000 Z-8.605\n";  // the 1 mm step-over: a stop at either end
+  for (int i = 0; i < 11; ++i) {
+    std::snprintf(buf, sizeof buf, "G1 X%.3f Y18.000 Z%.3f\n", 10.3 + 0.3 * i, z1[i]);
+    prog += buf;
+  }
+  prog += "M2\n";
+  const Result r = run_and_check(cfg, prog, V3{13.3, 18.0, -8.252}, 20000);
+  EXPECT_TRUE(r.done) << "stuck on line " << r.stuck_line;
+  EXPECT_EQ(violations(r), "");
+  EXPECT_LE(r.jerk.value, 1.0);
+  EXPECT_LE(r.acc.value, 1.0);
+}
+
 }  // namespace
 }  // namespace cnc::proptest
