@@ -291,16 +291,21 @@ void BridgeCore::limit_step(bool follow) {
     }
     // Travel: the last line of defence (the reference never leaves it; a command
     // that would is held at the end, at the cost of the limits in that tick).
+    // After it the command stands at the end: its state is at rest there. (Kept as
+    // the clamped step's finite differences, the state went on from an acceleration
+    // of about -v/T: with a reference that ends exactly at Z's travel end (a G0 Z5 on
+    // sim3) a micrometre of the limiter's overshoot threw Z 3.4 mm back and it swung
+    // between 1.6 and 5 mm for 0.8 s about a standing setpoint.)
+    bool at_end = false;
     if (x_new < ax.min_mm || x_new > ax.max_mm) {
       x_new = std::clamp(x_new, ax.min_mm, ax.max_mm);
-      v_new = (x_new - cmd_[i]) / t;
-      a_new = (v_new - v) / t;
+      at_end = true;
     }
     // The state is the command's own finite differences (no rounding drift
     // between what is sent and what the limits were applied to).
     const double v_fd = (x_new - cmd_[i]) / t;
-    acc_[i] = a_new == 0.0 && v_new == 0.0 ? 0.0 : (v_fd - v) / t;
-    vel_[i] = v_new == 0.0 ? 0.0 : v_fd;
+    acc_[i] = at_end || (a_new == 0.0 && v_new == 0.0) ? 0.0 : (v_fd - v) / t;
+    vel_[i] = at_end || v_new == 0.0 ? 0.0 : v_fd;
     cmd_[i] = x_new;
   }
 }

@@ -337,6 +337,47 @@ TEST(BridgeCore, SetpointBeyondTravelFaultsAndNothingMoves) {
   EXPECT_EQ(r.core.on_setpoint(7, at(0)), BridgeCore::Verdict::kIgnored);
 }
 
+// A rapid that ends exactly at the end of Z's travel: the G0 Z5 of the demo (from
+// Z-2, as the interpolator planned it between two stops at 97 % of Z's acceleration
+// and jerk; its setpoints as logged), with one setpoint missed on the way (bridged on
+// the last velocity, then rejoined). The limiter overshoots the end and the travel
+// clamp holds the command there; it must then stand at the end. Before, the clamped
+// step's finite differences stayed in the limiter's state (an acceleration of about
+// -v/T): here Z was thrown back to 3.86 mm; live, on the demo, it swung between 1.6
+// and 5 mm for 0.8 s about the standing setpoint.
+TEST(BridgeCore, ARapidEndingAtTheTravelEndStandsThere) {
+  const config::MachineConfig cfg = machine();
+  ASSERT_DOUBLE_EQ(cfg.axes[2].max_mm, 5.0);
+  const std::vector<double> zs = {
+      -1.9987584,   -1.993792,    -1.9826176,   -1.962752,    -1.931712,     -1.8870144,  -1.826176,
+      -1.7467136,   -1.646144,    -1.521984,    -1.371936216, -1.196156908,  -0.9970678937, -0.7770859891,
+      -0.5386225531, -0.2840827312, -0.01586439375, 0.2636426219, 0.5520577234, 0.8470112313, 1.146146197,
+      1.447120677,  1.747610459,  2.045312705,  2.337950641,  2.623279778,  2.899096247,   3.163248011,
+      3.413651086,  3.648313334,  3.865370538,  4.063143383,  4.240231281,  4.395666809,   4.529145175,
+      4.641244589,  4.733395953,  4.807541844,  4.865791556,  4.910263783,  4.943038567,   4.966136238,
+      4.9814974,    4.990955355,  4.99619578,   4.998699895,  4.999668228,  5.0};
+  Runner r(cfg);
+  r.start(at(0, 0, -2.0));
+  int64_t k = 0;
+  for (; k < 5; ++k) r.cycle(k, at(0, 0, -2.0));
+  double z_max = -1e9, z_min_after = 1e9;
+  bool arrived = false;
+  for (size_t i = 0; i < zs.size() + 300; ++i, ++k) {
+    r.cycle(k, at(0, 0, zs[std::min(i, zs.size() - 1)]), i != 30);  // one setpoint missed at 75 mm/s
+    ASSERT_NE(r.last, BridgeCore::Verdict::kFault) << r.core.fault_reason();
+    const double c = r.core.commanded()[2];
+    z_max = std::max(z_max, c);
+    arrived = arrived || c > 5.0 - 1e-3;
+    if (arrived) z_min_after = std::min(z_min_after, c);
+  }
+  std::printf("[ figures  ] Z to its travel end: highest command %.6f mm, lowest after arriving %.6f mm\n", z_max,
+              z_min_after);
+  EXPECT_TRUE(arrived);
+  EXPECT_LE(z_max, 5.0);
+  EXPECT_GE(z_min_after, 5.0 - 0.05);  // no swing back (was to 3.86 mm)
+  EXPECT_NEAR(r.core.commanded()[2], 5.0, 1e-6);
+}
+
 TEST(BridgeCore, SetpointBeyondVelocityFaultsAndNothingMoves) {
   Runner r(machine());
   for (int64_t k = 0; k < 5; ++k) r.cycle(k, at(0));
