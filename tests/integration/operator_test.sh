@@ -150,8 +150,9 @@ t_lost, y_k, v = float(m.group(1)), float(m.group(2)), float(m.group(3))
 y_end = float(re.findall(r"jogged:.* Y (-?[0-9.]+)", open(sys.argv[2]).read())[-1])
 d = y_end - y_k
 # Bound: the keepalive timeout (0.2 s) at the jog speed, with 50 ms for the watching
-# cycle (4 ms) and its scheduling on a loaded VM, then the path's jerk-limited brake
-# (path_jerk 30000, accel 1500: v*sqrt(v/J) while sqrt(v*J) < A).
+# cycle (4 ms) and its scheduling on a loaded VM, then a jerk-limited brake at half of
+# Y's limits (jerk 30000, accel 1500: v*sqrt(v/J) while sqrt(v*J) < A), never shorter
+# than the jog's own (a line between two stops: 0.97 of them).
 J, A = 30000.0, 1500.0
 brake = v * math.sqrt(v / J) if math.sqrt(v * J) <= A else v * v / (2 * A) + v * A / (2 * J)
 bound = v * (0.2 + 0.05) + brake
