@@ -35,7 +35,7 @@ G1 X20 Q7
 NGC
 
 start logger "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/run"
-start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M" --final-state "$WORK/final.json"
+start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M" --final-state "$WORK/final.json" --trace "$WORK/trace.csv"
 start_cell
 
 # A malformed program: refused with its place, nothing of it sent.
@@ -51,6 +51,7 @@ cat "$WORK/ctl.out" >&2
 [ "$rc" -eq 0 ] || fail "program did not complete (cnc-ctl exit $rc)"
 grep -q "program done" "$WORK/ctl.out" || fail "no completion report"
 
+settle_at "$WORK/trace.csv" 123.4567 45.6789 -7.0
 stop interpolator TERM
 stop program-server TERM
 stop monitor INT

@@ -173,29 +173,6 @@ stop_cell() {
   done
   return 0
 }
-# settle_at X Y Z: waits (at most 5 s) until the simulator's trace shows the axes
-# within 0.5 um of X Y Z. cnc-ctl reports a program done once they stand within
-# 10 um; the drive bridge's limiter settles the last micrometres after that (a
-# 1.5 um overshoot at the end of a jerk-limited stop, seen once). Stopping the cell
-# at once (the interpolator first: the stream ends, the bridge brakes where it is)
-# froze the axes 1.1 um from the end point in 1 of 10 suite runs.
-settle_at() {
-  /usr/bin/python3 - "$WORK/trace.csv" "$@" <<'PY' || note "the axes did not settle within 0.5 um of the end point in 5 s"
-import sys, time
-path, end = sys.argv[1], [float(v) for v in sys.argv[2:5]]
-deadline = time.monotonic() + 5.0
-while time.monotonic() < deadline:
-    lines = open(path).read().splitlines()
-    f = lines[-2].split(",") if len(lines) > 2 else []   # the last whole row
-    if len(f) >= 10:
-        pos = [float(f[1]), float(f[4]), float(f[7])]
-        if max(abs(p - e) for p, e in zip(pos, end)) < 5e-4:
-            sys.exit(0)
-    time.sleep(0.02)
-sys.exit(1)
-PY
-}
-
 # After the kill: the restarted cell refuses to move until a reset, then runs a program.
 reset_then_run() {
   local t0 rc
@@ -209,7 +186,7 @@ reset_then_run() {
   rc=$(ctl_rc --do run --program "$WORK/short.ngc" --timeout 30)
   [ "$rc" -eq 0 ] || fail "after the reset the program did not run to its end (cnc-ctl exit $rc)"
   grep -q "program done" "$WORK/ctl2.out" || fail "cnc-ctl did not report the program done"
-  settle_at 50 20 -5
+  settle_at "$WORK/trace.csv" 50 20 -5
   stop_cell
   final_at "$WORK/final.json" 50 20 -5 || fail "the axes did not end at the short program's end point"
 }
@@ -301,7 +278,7 @@ PY
   grep -q "resumed .* from the state file" "$WORK/program-server.log" || fail "the restarted server did not resume the program"
   grep -q "\[peer_back\] cnc-program-server is back" "$WORK/interpolator.log" || fail "no peer_back alarm"
   end_utime=$(date +%s%6N)  # the program's end: the bridge's setpoint watchdog trips at the cell's stop
-  settle_at $END_XY 0
+  settle_at "$WORK/trace.csv" $END_XY 0
   stop_cell
   final_at "$WORK/final.json" $END_XY 0 || fail "the program did not end at its end point"
   # No jump: the interpolator's setpoints (from the log), every cycle of the run, within
@@ -352,7 +329,7 @@ logger)
   rc=0; wait "$ctl_pid" || rc=$?
   cat "$WORK/ctl.out" >&2
   [ "$rc" -eq 0 ] || fail "cnc-ctl exit $rc: the program did not run to its end without the logger"
-  settle_at $END_XY 0
+  settle_at "$WORK/trace.csv" $END_XY 0
   stop_cell
   [ "$(sha256sum <"$log")" = "$sum_before" ] || fail "the restarted logger changed the killed one's file"
   "$BUILD/tools/cnc-logstat" --log "$WORK/cell-2.lcmlog" --require-no-gaps "${TEST_PREFIX}SETPOINTS" >"$WORK/new.logstat" 2>&1 \
@@ -380,7 +357,7 @@ monitor)
   grep -q "monitor ended by itself" "$WORK/up.log" || fail "./cnc up did not notice the monitor's end"
   grep -q "stopping the cell" "$WORK/up.log" && fail "./cnc up stopped the cell"
   grep -q "ALARM .*FAULT\|interp_fault\|publish_failed" "$WORK/ctl.out" && fail "a fault was raised"
-  settle_at $END_XY 0
+  settle_at "$WORK/trace.csv" $END_XY 0
   stop up TERM
   final_at "$WORK/final.json" $END_XY 0 || fail "the program did not end at its end point"
   ;;

@@ -26,7 +26,7 @@ cp "$SRC/tests/integration/loss_program.ngc" "$WORK/loss.ngc"
 
 start logger "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/run"
 sleep 0.2
-start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M" --final-state "$WORK/final.json"
+start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M" --final-state "$WORK/final.json" --trace "$WORK/trace.csv"
 start_cell
 
 # Loss on the cell's LCM port only (Modbus TCP stays clean: TCP's own retransmission
@@ -48,6 +48,7 @@ nft delete table inet loss
 # Before the cell stops (the interpolator stops first, and the bridge then rightly
 # stops on its watchdog): no watchdog trip during the run.
 grep -q "no setpoint for" "$WORK/drive-bridge.log" && fail "the bridge's watchdog tripped during the run"
+settle_at "$WORK/trace.csv" 61.2345 32.1 -1.5
 for s in interpolator program-server monitor drive-bridge servo-sim logger; do stop "$s" TERM; done
 
 bridge_summary=$(grep -h "recovered from the next one's history" "$WORK/drive-bridge.log" | tail -1)

@@ -40,12 +40,13 @@ grep -q "queue" "$WORK/netem.log" || { cat "$WORK/netem.log" >&2; fail "cnc-nete
 start up-a ${HOST[a]} env CNC_BUILD_DIR="$BUILD" "$SRC/cnc" up --machine "$M" \
   --only logger,monitor,program-server,interpolator --log-out "$WORK/a"
 start up-b ${HOST[b]} env CNC_BUILD_DIR="$BUILD" "$SRC/cnc" up --machine "$M" --only servo-sim,drive-bridge \
-  --sim-final-state "$WORK/final.json"
+  --sim-final-state "$WORK/final.json" --sim-trace "$WORK/trace.csv"
 
 rc=0
 ${HOST[a]} "$BUILD/tools/cnc-ctl" --machine "$M" --do run --program "$WORK/lines.ngc" --timeout 60 >"$WORK/ctl.out" 2>&1 || rc=$?
 cat "$WORK/ctl.out" >&2
 [ "$rc" -eq 0 ] || { tail -n 20 "$WORK"/up-*.log "$WORK/netem.log" >&2; fail "the program did not complete through cnc-netem (cnc-ctl exit $rc)"; }
+settle_at "$WORK/trace.csv" 123.4567 45.6789 -7.0
 stop up-b TERM
 stop up-a TERM
 stop netem TERM

@@ -46,7 +46,7 @@ note "a key file of mode 0640 is refused: $(head -1 "$WORK/mode.out")"
 chmod 600 "$TEST_KEY"
 
 start logger "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/run"
-start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M" --final-state "$WORK/final.json"
+start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M" --final-state "$WORK/final.json" --trace "$WORK/trace.csv"
 start_cell
 sleep 0.5
 
@@ -70,6 +70,7 @@ cat "$WORK/ctl.out" >&2
 grep -q "program done" "$WORK/ctl.out" || fail "no completion report"
 sleep 1.2  # a last heartbeat period, so the counts include everything
 
+settle_at "$WORK/trace.csv" 123.4567 45.6789 -4.0
 for s in interpolator program-server monitor drive-bridge servo-sim logger; do stop "$s" TERM; done
 for s in interpolator program-server monitor drive-bridge logger; do
   grep -q "key file .* read again: 2 key(s)" "$WORK/$s.log" || { cat "$WORK/$s.log" >&2; fail "$s did not take the rotated key"; }
