@@ -303,8 +303,7 @@ void Planner::plan_block(Planned& p) {
       return r;
     };
     // Nothing above the fastest the block can go (1.5 × override) needs refining.
-    double v_top = 1.5 * p.v_prog;
-    for (int a = 0; a < naxes_; ++a) v_top = std::min(v_top, std::sqrt(3.0) * cfg_.axes[a].max_velocity_mm_s);
+    const double v_top = top_speed(p.v_prog);
     Probe pa = probe(grid[0]);
     for (size_t k = 0; k + 1 < grid.size(); ++k) {
       const Probe pb = probe(grid[k + 1]);
@@ -535,8 +534,7 @@ void Planner::plan_block(Planned& p) {
     p.jerk_free = p.jerk;
   }
   if (b.kind == program::BlockKind::kNurbs && !inner_corner && n >= 2) {
-    double v_top = 1.5 * p.v_prog;
-    for (int a = 0; a < naxes_; ++a) v_top = std::min(v_top, std::sqrt(3.0) * cfg_.axes[a].max_velocity_mm_s);
+    const double v_top = top_speed(p.v_prog);
     AxisVec c_acc{}, c_dk{}, c_k{}, t_max{};
     for (size_t i = 0; i + 1 < n; ++i) {
       const double v = std::min(std::max(p.samples[i].v_geo, p.samples[i + 1].v_geo), v_top);
@@ -593,8 +591,7 @@ void Planner::plan_block(Planned& p) {
     return;
   }
   sample_limits();
-  double v_cap = 1.5 * p.v_prog;
-  for (int a = 0; a < naxes_; ++a) v_cap = std::min(v_cap, std::sqrt(3.0) * cfg_.axes[a].max_velocity_mm_s);
+  const double v_cap = top_speed(p.v_prog);
   std::vector<double> extra;
   for (size_t i = 0; i + 1 < us.size(); ++i) {
     const double va = std::min(p.samples[i].v_geo, v_cap), vb = std::min(p.samples[i + 1].v_geo, v_cap);
@@ -680,16 +677,16 @@ void Planner::plan_junction(const Planned& prev, Planned& next) const {
   // arc): the centripetal acceleration steps by v²·|Δk_a| within a cycle, which must
   // stay within half a cycle's jerk per axis (arc-to-arc junctions ran at up to 2x
   // the jerk limit).
+  // The curvature vectors either side of the junction (zero on a line).
+  AxisVec k0{}, k1{};
+  auto curvature_at = [&](const motion::PathSegment& path, double u, AxisVec* k) {
+    AxisVec q{}, d1{}, dd2{}, t{};
+    path.eval(u, &q, &d1, &dd2);
+    if (path.curved()) local_frame(d1, dd2, naxes_, &t, k);
+  };
+  if (prev.path.curved()) curvature_at(prev.path, prev.path.u_end(), &k0);
+  if (next.path.curved()) curvature_at(next.path, next.path.u_begin(), &k1);
   if (next.v_entry > 0 && (prev.path.curved() || next.path.curved())) {
-    auto curvature_at = [&](const motion::PathSegment& path, double u, AxisVec* k) {
-      AxisVec q{}, d1{}, dd2{}, t{};
-      path.eval(u, &q, &d1, &dd2);
-      *k = AxisVec{};
-      if (path.curved()) local_frame(d1, dd2, naxes_, &t, k);
-    };
-    AxisVec k0{}, k1{};
-    curvature_at(prev.path, prev.path.u_end(), &k0);
-    curvature_at(next.path, next.path.u_begin(), &k1);
     for (int a = 0; a < naxes_; ++a) {
       const double dk = std::fabs(k1[a] - k0[a]);
       if (dk > 0 && std::isfinite(dk))
@@ -706,18 +703,8 @@ void Planner::plan_junction(const Planned& prev, Planned& next) const {
   if (next.v_entry > 0) {
     const double a_free = std::max({prev.accel, prev.accel_free, next.accel, next.accel_free});
     const double j_free = std::max({prev.jerk, prev.jerk_free, next.jerk, next.jerk_free});
-    AxisVec q{}, d1{}, dd2{}, tt{}, k0{}, k1{};
-    if (prev.path.curved()) {
-      prev.path.eval(prev.path.u_end(), &q, &d1, &dd2);
-      local_frame(d1, dd2, naxes_, &tt, &k0);
-    }
-    if (next.path.curved()) {
-      next.path.eval(next.path.u_begin(), &q, &d1, &dd2);
-      local_frame(d1, dd2, naxes_, &tt, &k1);
-    }
     // The fastest the path can cross it (the junction's own limit may be infinite).
-    double ve = std::min(next.v_entry, 1.5 * std::max(prev.v_prog, next.v_prog));
-    for (int a = 0; a < naxes_; ++a) ve = std::min(ve, std::sqrt(3.0) * cfg_.axes[a].max_velocity_mm_s);
+    const double ve = std::min(next.v_entry, top_speed(std::max(prev.v_prog, next.v_prog)));
     const double n0 = norm(t0, naxes_), n1 = norm(t1, naxes_), T = period_s_;
     for (int a = 0; a < naxes_; ++a) {
       const double dt = std::fabs(t1[a] / n1 - t0[a] / n0);
@@ -730,6 +717,12 @@ void Planner::plan_junction(const Planned& prev, Planned& next) const {
         next.entry_free_ok = false;
     }
   }
+}
+
+double Planner::top_speed(double v_prog) const {
+  double v = 1.5 * v_prog;
+  for (int a = 0; a < naxes_; ++a) v = std::min(v, std::sqrt(3.0) * cfg_.axes[a].max_velocity_mm_s);
+  return v;
 }
 
 double Planner::corner_speed(const AxisVec& t0, const AxisVec& t1, double a_path, double j_path, bool* stop) const {

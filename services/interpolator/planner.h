@@ -47,8 +47,8 @@ struct Planned {
   // speed with a velocity step (both are stops, or tangent-continuous): the share of
   // each axis's limits kept for that step goes to the tangential planning too (lines:
   // all of it; NURBS without corners inside: what their curvature leaves).
-  // The planner hands them over in a limits patch once the block's end is known to be
-  // a stop; until then the block runs with accel and jerk.
+  // The planner hands them over in a limits patch once the block's exit junction is
+  // known to allow them; until then the block runs with accel and jerk.
   double accel_free = 0, jerk_free = 0;
   // Its entry junction allows free limits on both sides: a stop, or crossed at a speed
   // the corner rule would allow with them (tangent- and curvature-continuous).
@@ -97,7 +97,7 @@ struct PlanUpdate {
   std::vector<Patch> patches;
   std::vector<double> values;
   // Raised tangential limits for a block the cyclic side may hold (its accel_free and
-  // jerk_free: both of its ends turned out to be stops).
+  // jerk_free: neither of its junctions turned out to be crossed with a velocity step).
   struct Limits {
     uint64_t serial;
     double accel, jerk;
@@ -135,7 +135,7 @@ class Planner {
     std::unique_ptr<Planned> p;
     std::vector<double> v_bw;  // the planner's own look-ahead values
     double accel = 0;          // the acceleration its look-ahead values use (raised once free)
-    bool free = false;         // runs with accel_free and jerk_free (both ends are stops)
+    bool free = false;         // runs with accel_free and jerk_free (Planned::entry_free_ok at both ends)
     bool recompute = false;    // its look-ahead values changed without its end's
   };
   void plan_block(Planned& p);
@@ -144,6 +144,9 @@ class Planner {
   void force_limits(const Planned& p, std::vector<double>* us, std::vector<double>* v_force);
   void reset_stock();
   void plan_junction(const Planned& prev, Planned& next) const;
+  // The fastest a block programmed at v_prog can go: 1.5 x (the override's most) and
+  // no faster than every axis at its velocity limit together.
+  double top_speed(double v_prog) const;
   // The speed at which the path may turn from tangent t0 to t1 within one cycle, with
   // the path's tangential limits a_path and j_path on either side; *stop when these
   // alone would use up an axis's jerk or acceleration limit in that cycle.
