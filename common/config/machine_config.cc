@@ -15,6 +15,77 @@ namespace cnc::config {
 namespace {
 constexpr double kInf = std::numeric_limits<double>::max();
 
+// The keys of each mapping, in the order the reader reads them. Each reader below is
+// given its table: it may read no other key, and the table rejects every other key.
+constexpr std::string_view kTopKeys[] = {"cell",    "timing", "motion", "operator",     "hmi",    "process",
+                                         "cutting", "program", "axes",  "drive_bridge", "logger", "security",
+                                         "monitor"};
+constexpr std::string_view kCellKeys[] = {"name", "channel_prefix", "lcm_url"};
+constexpr std::string_view kTimingKeys[] = {"ipo_period_s",       "servo_period_s",      "setpoint_timeout_s",
+                                            "stop_decel_mm_s2",   "heartbeat_period_s",  "heartbeat_timeout_s",
+                                            "realtime_priority",  "realtime_cpus"};
+constexpr std::string_view kMotionKeys[] = {"default_feed_mm_per_min", "chord_tolerance_mm", "path_accel_mm_s2",
+                                            "path_jerk_mm_s3",         "block_window",       "plan_budget_samples",
+                                            "param_update"};
+constexpr std::string_view kOperatorKeys[] = {"homing_required", "jog_keepalive_timeout_s", "mdi_directory",
+                                              "safe_z_mm"};
+constexpr std::string_view kHmiKeys[] = {"listen",      "port",           "users_file", "read_only_without_login",
+                                         "program_dir", "status_rate_hz", "runs_dir"};
+constexpr std::string_view kProcessKeys[] = {"ball_radius_mm", "flutes", "pick_feed_mm", "target_rmax_um",
+                                             "spindle_rpm"};
+constexpr std::string_view kCuttingKeys[] = {"tool",          "material",       "model",          "stock",
+                                             "deflection_tolerance_mm", "max_force_n", "feed_limit", "station_mm",
+                                             "disc_height_mm", "angles_per_tooth"};
+constexpr std::string_view kStockKeys[] = {"x_min_mm", "y_min_mm", "x_max_mm", "y_max_mm", "top_z_mm", "pitch_mm"};
+constexpr std::string_view kProgramKeys[] = {
+    "subroutine_path", "tool_table",   "var_file",      "probe",         "digital_inputs",
+    "analog_inputs",   "digital_outputs", "analog_outputs", "block_delete", "optional_stop",
+    "max_validation_lines", "g64_fit", "g64_fit_max_segment_mm", "g64_fit_max_turn_deg"};
+constexpr std::string_view kAxisKeys[] = {"name",          "min_mm",  "max_mm",          "max_velocity_mm_s",
+                                          "max_accel_mm_s2", "max_jerk_mm_s3", "max_following_error_mm", "home_mm",
+                                          "drive",         "sim",     "home",            "jog_velocity_mm_s"};
+constexpr std::string_view kDriveKeys[] = {"transport", "host",      "port",    "device",  "baud",
+                                           "parity",    "stop_bits", "unit_id", "profile", "response_timeout_s"};
+constexpr std::string_view kSimKeys[] = {"bandwidth_hz",         "damping",          "max_velocity_mm_s",
+                                         "comm_timeout_s",       "comm_stop_decel_mm_s2", "home_switch_mm",
+                                         "home_switch_sigma_mm", "home_switch_hysteresis_mm", "home_switch_seed"};
+constexpr std::string_view kHomeKeys[] = {"method",      "search_velocity_mm_s", "latch_velocity_mm_s",
+                                          "direction",   "switch_position_mm",   "position_mm",
+                                          "backoff_mm",  "order"};
+constexpr std::string_view kDriveBridgeKeys[] = {"enable_on_start", "profile_dir",     "enable_timeout_s",
+                                                 "link_loss_timeout_s", "reconnect_min_s", "reconnect_max_s",
+                                                 "lead_cycles"};
+constexpr std::string_view kLoggerKeys[] = {"directory", "rotate_mb", "flush_period_s"};
+constexpr std::string_view kSecurityKeys[] = {"signing", "key_file", "max_age_s"};
+constexpr std::string_view kMonitorKeys[] = {"rmax_margin"};
+
+constexpr KeySection kSections[] = {
+    {"", kTopKeys},
+    {"cell", kCellKeys},
+    {"timing", kTimingKeys},
+    {"motion", kMotionKeys},
+    {"operator", kOperatorKeys},
+    {"hmi", kHmiKeys},
+    {"process", kProcessKeys},
+    {"cutting", kCuttingKeys},
+    {"cutting.stock", kStockKeys},
+    {"program", kProgramKeys},
+    {"axes[]", kAxisKeys},
+    {"axes[].drive", kDriveKeys},
+    {"axes[].sim", kSimKeys},
+    {"axes[].home", kHomeKeys},
+    {"drive_bridge", kDriveBridgeKeys},
+    {"logger", kLoggerKeys},
+    {"security", kSecurityKeys},
+    {"monitor", kMonitorKeys},
+};
+
+// A path relative to the config file's folder; "" and absolute paths stay as they are.
+std::string beside(const MapReader& r, const std::string& v) {
+  if (v.empty() || v[0] == '/') return v;
+  return (std::filesystem::path(r.file()).parent_path() / v).lexically_normal().string();
+}
+
 DriveConfig read_drive(MapReader r) {
   DriveConfig d;
   d.transport = r.get_choice("transport", d.transport, {"modbus_tcp", "modbus_rtu", "loopback"});
@@ -33,6 +104,37 @@ DriveConfig read_drive(MapReader r) {
   return d;
 }
 
+ServoSimAxisConfig read_sim(MapReader s) {
+  ServoSimAxisConfig k;
+  k.bandwidth_hz = s.get_double("bandwidth_hz", k.bandwidth_hz, 0.1, 1000);
+  k.damping = s.get_double("damping", k.damping, 0.05, 10);
+  k.max_velocity_mm_s = s.get_double("max_velocity_mm_s", 0.0, 0.0, 1e4);
+  k.comm_timeout_s = s.get_double("comm_timeout_s", 0.0, 0.0, 60.0);
+  k.comm_stop_decel_mm_s2 = s.get_double("comm_stop_decel_mm_s2", 0.0, 0.0, 1e6);
+  k.has_home_switch = s.has("home_switch_mm");
+  k.home_switch_mm = s.get_double("home_switch_mm", 0.0, -1e5, 1e5);
+  k.home_switch_sigma_mm = s.get_double("home_switch_sigma_mm", k.home_switch_sigma_mm, 0.0, 10.0);
+  k.home_switch_hysteresis_mm = s.get_double("home_switch_hysteresis_mm", k.home_switch_hysteresis_mm, 0.0, 100.0);
+  k.home_switch_seed = static_cast<uint64_t>(s.get_int("home_switch_seed", 1, 0, INT64_MAX));
+  s.finish();
+  return k;
+}
+
+HomeConfig read_home(MapReader h, const AxisConfig& a) {
+  HomeConfig k;
+  k.method = h.get_choice("method", "switch", {"none", "switch", "absolute"});
+  k.search_velocity_mm_s = h.get_double("search_velocity_mm_s", k.search_velocity_mm_s, 1e-3, a.max_velocity_mm_s);
+  k.latch_velocity_mm_s = h.get_double("latch_velocity_mm_s", k.latch_velocity_mm_s, 1e-3, a.max_velocity_mm_s);
+  k.direction = static_cast<int>(h.get_int("direction", k.direction, -1, 1));
+  if (k.direction == 0) h.fail("direction", "must be -1 or 1");
+  k.switch_position_mm = h.get_double("switch_position_mm", k.direction < 0 ? a.min_mm : a.max_mm, -1e5, 1e5);
+  k.position_mm = h.get_double("position_mm", a.home_mm, a.min_mm, a.max_mm);
+  k.backoff_mm = h.get_double("backoff_mm", k.backoff_mm, 1e-3, 1e3);
+  k.order = static_cast<int>(h.get_int("order", 0, 0, 64));
+  h.finish();
+  return k;
+}
+
 AxisConfig read_axis(MapReader r) {
   AxisConfig a;
   a.name = r.require_string("name");
@@ -47,263 +149,236 @@ AxisConfig read_axis(MapReader r) {
   if (!r.has("home_mm") && (a.min_mm > 0 || a.max_mm < 0))
     r.fail("home_mm", "is required when 0 is outside [min_mm, max_mm]");
   a.home_mm = r.get_double("home_mm", 0.0, a.min_mm, a.max_mm);
-  a.drive = read_drive(r.map("drive"));
-  MapReader s = r.map("sim");
-  a.sim.bandwidth_hz = s.get_double("bandwidth_hz", a.sim.bandwidth_hz, 0.1, 1000);
-  a.sim.damping = s.get_double("damping", a.sim.damping, 0.05, 10);
-  a.sim.max_velocity_mm_s = s.get_double("max_velocity_mm_s", 0.0, 0.0, 1e4);
-  a.sim.comm_timeout_s = s.get_double("comm_timeout_s", 0.0, 0.0, 60.0);
-  a.sim.comm_stop_decel_mm_s2 = s.get_double("comm_stop_decel_mm_s2", 0.0, 0.0, 1e6);
-  a.sim.has_home_switch = s.has("home_switch_mm");
-  a.sim.home_switch_mm = s.get_double("home_switch_mm", 0.0, -1e5, 1e5);
-  a.sim.home_switch_sigma_mm = s.get_double("home_switch_sigma_mm", a.sim.home_switch_sigma_mm, 0.0, 10.0);
-  a.sim.home_switch_hysteresis_mm = s.get_double("home_switch_hysteresis_mm", a.sim.home_switch_hysteresis_mm, 0.0, 100.0);
-  a.sim.home_switch_seed = static_cast<uint64_t>(s.get_int("home_switch_seed", 1, 0, INT64_MAX));
-  s.finish();
-  if (r.has("home")) {
-    MapReader h = r.map("home");
-    HomeConfig& k = a.home;
-    k.method = h.get_choice("method", "switch", {"none", "switch", "absolute"});
-    k.search_velocity_mm_s = h.get_double("search_velocity_mm_s", k.search_velocity_mm_s, 1e-3, a.max_velocity_mm_s);
-    k.latch_velocity_mm_s = h.get_double("latch_velocity_mm_s", k.latch_velocity_mm_s, 1e-3, a.max_velocity_mm_s);
-    k.direction = static_cast<int>(h.get_int("direction", k.direction, -1, 1));
-    if (k.direction == 0) h.fail("direction", "must be -1 or 1");
-    k.switch_position_mm = h.get_double("switch_position_mm", k.direction < 0 ? a.min_mm : a.max_mm, -1e5, 1e5);
-    k.position_mm = h.get_double("position_mm", a.home_mm, a.min_mm, a.max_mm);
-    k.backoff_mm = h.get_double("backoff_mm", k.backoff_mm, 1e-3, 1e3);
-    k.order = static_cast<int>(h.get_int("order", 0, 0, 64));
-    h.finish();
-  }
+  a.drive = read_drive(r.map("drive", kDriveKeys));
+  a.sim = read_sim(r.map("sim", kSimKeys));
+  if (r.has("home")) a.home = read_home(r.map("home", kHomeKeys), a);
   a.jog_velocity_mm_s = r.get_double("jog_velocity_mm_s", 0.1 * a.max_velocity_mm_s, 1e-3, a.max_velocity_mm_s);
   r.finish();
   return a;
 }
 
+void read_cell(MapReader r, MachineConfig& c) {
+  c.name = r.require_string("name");
+  c.channel_prefix = r.get_string("channel_prefix", c.name.empty() ? "" : c.name + ".");
+  c.lcm_url = r.get_string("lcm_url", "");
+  r.finish();
+}
+
+void read_timing(MapReader r, MachineConfig& c) {
+  c.ipo_period_s = r.get_double("ipo_period_s", c.ipo_period_s, 1e-4, 0.1);
+  c.servo_period_s = r.get_double("servo_period_s", c.servo_period_s, 1e-4, 0.1);
+  if (c.servo_period_s > c.ipo_period_s) r.fail("servo_period_s", "must not exceed timing.ipo_period_s");
+  const double ratio = c.ipo_period_s / c.servo_period_s;
+  if (std::fabs(ratio - std::round(ratio)) > 1e-9)
+    r.fail("servo_period_s", "timing.ipo_period_s must be a whole multiple of it");
+  c.setpoint_timeout_s = r.get_double("setpoint_timeout_s", c.setpoint_timeout_s, 2 * c.ipo_period_s, 10.0);
+  c.stop_decel_mm_s2 = r.get_double("stop_decel_mm_s2", c.stop_decel_mm_s2, 1.0, 1e6);
+  c.heartbeat_period_s = r.get_double("heartbeat_period_s", c.heartbeat_period_s, 0.05, 60.0);
+  c.heartbeat_timeout_s = r.get_double("heartbeat_timeout_s", 4 * c.heartbeat_period_s, 2 * c.heartbeat_period_s, 600.0);
+  c.realtime_priority = static_cast<int>(r.get_int("realtime_priority", 0, 0, 98));
+  const YAML::Node cpus = r.sequence("realtime_cpus");
+  for (size_t i = 0; i < cpus.size(); ++i) {
+    const std::string path = r.item_path("realtime_cpus", i);
+    int64_t cpu = -1;
+    try {
+      if (cpus[i].IsScalar()) cpu = cpus[i].as<int64_t>();
+    } catch (const YAML::Exception&) {
+      cpu = -1;
+    }
+    if (cpu < 0 || cpu > 1023)
+      throw ConfigError(r.file(), path, "expected a CPU number 0..1023, got '" + YAML::Dump(cpus[i]) + "'");
+    if (std::find(c.realtime_cpus.begin(), c.realtime_cpus.end(), cpu) != c.realtime_cpus.end())
+      throw ConfigError(r.file(), path, "CPU " + std::to_string(cpu) + " is listed twice");
+    c.realtime_cpus.push_back(static_cast<int>(cpu));
+  }
+  r.finish();
+}
+
+void read_motion(MapReader r, MachineConfig& c) {
+  c.default_feed_mm_per_min = r.get_double("default_feed_mm_per_min", c.default_feed_mm_per_min, 1e-3, 1e6);
+  c.chord_tolerance_mm = r.get_double("chord_tolerance_mm", c.chord_tolerance_mm, 1e-8, 1.0);
+  c.path_accel_mm_s2 = r.get_double("path_accel_mm_s2", c.path_accel_mm_s2, 1e-3, 1e6);
+  c.path_jerk_mm_s3 = r.get_double("path_jerk_mm_s3", c.path_jerk_mm_s3, 1e-3, 1e9);
+  c.block_window = static_cast<int>(r.get_int("block_window", c.block_window, 1, 4096));
+  c.plan_budget_samples = static_cast<int>(r.get_int("plan_budget_samples", c.plan_budget_samples, 2, 10'000'000));
+  c.param_update = r.get_choice("param_update", c.param_update, {"first_order", "taylor2", "corrected"});
+  r.finish();
+}
+
+void read_operator(MapReader r, OperatorConfig& o) {
+  o.homing_required = r.get_bool("homing_required", false);
+  o.jog_keepalive_timeout_s = r.get_double("jog_keepalive_timeout_s", 0.2, 0.01, 10.0);
+  o.mdi_directory = r.get_string("mdi_directory", "");
+  if (r.has("safe_z_mm")) o.safe_z_mm = r.get_double("safe_z_mm", 0.0, -1e6, 1e6);
+  r.finish();
+}
+
+void read_hmi(MapReader r, HmiConfig& h) {
+  h.listen = r.get_string("listen", h.listen);
+  h.port = static_cast<int>(r.get_int("port", h.port, 1, 65535));
+  h.users_file = beside(r, r.get_string("users_file", ""));
+  h.read_only_without_login = r.get_bool("read_only_without_login", false);
+  h.program_dir = beside(r, r.get_string("program_dir", "../programs"));
+  h.status_rate_hz = r.get_double("status_rate_hz", h.status_rate_hz, 20.0, 100.0);
+  h.runs_dir = beside(r, r.get_string("runs_dir", ""));
+  const bool local = h.listen == "127.0.0.1" || h.listen == "::1" || h.listen == "localhost";
+  if (!local && h.users_file.empty())
+    r.fail("users_file", "is required when hmi.listen is not a localhost address ('" + h.listen +
+                             "'): a shop network needs passwords (cnc-hmi --hash-password makes a line)");
+  r.finish();
+}
+
+void read_process(MapReader r, ProcessConfig& p) {
+  p.ball_radius_mm = r.get_double("ball_radius_mm", 0.0, 0.0, 100.0);
+  p.flutes = static_cast<int>(r.get_int("flutes", 0, 0, program::kMaxFlutes));
+  p.pick_feed_mm = r.get_double("pick_feed_mm", 0.0, 0.0, 100.0);
+  p.target_rmax_um = r.get_double("target_rmax_um", 0.0, 0.0, 1000.0);
+  p.spindle_rpm = r.get_double("spindle_rpm", 0.0, 0.0, 200000.0);
+  r.finish();
+}
+
+void read_stock(MapReader s, CuttingConfig& k) {
+  k.stock_x_min_mm = s.require_double("x_min_mm", -1e5, 1e5);
+  k.stock_y_min_mm = s.require_double("y_min_mm", -1e5, 1e5);
+  k.stock_x_max_mm = s.require_double("x_max_mm", -1e5, 1e5);
+  k.stock_y_max_mm = s.require_double("y_max_mm", -1e5, 1e5);
+  k.stock_top_z_mm = s.require_double("top_z_mm", -1e5, 1e5);
+  k.stock_pitch_mm = s.get_double("pitch_mm", k.stock_pitch_mm, 0.001, 10.0);
+  if (!(k.stock_x_max_mm > k.stock_x_min_mm)) s.fail("x_max_mm", "must be greater than x_min_mm");
+  if (!(k.stock_y_max_mm > k.stock_y_min_mm)) s.fail("y_max_mm", "must be greater than y_min_mm");
+  // The monitor and the planner each hold the stock: at most 2^24 columns (64 MB).
+  const double cells = std::ceil((k.stock_x_max_mm - k.stock_x_min_mm) / k.stock_pitch_mm) *
+                       std::ceil((k.stock_y_max_mm - k.stock_y_min_mm) / k.stock_pitch_mm);
+  if (cells > 16777216.0)
+    s.fail("pitch_mm", "the stock would have " + std::to_string(static_cast<long long>(cells)) +
+                           " columns, more than 16777216: a coarser pitch or a smaller box");
+  s.finish();
+}
+
+void read_cutting(MapReader r, CuttingConfig& k) {
+  k.enabled = true;
+  const auto file = [&](const char* key) {
+    const std::string v = beside(r, r.require_string(key));
+    if (!std::filesystem::is_regular_file(v)) r.fail(key, "'" + v + "' is not a file");
+    return v;
+  };
+  k.tool_file = file("tool");
+  k.material_file = file("material");
+  k.model = r.get_choice("model", "", {"", "linear_edge", "chip_thickness_law"});
+  read_stock(r.map("stock", kStockKeys), k);
+  k.deflection_tolerance_mm = r.require_double("deflection_tolerance_mm", 1e-6, 100.0);
+  k.max_force_n = r.get_double("max_force_n", 0.0, 0.0, 1e7);
+  k.feed_limit = r.get_bool("feed_limit", k.feed_limit);
+  k.station_mm = r.get_double("station_mm", k.station_mm, 0.001, 10.0);
+  k.disc_height_mm = r.get_double("disc_height_mm", k.disc_height_mm, 0.001, 10.0);
+  k.angles_per_tooth = static_cast<int>(r.get_int("angles_per_tooth", k.angles_per_tooth, 1, 360));
+  r.finish();
+}
+
+void read_program(MapReader r, ProgramConfig& p) {
+  const std::string sub = r.get_string("subroutine_path", "");
+  for (size_t b = 0; b < sub.size();) {
+    size_t e = sub.find(':', b);
+    if (e == std::string::npos) e = sub.size();
+    if (e > b) p.subroutine_path.push_back(beside(r, sub.substr(b, e - b)));
+    b = e + 1;
+  }
+  for (const std::string& d : p.subroutine_path)
+    if (!std::filesystem::is_directory(d)) r.fail("subroutine_path", "'" + d + "' is not a folder");
+  p.tool_table = beside(r, r.get_string("tool_table", ""));
+  if (!p.tool_table.empty() && !std::filesystem::is_regular_file(p.tool_table))
+    r.fail("tool_table", "'" + p.tool_table + "' is not a file");
+  p.var_file = beside(r, r.get_string("var_file", ""));
+  p.probe = r.get_bool("probe", p.probe);
+  p.digital_inputs = static_cast<int>(r.get_int("digital_inputs", p.digital_inputs, 0, 64));
+  p.analog_inputs = static_cast<int>(r.get_int("analog_inputs", p.analog_inputs, 0, 64));
+  p.digital_outputs = static_cast<int>(r.get_int("digital_outputs", p.digital_outputs, 0, 64));
+  p.analog_outputs = static_cast<int>(r.get_int("analog_outputs", p.analog_outputs, 0, 64));
+  p.block_delete = r.get_bool("block_delete", p.block_delete);
+  p.optional_stop = r.get_bool("optional_stop", p.optional_stop);
+  p.max_validation_lines = r.get_int("max_validation_lines", p.max_validation_lines, 1000, int64_t{1} << 40);
+  p.g64_fit = r.get_bool("g64_fit", p.g64_fit);
+  p.g64_fit_max_segment_mm = r.get_double("g64_fit_max_segment_mm", p.g64_fit_max_segment_mm, 0.001, 1000.0);
+  p.g64_fit_max_turn_deg = r.get_double("g64_fit_max_turn_deg", p.g64_fit_max_turn_deg, 0.0, 90.0);
+  r.finish();
+}
+
+void read_axes(MapReader& top, MachineConfig& c) {
+  YAML::Node axes = top.sequence("axes");
+  if (axes.size() == 0) top.fail("axes", "at least one axis is required");
+  if (axes.size() > 9) top.fail("axes", "at most 9 axes are supported");
+  std::set<std::string> names;
+  std::set<std::tuple<std::string, std::string, int, std::string, int>> addresses;
+  for (size_t i = 0; i < axes.size(); ++i) {
+    const std::string path = top.item_path("axes", i);
+    AxisConfig a = read_axis(MapReader(axes[i], path, top.file(), kAxisKeys));
+    if (!names.insert(a.name).second) throw ConfigError(top.file(), path + ".name", "duplicate axis '" + a.name + "'");
+    const auto addr = std::make_tuple(a.drive.transport, a.drive.host, a.drive.port, a.drive.device, a.drive.unit_id);
+    if (!addresses.insert(addr).second)
+      throw ConfigError(top.file(), path + ".drive.unit_id", "another axis already uses this drive address");
+    for (const auto& other : c.axes) {
+      if (other.drive.link_key() != a.drive.link_key()) continue;
+      if (other.drive.baud != a.drive.baud || other.drive.parity != a.drive.parity ||
+          other.drive.stop_bits != a.drive.stop_bits)
+        throw ConfigError(top.file(), path + ".drive.baud",
+                          "axis " + other.name + " is on the same serial line with other line settings");
+    }
+    c.axes.push_back(std::move(a));
+  }
+}
+
+void read_drive_bridge(MapReader r, MachineConfig& c) {
+  DriveBridgeConfig& b = c.drive_bridge;
+  b.enable_on_start = r.get_bool("enable_on_start", b.enable_on_start);
+  c.drive_profile_dir = r.get_string("profile_dir", c.drive_profile_dir);
+  b.enable_timeout_s = r.get_double("enable_timeout_s", b.enable_timeout_s, 0.01, 60.0);
+  b.link_loss_timeout_s = r.get_double("link_loss_timeout_s", b.link_loss_timeout_s, 0.001, 60.0);
+  b.reconnect_min_s = r.get_double("reconnect_min_s", b.reconnect_min_s, 0.001, 60.0);
+  b.reconnect_max_s = r.get_double("reconnect_max_s", b.reconnect_max_s, b.reconnect_min_s, 600.0);
+  b.lead_cycles = r.get_double("lead_cycles", b.lead_cycles, 1.5, 16.0);
+  for (const auto& a : c.axes) {
+    if (b.link_loss_timeout_s < a.drive.response_timeout_s)
+      r.fail("link_loss_timeout_s", "must not be shorter than axis " + a.name + "'s drive.response_timeout_s");
+  }
+  r.finish();
+}
+
+void read_logger(MapReader r, MachineConfig& c) {
+  c.log_directory = r.get_string("directory", c.log_directory);
+  c.log_rotate_mb = r.get_double("rotate_mb", c.log_rotate_mb, 1.0, 1e6);
+  c.log_flush_period_s = r.get_double("flush_period_s", c.log_flush_period_s, 0.01, 60.0);
+  r.finish();
+}
+
+void read_security(MapReader r, SecurityConfig& sec) {
+  sec.signing = r.get_bool("signing", sec.signing);
+  sec.key_file = beside(r, r.get_string("key_file", ""));
+  if (sec.signing && sec.key_file.empty()) r.fail("key_file", "is required when security.signing is true");
+  sec.max_age_s = r.get_double("max_age_s", sec.max_age_s, 0.01, 3600.0);
+  r.finish();
+}
+
+void read_monitor(MapReader r, MachineConfig& c) {
+  c.monitor_rmax_margin = r.get_double("rmax_margin", c.monitor_rmax_margin, 0.0, 10.0);
+  r.finish();
+}
+
+// The sections in the order they were always read, so that of two errors the same one is reported.
 MachineConfig read_machine(MapReader top) {
   MachineConfig c;
-  {
-    MapReader r = top.map("cell");
-    c.name = r.require_string("name");
-    c.channel_prefix = r.get_string("channel_prefix", c.name.empty() ? "" : c.name + ".");
-    c.lcm_url = r.get_string("lcm_url", "");
-    r.finish();
-  }
-  {
-    MapReader r = top.map("timing");
-    c.ipo_period_s = r.get_double("ipo_period_s", c.ipo_period_s, 1e-4, 0.1);
-    c.servo_period_s = r.get_double("servo_period_s", c.servo_period_s, 1e-4, 0.1);
-    if (c.servo_period_s > c.ipo_period_s) r.fail("servo_period_s", "must not exceed timing.ipo_period_s");
-    const double ratio = c.ipo_period_s / c.servo_period_s;
-    if (std::fabs(ratio - std::round(ratio)) > 1e-9)
-      r.fail("servo_period_s", "timing.ipo_period_s must be a whole multiple of it");
-    c.setpoint_timeout_s = r.get_double("setpoint_timeout_s", c.setpoint_timeout_s, 2 * c.ipo_period_s, 10.0);
-    c.stop_decel_mm_s2 = r.get_double("stop_decel_mm_s2", c.stop_decel_mm_s2, 1.0, 1e6);
-    c.heartbeat_period_s = r.get_double("heartbeat_period_s", c.heartbeat_period_s, 0.05, 60.0);
-    c.heartbeat_timeout_s = r.get_double("heartbeat_timeout_s", 4 * c.heartbeat_period_s, 2 * c.heartbeat_period_s, 600.0);
-    c.realtime_priority = static_cast<int>(r.get_int("realtime_priority", 0, 0, 98));
-    const YAML::Node cpus = r.sequence("realtime_cpus");
-    for (size_t i = 0; i < cpus.size(); ++i) {
-      const std::string path = r.item_path("realtime_cpus", i);
-      int64_t cpu = -1;
-      try {
-        if (cpus[i].IsScalar()) cpu = cpus[i].as<int64_t>();
-      } catch (const YAML::Exception&) {
-        cpu = -1;
-      }
-      if (cpu < 0 || cpu > 1023)
-        throw ConfigError(top.file(), path, "expected a CPU number 0..1023, got '" + YAML::Dump(cpus[i]) + "'");
-      if (std::find(c.realtime_cpus.begin(), c.realtime_cpus.end(), cpu) != c.realtime_cpus.end())
-        throw ConfigError(top.file(), path, "CPU " + std::to_string(cpu) + " is listed twice");
-      c.realtime_cpus.push_back(static_cast<int>(cpu));
-    }
-    r.finish();
-  }
-  {
-    MapReader r = top.map("motion");
-    c.default_feed_mm_per_min = r.get_double("default_feed_mm_per_min", c.default_feed_mm_per_min, 1e-3, 1e6);
-    c.chord_tolerance_mm = r.get_double("chord_tolerance_mm", c.chord_tolerance_mm, 1e-8, 1.0);
-    c.path_accel_mm_s2 = r.get_double("path_accel_mm_s2", c.path_accel_mm_s2, 1e-3, 1e6);
-    c.path_jerk_mm_s3 = r.get_double("path_jerk_mm_s3", c.path_jerk_mm_s3, 1e-3, 1e9);
-    c.block_window = static_cast<int>(r.get_int("block_window", c.block_window, 1, 4096));
-    c.plan_budget_samples = static_cast<int>(r.get_int("plan_budget_samples", c.plan_budget_samples, 2, 10'000'000));
-    c.param_update = r.get_choice("param_update", c.param_update, {"first_order", "taylor2", "corrected"});
-    r.finish();
-  }
-  if (top.has("operator")) {
-    MapReader r = top.map("operator");
-    c.operator_.homing_required = r.get_bool("homing_required", false);
-    c.operator_.jog_keepalive_timeout_s = r.get_double("jog_keepalive_timeout_s", 0.2, 0.01, 10.0);
-    c.operator_.mdi_directory = r.get_string("mdi_directory", "");
-    if (r.has("safe_z_mm")) c.operator_.safe_z_mm = r.get_double("safe_z_mm", 0.0, -1e6, 1e6);
-    r.finish();
-  }
-  {
-    MapReader r = top.map("hmi");
-    const std::filesystem::path base = std::filesystem::path(top.file()).parent_path();
-    const auto resolve = [&](const std::string& v) {
-      if (v.empty() || v[0] == '/') return v;
-      return (base / v).lexically_normal().string();
-    };
-    c.hmi.listen = r.get_string("listen", c.hmi.listen);
-    c.hmi.port = static_cast<int>(r.get_int("port", c.hmi.port, 1, 65535));
-    c.hmi.users_file = resolve(r.get_string("users_file", ""));
-    c.hmi.read_only_without_login = r.get_bool("read_only_without_login", false);
-    c.hmi.program_dir = resolve(r.get_string("program_dir", "../programs"));
-    c.hmi.status_rate_hz = r.get_double("status_rate_hz", c.hmi.status_rate_hz, 20.0, 100.0);
-    c.hmi.runs_dir = resolve(r.get_string("runs_dir", ""));
-    const bool local = c.hmi.listen == "127.0.0.1" || c.hmi.listen == "::1" || c.hmi.listen == "localhost";
-    if (!local && c.hmi.users_file.empty())
-      r.fail("users_file", "is required when hmi.listen is not a localhost address ('" + c.hmi.listen +
-                               "'): a shop network needs passwords (cnc-hmi --hash-password makes a line)");
-    r.finish();
-  }
-  {
-    MapReader r = top.map("process");
-    c.process.ball_radius_mm = r.get_double("ball_radius_mm", 0.0, 0.0, 100.0);
-    c.process.flutes = static_cast<int>(r.get_int("flutes", 0, 0, program::kMaxFlutes));
-    c.process.pick_feed_mm = r.get_double("pick_feed_mm", 0.0, 0.0, 100.0);
-    c.process.target_rmax_um = r.get_double("target_rmax_um", 0.0, 0.0, 1000.0);
-    c.process.spindle_rpm = r.get_double("spindle_rpm", 0.0, 0.0, 200000.0);
-    r.finish();
-  }
-  if (top.has("cutting")) {
-    MapReader r = top.map("cutting");
-    CuttingConfig& k = c.cutting;
-    k.enabled = true;
-    const std::string base = std::filesystem::path(top.file()).parent_path().string();
-    const auto file = [&](const char* key) {
-      std::string v = r.require_string(key);
-      if (!v.empty() && v[0] != '/') v = (std::filesystem::path(base) / v).lexically_normal().string();
-      if (!std::filesystem::is_regular_file(v)) r.fail(key, "'" + v + "' is not a file");
-      return v;
-    };
-    k.tool_file = file("tool");
-    k.material_file = file("material");
-    k.model = r.get_choice("model", "", {"", "linear_edge", "chip_thickness_law"});
-    MapReader s = r.map("stock");
-    k.stock_x_min_mm = s.require_double("x_min_mm", -1e5, 1e5);
-    k.stock_y_min_mm = s.require_double("y_min_mm", -1e5, 1e5);
-    k.stock_x_max_mm = s.require_double("x_max_mm", -1e5, 1e5);
-    k.stock_y_max_mm = s.require_double("y_max_mm", -1e5, 1e5);
-    k.stock_top_z_mm = s.require_double("top_z_mm", -1e5, 1e5);
-    k.stock_pitch_mm = s.get_double("pitch_mm", k.stock_pitch_mm, 0.001, 10.0);
-    if (!(k.stock_x_max_mm > k.stock_x_min_mm)) s.fail("x_max_mm", "must be greater than x_min_mm");
-    if (!(k.stock_y_max_mm > k.stock_y_min_mm)) s.fail("y_max_mm", "must be greater than y_min_mm");
-    // The monitor and the planner each hold the stock: at most 2^24 columns (64 MB).
-    const double cells = std::ceil((k.stock_x_max_mm - k.stock_x_min_mm) / k.stock_pitch_mm) *
-                         std::ceil((k.stock_y_max_mm - k.stock_y_min_mm) / k.stock_pitch_mm);
-    if (cells > 16777216.0)
-      s.fail("pitch_mm", "the stock would have " + std::to_string(static_cast<long long>(cells)) +
-                             " columns, more than 16777216: a coarser pitch or a smaller box");
-    s.finish();
-    k.deflection_tolerance_mm = r.require_double("deflection_tolerance_mm", 1e-6, 100.0);
-    k.max_force_n = r.get_double("max_force_n", 0.0, 0.0, 1e7);
-    k.feed_limit = r.get_bool("feed_limit", k.feed_limit);
-    k.station_mm = r.get_double("station_mm", k.station_mm, 0.001, 10.0);
-    k.disc_height_mm = r.get_double("disc_height_mm", k.disc_height_mm, 0.001, 10.0);
-    k.angles_per_tooth = static_cast<int>(r.get_int("angles_per_tooth", k.angles_per_tooth, 1, 360));
-    r.finish();
-  }
-  {
-    MapReader r = top.map("program");
-    ProgramConfig& p = c.program;
-    const std::string base = std::filesystem::path(top.file()).parent_path().string();
-    const auto resolve = [&](const std::string& v) {
-      if (v.empty() || v[0] == '/') return v;
-      return (std::filesystem::path(base) / v).lexically_normal().string();
-    };
-    const std::string sub = r.get_string("subroutine_path", "");
-    for (size_t b = 0; b < sub.size();) {
-      size_t e = sub.find(':', b);
-      if (e == std::string::npos) e = sub.size();
-      if (e > b) p.subroutine_path.push_back(resolve(sub.substr(b, e - b)));
-      b = e + 1;
-    }
-    for (const std::string& d : p.subroutine_path)
-      if (!std::filesystem::is_directory(d)) r.fail("subroutine_path", "'" + d + "' is not a folder");
-    p.tool_table = resolve(r.get_string("tool_table", ""));
-    if (!p.tool_table.empty() && !std::filesystem::is_regular_file(p.tool_table))
-      r.fail("tool_table", "'" + p.tool_table + "' is not a file");
-    p.var_file = resolve(r.get_string("var_file", ""));
-    p.probe = r.get_bool("probe", p.probe);
-    p.digital_inputs = static_cast<int>(r.get_int("digital_inputs", p.digital_inputs, 0, 64));
-    p.analog_inputs = static_cast<int>(r.get_int("analog_inputs", p.analog_inputs, 0, 64));
-    p.digital_outputs = static_cast<int>(r.get_int("digital_outputs", p.digital_outputs, 0, 64));
-    p.analog_outputs = static_cast<int>(r.get_int("analog_outputs", p.analog_outputs, 0, 64));
-    p.block_delete = r.get_bool("block_delete", p.block_delete);
-    p.optional_stop = r.get_bool("optional_stop", p.optional_stop);
-    p.max_validation_lines = r.get_int("max_validation_lines", p.max_validation_lines, 1000, int64_t{1} << 40);
-    p.g64_fit = r.get_bool("g64_fit", p.g64_fit);
-    p.g64_fit_max_segment_mm = r.get_double("g64_fit_max_segment_mm", p.g64_fit_max_segment_mm, 0.001, 1000.0);
-    p.g64_fit_max_turn_deg = r.get_double("g64_fit_max_turn_deg", p.g64_fit_max_turn_deg, 0.0, 90.0);
-    r.finish();
-  }
-  {
-    YAML::Node axes = top.sequence("axes");
-    if (axes.size() == 0) top.fail("axes", "at least one axis is required");
-    if (axes.size() > 9) top.fail("axes", "at most 9 axes are supported");
-    std::set<std::string> names;
-    std::set<std::tuple<std::string, std::string, int, std::string, int>> addresses;
-    for (size_t i = 0; i < axes.size(); ++i) {
-      const std::string path = top.item_path("axes", i);
-      AxisConfig a = read_axis(MapReader(axes[i], path, top.file()));
-      if (!names.insert(a.name).second) throw ConfigError(top.file(), path + ".name", "duplicate axis '" + a.name + "'");
-      const auto addr = std::make_tuple(a.drive.transport, a.drive.host, a.drive.port, a.drive.device, a.drive.unit_id);
-      if (!addresses.insert(addr).second)
-        throw ConfigError(top.file(), path + ".drive.unit_id", "another axis already uses this drive address");
-      for (const auto& other : c.axes) {
-        if (other.drive.link_key() != a.drive.link_key()) continue;
-        if (other.drive.baud != a.drive.baud || other.drive.parity != a.drive.parity ||
-            other.drive.stop_bits != a.drive.stop_bits)
-          throw ConfigError(top.file(), path + ".drive.baud",
-                            "axis " + other.name + " is on the same serial line with other line settings");
-      }
-      c.axes.push_back(std::move(a));
-    }
-  }
-  {
-    MapReader r = top.map("drive_bridge");
-    DriveBridgeConfig& b = c.drive_bridge;
-    b.enable_on_start = r.get_bool("enable_on_start", b.enable_on_start);
-    c.drive_profile_dir = r.get_string("profile_dir", c.drive_profile_dir);
-    b.enable_timeout_s = r.get_double("enable_timeout_s", b.enable_timeout_s, 0.01, 60.0);
-    b.link_loss_timeout_s = r.get_double("link_loss_timeout_s", b.link_loss_timeout_s, 0.001, 60.0);
-    b.reconnect_min_s = r.get_double("reconnect_min_s", b.reconnect_min_s, 0.001, 60.0);
-    b.reconnect_max_s = r.get_double("reconnect_max_s", b.reconnect_max_s, b.reconnect_min_s, 600.0);
-    b.lead_cycles = r.get_double("lead_cycles", b.lead_cycles, 1.5, 16.0);
-    for (const auto& a : c.axes) {
-      if (b.link_loss_timeout_s < a.drive.response_timeout_s)
-        r.fail("link_loss_timeout_s", "must not be shorter than axis " + a.name + "'s drive.response_timeout_s");
-    }
-    r.finish();
-  }
-  {
-    MapReader r = top.map("logger");
-    c.log_directory = r.get_string("directory", c.log_directory);
-    c.log_rotate_mb = r.get_double("rotate_mb", c.log_rotate_mb, 1.0, 1e6);
-    c.log_flush_period_s = r.get_double("flush_period_s", c.log_flush_period_s, 0.01, 60.0);
-    r.finish();
-  }
-  {
-    MapReader r = top.map("security");
-    SecurityConfig& sec = c.security;
-    sec.signing = r.get_bool("signing", sec.signing);
-    const std::string key = r.get_string("key_file", "");
-    if (!key.empty() && key[0] != '/') {
-      const std::string base = std::filesystem::path(top.file()).parent_path().string();
-      sec.key_file = (std::filesystem::path(base) / key).lexically_normal().string();
-    } else {
-      sec.key_file = key;
-    }
-    if (sec.signing && sec.key_file.empty()) r.fail("key_file", "is required when security.signing is true");
-    sec.max_age_s = r.get_double("max_age_s", sec.max_age_s, 0.01, 3600.0);
-    r.finish();
-  }
-  {
-    MapReader r = top.map("monitor");
-    c.monitor_rmax_margin = r.get_double("rmax_margin", c.monitor_rmax_margin, 0.0, 10.0);
-    r.finish();
-  }
+  read_cell(top.map("cell", kCellKeys), c);
+  read_timing(top.map("timing", kTimingKeys), c);
+  read_motion(top.map("motion", kMotionKeys), c);
+  if (top.has("operator")) read_operator(top.map("operator", kOperatorKeys), c.operator_);
+  read_hmi(top.map("hmi", kHmiKeys), c.hmi);
+  read_process(top.map("process", kProcessKeys), c.process);
+  if (top.has("cutting")) read_cutting(top.map("cutting", kCuttingKeys), c.cutting);
+  read_program(top.map("program", kProgramKeys), c.program);
+  read_axes(top, c);
+  read_drive_bridge(top.map("drive_bridge", kDriveBridgeKeys), c);
+  read_logger(top.map("logger", kLoggerKeys), c);
+  read_security(top.map("security", kSecurityKeys), c.security);
+  read_monitor(top.map("monitor", kMonitorKeys), c);
   top.finish();
   return c;
 }
@@ -314,6 +389,8 @@ std::string DriveConfig::link_key() const {
   if (transport == "modbus_rtu") return "rtu://" + device;
   return "loopback";
 }
+
+std::span<const KeySection> machine_config_keys() { return kSections; }
 
 int MachineConfig::axis_index(const std::string& axis_name) const {
   for (size_t i = 0; i < axes.size(); ++i)
@@ -338,7 +415,7 @@ MachineConfig parse_machine_config(const std::string& yaml_text, const std::stri
     throw ConfigError(file_label, "", "YAML syntax error at line " + std::to_string(e.mark.line + 1) + ", column " +
                                           std::to_string(e.mark.column + 1) + ": " + e.msg);
   }
-  MachineConfig c = read_machine(MapReader(root, "", file_label));
+  MachineConfig c = read_machine(MapReader(root, "", file_label, kTopKeys));
   c.source_file = file_label;
   c.source_text = yaml_text;
   return c;

@@ -3,7 +3,9 @@
 // `config/machines/NAME.yaml`.
 #include <cstdint>
 #include <limits>
+#include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace cnc::config {
@@ -240,6 +242,15 @@ struct MachineConfig {
 // Loads and validates; throws ConfigError naming the key path.
 MachineConfig load_machine_config(const std::string& file);
 MachineConfig parse_machine_config(const std::string& yaml_text, const std::string& file_label);
+
+// The keys the reader accepts, one table per mapping: `path` is the mapping's dotted
+// path ("" the top level, "axes[]" each item of `axes`). The reader checks every
+// file against these tables; docs/config.md documents each key (a test keeps both equal).
+struct KeySection {
+  std::string_view path;
+  std::span<const std::string_view> keys;
+};
+std::span<const KeySection> machine_config_keys();
 
 // Channel base names of the cell.
 namespace channels {

@@ -1,5 +1,6 @@
 #include "common/config/yaml_reader.h"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -19,8 +20,8 @@ std::string mark_of(const YAML::Node& n) {
 ConfigError::ConfigError(const std::string& file, const std::string& key_path, const std::string& what)
     : std::runtime_error(describe(file, key_path, what)), key_path_(key_path) {}
 
-MapReader::MapReader(YAML::Node node, std::string path, std::string file)
-    : node_(std::move(node)), path_(std::move(path)), file_(std::move(file)) {
+MapReader::MapReader(YAML::Node node, std::string path, std::string file, KeyTable known)
+    : node_(std::move(node)), path_(std::move(path)), file_(std::move(file)), known_(known) {
   if (node_ && !node_.IsNull() && !node_.IsMap()) throw ConfigError(file_, path_, "expected a mapping" + mark_of(node_));
 }
 
@@ -33,9 +34,20 @@ void MapReader::fail(const std::string& key, const std::string& what) const {
   throw ConfigError(file_, child_path(key), what);
 }
 
-bool MapReader::has(const std::string& key) const { return node_ && node_.IsMap() && node_[key]; }
+void MapReader::ask(const std::string& key) const {
+  if (known_.empty()) return;
+  if (std::find(known_.begin(), known_.end(), key) == known_.end())
+    throw std::logic_error(file_ + ": " + child_path(key) + ": read, but not in the reader's table of known keys");
+  asked_.insert(key);
+}
+
+bool MapReader::has(const std::string& key) const {
+  ask(key);
+  return node_ && node_.IsMap() && node_[key];
+}
 
 YAML::Node MapReader::scalar(const std::string& key) {
+  ask(key);
   used_.insert(key);
   YAML::Node n = node_[key];
   if (!n.IsScalar()) fail(key, "expected a scalar value" + mark_of(n));
@@ -114,13 +126,15 @@ std::string MapReader::get_choice(const std::string& key, const std::string& fal
   return v;
 }
 
-MapReader MapReader::map(const std::string& key) {
+MapReader MapReader::map(const std::string& key, KeyTable known) {
+  ask(key);
   used_.insert(key);
-  if (!has(key)) return MapReader(YAML::Node(YAML::NodeType::Map), child_path(key), file_);
-  return MapReader(node_[key], child_path(key), file_);
+  if (!has(key)) return MapReader(YAML::Node(YAML::NodeType::Map), child_path(key), file_, known);
+  return MapReader(node_[key], child_path(key), file_, known);
 }
 
 YAML::Node MapReader::sequence(const std::string& key) {
+  ask(key);
   used_.insert(key);
   if (!has(key)) return YAML::Node(YAML::NodeType::Sequence);
   YAML::Node n = node_[key];
@@ -129,6 +143,10 @@ YAML::Node MapReader::sequence(const std::string& key) {
 }
 
 void MapReader::finish() const {
+  for (const std::string_view k : known_) {
+    if (asked_.count(std::string(k)) == 0)
+      throw std::logic_error(file_ + ": " + child_path(std::string(k)) + ": in the table of known keys, never read");
+  }
   if (!node_ || !node_.IsMap()) return;
   std::set<std::string> seen;
   for (const auto& kv : node_) {

@@ -18,6 +18,16 @@ constexpr std::array<const char*, kRoleCount> kRoleNames = {
     "actual_position", "actual_velocity", "error_code", "fault_reset", "following_error",
     "home_latch_position", "home_latch_count"};
 
+// The keys a profile file may hold: its top level, `registers:` (one per role) and each field.
+constexpr std::string_view kProfileKeys[] = {"name",         "description",       "state_machine", "write_and_read",
+                                             "read_gap_max", "mode_of_operation", "registers"};
+constexpr auto kRegisterKeys = [] {
+  std::array<std::string_view, kRoleCount> k{};
+  for (int i = 0; i < kRoleCount; ++i) k[i] = kRoleNames[i];
+  return k;
+}();
+constexpr std::string_view kFieldKeys[] = {"address", "words", "signed", "word_order", "scale"};
+
 uint32_t join(const uint16_t* regs, WordOrder order) {
   const uint32_t lo = order == WordOrder::kLowFirst ? regs[0] : regs[1];
   const uint32_t hi = order == WordOrder::kLowFirst ? regs[1] : regs[0];
@@ -49,9 +59,9 @@ DriveProfile read_profile(config::MapReader top, const std::string& file) {
   p.write_and_read = top.get_bool("write_and_read", false);
   p.read_gap_max = static_cast<int>(top.get_int("read_gap_max", 0, 0, 32));
   p.mode_of_operation = static_cast<int>(top.get_int("mode_of_operation", 8, -128, 127));
-  config::MapReader regs = top.map("registers");
+  config::MapReader regs = top.map("registers", kRegisterKeys);
   for (int i = 0; i < kRoleCount; ++i) {
-    if (regs.has(kRoleNames[i])) p.fields[i] = read_field(regs.map(kRoleNames[i]));
+    if (regs.has(kRoleNames[i])) p.fields[i] = read_field(regs.map(kRoleNames[i], kFieldKeys));
   }
   regs.finish();
   const ProfileLogic& logic = profile_logic(p);
@@ -82,6 +92,10 @@ DriveProfile read_profile(config::MapReader top, const std::string& file) {
 }  // namespace
 
 const char* role_name(Role r) { return kRoleNames[static_cast<size_t>(r)]; }
+
+std::span<const std::string_view> drive_profile_keys() { return kProfileKeys; }
+std::span<const std::string_view> drive_profile_register_keys() { return kRegisterKeys; }
+std::span<const std::string_view> drive_profile_field_keys() { return kFieldKeys; }
 
 int64_t Field::min_raw() const {
   if (!is_signed) return 0;
@@ -142,7 +156,7 @@ int DriveProfile::end_address() const {
 }
 
 DriveProfile load_drive_profile(const std::string& file) {
-  return read_profile(config::MapReader(config::load_yaml_file(file), "", file), file);
+  return read_profile(config::MapReader(config::load_yaml_file(file), "", file, kProfileKeys), file);
 }
 
 DriveProfile parse_drive_profile(const std::string& yaml_text, const std::string& file_label) {
@@ -153,7 +167,7 @@ DriveProfile parse_drive_profile(const std::string& yaml_text, const std::string
     throw config::ConfigError(file_label, "", "YAML syntax error at line " + std::to_string(e.mark.line + 1) + ": " +
                                                   e.msg);
   }
-  return read_profile(config::MapReader(root, "", file_label), file_label);
+  return read_profile(config::MapReader(root, "", file_label, kProfileKeys), file_label);
 }
 
 std::string find_drive_profile(const std::string& name, const std::string& machine_file,

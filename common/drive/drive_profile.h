@@ -16,7 +16,9 @@
 // (mm, mm/s, or a plain number) to the drive's integer: raw = round(value * scale).
 #include <array>
 #include <cstdint>
+#include <span>
 #include <string>
+#include <string_view>
 
 namespace cnc::drive {
 
@@ -74,6 +76,12 @@ struct DriveProfile {
   int first_address() const;
   int end_address() const;
 };
+
+// The keys a profile file may hold (docs/config.md documents each; a test keeps both equal):
+// the top level, the roles under `registers:`, and the keys of each field.
+std::span<const std::string_view> drive_profile_keys();
+std::span<const std::string_view> drive_profile_register_keys();
+std::span<const std::string_view> drive_profile_field_keys();
 
 // Loads and validates; throws config::ConfigError naming the file and key path.
 DriveProfile load_drive_profile(const std::string& file);
