@@ -1,0 +1,256 @@
+// Tools, offsets and coordinate systems: M6/M61, G10, G28/G30, G52/G92, G54-G59.3.
+#include "common/rs274/interpreter_impl.h"
+
+namespace cnc::rs274 {
+
+using namespace interp;
+
+void Interpreter::set_coord_system(int index) {
+  if (comp_ != 400) fail(0, "cannot change the coordinate system with cutter radius compensation on");
+  // The machine position stays; the program position moves with the origin.
+  position_ = program_of(machine_of(position_, coord_), index);
+  coord_ = index;
+  params_.set(5220, index);
+  rotation_deg_ = params_.get(5210 + 20 * index);
+  Pose g5x{};
+  for (int i = 0; i < kNumAxes; ++i) g5x[static_cast<size_t>(i)] = to_program_axis(i, param_len(5201 + 20 * index, i));
+  canon_.set_g5x_offset(ref(), index, g5x);
+  Pose g92p{};
+  for (int i = 0; i < kNumAxes; ++i) g92p[static_cast<size_t>(i)] = to_program_axis(i, g92_[static_cast<size_t>(i)]);
+  canon_.set_g92_offset(ref(), g92p);
+  canon_.set_xy_rotation(ref(), rotation_deg_);
+}
+
+void Interpreter::tool_change(Words& w) {
+  const SourceRef r = ref(w.mcol[6]);
+  if (comp_ != 400) fail(w.mcol[6], "cannot change tools with cutter radius compensation on");
+  if (selected_tool_ < 0) selected_tool_ = 0;  // LinuxCNC changes to tool 0 (an empty spindle)
+  canon_.start_change(r);
+  if (spindle_ != 0) {
+    // LinuxCNC stops the spindle for the change and leaves it stopped.
+  }
+  canon_.stop_spindle_turning(r);
+  spindle_ = 0;
+  canon_.change_tool(r, selected_tool_);
+  tool_ = selected_tool_;
+  set_tool_params();
+  reread_position();
+}
+
+void Interpreter::set_tool_params() {
+  // LinuxCNC 2.9's set_tool_parameters / default_tool_parameters (M6, M61, G10 L1/L10/L11):
+  // #5400 the tool in the spindle, #5401-#5409 its table offsets and #5410 its diameter
+  // in machine units (not the offset G43 applies), #5411-#5413 angles and orientation;
+  // all 0 without a tool.
+  const Tool* t = tool_ > 0 ? tools_.find(tool_) : nullptr;
+  params_.set(5400, tool_ > 0 ? tool_ : 0);
+  for (int i = 0; i < kNumAxes; ++i) {
+    const double lin = i < 3 || i >= 6 ? mu_ : 1.0;
+    params_.set(5401 + i, t != nullptr ? t->offset[static_cast<size_t>(i)] / lin : 0.0);
+  }
+  params_.set(5410, t != nullptr ? t->diameter / mu_ : 0.0);
+  params_.set(5411, t != nullptr ? t->front_angle : 0.0);
+  params_.set(5412, t != nullptr ? t->back_angle : 0.0);
+  params_.set(5413, t != nullptr ? t->orientation : 0.0);
+}
+
+void Interpreter::g10(Words& w) {
+  if (!w.on('L')) fail(w.gcol[0], "G10 needs an L word (1, 2, 10, 11 or 20)");
+  const int l = static_cast<int>(std::lround(w['L']));
+  if (!w.on('P')) fail(w.gcol[0], "G10 L" + std::to_string(l) + " needs a P word");
+  const int p = static_cast<int>(std::lround(w['P']));
+  const double s = length_scale();
+  if (l == 2 || l == 20) {
+    if (p < 0 || p > 9) fail(w.column('P'), "G10 L" + std::to_string(l) + " P must be 0 to 9 (coordinate system)");
+    const int cs = p == 0 ? coord_ : p;
+    if (comp_ != 400 && cs == coord_) fail(w.gcol[0], "cannot change the active coordinate system with cutter radius compensation on");
+    if (w.on('R') && l == 20) fail(w.column('R'), "R not allowed in G10 L20");
+    // The tool does not move: the current position is re-expressed in the changed system
+    // (LinuxCNC's convert_setup; it differs only when G10 L2 R changes the rotation of the
+    // active system while a G92 offset is on, where LinuxCNC's formula leaves the G92 offset
+    // rotated: expected-differences.md).
+    const Pose machine = machine_of(position_, coord_);
+    if (w.on('R')) params_.set(5210 + 20 * cs, w['R']);
+    for (int i = 0; i < kNumAxes; ++i) {
+      const char c = kAxisLetters[i];
+      if (!w.on(c) || (l == 20 && i < 2)) continue;
+      const size_t k = static_cast<size_t>(i);
+      const double lin = i < 3 || i >= 6 ? s : 1.0;
+      double off = w[c] * lin;
+      if (l == 20) off = machine[k] - g92_[k] - tool_offset_[k] - w[c] * lin;  // the current position becomes the value
+      set_param_len(5201 + 20 * cs, i, off);
+    }
+    if (l == 20 && (w.on('X') || w.on('Y'))) {
+      // X and Y are values in the rotated frame of system cs: the offset is the machine point
+      // less the rotated (value + G92), so both offsets change when the system is rotated.
+      const Pose cur = program_of(machine, cs);
+      const double x = (w.on('X') ? w['X'] * s : cur[0]) + g92_[0];
+      const double y = (w.on('Y') ? w['Y'] * s : cur[1]) + g92_[1];
+      const double t = params_.get(5210 + 20 * cs) * M_PI / 180.0, co = std::cos(t), sn = std::sin(t);
+      set_param_len(5201 + 20 * cs, 0, machine[0] - tool_offset_[0] - (x * co - y * sn));
+      set_param_len(5201 + 20 * cs, 1, machine[1] - tool_offset_[1] - (x * sn + y * co));
+    }
+    if (cs == coord_) position_ = program_of(machine, coord_);
+    w.axes = 0;
+    if (cs == coord_) {
+      rotation_deg_ = params_.get(5210 + 20 * cs);
+      Pose g5x{};
+      for (int i = 0; i < kNumAxes; ++i) g5x[static_cast<size_t>(i)] = to_program_axis(i, param_len(5201 + 20 * cs, i));
+      canon_.set_g5x_offset(ref(w.gcol[0]), cs, g5x);
+      canon_.set_xy_rotation(ref(w.gcol[0]), rotation_deg_);
+    } else {
+      canon_.comment(ref(w.gcol[0]), "interpreter: setting coordinate system origin");
+    }
+    return;
+  }
+  if (l == 1 || l == 10 || l == 11) {
+    Tool t;
+    if (const Tool* old = tools_.find(p)) t = *old;
+    t.number = p;
+    if (t.pocket == 0) t.pocket = p;
+    // L10/L11 (LinuxCNC's convert_setup_tool): the offset that makes the current point
+    // read as the values given in the current system (L10) or in G59.3 without G92
+    // (L11). `cur` is that point as the system shows it with no tool offset; X and Y
+    // are in the system's rotated frame, so the offset is rotated back, and an X (Y)
+    // alone keeps the part of the old offset along the rotated Y (X).
+    const int cs = l == 11 ? 9 : coord_;
+    const double rot = params_.get(5210 + 20 * cs);
+    const auto turn = [](double& x, double& y, double deg) {
+      if (deg == 0) return;
+      const double a = deg * M_PI / 180.0, co = std::cos(a), sn = std::sin(a);
+      const double x1 = x * co - y * sn;
+      y = x * sn + y * co;
+      x = x1;
+    };
+    Pose cur{};
+    if (l != 1) {
+      const Pose machine = machine_of(position_, coord_);
+      for (int i = 0; i < kNumAxes; ++i) cur[static_cast<size_t>(i)] = machine[static_cast<size_t>(i)] - param_len(5201 + 20 * cs, i);
+      turn(cur[0], cur[1], -rot);
+      if (l == 10)
+        for (size_t k = 0; k < cur.size(); ++k) cur[k] -= g92_[k];
+    }
+    const auto value = [&](char c) { return w[c] * (axis_of_letter(c) < 3 || axis_of_letter(c) >= 6 ? s : 1.0); };
+    for (int i = 0; i < kNumAxes; ++i) {
+      const char c = kAxisLetters[i];
+      if (!w.on(c)) continue;
+      const size_t k = static_cast<size_t>(i);
+      if (l == 1) t.offset[k] = value(c);
+      else if (i >= 2) t.offset[k] = cur[k] - value(c);
+    }
+    if (l != 1 && (w.on('X') || w.on('Y'))) {
+      double ox = t.offset[0], oy = t.offset[1];  // the old offset, kept across the axis not given
+      turn(ox, oy, -rot);
+      if (w.on('X')) ox = 0;
+      if (w.on('Y')) oy = 0;
+      turn(ox, oy, rot);
+      double tx = w.on('X') ? cur[0] - value('X') : 0, ty = w.on('Y') ? cur[1] - value('Y') : 0;
+      turn(tx, ty, rot);
+      t.offset[0] = tx + ox;
+      t.offset[1] = ty + oy;
+    }
+    if (w.on('R')) t.diameter = 2 * w['R'] * s;
+    if (w.on('I')) t.front_angle = w['I'];
+    if (w.on('J')) t.back_angle = w['J'];
+    if (w.on('Q')) t.orientation = static_cast<int>(std::lround(w['Q']));
+    tools_.put(t);
+    tools_changed_ = true;
+    // LinuxCNC hands the changed entry to the canon, and again as entry 0 when the
+    // tool is in the spindle (a non-random tool changer).
+    int index = 0;
+    for (size_t i = 0; i < tools_.tools().size(); ++i)
+      if (tools_.tools()[i].number == p) index = static_cast<int>(i) + 1;
+    Pose shown = t.offset;
+    for (int i = 0; i < kNumAxes; ++i)
+      if (i < 3 || i >= 6) shown[static_cast<size_t>(i)] /= mu_;
+    const SourceRef r = ref(w.gcol[0]);
+    canon_.set_tool_table_entry(r, index, p, shown, t.diameter / mu_, t.front_angle, t.back_angle, t.orientation);
+    if (tool_ == p && p > 0)
+      canon_.set_tool_table_entry(r, 0, p, shown, t.diameter / mu_, t.front_angle, t.back_angle, t.orientation);
+    set_tool_params();
+    w.axes = 0;
+    return;
+  }
+  fail(w.column('L'), "G10 L" + std::to_string(l) + " is not supported (L1, L2, L10, L11, L20)");
+}
+
+void Interpreter::g28_g30(Words& w, bool g30) {
+  const int base = g30 ? 5181 : 5161;
+  // The intermediate point in program coordinates (the current point when no axis is
+  // named: LinuxCNC's convert_home makes that move all the same, of length zero),
+  // then the stored home of the named axes (all axes when none are named).
+  Pose via = axis_target(w, false);
+  const SourceRef r = ref(w.gcol[0]);
+  canon_.straight_traverse(r, program_pose(via));
+  position_ = via;
+  Pose home_m = machine_of(position_, coord_);
+  for (int i = 0; i < kNumAxes; ++i) {
+    const size_t k = static_cast<size_t>(i);
+    if (w.axes != 0 && !w.on(kAxisLetters[i])) continue;
+    if (setup_.axes.find(kAxisLetters[i]) == std::string::npos) continue;
+    home_m[k] = param_len(base, i);
+  }
+  const Pose home = program_of(home_m, coord_);
+  const Pose shown = program_pose(home);
+  canon_.straight_traverse(r, shown);
+  position_ = home;
+  w.axes = 0;
+}
+
+// G52 and G92 share one offset (LinuxCNC 2.9's convert_axis_offsets): G92 shifts it
+// so the current point gets the values given; G52 sets it to the values given for the
+// axes named, the current point moving with it. Both set #5210 to 1 and #5211-#5219
+// to the whole offset; G92.1 and G92.2 clear the offset and #5210 (G92.1 also
+// #5211-#5219); G92.3 takes the offset back from #5211-#5219 and sets #5210.
+void Interpreter::g92(Words& w) {
+  const int g = w.g[0];
+  const SourceRef r = ref(w.gcol[0]);
+  if (comp_ != 400)
+    fail(w.gcol[0], "cannot change axis offsets (" + g_text(g) + ") with cutter radius compensation on");
+  if (g == 920 || g == 520) {
+    if (w.on('@') || w.on('^'))
+      fail(w.column(w.on('@') ? '@' : '^'), "polar coordinates (@ ^) are for motion only, not with " + g_text(g));
+    if (w.axes == 0) fail(w.gcol[0], g_text(g) + " needs at least one axis word");
+    const double s = length_scale();
+    for (int i = 0; i < kNumAxes; ++i) {
+      const char c = kAxisLetters[i];
+      if (!w.on(c)) continue;
+      const size_t k = static_cast<size_t>(i);
+      const double lin = i < 3 || i >= 6 ? s : 1.0;
+      const double v = w[c] * lin;
+      if (g == 920) {
+        g92_[k] = position_[k] + g92_[k] - v;
+        position_[k] = v;
+      } else {
+        position_[k] += g92_[k] - v;
+        g92_[k] = v;
+      }
+    }
+    for (int i = 0; i < kNumAxes; ++i) set_param_len(5211, i, g92_[static_cast<size_t>(i)]);
+    params_.set(5210, 1);
+    g92_active_ = true;
+    w.axes = 0;
+  } else if (g == 921 || g == 922) {
+    for (int i = 0; i < kNumAxes; ++i) {
+      const size_t k = static_cast<size_t>(i);
+      position_[k] += g92_[k];
+      g92_[k] = 0;
+      if (g == 921) set_param_len(5211, i, 0);
+    }
+    params_.set(5210, 0);
+    g92_active_ = false;
+  } else {  // G92.3
+    for (int i = 0; i < kNumAxes; ++i) {
+      const size_t k = static_cast<size_t>(i);
+      const double v = param_len(5211, i);
+      position_[k] += g92_[k] - v;
+      g92_[k] = v;
+    }
+    params_.set(5210, 1);
+    g92_active_ = true;
+  }
+  const Pose p = program_pose(g92_);
+  canon_.set_g92_offset(r, p);
+}
+
+}  // namespace cnc::rs274
