@@ -90,6 +90,9 @@ class Runner {
   void peck(double a, double b, double r, double clear, double bottom, double delta, bool full_retract);
   void tap(double a, double b, double clear, double bottom);
   void back_bore(double a, double b, double r, double clear, double bottom);
+  void check_input() const;
+  void require_words() const;
+  void hole(double a, double b, double r, double clear, double bottom);
 
   const CycleInput& in_;
   const SourceRef& ref_;
@@ -169,7 +172,8 @@ void Runner::back_bore(double a, double b, double r, double clear, double bottom
   start_spindle(in_.spindle_cw);
 }
 
-CycleResult Runner::run() {
+// The refusals that need no position: an unknown cycle, then LinuxCNC's convert_cycle.
+void Runner::check_input() const {
   const int g = in_.g;
   const bool known = g == 730 || g == 740 || (g >= 810 && g <= 890 && g % 10 == 0);
   if (!known) {
@@ -190,6 +194,93 @@ CycleResult Runner::run() {
   if (in_.repeats > kMaxCycleMoves)
     refuse("L" + std::to_string(in_.repeats) + " repeats of " + gcode_text(in_.g) + ": more than " +
            std::to_string(kMaxCycleMoves) + " in one block");
+}
+
+// The words each cycle needs (after the mode switch, as in LinuxCNC).
+void Runner::require_words() const {
+  const int g = in_.g;
+  const std::string gname = gcode_text(g, 'g');
+  switch (g) {
+    case 820: case 860: case 880: case 890:
+      if (!in_.continuing && !in_.has_p) refuse("Dwell time p word missing with " + gname);
+      break;
+    case 730: case 830:
+      if (!in_.continuing && !in_.has_q) refuse("Q word missing with " + gname);
+      break;
+    case 870:
+      if (!in_.continuing) {
+        // LinuxCNC checks I, then J, then K; i/j/k here are in plane order.
+        const bool has_word[3] = {
+            ax_.a % 3 == 0 ? in_.has_i : ax_.b % 3 == 0 ? in_.has_j : in_.has_k,
+            ax_.a % 3 == 1 ? in_.has_i : ax_.b % 3 == 1 ? in_.has_j : in_.has_k,
+            ax_.a % 3 == 2 ? in_.has_i : ax_.b % 3 == 2 ? in_.has_j : in_.has_k,
+        };
+        if (!has_word[0]) refuse("I word missing with g87");
+        if (!has_word[1]) refuse("J word missing with g87");
+        if (!has_word[2]) refuse("K word missing with g87");
+      }
+      break;
+    default: break;
+  }
+}
+
+// One repeat's moves at the hole (a, b), from the clearance level down and back.
+void Runner::hole(double a, double b, double r, double clear, double bottom) {
+  switch (in_.g) {
+    case 810:
+      feed(a, b, bottom);
+      traverse(a, b, clear);
+      break;
+    case 820:
+      feed(a, b, bottom);
+      canon_.dwell(ref_, p_);
+      traverse(a, b, clear);
+      break;
+    case 730:
+      peck(a, b, r, clear, bottom, q_, false);
+      break;
+    case 830:
+      peck(a, b, r, clear, bottom, q_, true);
+      break;
+    case 740: case 840:
+      tap(a, b, clear, bottom);
+      break;
+    case 850:
+      feed(a, b, bottom);
+      feed(a, b, r);
+      traverse(a, b, clear);
+      break;
+    case 860:
+      require_turning();
+      feed(a, b, bottom);
+      canon_.dwell(ref_, p_);
+      canon_.stop_spindle_turning(ref_);
+      traverse(a, b, clear);
+      start_spindle(in_.spindle_cw);
+      break;
+    case 870:
+      back_bore(a, b, r, clear, bottom);
+      break;
+    case 880:
+      // The operator takes the tool out by hand at the program stop.
+      require_turning();
+      feed(a, b, bottom);
+      canon_.dwell(ref_, p_);
+      canon_.stop_spindle_turning(ref_);
+      canon_.program_stop(ref_);
+      start_spindle(in_.spindle_cw);
+      break;
+    case 890:
+      feed(a, b, bottom);
+      canon_.dwell(ref_, p_);
+      feed(a, b, clear);
+      break;
+    default: break;
+  }
+}
+
+CycleResult Runner::run() {
+  check_input();
 
   // LinuxCNC's convert_cycle_xy (yz, zx, uv, vw, wu).
   // LinuxCNC's letters: "Z value unspecified in xy plane ...", "R less than z in ... xy".
@@ -232,30 +323,7 @@ CycleResult Runner::run() {
 
   if (in_.path_mode != PathMode::kExactPath) canon_.set_motion_control_mode(ref_, PathMode::kExactPath, 0);
 
-  // The words each cycle needs (after the mode switch, as in LinuxCNC).
-  const std::string gname = gcode_text(g, 'g');
-  switch (g) {
-    case 820: case 860: case 880: case 890:
-      if (!in_.continuing && !in_.has_p) refuse("Dwell time p word missing with " + gname);
-      break;
-    case 730: case 830:
-      if (!in_.continuing && !in_.has_q) refuse("Q word missing with " + gname);
-      break;
-    case 870:
-      if (!in_.continuing) {
-        // LinuxCNC checks I, then J, then K; i/j/k here are in plane order.
-        const bool has_word[3] = {
-            ax_.a % 3 == 0 ? in_.has_i : ax_.b % 3 == 0 ? in_.has_j : in_.has_k,
-            ax_.a % 3 == 1 ? in_.has_i : ax_.b % 3 == 1 ? in_.has_j : in_.has_k,
-            ax_.a % 3 == 2 ? in_.has_i : ax_.b % 3 == 2 ? in_.has_j : in_.has_k,
-        };
-        if (!has_word[0]) refuse("I word missing with g87");
-        if (!has_word[1]) refuse("J word missing with g87");
-        if (!has_word[2]) refuse("K word missing with g87");
-      }
-      break;
-    default: break;
-  }
+  require_words();
   p_ = in_.p;
   q_ = in_.q;
   i_ = in_.i;
@@ -278,57 +346,7 @@ CycleResult Runner::run() {
       traverse(a, b, clear);
       if (clear > r) traverse(a, b, r);
     }
-    switch (g) {
-      case 810:
-        feed(a, b, bottom);
-        traverse(a, b, clear);
-        break;
-      case 820:
-        feed(a, b, bottom);
-        canon_.dwell(ref_, p_);
-        traverse(a, b, clear);
-        break;
-      case 730:
-        peck(a, b, r, clear, bottom, q_, false);
-        break;
-      case 830:
-        peck(a, b, r, clear, bottom, q_, true);
-        break;
-      case 740: case 840:
-        tap(a, b, clear, bottom);
-        break;
-      case 850:
-        feed(a, b, bottom);
-        feed(a, b, r);
-        traverse(a, b, clear);
-        break;
-      case 860:
-        require_turning();
-        feed(a, b, bottom);
-        canon_.dwell(ref_, p_);
-        canon_.stop_spindle_turning(ref_);
-        traverse(a, b, clear);
-        start_spindle(in_.spindle_cw);
-        break;
-      case 870:
-        back_bore(a, b, r, clear, bottom);
-        break;
-      case 880:
-        // The operator takes the tool out by hand at the program stop.
-        require_turning();
-        feed(a, b, bottom);
-        canon_.dwell(ref_, p_);
-        canon_.stop_spindle_turning(ref_);
-        canon_.program_stop(ref_);
-        start_spindle(in_.spindle_cw);
-        break;
-      case 890:
-        feed(a, b, bottom);
-        canon_.dwell(ref_, p_);
-        feed(a, b, clear);
-        break;
-      default: break;
-    }
+    hole(a, b, r, clear, bottom);
   }
 
   if (in_.path_mode != PathMode::kExactPath) {

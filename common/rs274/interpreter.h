@@ -135,6 +135,14 @@ class Interpreter {
   bool read_line();
   void execute_line();
   void execute_o(const OStatement& o);
+  double o_condition(const OStatement& o);
+  void o_sub(const OStatement& o, const std::string& name);
+  void o_return(const OStatement& o, const std::string& name);
+  void o_program(const OStatement& o, const std::string& name);
+  void o_call(const OStatement& o, const std::string& name);
+  void o_loop(const OStatement& o, const std::string& name);
+  void o_if(const OStatement& o, const std::string& name);
+  void o_break_continue(const OStatement& o, const std::string& name);
   void skip_to(const std::string& name, uint32_t kinds_mask);
   std::string o_name(const OStatement& o);
   std::vector<std::string> subroutine_dirs() const;
@@ -142,8 +150,8 @@ class Interpreter {
   void fanuc_call();
   void fanuc_return();
   void return_from_call(double value, bool has_value, int column);
-  SubDef find_fanuc_sub(const std::string& name, int column);
-  void find_sub(const std::string& name, int column);
+  // o<name> call (m98 false) or M98 P<name> (true): where the subroutine starts.
+  SubDef find_sub(const std::string& name, int column, bool m98);
   std::string beyond_sub_dirs(const std::string& file) const;
   [[noreturn]] void fail_at_def(const SubDef& def, const std::string& detail);
 
@@ -153,6 +161,28 @@ class Interpreter {
   void apply_settings();
   void execute_block(Words& w);
   void comments_of_line();
+  // execute_block's steps, in its order.
+  bool continue_nurbs(Words& w);
+  void g93_g95(const Words& w);
+  void f_s_t(const Words& w);
+  void m62_m68(const Words& w);
+  void m6_m61(Words& w);
+  void m3_m5(const Words& w);
+  void m70_m73(const Words& w);
+  void m7_m9(const Words& w);
+  void m48_m53(const Words& w);
+  void g4(const Words& w);
+  void g17_g19(const Words& w);
+  void g20_g21(const Words& w);
+  void g40_g42(const Words& w);
+  void g43_g49(Words& w);
+  void g54_g59(const Words& w);
+  void g61_g64(const Words& w);
+  void g90_g91(const Words& w);
+  void g98_g99(const Words& w);
+  void homes_and_offsets(Words& w);
+  void motion_block(Words& w);
+  void stops(const Words& w);
   void motion(Words& w);
   void arc(Words& w, bool cw, const Pose& end);
   void nurbs_fanuc_open(Words& w);
@@ -162,6 +192,8 @@ class Interpreter {
   void nurbs_g5_point(Words& w);
   void nurbs_g5_close();
   void g10(Words& w);
+  void g10_coord_system(Words& w, int l, int p);
+  void g10_tool(Words& w, int l, int p);
   void g28_g30(Words& w, bool g30);
   void g92(Words& w);
   void tool_change(Words& w);

@@ -46,78 +46,101 @@ void Interpreter::skip_to(const std::string& name, uint32_t kinds) {
 
 void Interpreter::execute_o(const OStatement& o) {
   const std::string name = o_name(o);
-  SourceFile& f = *files_[static_cast<size_t>(file_)];
-  auto cond = [&]() -> double {
-    if (o.args.empty()) fail(o.keyword_column, "expected a condition in [ ] after the keyword");
-    return evaluate(line_.arena, o.args.front(), *reader_);
-  };
   switch (o.kind) {
-    case OKind::kSub: {
-      // A definition read in the program's flow: remember it and skip its body.
-      if (nurbs_) fail(o.column, "a subroutine definition inside a NURBS curve");
-      if (!frames_.empty()) fail(o.column, "o<" + name + "> sub: a subroutine may not be defined inside another");
-      subs_[name] = SubDef{file_, f.offset(), line_no_, f.line_start, false};
-      skip_to(name, kbit(OKind::kEndsub));
-      return;
-    }
+    case OKind::kSub: o_sub(o, name); return;
     case OKind::kEndsub:
-    case OKind::kReturn: {
-      // LinuxCNC lets a return carry any O-number (often its if's); endsub must match.
-      if (frames_.empty()) fail(o.column, "o<" + name + (o.kind == OKind::kEndsub ? "> endsub" : "> return") + " outside a subroutine");
-      if (frames_.back().fanuc)
-        fail(o.column, "o<" + name + (o.kind == OKind::kEndsub ? "> endsub" : "> return") + " inside Fanuc subprogram O" +
-                           frames_.back().sub + ", which M98 called: it ends with M99");
-      if (o.kind == OKind::kEndsub && frames_.back().sub != name)
-        fail(o.column, "o<" + name + "> endsub inside o<" + frames_.back().sub + ">");
-      double value = 0;
-      bool has_value = false;
-      if (!o.args.empty()) {
-        value = evaluate(line_.arena, o.args.front(), *reader_);
-        has_value = true;
-      }
-      return_from_call(value, has_value, o.column);
-      return;
-    }
-    case OKind::kProgram: {
-      // A bare O-word. In the main program's flow it is the program's number or name
-      // (LinuxCNC: nothing to do); running into one inside a Fanuc subprogram goes on
-      // into it (LinuxCNC 2.9 does); an O-word subroutine may not run into one.
-      if (!setup_.fanuc_subs)
-        fail(o.column, "bare O-word O" + name + ": Fanuc-style subprograms are disabled (DISABLE_FANUC_STYLE_SUB)");
-      if (!frames_.empty() && !frames_.back().fanuc)
-        fail(o.column, "Fanuc subprogram head O" + name + " inside o<" + frames_.back().sub +
-                           "> sub (a Fanuc subprogram is called with M98, an O-word subroutine ends with endsub)");
-      return;
-    }
-    case OKind::kCall: {
-      if (static_cast<int64_t>(frames_.size()) >= setup_.max_call_depth)
-        fail(o.column, "o<" + name + "> call: calls nested deeper than " + std::to_string(setup_.max_call_depth));
-      std::array<double, 30> args{};
-      if (o.args.size() > 30) fail(o.column, "more than 30 arguments to o<" + name + ">");
-      for (size_t i = 0; i < o.args.size(); ++i) args[i] = evaluate(line_.arena, o.args[i], *reader_);
-      auto it = subs_.find(name);
-      if (it == subs_.end()) {
-        find_sub(name, o.column);
-        it = subs_.find(name);
-      }
-      Frame fr;
-      fr.sub = name;
-      fr.return_file = file_;
-      fr.return_offset = files_[static_cast<size_t>(file_)]->offset();
-      fr.return_line = line_no_;
-      fr.call_column = o.column;
-      fr.loops = loops_.size();
-      params_.push_call();
-      for (size_t i = 0; i < 30; ++i)
-        if (i < o.args.size()) params_.set(static_cast<int>(i) + 1, args[i]);
-      frames_.push_back(std::move(fr));
-      if (it->second.fanuc)
-        fail_at_def(it->second, "Fanuc subprogram O" + name + " is called with M98 P" + name + ", not o<" + name + "> call");
-      file_ = it->second.file;
-      files_[static_cast<size_t>(file_)]->seek(it->second.offset);
-      line_no_ = it->second.line;
-      return;
-    }
+    case OKind::kReturn: o_return(o, name); return;
+    case OKind::kProgram: o_program(o, name); return;
+    case OKind::kCall: o_call(o, name); return;
+    case OKind::kDo:
+    case OKind::kWhile:
+    case OKind::kEndwhile:
+    case OKind::kRepeat:
+    case OKind::kEndrepeat: o_loop(o, name); return;
+    case OKind::kIf:
+    case OKind::kElseif:
+    case OKind::kElse:
+    case OKind::kEndif: o_if(o, name); return;
+    case OKind::kBreak:
+    case OKind::kContinue: o_break_continue(o, name); return;
+    case OKind::kNone: return;
+  }
+}
+
+// The condition in [ ] after a while, if, elseif or repeat keyword.
+double Interpreter::o_condition(const OStatement& o) {
+  if (o.args.empty()) fail(o.keyword_column, "expected a condition in [ ] after the keyword");
+  return evaluate(line_.arena, o.args.front(), *reader_);
+}
+
+// o<name> sub read in the program's flow: remembered, its body skipped.
+void Interpreter::o_sub(const OStatement& o, const std::string& name) {
+  SourceFile& f = *files_[static_cast<size_t>(file_)];
+  if (nurbs_) fail(o.column, "a subroutine definition inside a NURBS curve");
+  if (!frames_.empty()) fail(o.column, "o<" + name + "> sub: a subroutine may not be defined inside another");
+  subs_[name] = SubDef{file_, f.offset(), line_no_, f.line_start, false};
+  skip_to(name, kbit(OKind::kEndsub));
+}
+
+// o<name> endsub / return: back to the caller.
+void Interpreter::o_return(const OStatement& o, const std::string& name) {
+  // LinuxCNC lets a return carry any O-number (often its if's); endsub must match.
+  if (frames_.empty()) fail(o.column, "o<" + name + (o.kind == OKind::kEndsub ? "> endsub" : "> return") + " outside a subroutine");
+  if (frames_.back().fanuc)
+    fail(o.column, "o<" + name + (o.kind == OKind::kEndsub ? "> endsub" : "> return") + " inside Fanuc subprogram O" +
+                       frames_.back().sub + ", which M98 called: it ends with M99");
+  if (o.kind == OKind::kEndsub && frames_.back().sub != name)
+    fail(o.column, "o<" + name + "> endsub inside o<" + frames_.back().sub + ">");
+  double value = 0;
+  bool has_value = false;
+  if (!o.args.empty()) {
+    value = evaluate(line_.arena, o.args.front(), *reader_);
+    has_value = true;
+  }
+  return_from_call(value, has_value, o.column);
+}
+
+// A bare O-word. In the main program's flow it is the program's number or name
+// (LinuxCNC: nothing to do); running into one inside a Fanuc subprogram goes on
+// into it (LinuxCNC 2.9 does); an O-word subroutine may not run into one.
+void Interpreter::o_program(const OStatement& o, const std::string& name) {
+  if (!setup_.fanuc_subs)
+    fail(o.column, "bare O-word O" + name + ": Fanuc-style subprograms are disabled (DISABLE_FANUC_STYLE_SUB)");
+  if (!frames_.empty() && !frames_.back().fanuc)
+    fail(o.column, "Fanuc subprogram head O" + name + " inside o<" + frames_.back().sub +
+                       "> sub (a Fanuc subprogram is called with M98, an O-word subroutine ends with endsub)");
+}
+
+// o<name> call [args]: into the subroutine, found on first use.
+void Interpreter::o_call(const OStatement& o, const std::string& name) {
+  if (static_cast<int64_t>(frames_.size()) >= setup_.max_call_depth)
+    fail(o.column, "o<" + name + "> call: calls nested deeper than " + std::to_string(setup_.max_call_depth));
+  std::array<double, 30> args{};
+  if (o.args.size() > 30) fail(o.column, "more than 30 arguments to o<" + name + ">");
+  for (size_t i = 0; i < o.args.size(); ++i) args[i] = evaluate(line_.arena, o.args[i], *reader_);
+  const SubDef def = find_sub(name, o.column, false);
+  Frame fr;
+  fr.sub = name;
+  fr.return_file = file_;
+  fr.return_offset = files_[static_cast<size_t>(file_)]->offset();
+  fr.return_line = line_no_;
+  fr.call_column = o.column;
+  fr.loops = loops_.size();
+  params_.push_call();
+  for (size_t i = 0; i < 30; ++i)
+    if (i < o.args.size()) params_.set(static_cast<int>(i) + 1, args[i]);
+  frames_.push_back(std::move(fr));
+  if (def.fanuc)
+    fail_at_def(def, "Fanuc subprogram O" + name + " is called with M98 P" + name + ", not o<" + name + "> call");
+  file_ = def.file;
+  files_[static_cast<size_t>(file_)]->seek(def.offset);
+  line_no_ = def.line;
+}
+
+// do, while (a loop's head or a do's end), endwhile, repeat, endrepeat.
+void Interpreter::o_loop(const OStatement& o, const std::string& name) {
+  SourceFile& f = *files_[static_cast<size_t>(file_)];
+  switch (o.kind) {
     case OKind::kDo: {
       loops_.push_back(Loop{OKind::kDo, name, file_, f.offset(), line_no_, 0, false});
       return;
@@ -125,7 +148,7 @@ void Interpreter::execute_o(const OStatement& o) {
     case OKind::kWhile: {
       // Either the end of a do-while, or the head of a while loop.
       if (!loops_.empty() && loops_.back().kind == OKind::kDo && loops_.back().name == name) {
-        if (cond() != 0) {
+        if (o_condition(o) != 0) {
           f.seek(loops_.back().offset);
           line_no_ = loops_.back().line;
         } else {
@@ -133,7 +156,7 @@ void Interpreter::execute_o(const OStatement& o) {
         }
         return;
       }
-      if (cond() != 0) {
+      if (o_condition(o) != 0) {
         if (loops_.empty() || loops_.back().name != name || loops_.back().kind != OKind::kWhile)
           loops_.push_back(Loop{OKind::kWhile, name, file_, f.line_start, line_no_ - 1, 0, false});
         return;
@@ -150,7 +173,7 @@ void Interpreter::execute_o(const OStatement& o) {
       return;
     }
     case OKind::kRepeat: {
-      const double n = cond();
+      const double n = o_condition(o);
       if (n < 1) {
         skip_to(name, kbit(OKind::kEndrepeat));
         return;
@@ -170,8 +193,15 @@ void Interpreter::execute_o(const OStatement& o) {
       }
       return;
     }
+    default: return;
+  }
+}
+
+// if, elseif, else, endif.
+void Interpreter::o_if(const OStatement& o, const std::string& name) {
+  switch (o.kind) {
     case OKind::kIf: {
-      if (cond() != 0) {
+      if (o_condition(o) != 0) {
         loops_.push_back(Loop{OKind::kIf, name, file_, 0, 0, 0, true});
         return;
       }
@@ -208,49 +238,49 @@ void Interpreter::execute_o(const OStatement& o) {
       loops_.pop_back();
       return;
     }
-    case OKind::kBreak:
-    case OKind::kContinue: {
-      // The innermost loop of this name.
-      auto it = std::find_if(loops_.rbegin(), loops_.rend(), [&](const Loop& l) {
-        return l.name == name && (l.kind == OKind::kWhile || l.kind == OKind::kDo || l.kind == OKind::kRepeat);
-      });
-      if (it == loops_.rend())
-        fail(o.column, "o<" + name + "> " + (o.kind == OKind::kBreak ? "break" : "continue") + " outside its loop");
-      const size_t keep = static_cast<size_t>(loops_.rend() - it);  // index + 1 of the loop
-      loops_.resize(keep);
-      Loop& l = loops_.back();
-      if (o.kind == OKind::kContinue) {
-        if (l.kind == OKind::kRepeat) {
-          if (--l.remaining < 1) {
-            loops_.pop_back();
-            skip_to(name, kbit(OKind::kEndrepeat));
-            return;
-          }
-          f.seek(l.offset);
-          line_no_ = l.line;
-          return;
-        }
-        if (l.kind == OKind::kWhile) {
-          f.seek(l.offset);
-          line_no_ = l.line;
-          return;
-        }
-        // do-while: continue jumps to the test at its end.
-        skip_to(name, kbit(OKind::kWhile));
+    default: return;
+  }
+}
+
+// break / continue: the innermost loop of this name.
+void Interpreter::o_break_continue(const OStatement& o, const std::string& name) {
+  SourceFile& f = *files_[static_cast<size_t>(file_)];
+  auto it = std::find_if(loops_.rbegin(), loops_.rend(), [&](const Loop& l) {
+    return l.name == name && (l.kind == OKind::kWhile || l.kind == OKind::kDo || l.kind == OKind::kRepeat);
+  });
+  if (it == loops_.rend())
+    fail(o.column, "o<" + name + "> " + (o.kind == OKind::kBreak ? "break" : "continue") + " outside its loop");
+  const size_t keep = static_cast<size_t>(loops_.rend() - it);  // index + 1 of the loop
+  loops_.resize(keep);
+  Loop& l = loops_.back();
+  if (o.kind == OKind::kContinue) {
+    if (l.kind == OKind::kRepeat) {
+      if (--l.remaining < 1) {
         loops_.pop_back();
-        loops_.push_back(Loop{OKind::kDo, name, file_, l.offset, l.line, 0, false});
-        execute_o(line_.o);
+        skip_to(name, kbit(OKind::kEndrepeat));
         return;
       }
-      const OKind k = l.kind;
-      loops_.pop_back();
-      skip_to(name, k == OKind::kRepeat ? kbit(OKind::kEndrepeat)
-                    : k == OKind::kWhile ? kbit(OKind::kEndwhile)
-                                         : kbit(OKind::kWhile));
+      f.seek(l.offset);
+      line_no_ = l.line;
       return;
     }
-    case OKind::kNone: return;
+    if (l.kind == OKind::kWhile) {
+      f.seek(l.offset);
+      line_no_ = l.line;
+      return;
+    }
+    // do-while: continue jumps to the test at its end.
+    skip_to(name, kbit(OKind::kWhile));
+    loops_.pop_back();
+    loops_.push_back(Loop{OKind::kDo, name, file_, l.offset, l.line, 0, false});
+    execute_o(line_.o);
+    return;
   }
+  const OKind k = l.kind;
+  loops_.pop_back();
+  skip_to(name, k == OKind::kRepeat ? kbit(OKind::kEndrepeat)
+                : k == OKind::kWhile ? kbit(OKind::kEndwhile)
+                                     : kbit(OKind::kWhile));
 }
 
 // Where subroutine files are looked for: the subroutine path, then the main
@@ -330,77 +360,14 @@ int Interpreter::fanuc_m_code() {
   return -1;
 }
 
-// Where o<name> sub starts for a call not met before (LinuxCNC 2.9's control_back_to):
-// a file <name>.ngc on the subroutine path or in the program's folder (its first
-// `o<name> sub` or `O<name>` head), else the first such head further down the file
-// being read, from the call on, up to its end or its closing '%' (definitions before
-// the call that the flow did not pass are not seen, as in LinuxCNC). Fails when there
-// is none.
-void Interpreter::find_sub(const std::string& name, int column) {
-  std::string t;
-  Line probe;
-  for (const std::string& dir : subroutine_dirs()) {
-    const std::string p = dir + "/" + name + ".ngc";
-    if (!std::filesystem::exists(p)) continue;
-    auto sf = std::make_unique<SourceFile>();
-    sf->path = p;
-    sf->fd = ::open(p.c_str(), O_RDONLY | O_CLOEXEC);
-    if (sf->fd < 0) continue;
-    const int32_t idx = static_cast<int32_t>(files_.size());
-    int32_t ln = 0;
-    bool found = false;
-    while (sf->getline(t)) {
-      ++ln;
-      try {
-        lex_line(t, probe);
-      } catch (const Error&) {
-        continue;
-      }
-      if ((probe.o.kind == OKind::kSub || probe.o.kind == OKind::kProgram) && probe.o.number_expr < 0 &&
-          probe.o.name == name) {
-        subs_[name] = SubDef{idx, sf->offset(), ln, sf->line_start, probe.o.kind == OKind::kProgram};
-        found = true;
-        break;
-      }
-    }
-    if (!found) fail(column, p + " does not define o<" + name + "> sub");
-    file_names_.push_back(p);
-    files_.push_back(std::move(sf));
-    return;
-  }
-  SourceFile& f = *files_[static_cast<size_t>(file_)];
-  const int64_t here = f.offset();
-  int32_t ln = line_no_;
-  while (f.getline(t)) {
-    ++ln;
-    try {
-      lex_line(t, probe);
-    } catch (const Error&) {
-      continue;
-    }
-    if (probe.percent) break;  // the program's closing '%': nothing after it counts
-    if (probe.o.number_expr >= 0 || probe.o.name != name) continue;
-    if (probe.o.kind == OKind::kSub || probe.o.kind == OKind::kProgram) {
-      subs_[name] = SubDef{file_, f.offset(), ln, f.line_start, probe.o.kind == OKind::kProgram};
-      f.seek(here);
-      return;
-    }
-  }
-  f.seek(here);
-  std::string why = "o<" + name + "> call: no file " + name + ".ngc on the subroutine path nor o<" + name +
-                    "> sub further down " + file_names_[static_cast<size_t>(file_)] +
-                    " (a definition before the call counts only once the program has run through it)";
-  if (const std::string far = beyond_sub_dirs(name + ".ngc"); !far.empty())
-    why += "; " + far;
-  fail(column, why);
-}
-
-// Where subprogram O<name> starts, for M98 (LinuxCNC's control_back_to): one met
-// before, else a file <name>.ngc on the subroutine path or in the program's folder
-// (LinuxCNC looks for the file first), else further down the file being read, up to
-// its end or its closing '%'. The first head of that number found counts, `O<name>`
-// or `O<name> sub` (the caller refuses the latter).
-Interpreter::SubDef Interpreter::find_fanuc_sub(const std::string& name, int column) {
+// Where subroutine `name` starts (LinuxCNC 2.9's control_back_to), for an o<name>
+// call (m98 false) or M98 P<name> (m98 true): one met before, else a file <name>.ngc
+// on the subroutine path or in the program's folder (LinuxCNC looks for the file
+// first), else further down the file being read, from the call on, up to its end or
+// its closing '%' (definitions before the call that the flow did not pass are not
+// seen, as in LinuxCNC). The first head of that name found counts, `o<name> sub` or
+// a bare `O<name>` (the caller refuses the other style's). Fails when there is none.
+Interpreter::SubDef Interpreter::find_sub(const std::string& name, int column, bool m98) {
   if (auto it = subs_.find(name); it != subs_.end()) return it->second;
   std::string t;
   Line probe;
@@ -430,7 +397,8 @@ Interpreter::SubDef Interpreter::find_fanuc_sub(const std::string& name, int col
       subs_[name] = d;
       return d;
     }
-    fail(column, "M98 P" + name + ": " + p + " does not hold subprogram O" + name);
+    fail(column, m98 ? "M98 P" + name + ": " + p + " does not hold subprogram O" + name
+                     : p + " does not define o<" + name + "> sub");
   }
   SourceFile& f = *files_[static_cast<size_t>(file_)];
   const int64_t here = f.offset();
@@ -442,7 +410,7 @@ Interpreter::SubDef Interpreter::find_fanuc_sub(const std::string& name, int col
     } catch (const Error&) {
       continue;
     }
-    if (probe.percent) break;  // the program's end: LinuxCNC stops looking there
+    if (probe.percent) break;  // the program's closing '%': nothing after it counts
     if (!is_head(probe)) continue;
     const SubDef d{file_, f.offset(), ln, f.line_start, probe.o.kind == OKind::kProgram};
     f.seek(here);
@@ -450,9 +418,15 @@ Interpreter::SubDef Interpreter::find_fanuc_sub(const std::string& name, int col
     return d;
   }
   f.seek(here);
-  std::string far = beyond_sub_dirs(name + ".ngc");
-  fail(column, "M98 P" + name + ": no subprogram O" + name + " further down " + file_names_[static_cast<size_t>(file_)] +
-                   " (before its end) nor a file " + name + ".ngc on the subroutine path" +
+  const std::string far = beyond_sub_dirs(name + ".ngc");
+  const std::string& file = file_names_[static_cast<size_t>(file_)];
+  if (m98)
+    fail(column, "M98 P" + name + ": no subprogram O" + name + " further down " + file +
+                     " (before its end) nor a file " + name + ".ngc on the subroutine path" +
+                     (far.empty() ? "" : "; " + far));
+  fail(column, "o<" + name + "> call: no file " + name + ".ngc on the subroutine path nor o<" + name +
+                   "> sub further down " + file +
+                   " (a definition before the call counts only once the program has run through it)" +
                    (far.empty() ? "" : "; " + far));
 }
 
@@ -530,7 +504,7 @@ void Interpreter::fanuc_call() {
   if (static_cast<int64_t>(frames_.size()) >= setup_.max_call_depth)
     fail(mw.column, "M98 P" + name + ": calls nested deeper than " + std::to_string(setup_.max_call_depth));
   const int64_t call_start = files_[static_cast<size_t>(file_)]->line_start;
-  const SubDef def = find_fanuc_sub(name, mw.column);
+  const SubDef def = find_sub(name, mw.column, true);
   Frame fr;
   fr.sub = name;
   fr.return_file = file_;

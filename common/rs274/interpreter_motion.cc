@@ -524,4 +524,70 @@ void Interpreter::nurbs_fanuc_close() {
   motion_ = -1;
 }
 
+// Inside a NURBS curve: the line adds to the curve or closes it; true when it
+// was the curve's (the block's other steps are then not made).
+bool Interpreter::continue_nurbs(Words& w) {
+  if (!nurbs_) return false;
+  // A line of comments only (or an empty one) leaves the curve open.
+  if (line_.words.empty()) return true;
+  if (nurbs_->fanuc) {
+    // LinuxCNC's newer G6.2 repeats the G code on its knot-only lines ("G6.2 K29").
+    if (w.on('K') && (w.g[1] < 0 || w.g[1] == 62)) {
+      nurbs_fanuc_line(w);
+      // A curve whose knots are complete (control points + order) ends here.
+      if (nurbs_->knots.size() == nurbs_->points.size() + static_cast<size_t>(nurbs_->order)) {
+        nurbs_fanuc_close();
+        fanuc_closed_line_ = line_no_;
+      }
+      return true;
+    }
+    nurbs_fanuc_close();
+    return false;
+  }
+  if (w.g[1] == 53) {
+    w53_column_ = w.gcol[1];
+    nurbs_g5_close();
+    return true;
+  }
+  // Control point lines: X Y P, where LinuxCNC also takes G5.2 again, a new order L
+  // (checked at G5.3) and an S word (a spindle speed for what follows).
+  if ((w.g[1] < 0 || w.g[1] == 52) && (w.axes != 0 || w.on('P') || w.on('L'))) {
+    if (w.on('S')) {
+      speed_ = w['S'];
+      canon_.set_spindle_speed(ref(w.column('S')), speed_);
+    }
+    if (w.on('L')) {
+      if (w['L'] != std::floor(w['L']) || w['L'] < 3 || w['L'] > 8)
+        fail(w.column('L'), "G5.2 L (order) must be a whole number from 3 to 8");
+      nurbs_->order = static_cast<int>(w['L']);
+    }
+    if (w.axes != 0 || w.on('P')) nurbs_g5_point(w);
+    return true;
+  }
+  fail(w.g[1] >= 0 ? w.gcol[1] : 0, "inside a G5.2 curve: expected X Y P control points or G5.3");
+}
+
+// The motion mode and its move (G0-G89, G5.2, G6.2, or axis words alone).
+void Interpreter::motion_block(Words& w) {
+  prev_motion_ = motion_;
+  if (w.g[1] >= 0) {
+    motion_ = w.g[1];
+    if (motion_ == 800) {
+      in_cycle_ = false;
+      canon_.comment(ref(w.gcol[1]), "interpreter: motion mode set to none");
+    }
+  }
+  const bool axis_g0 = w.g[0] == 100 || w.g[0] == 280 || w.g[0] == 300 || w.g[0] == 520 || w.g[0] == 920 ||
+                       w.g[0] == 431;
+  if (w.g[1] == 52) {
+    nurbs_g5_open(w);
+  } else if (w.g[1] == 62) {
+    nurbs_fanuc_open(w);
+  } else if (w.g[1] == 53) {
+    fail(w.gcol[1], "G5.3 without G5.2");
+  } else if (w.g[1] >= 0 || (w.axes != 0 && !axis_g0)) {
+    motion(w);
+  }
+}
+
 }  // namespace cnc::rs274

@@ -9,8 +9,6 @@ using namespace interp;
 
 namespace {
 
-constexpr double kToleranceEqual = 1e-6;  // LinuxCNC 2.9's TOLERANCE_EQUAL (2.9.0-pre1: 1e-4)
-
 // G-code modal groups (LinuxCNC's numbering), by G code in tenths.
 int g_group(int g) {
   switch (g) {
@@ -220,73 +218,11 @@ void Interpreter::comments_of_line() {
       }
       case CommentKind::kPrint:
       case CommentKind::kDebug: {
-        // #n and #<name> in the text are replaced by their values, as LinuxCNC's
-        // convert_param_comment: "%lf" until a %d (%.0f), %f (%.4f) or %.Nf changes the
-        // format for the rest of the text; a value within TOLERANCE_EQUAL of 0 prints as 0
-        // (no "-0.000000"); a parameter that does not exist prints "######".
         std::string out;
-        std::string format = "%lf";
-        const std::string& t = c.text;
-        const auto put_value = [&](bool found, double v) {
-          if (!found) {
-            out += "######";
-            return;
-          }
-          if (std::fabs(v) < kToleranceEqual) v = 0.0;
-          char buf[400];
-          const int n = std::snprintf(buf, sizeof buf, format.c_str(), v);
-          out += (n < 0 || n >= 350) ? "######" : buf;  // LinuxCNC's VAL_LEN is 350
-        };
-        for (size_t i = 0; i < t.size(); ++i) {
-          if (t[i] == '%') {
-            const char f = i + 1 < t.size() ? t[i + 1] : '\0';
-            if (f == 'd') {
-              format = "%.0f";
-              ++i;
-            } else if (f == 'f') {
-              format = "%.4f";
-              ++i;
-            } else if (f == '.') {
-              ++i;
-              if (i + 2 < t.size() && std::isdigit(static_cast<unsigned char>(t[i + 1])) && t[i + 2] == 'f') {
-                format = std::string("%.") + t[i + 1] + "f";
-                i += 2;
-              } else {
-                out += '.';  // LinuxCNC drops the '%' of a "%." that is no format
-              }
-            } else {
-              out += '%';
-            }
-            continue;
-          }
-          if (t[i] != '#') {
-            out += t[i];
-            continue;
-          }
-          const size_t j = i + 1;
-          if (j >= t.size()) fail(c.column + 1, "named parameter not terminated in a DEBUG/PRINT comment");
-          if (t[j] == '<') {
-            const size_t e = t.find('>', j);
-            if (e == std::string::npos) fail(c.column + 1, "named parameter not terminated in a DEBUG/PRINT comment");
-            std::string name;
-            for (size_t k = j + 1; k < e; ++k)
-              if (!std::isspace(static_cast<unsigned char>(t[k])))
-                name += static_cast<char>(std::tolower(static_cast<unsigned char>(t[k])));
-            const bool found = named_exists(name);
-            put_value(found, found ? named_value(name, c.column) : 0.0);
-            i = e;
-            continue;
-          }
-          size_t k = j;
-          while (k < t.size() && std::isdigit(static_cast<unsigned char>(t[k]))) ++k;
-          if (k == j) {
-            out += t[i];
-            continue;
-          }
-          const long n = std::strtol(t.substr(j, k - j).c_str(), nullptr, 10);
-          const bool found = n >= 0 && n <= kMaxParameter;
-          put_value(found, n >= 1 && found ? params_.get(static_cast<int>(n)) : 0.0);
-          i = k - 1;
+        try {
+          out = expand_parameters(c.text, c.column + 1, *reader_);
+        } catch (const Error& e) {
+          fail(e.column(), e.detail());
         }
         if (c.kind == CommentKind::kDebug)
           canon_.message(r, out);

@@ -163,6 +163,11 @@ class ParamReader {
 // naming the column. The result is finite or an Error is thrown.
 double evaluate(const ExprArena& arena, int32_t root, const ParamReader& params);
 
+// The text of a (PRINT,...) or (DEBUG,...) comment with the values of the #n and
+// #<name> in it, as LinuxCNC's convert_param_comment makes it. Throws
+// Error(column, ...) for a parameter reference left open.
+std::string expand_parameters(const std::string& text, int column, const ParamReader& params);
+
 // Text of an expression as written, for messages: "[#1+2]".
 std::string to_text(const ExprArena& arena, int32_t root);
 
