@@ -468,7 +468,7 @@ struct CutterComp::Impl {
   }
 };
 
-CutterComp::CutterComp(Canon& out) : out_(out), impl_(std::make_unique<Impl>(out)) {}
+CutterComp::CutterComp(Canon& out) : CanonForward(out), impl_(std::make_unique<Impl>(out)) {}
 CutterComp::~CutterComp() = default;
 
 void CutterComp::start(int side, double radius, Plane plane, const Pose& programmed) {
@@ -567,7 +567,8 @@ void CutterComp::set_process(const SourceRef& r, const ProcessSettings& p) {
   impl_->queueable([r, p](Canon& c) { c.set_process(r, p); });
 }
 
-// ---- calls that go straight through (before a waiting move, as in LinuxCNC) -------
+// ---- calls that change the filter's state (the others that are not queued pass
+// straight on, before a waiting move, as in LinuxCNC) ----------------------------
 
 void CutterComp::use_length_units(const SourceRef& r, Units u) {
   Impl& m = *impl_;
@@ -577,30 +578,8 @@ void CutterComp::use_length_units(const SourceRef& r, Units u) {
     m.cv *= f;
   }
   m.units = u;
-  out_.use_length_units(r, u);
+  next_.use_length_units(r, u);
 }
-void CutterComp::select_plane(const SourceRef& r, Plane p) { out_.select_plane(r, p); }
-void CutterComp::set_g5x_offset(const SourceRef& r, int i, const Pose& p) { out_.set_g5x_offset(r, i, p); }
-void CutterComp::set_g92_offset(const SourceRef& r, const Pose& p) { out_.set_g92_offset(r, p); }
-void CutterComp::set_xy_rotation(const SourceRef& r, double d) { out_.set_xy_rotation(r, d); }
-void CutterComp::set_feed_reference(const SourceRef& r) { out_.set_feed_reference(r); }
-void CutterComp::set_motion_control_mode(const SourceRef& r, PathMode m, double p) {
-  out_.set_motion_control_mode(r, m, p);
-}
-void CutterComp::set_naivecam_tolerance(const SourceRef& r, double q) { out_.set_naivecam_tolerance(r, q); }
-void CutterComp::use_tool_length_offset(const SourceRef& r, const Pose& p) { out_.use_tool_length_offset(r, p); }
-void CutterComp::select_tool(const SourceRef& r, int t) { out_.select_tool(r, t); }
-void CutterComp::set_tool_table_entry(const SourceRef& r, int index, int tool, const Pose& offset, double diameter,
-                                      double front, double back, int orientation) {
-  out_.set_tool_table_entry(r, index, tool, offset, diameter, front, back, orientation);
-}
-void CutterComp::enable_feed_override(const SourceRef& r, bool b) { out_.enable_feed_override(r, b); }
-void CutterComp::enable_speed_override(const SourceRef& r, bool b) { out_.enable_speed_override(r, b); }
-void CutterComp::enable_adaptive_feed(const SourceRef& r, bool b) { out_.enable_adaptive_feed(r, b); }
-void CutterComp::enable_feed_hold(const SourceRef& r, bool b) { out_.enable_feed_hold(r, b); }
-void CutterComp::digital_output(const SourceRef& r, int i, bool on, bool sync) { out_.digital_output(r, i, on, sync); }
-void CutterComp::analog_output(const SourceRef& r, int i, double v, bool sync) { out_.analog_output(r, i, v, sync); }
-void CutterComp::message(const SourceRef& r, const std::string& s) { out_.message(r, s); }
 
 // LinuxCNC's reset empties its queue without sending it.
 void CutterComp::on_reset(const SourceRef& r) {
@@ -611,7 +590,7 @@ void CutterComp::on_reset(const SourceRef& r) {
   m.radius = 0;
   m.first_move = true;
   m.arc_not_allowed = false;
-  out_.on_reset(r);
+  next_.on_reset(r);
 }
 
 // ---- calls that end what is held first --------------------------------------------
@@ -620,36 +599,36 @@ void CutterComp::on_reset(const SourceRef& r) {
 // moves go first.
 void CutterComp::start_change(const SourceRef& r) {
   flush();
-  out_.start_change(r);
+  next_.start_change(r);
 }
 void CutterComp::change_tool(const SourceRef& r, int t) {
   flush();
-  out_.change_tool(r, t);
+  next_.change_tool(r, t);
 }
 void CutterComp::change_tool_number(const SourceRef& r, int t) {
   flush();
-  out_.change_tool_number(r, t);
+  next_.change_tool_number(r, t);
 }
 void CutterComp::program_stop(const SourceRef& r) {
   flush();
-  out_.program_stop(r);
+  next_.program_stop(r);
 }
 void CutterComp::optional_program_stop(const SourceRef& r) {
   flush();
-  out_.optional_program_stop(r);
+  next_.optional_program_stop(r);
 }
 void CutterComp::pallet_shuttle(const SourceRef& r) {
   flush();
-  out_.pallet_shuttle(r);
+  next_.pallet_shuttle(r);
 }
 void CutterComp::program_end(const SourceRef& r) {
   flush();
-  out_.program_end(r);
+  next_.program_end(r);
 }
 
 void CutterComp::finish(const SourceRef& r) {
   flush();
-  out_.finish(r);
+  next_.finish(r);
 }
 
 // ---- motion ------------------------------------------------------------------------
@@ -659,7 +638,7 @@ void CutterComp::straight_traverse(const SourceRef& r, const Pose& end) {
   m.arc_not_allowed = false;
   m.stopped_off_path = false;
   if (!m.compensating()) {
-    out_.straight_traverse(r, end);
+    next_.straight_traverse(r, end);
     return;
   }
   m.straight(false, r, end);
@@ -670,7 +649,7 @@ void CutterComp::straight_feed(const SourceRef& r, const Pose& end) {
   m.arc_not_allowed = false;
   m.stopped_off_path = false;
   if (!m.compensating()) {
-    out_.straight_feed(r, end);
+    next_.straight_feed(r, end);
     return;
   }
   m.straight(true, r, end);
@@ -682,7 +661,7 @@ void CutterComp::arc_feed(const SourceRef& r, double first_end, double second_en
   if (m.arc_not_allowed) refuse("The move just after exiting cutter compensation mode must be straight, not an arc");
   m.stopped_off_path = false;
   if (!m.compensating()) {
-    out_.arc_feed(r, first_end, second_end, first_axis, second_axis, rotation, axis_end, end);
+    next_.arc_feed(r, first_end, second_end, first_axis, second_axis, rotation, axis_end, end);
     return;
   }
   m.arc(r, first_end, second_end, first_axis, second_axis, rotation, axis_end, end);
@@ -692,7 +671,7 @@ void CutterComp::nurbs_feed(const SourceRef& r, int order, const std::vector<Nur
                             const std::vector<double>& knots, const Pose& end) {
   if (impl_->side != 0) refuse("Cannot convert spline with cutter radius compensation");
   impl_->stopped_off_path = false;
-  out_.nurbs_feed(r, order, points, knots, end);
+  next_.nurbs_feed(r, order, points, knots, end);
 }
 
 }  // namespace cnc::rs274

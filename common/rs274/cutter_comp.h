@@ -13,11 +13,11 @@
 #include <memory>
 #include <vector>
 
-#include "common/rs274/canon.h"
+#include "common/rs274/canon_forward.h"
 
 namespace cnc::rs274 {
 
-class CutterComp : public Canon {
+class CutterComp : public CanonForward {
  public:
   explicit CutterComp(Canon& out);
   ~CutterComp() override;
@@ -40,59 +40,44 @@ class CutterComp : public Canon {
   // reordered: a tool change, a stop).
   void flush();
 
-  // Canon: see the header comment.
-  void use_length_units(const SourceRef&, Units) override;
-  void select_plane(const SourceRef&, Plane) override;
-  void set_g5x_offset(const SourceRef&, int, const Pose&) override;
-  void set_g92_offset(const SourceRef&, const Pose&) override;
-  void set_xy_rotation(const SourceRef&, double) override;
-  void set_feed_reference(const SourceRef&) override;
+  // The calls LinuxCNC queues behind a waiting move (the rest pass straight on).
   void set_feed_rate(const SourceRef&, double) override;
   void set_feed_mode(const SourceRef&, FeedMode) override;
-  void set_motion_control_mode(const SourceRef&, PathMode, double) override;
-  void set_naivecam_tolerance(const SourceRef&, double) override;
-  void use_tool_length_offset(const SourceRef&, const Pose&) override;
+  void dwell(const SourceRef&, double seconds) override;
+  void set_spindle_speed(const SourceRef&, double) override;
+  void set_spindle_mode(const SourceRef&, double) override;
+  void orient_spindle(const SourceRef&, double, int) override;
+  void start_spindle_clockwise(const SourceRef&) override;
+  void start_spindle_counterclockwise(const SourceRef&) override;
+  void stop_spindle_turning(const SourceRef&) override;
+  void mist_on(const SourceRef&) override;
+  void mist_off(const SourceRef&) override;
+  void flood_on(const SourceRef&) override;
+  void flood_off(const SourceRef&) override;
+  void comment(const SourceRef&, const std::string&) override;
+  void set_process(const SourceRef&, const ProcessSettings&) override;
+  // Calls that change the filter's own state.
+  void use_length_units(const SourceRef&, Units) override;
   void on_reset(const SourceRef&) override;
+  // Calls that end what is held first.
+  void start_change(const SourceRef&) override;
+  void change_tool(const SourceRef&, int) override;
+  void change_tool_number(const SourceRef&, int) override;
+  void program_stop(const SourceRef&) override;
+  void optional_program_stop(const SourceRef&) override;
+  void pallet_shuttle(const SourceRef&) override;
+  void program_end(const SourceRef&) override;
+  void finish(const SourceRef&) override;
+  // Motion.
   void straight_traverse(const SourceRef&, const Pose& end) override;
   void straight_feed(const SourceRef&, const Pose& end) override;
   void arc_feed(const SourceRef&, double first_end, double second_end, double first_axis, double second_axis,
                 int rotation, double axis_end, const Pose& end) override;
   void nurbs_feed(const SourceRef&, int order, const std::vector<NurbsPoint>& points, const std::vector<double>& knots,
                   const Pose& end) override;
-  void dwell(const SourceRef&, double seconds) override;
-  void select_tool(const SourceRef&, int) override;
-  void set_tool_table_entry(const SourceRef&, int, int, const Pose&, double, double, double, int) override;
-  void start_change(const SourceRef&) override;
-  void change_tool(const SourceRef&, int) override;
-  void change_tool_number(const SourceRef&, int) override;
-  void set_spindle_speed(const SourceRef&, double) override;
-  void start_spindle_clockwise(const SourceRef&) override;
-  void start_spindle_counterclockwise(const SourceRef&) override;
-  void stop_spindle_turning(const SourceRef&) override;
-  void set_spindle_mode(const SourceRef&, double) override;
-  void orient_spindle(const SourceRef&, double, int) override;
-  void mist_on(const SourceRef&) override;
-  void mist_off(const SourceRef&) override;
-  void flood_on(const SourceRef&) override;
-  void flood_off(const SourceRef&) override;
-  void enable_feed_override(const SourceRef&, bool) override;
-  void enable_speed_override(const SourceRef&, bool) override;
-  void enable_adaptive_feed(const SourceRef&, bool) override;
-  void enable_feed_hold(const SourceRef&, bool) override;
-  void digital_output(const SourceRef&, int, bool, bool) override;
-  void analog_output(const SourceRef&, int, double, bool) override;
-  void set_process(const SourceRef&, const ProcessSettings&) override;
-  void comment(const SourceRef&, const std::string&) override;
-  void message(const SourceRef&, const std::string&) override;
-  void program_stop(const SourceRef&) override;
-  void optional_program_stop(const SourceRef&) override;
-  void pallet_shuttle(const SourceRef&) override;
-  void program_end(const SourceRef&) override;
-  void finish(const SourceRef&) override;
 
  private:
   struct Impl;
-  Canon& out_;
   std::unique_ptr<Impl> impl_;
 };
 
