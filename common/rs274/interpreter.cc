@@ -156,6 +156,12 @@ void Interpreter::open(const std::string& path) {
   update_position_params();
 }
 
+// The current position in #5420-#5428.
+void Interpreter::update_position_params() {
+  const Pose p = current_point();
+  for (int i = 0; i < kNumAxes; ++i) params_.set(5420 + i, to_program_axis(i, p[static_cast<size_t>(i)]));
+}
+
 Pose Interpreter::current_point(bool after_g40) const {
   // LinuxCNC's current point is the compensated one while cutter compensation runs;
   // position_ keeps the programmed point. after_g40: where the tool stands after G40

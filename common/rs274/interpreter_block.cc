@@ -5,35 +5,35 @@ namespace cnc::rs274 {
 
 using namespace interp;
 
-// LinuxCNC's order of execution (its execute_block), one step per group of codes.
+// LinuxCNC's order of execution (its execute_block): one step per group of codes,
+// each made when the block has a code of its group.
 void Interpreter::execute_block(Words& w) {
   comments_of_line();
-  if (continue_nurbs(w)) return;
-  g93_g95(w);
-  f_s_t(w);
-  m62_m68(w);
-  m6_m61(w);
-  m3_m5(w);
-  m70_m73(w);
-  m7_m9(w);
-  m48_m53(w);
-  g4(w);
-  g17_g19(w);
-  g20_g21(w);
-  g40_g42(w);
-  g43_g49(w);
-  g54_g59(w);
-  g61_g64(w);
-  g90_g91(w);
-  g98_g99(w);
-  homes_and_offsets(w);
+  if (nurbs_ && continue_nurbs(w)) return;
+  if (w.g[5] >= 0) g93_g95(w);
+  if ((w.has & (bit('F') | bit('S') | bit('T'))) != 0) f_s_t(w);
+  if (w.m[5] >= 0) m62_m68(w);
+  if (w.m[6] >= 0) m6_m61(w);
+  if (w.m[7] >= 0) m3_m5(w);
+  if (w.m[10] >= 0) m70_m73(w);
+  if (w.m[8] >= 0) m7_m9(w);
+  if (w.m[9] >= 0) m48_m53(w);
+  if (w.g[0] == 40) g4(w);
+  if (w.g[2] >= 0) g17_g19(w);
+  if (w.g[6] >= 0) g20_g21(w);
+  if (w.g[7] >= 0) g40_g42(w);
+  if (w.g[8] >= 0) g43_g49(w);
+  if (w.g[12] >= 0) g54_g59(w);
+  if (w.g[13] >= 0) g61_g64(w);
+  if (w.g[3] >= 0 || w.g[4] >= 0) g90_g91(w);
+  if (w.g[10] >= 0) g98_g99(w);
+  if (w.g[0] >= 0) homes_and_offsets(w);
   motion_block(w);
-  stops(w);
+  if (w.m[4] >= 0) stops(w);
 }
 
 // Feed mode (G93, G94, G95).
 void Interpreter::g93_g95(const Words& w) {
-  if (w.g[5] < 0) return;
   const SourceRef r = ref(w.gcol[5]);
   feed_mode_ = w.g[5] == 930 ? FeedMode::kInverseTime : w.g[5] == 950 ? FeedMode::kUnitsPerRev : FeedMode::kUnitsPerMinute;
   canon_.comment(r, feed_mode_ == FeedMode::kInverseTime   ? "interpreter: feed mode set to inverse time"
@@ -69,7 +69,6 @@ void Interpreter::f_s_t(const Words& w) {
 
 // Outputs and inputs (M62-M68).
 void Interpreter::m62_m68(const Words& w) {
-  if (w.m[5] < 0) return;
   const int m = w.m[5];
   const SourceRef r = ref(w.mcol[5]);
   if (m == 66) fail(w.mcol[5], setup_.digital_inputs + setup_.analog_inputs == 0
@@ -89,7 +88,6 @@ void Interpreter::m62_m68(const Words& w) {
 
 // Spindle (M3, M4, M5; M19 refused).
 void Interpreter::m3_m5(const Words& w) {
-  if (w.m[7] < 0) return;
   const SourceRef r = ref(w.mcol[7]);
   switch (w.m[7]) {
     case 3: spindle_ = 1; canon_.start_spindle_clockwise(r); break;
@@ -101,7 +99,6 @@ void Interpreter::m3_m5(const Words& w) {
 
 // Modal state saved and restored (M70-M73).
 void Interpreter::m70_m73(const Words& w) {
-  if (w.m[10] < 0) return;
   const int m = w.m[10];
   if (m == 70 || m == 73) {
     SavedModes s{static_cast<int32_t>(frames_.size()) + (m == 73 ? 0 : 1000000), true, motion_, plane_, incremental_,
@@ -121,7 +118,6 @@ void Interpreter::m70_m73(const Words& w) {
 
 // Coolant (M7, M8, M9).
 void Interpreter::m7_m9(const Words& w) {
-  if (w.m[8] < 0) return;
   const SourceRef r = ref(w.mcol[8]);
   if (w.m[8] == 9) {
     canon_.mist_off(r);
@@ -141,7 +137,6 @@ void Interpreter::m7_m9(const Words& w) {
 
 // Overrides (M48-M53).
 void Interpreter::m48_m53(const Words& w) {
-  if (w.m[9] < 0) return;
   const SourceRef r = ref(w.mcol[9]);
   const bool p_on = !w.on('P') || w['P'] != 0;
   switch (w.m[9]) {
@@ -157,17 +152,14 @@ void Interpreter::m48_m53(const Words& w) {
 
 // Dwell (G4).
 void Interpreter::g4(const Words& w) {
-  if (w.g[0] == 40) {
-    if (!w.on('P')) fail(w.gcol[0], "G4 needs a P word (seconds)");
-    const double p = w['P'];
-    if (p < 0) fail(w.column('P'), "negative dwell time");
-    canon_.dwell(ref(w.gcol[0]), p);
-  }
+  if (!w.on('P')) fail(w.gcol[0], "G4 needs a P word (seconds)");
+  const double p = w['P'];
+  if (p < 0) fail(w.column('P'), "negative dwell time");
+  canon_.dwell(ref(w.gcol[0]), p);
 }
 
 // Plane (G17, G18, G19).
 void Interpreter::g17_g19(const Words& w) {
-  if (w.g[2] < 0) return;
   const Plane p = w.g[2] == 170 ? Plane::kXY : w.g[2] == 180 ? Plane::kXZ : Plane::kYZ;
   if (comp_ != 400 && p != plane_) fail(w.gcol[2], "cannot change planes with cutter radius compensation on");
   plane_ = p;
@@ -176,7 +168,6 @@ void Interpreter::g17_g19(const Words& w) {
 
 // Units (G20, G21).
 void Interpreter::g20_g21(const Words& w) {
-  if (w.g[6] < 0) return;
   const Units u = w.g[6] == 200 ? Units::kInch : Units::kMm;
   if (comp_ != 400 && u != units_) fail(w.gcol[6], "cannot change units with cutter radius compensation on");
   if (u != units_) {
@@ -189,7 +180,6 @@ void Interpreter::g20_g21(const Words& w) {
 
 // Path control (G61, G61.1, G64).
 void Interpreter::g61_g64(const Words& w) {
-  if (w.g[13] < 0) return;
   const SourceRef r = ref(w.gcol[13]);
   if (w.g[13] == 610) {
     path_ = PathMode::kExactPath;
@@ -223,7 +213,6 @@ void Interpreter::g90_g91(const Words& w) {
 
 // Retract mode (G98, G99).
 void Interpreter::g98_g99(const Words& w) {
-  if (w.g[10] < 0) return;
   if (comp_ != 400) fail(w.gcol[10], "cannot change retract mode with cutter radius compensation on");
   retract_r_ = w.g[10] == 990;
   canon_.comment(ref(w.gcol[10]), retract_r_ ? "interpreter: retract mode set to r_plane"
@@ -232,7 +221,6 @@ void Interpreter::g98_g99(const Words& w) {
 
 // Stops and the program's end (M0, M1, M2, M30, M60, M99).
 void Interpreter::stops(const Words& w) {
-  if (w.m[4] < 0) return;
   const SourceRef r = ref(w.mcol[4]);
   switch (w.m[4]) {
     case 0: canon_.program_stop(r); break;

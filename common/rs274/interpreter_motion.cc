@@ -527,7 +527,6 @@ void Interpreter::nurbs_fanuc_close() {
 // Inside a NURBS curve: the line adds to the curve or closes it; true when it
 // was the curve's (the block's other steps are then not made).
 bool Interpreter::continue_nurbs(Words& w) {
-  if (!nurbs_) return false;
   // A line of comments only (or an empty one) leaves the curve open.
   if (line_.words.empty()) return true;
   if (nurbs_->fanuc) {

@@ -283,7 +283,6 @@ void Interpreter::m6_m61(Words& w) {
 
 // Cutter radius compensation (G40, G41, G42, G41.1, G42.1).
 void Interpreter::g40_g42(const Words& w) {
-  if (w.g[7] < 0) return;
   const int g = w.g[7];
   if (g == 400) {
     canon_.comment(ref(w.gcol[7]), "interpreter: cutter radius compensation off");
@@ -321,7 +320,6 @@ void Interpreter::g40_g42(const Words& w) {
 
 // Tool length compensation (G43, G43.1, G43.2, G49).
 void Interpreter::g43_g49(Words& w) {
-  if (w.g[8] < 0) return;
   const int g = w.g[8];
   const SourceRef r = ref(w.gcol[8]);
   Pose off{};
@@ -369,7 +367,6 @@ void Interpreter::g43_g49(Words& w) {
 
 // Coordinate system (G54-G59.3).
 void Interpreter::g54_g59(const Words& w) {
-  if (w.g[12] < 0) return;
   static const int kCs[] = {540, 550, 560, 570, 580, 590, 591, 592, 593};
   int idx = 1;
   for (int i = 0; i < 9; ++i)

@@ -1,5 +1,5 @@
 // The parameters as a program reads and sets them: the predefined named ones that
-// show the modal state, the settings of a line, and the current position (#5420-#5428).
+// show the modal state, and the settings of a line.
 #include "common/rs274/interpreter_impl.h"
 
 namespace cnc::rs274 {
@@ -105,11 +105,6 @@ void Interpreter::apply_settings() {
       fail(e.column() > 0 ? e.column() : s.column, e.detail());
     }
   }
-}
-
-void Interpreter::update_position_params() {
-  const Pose p = current_point();
-  for (int i = 0; i < kNumAxes; ++i) params_.set(5420 + i, to_program_axis(i, p[static_cast<size_t>(i)]));
 }
 
 }  // namespace cnc::rs274
