@@ -1,0 +1,113 @@
+#include "services/hmi/dry_run.h"
+
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <vector>
+
+namespace cnc::hmi {
+
+using json = nlohmann::json;
+
+void DryRun::start(int64_t token, const std::string& program) {
+  cancel();
+  cancelled_ = false;
+  thread_ = std::thread([this, token, program] { run(token, program); });
+}
+
+void DryRun::cancel() {
+  cancelled_ = true;
+  if (const pid_t p = pid_.load(); p > 0) kill(p, SIGTERM);
+  if (thread_.joinable()) thread_.join();
+}
+
+void DryRun::run(int64_t token, const std::string& program) {
+  char tmpl[] = "/tmp/cnc-hmi-plan-XXXXXX";
+  const int fd = mkstemp(tmpl);
+  if (fd < 0) return;
+  close(fd);
+  const std::string csv = tmpl;
+  const pid_t child = fork();
+  if (child == 0) {
+    const int devnull = open("/dev/null", O_WRONLY);
+    if (devnull >= 0) {
+      dup2(devnull, 1);
+      dup2(devnull, 2);
+    }
+    execl(exe_.c_str(), exe_.c_str(), "--machine", machine_.c_str(), "--program", program.c_str(), "--csv",
+          csv.c_str(), static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  json out;
+  out["t"] = "preview";
+  out["token"] = token;
+  out["path"] = program;
+  if (child < 0) {
+    out["error"] = "cannot start the dry run";
+  } else {
+    pid_ = child;
+    int status = 0;
+    waitpid(child, &status, 0);
+    pid_ = 0;
+    if (cancelled_) {
+      std::filesystem::remove(csv);
+      return;
+    }
+    if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
+      out["error"] = "the dry run (" + exe_ + ") ended with status " + std::to_string(WEXITSTATUS(status));
+    } else {
+      // Thinned: a point where the path moved 0.05 mm or its line changed, at most 40,000.
+      std::ifstream f(csv);
+      std::string row;
+      std::getline(f, row);  // header
+      std::vector<double> pts;
+      std::vector<int> lines;
+      double lx = 1e300, ly = 1e300, lz = 1e300;
+      int lline = -1;
+      double tol = 0.05;
+      while (std::getline(f, row)) {
+        double v[6];
+        size_t b = 0;
+        int k = 0;
+        for (; k < 6; ++k) {
+          size_t e = row.find(',', b);
+          if (e == std::string::npos) break;
+          v[k] = std::strtod(row.c_str() + b, nullptr);
+          b = e + 1;
+        }
+        if (k < 6) continue;
+        const int line = static_cast<int>(v[5]);
+        if (std::fabs(v[2] - lx) + std::fabs(v[3] - ly) + std::fabs(v[4] - lz) < tol && line == lline) continue;
+        lx = v[2], ly = v[3], lz = v[4], lline = line;
+        pts.insert(pts.end(), {std::round(v[2] * 1000) / 1000, std::round(v[3] * 1000) / 1000,
+                               std::round(v[4] * 1000) / 1000});
+        lines.push_back(line);
+        if (lines.size() > 40000) {  // coarser, from the start again would cost a second pass: halve
+          std::vector<double> p2;
+          std::vector<int> l2;
+          for (size_t i = 0; i < lines.size(); i += 2) {
+            p2.insert(p2.end(), {pts[3 * i], pts[3 * i + 1], pts[3 * i + 2]});
+            l2.push_back(lines[i]);
+          }
+          pts.swap(p2);
+          lines.swap(l2);
+          tol *= 2;
+        }
+      }
+      out["points"] = pts;
+      out["lines"] = lines;
+    }
+  }
+  std::filesystem::remove(csv);
+  std::lock_guard<std::mutex> lk(mu_);
+  result_ = out.dump();
+}
+
+}  // namespace cnc::hmi

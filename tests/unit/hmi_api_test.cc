@@ -1,0 +1,155 @@
+// The HMI's API: its action table is the one docs/hmi-api.md shows, and the
+// dispatcher answers by that table without any HTTP (over an in-memory bus).
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <fstream>
+#include <memory>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "common/config/machine_config.h"
+#include "services/hmi/api.h"
+
+using cnc::hmi::Api;
+using json = nlohmann::json;
+
+namespace {
+
+const std::string kDoc = std::string(CNC_SOURCE_DIR) + "/docs/hmi-api.md";
+const std::string kBegin = "<!-- actions: generated from services/hmi/api.cc -->\n";
+const std::string kEnd = "<!-- end of actions -->\n";
+
+// The table as docs/hmi-api.md shows it.
+std::string render_table() {
+  std::string t = "| action | fields | sends | answers | view only |\n|---|---|---|---|---|\n";
+  for (const Api::Action& a : Api::actions())
+    t += std::string("| `") + a.name + "` | " + a.fields + " | " + a.sends + " | " + a.answers + " | " +
+         (a.view_only ? "yes" : "") + " |\n";
+  return t;
+}
+
+std::string read_file(const std::string& path) {
+  std::ifstream f(path);
+  std::stringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+// The action names of the doc's table (the first cell of each row, between backquotes).
+std::set<std::string> doc_actions(const std::string& table) {
+  std::set<std::string> names;
+  std::istringstream in(table);
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind("| `", 0) != 0) continue;
+    const size_t end = line.find('`', 3);
+    if (end != std::string::npos) names.insert(line.substr(3, end - 3));
+  }
+  return names;
+}
+
+}  // namespace
+
+TEST(HmiApiTable, NamesAreUniqueAndHaveHandlers) {
+  std::set<std::string> seen;
+  for (const Api::Action& a : Api::actions()) {
+    EXPECT_TRUE(seen.insert(a.name).second) << a.name << " twice";
+    EXPECT_NE(a.handler, nullptr) << a.name;
+    EXPECT_EQ(Api::find_action(a.name), &a);
+  }
+  EXPECT_EQ(Api::find_action("no_such_action"), nullptr);
+}
+
+TEST(HmiApiTable, DocShowsTheCodesTable) {
+  std::string doc = read_file(kDoc);
+  const size_t b = doc.find(kBegin), e = doc.find(kEnd);
+  ASSERT_NE(b, std::string::npos) << kDoc << " has no '" << kBegin << "'";
+  ASSERT_NE(e, std::string::npos) << kDoc << " has no '" << kEnd << "'";
+  ASSERT_LT(b, e);
+  const std::string shown = doc.substr(b + kBegin.size(), e - b - kBegin.size());
+  const std::string want = render_table();
+  if (std::getenv("CNC_WRITE_DOCS") != nullptr && shown != want) {
+    doc.replace(b + kBegin.size(), e - b - kBegin.size(), want);
+    std::ofstream(kDoc) << doc;
+    GTEST_SKIP() << "wrote the actions table into " << kDoc;
+  }
+  std::set<std::string> code;
+  for (const Api::Action& a : Api::actions()) code.insert(a.name);
+  const std::set<std::string> docs = doc_actions(shown);
+  for (const auto& n : code) EXPECT_TRUE(docs.count(n)) << "action '" << n << "' is missing from " << kDoc;
+  for (const auto& n : docs) EXPECT_TRUE(code.count(n)) << kDoc << " documents '" << n << "', which the API does not have";
+  EXPECT_EQ(shown, want) << kDoc << "'s table differs from services/hmi/api.cc's (CNC_WRITE_DOCS=1 writes it)";
+}
+
+// The dispatcher with no HTTP: a client is a number, its answers are collected.
+class HmiApi : public ::testing::Test {
+ protected:
+  HmiApi()
+      : cfg_(cnc::config::load_machine_config(std::string(CNC_SOURCE_DIR) + "/config/machines/sim3.yaml")),
+        bus_("memq://") {
+    cnc::hmi::Outbox out;
+    out.broadcast = [this](const json& j, bool) { broadcast_.push_back(j); };
+    out.send_to = [this](uint64_t client, const json& j) {
+      EXPECT_EQ(client, 7u);
+      sent_.push_back(j);
+    };
+    cnc::hmi::ApiOptions opt;
+    opt.machine_file = "/nonexistent.yaml";
+    opt.plan_exe = "/nonexistent/cnc-plan";
+    opt.logexport_exe = "/nonexistent/cnc-logexport";
+    opt.make_report = "/nonexistent/make_report.py";
+    opt.runs_dir = "/nonexistent";
+    api_ = std::make_unique<Api>(cfg_, bus_, opt, out);
+  }
+  ~HmiApi() override { api_->stop(); }
+  json last() { return sent_.empty() ? json() : sent_.back(); }
+
+  cnc::config::MachineConfig cfg_;
+  cnc::bus::Bus bus_;
+  std::unique_ptr<Api> api_;
+  std::vector<json> sent_, broadcast_;
+};
+
+TEST_F(HmiApi, Hello) {
+  api_->open(7, true, "op");
+  ASSERT_GE(sent_.size(), 3u);
+  EXPECT_EQ(sent_[0]["t"], "hello");
+  EXPECT_EQ(sent_[0]["machine"], cfg_.name);
+  EXPECT_EQ(sent_[0]["axes"].size(), cfg_.axes.size());
+  EXPECT_EQ(sent_[0]["user"], "op");
+  EXPECT_EQ(sent_[1]["t"], "program");
+  EXPECT_EQ(last()["t"], "alarms");
+}
+
+TEST_F(HmiApi, AnswersByTheTable) {
+  api_->message(7, true, R"({"id": 1, "action": "ping"})");
+  EXPECT_EQ(last(), (json{{"t", "pong"}, {"id", 1}}));
+  api_->message(7, true, "{not json");
+  EXPECT_EQ(last()["ok"], false);
+  EXPECT_TRUE(last()["id"].is_null());
+  EXPECT_EQ(last()["text"].get<std::string>().rfind("not JSON: ", 0), 0u);
+  api_->message(7, true, R"({"id": 2, "action": "fly"})");
+  EXPECT_EQ(last(), (json{{"t", "result"}, {"id", 2}, {"ok", false}, {"text", "unknown action 'fly'"}}));
+  api_->message(7, true, R"({"id": 3, "action": "override", "value": "fast"})");
+  EXPECT_EQ(last()["text"], "override: 'value' must be a number");
+  api_->message(7, true, R"({"id": 4, "action": "jog", "axis": "Q"})");
+  EXPECT_EQ(last()["text"], "jog: the machine has no axis \"Q\"");
+  api_->message(7, true, R"({"id": 5, "action": "mdi"})");
+  EXPECT_EQ(last()["text"], "mdi: no line");
+  api_->message(7, true, R"({"id": 6, "action": "load", "path": "../x.ngc"})");
+  EXPECT_EQ(last()["text"].get<std::string>().rfind("load refused: ", 0), 0u);
+}
+
+TEST_F(HmiApi, ViewOnlyClientsMayOnlyLook) {
+  for (const Api::Action& a : Api::actions()) {
+    sent_.clear();
+    api_->message(7, false, json{{"id", 9}, {"action", a.name}}.dump());
+    const bool refused = !sent_.empty() && sent_.back()["text"] == "view only: log in to operate the machine";
+    EXPECT_EQ(refused, !a.view_only) << a.name;
+  }
+  api_->message(7, false, R"({"id": 10, "action": "fly"})");
+  EXPECT_EQ(last()["text"], "view only: log in to operate the machine");
+}
