@@ -26,7 +26,8 @@ sys.path.insert(0, HERE)
 
 
 def sha(data):
-    return hashlib.sha256(data).hexdigest()[:16]
+    # Messages name files by absolute path: the same program in another checkout is the same.
+    return hashlib.sha256(data.replace(ROOT.encode(), b'$SRC')).hexdigest()[:16]
 
 
 def programs(generate, work):
