@@ -74,18 +74,15 @@ PACKAGES=(
   clang libclang-rt-14-dev               # libFuzzer with ASan and UBSan: tests/fuzz/run (optional)
 )
 
-# Service name -> executable, in start order. The logger starts first and stops
-# last so that it records everything the others publish, their final heartbeats too.
-SERVICES=(logger servo-sim drive-bridge monitor program-server interpolator hmi)
-declare -A EXE=(
-  [logger]=services/cnc-logger
-  [servo-sim]=tools/cnc-servo-sim
-  [drive-bridge]=services/cnc-drive-bridge
-  [monitor]=services/cnc-monitor
-  [program-server]=services/cnc-program-server
-  [interpolator]=services/cnc-interpolator
-  [hmi]=services/cnc-hmi
-)
+# Service name -> executable, in start order (config/services.txt, the one list).
+SERVICES=()
+declare -A EXE=()
+while read -r _svc _exe _; do
+  case "$_svc" in ''|'#'*) continue ;; esac
+  SERVICES+=("$_svc")
+  EXE[$_svc]="$_exe"
+done <"$ROOT/config/services.txt"
+unset _svc _exe
 
 say() { printf '%s\n' "cnc: $*" >&2; }
 die() { say "$*"; exit 2; }

@@ -65,15 +65,20 @@ start() {
   TEST_PIDS[$name]=$!
 }
 
+# services_list: config/services.txt, the cell's services in start order (name, executable).
+services_list() { grep -v -e '^[[:space:]]*#' -e '^[[:space:]]*$' "$(dirname "${BASH_SOURCE[0]}")/../../config/services.txt"; }
+
 # start_cell [--no-monitor]: the cell's services on machine $M, as every live test
-# starts them: the drive bridge, the monitor (unless --no-monitor), the program server
-# and the interpolator. The logger and the drives (servo-sim, with each test's own
-# options) come first, from the test itself.
+# starts them, in the list's order: all but the logger and the drives (servo-sim, with
+# each test's own options), which the test starts first itself, and the HMI, which
+# only its own test starts; the monitor unless --no-monitor.
 start_cell() {
-  start drive-bridge "$BUILD/services/cnc-drive-bridge" --machine "$M"
-  [ "${1:-}" = --no-monitor ] || start monitor "$BUILD/services/cnc-monitor" --machine "$M"
-  start program-server "$BUILD/services/cnc-program-server" --machine "$M"
-  start interpolator "$BUILD/services/cnc-interpolator" --machine "$M"
+  local s exe
+  while read -r s exe _; do
+    case "$s" in logger|servo-sim|hmi) continue ;; esac
+    [ "$s" = monitor ] && [ "${1:-}" = --no-monitor ] && continue
+    start "$s" "$BUILD/$exe" --machine "$M"
+  done < <(services_list)
 }
 
 # stop NAME SIGNAL: signals the process and checks that it exits 0 within 10 s.
