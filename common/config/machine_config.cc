@@ -9,11 +9,19 @@
 #include <set>
 
 #include "common/config/yaml_reader.h"
+#include "common/drive/transport.h"
 #include "common/program/block.h"
 
 namespace cnc::config {
 namespace {
 constexpr double kInf = std::numeric_limits<double>::max();
+using drive::Transport;
+
+std::set<std::string> transport_names() {
+  std::set<std::string> names;
+  for (const auto& [t, n] : drive::kTransports) names.emplace(n);
+  return names;
+}
 
 // The keys of each mapping, in the order the reader reads them. Each reader below is
 // given its table: it may read no other key, and the table rejects every other key.
@@ -88,7 +96,7 @@ std::string beside(const MapReader& r, const std::string& v) {
 
 DriveConfig read_drive(MapReader r) {
   DriveConfig d;
-  d.transport = r.get_choice("transport", d.transport, {"modbus_tcp", "modbus_rtu", "loopback"});
+  d.transport = r.get_choice("transport", d.transport, transport_names());
   d.host = r.get_string("host", d.host);
   d.port = static_cast<int>(r.get_int("port", d.port, 1, 65535));
   d.device = r.get_string("device", d.device);
@@ -99,7 +107,8 @@ DriveConfig read_drive(MapReader r) {
   d.profile = r.get_string("profile", d.profile);
   d.response_timeout_s = r.get_double("response_timeout_s", d.response_timeout_s, 0.001, 5.0);
   if (d.profile.empty()) r.fail("profile", "must not be empty");
-  if (d.transport == "modbus_rtu" && d.device.empty()) r.fail("device", "is required for transport modbus_rtu");
+  if (drive::transport_named(d.transport) == Transport::kModbusRtu && d.device.empty())
+    r.fail("device", "is required for transport modbus_rtu");
   r.finish();
   return d;
 }
@@ -385,8 +394,11 @@ MachineConfig read_machine(MapReader top) {
 }  // namespace
 
 std::string DriveConfig::link_key() const {
-  if (transport == "modbus_tcp") return "tcp://" + host + ":" + std::to_string(port);
-  if (transport == "modbus_rtu") return "rtu://" + device;
+  switch (drive::transport_named(transport).value_or(Transport::kLoopback)) {
+    case Transport::kModbusTcp: return "tcp://" + host + ":" + std::to_string(port);
+    case Transport::kModbusRtu: return "rtu://" + device;
+    case Transport::kLoopback: break;
+  }
   return "loopback";
 }
 

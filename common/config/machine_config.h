@@ -11,7 +11,7 @@
 namespace cnc::config {
 
 struct DriveConfig {
-  std::string transport = "modbus_tcp";  // modbus_tcp | modbus_rtu | loopback
+  std::string transport = "modbus_tcp";  // a name of common/drive/transport.h
   std::string host = "127.0.0.1";        // modbus_tcp
   int port = 1502;                       // modbus_tcp
   std::string device;                    // modbus_rtu: serial device

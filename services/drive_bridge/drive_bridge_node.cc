@@ -11,8 +11,8 @@
 #include "cnc/lcmt_alarm.hpp"
 #include "cnc/lcmt_axis_status.hpp"
 #include "common/config/yaml_reader.h"
+#include "common/drive/link_factory.h"
 #include "common/drive/loopback_link.h"
-#include "common/drive/modbus_link.h"
 #include "common/util/clock.h"
 
 namespace cnc::bridge {
@@ -39,7 +39,6 @@ DriveBridgeNode::DriveBridgeNode(const config::MachineConfig& cfg, bus::Bus& bus
       health_(bus, cfg.channel(ch::kAlarm), "cnc-drive-bridge", cnc::lcmt_alarm::FAULT) {
   std::map<std::string, const drive::DriveProfile*> by_file;
   std::map<std::string, LinkWorker*> by_link;
-  drive::LoopbackLink* loopback = nullptr;
   for (size_t i = 0; i < cfg.axes.size(); ++i) {
     const config::AxisConfig& a = cfg.axes[i];
     const config::DriveConfig& d = a.drive;
@@ -54,20 +53,13 @@ DriveBridgeNode::DriveBridgeNode(const config::MachineConfig& cfg, bus::Bus& bus
     const drive::DriveProfile* profile = by_file[file];
     const std::string key = d.link_key();
     if (!by_link.count(key)) {
-      if (d.transport == "modbus_tcp") {
-        links_.push_back(drive::ModbusLink::tcp(d.host, d.port, d.response_timeout_s));
-      } else if (d.transport == "modbus_rtu") {
-        const char parity = d.parity == "even" ? 'E' : d.parity == "odd" ? 'O' : 'N';
-        links_.push_back(drive::ModbusLink::rtu(d.device, d.baud, parity, d.stop_bits, d.response_timeout_s));
-      } else {
-        auto lb = std::make_unique<drive::LoopbackLink>();
-        loopback = lb.get();
-        links_.push_back(std::move(lb));
-      }
+      links_.push_back(drive::make_link(d));
       workers_.push_back(std::make_unique<LinkWorker>(*links_.back(), cfg.drive_bridge));
       by_link[key] = workers_.back().get();
     }
-    if (d.transport == "loopback") loopback->add_drive(d.unit_id, *profile, a.home_mm);
+    // The in-process link emulates its drives: each needs its profile and start.
+    if (auto* loopback = dynamic_cast<drive::LoopbackLink*>(&by_link[key]->link()))
+      loopback->add_drive(d.unit_id, *profile, a.home_mm);
     Axis ax;
     ax.profile = profile;
     ax.worker = by_link[key];

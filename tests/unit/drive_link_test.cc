@@ -12,6 +12,7 @@
 #include "common/drive/cia402_profile.h"
 #include "common/drive/drive_io.h"
 #include "common/drive/drive_profile.h"
+#include "common/drive/link_factory.h"
 #include "common/drive/loopback_link.h"
 
 namespace cnc::drive {
@@ -159,6 +160,31 @@ TEST(Link, LostLinkIsReopenedOnTheBackOffSchedule) {
   EXPECT_FALSE(r.link.ensure_open(1.29));  // reachable, but still backing off
   EXPECT_TRUE(r.link.ensure_open(1.31));
   EXPECT_EQ(r.io.exchange(nullptr, r.c), TxResult::kOk);
+}
+
+// One factory for every transport the config accepts; each link is made closed.
+TEST(LinkFactory, MakesTheLinkOfEachTransport) {
+  config::DriveConfig d;
+  d.transport = "modbus_tcp";
+  d.host = "127.0.0.1";
+  d.port = 1502;
+  EXPECT_EQ(make_link(d)->name(), "tcp://127.0.0.1:1502");
+  d.transport = "modbus_rtu";
+  d.device = "/tmp/none";
+  d.baud = 19200;
+  d.parity = "even";
+  d.stop_bits = 1;
+  EXPECT_EQ(make_link(d)->name(), "rtu:///tmp/none@19200-8E1");
+  d.transport = "loopback";
+  auto lb = make_link(d);
+  EXPECT_NE(dynamic_cast<LoopbackLink*>(lb.get()), nullptr);
+  EXPECT_FALSE(lb->is_open());
+  for (const auto& [t, name] : kTransports) {
+    EXPECT_EQ(transport_named(name), t);
+    EXPECT_EQ(transport_name(t), name);
+  }
+  d.transport = "ethercat";
+  EXPECT_THROW(make_link(d), std::invalid_argument);
 }
 
 }  // namespace

@@ -34,7 +34,7 @@
 #include "common/bus/bus.h"
 #include "common/config/machine_config.h"
 #include "common/drive/drive_io.h"
-#include "common/drive/modbus_link.h"
+#include "common/drive/link_factory.h"
 #include "common/util/clock.h"
 #include "services/drive_bridge/drive_bridge_node.h"
 #include "common/util/cli.h"
@@ -201,10 +201,9 @@ struct Rate {
 };
 
 Rate exchanges(const cnc::config::MachineConfig& cfg, double seconds) {
-  const auto& d0 = cfg.axes[0].drive;
-  std::unique_ptr<cnc::drive::ModbusLink> link =
-      d0.transport == "modbus_tcp" ? cnc::drive::ModbusLink::tcp(d0.host, d0.port, 0.2)
-                                   : cnc::drive::ModbusLink::rtu(d0.device, d0.baud, 'N', 1, 0.2);
+  cnc::config::DriveConfig d0 = cfg.axes[0].drive;
+  d0.response_timeout_s = 0.2;
+  std::unique_ptr<cnc::drive::Link> link = cnc::drive::make_link(d0);
   const cnc::drive::DriveProfile profile = cnc::drive::load_drive_profile(
       cnc::drive::find_drive_profile(d0.profile, cfg.source_file, ""));
   std::vector<std::unique_ptr<cnc::drive::DriveIo>> io;

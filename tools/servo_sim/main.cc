@@ -47,6 +47,7 @@
 
 #include "common/config/yaml_reader.h"
 #include "common/drive/drive_profile.h"
+#include "common/drive/link_factory.h"
 #include "common/service/service.h"
 #include "common/util/clock.h"
 #include "common/util/realtime.h"
@@ -344,7 +345,8 @@ Simulator::Simulator(const cnc::config::MachineConfig& cfg, const cnc::service::
   for (size_t i = 0; i < cfg.axes.size(); ++i) {
     const auto& a = cfg.axes[i];
     const auto& d = a.drive;
-    if (d.transport != "modbus_tcp" && d.transport != "modbus_rtu") continue;
+    const cnc::drive::Transport transport = cnc::drive::transport_of(d);
+    if (transport == cnc::drive::Transport::kLoopback) continue;  // emulated inside the bridge
     const std::string file = cnc::drive::find_drive_profile(d.profile, cfg.source_file, cfg.drive_profile_dir);
     if (!by_file.count(file)) {
       if (!std::filesystem::exists(file))
@@ -358,7 +360,7 @@ Simulator::Simulator(const cnc::config::MachineConfig& cfg, const cnc::service::
                                                  a.max_accel_mm_s2));
     drives_.back()->set_home_switch(a.sim, a.home.direction);
     all_.push_back(drives_.back().get());
-    if (d.transport == "modbus_tcp") {
+    if (transport == cnc::drive::Transport::kModbusTcp) {
       if (port_ < 0) port_ = d.port;
       if (d.port != port_)
         throw std::runtime_error("axis " + a.name + ": the simulator serves one TCP port; axes use " +
