@@ -7,7 +7,8 @@
 #include <unordered_set>
 #include <cmath>
 #include <stdexcept>
-#include <thread>
+
+#include "common/util/parallel_for.h"
 
 namespace cnc::cam {
 namespace {
@@ -404,22 +405,13 @@ void DropCutter::drop_batch(std::span<const XY> in, std::span<ClPoint> out, int 
                             std::atomic<std::size_t>* done) const {
   if (out.size() != in.size()) throw std::invalid_argument("drop_batch: in and out differ in size");
   constexpr std::size_t kChunk = 256;
-  std::atomic<std::size_t> next{0};
-  auto work = [&] {
-    for (;;) {
-      const std::size_t b = next.fetch_add(kChunk, std::memory_order_relaxed);
-      if (b >= in.size()) return;
-      const std::size_t e = std::min(in.size(), b + kChunk);
-      for (std::size_t i = b; i < e; ++i) out[i] = drop(in[i].x, in[i].y);
-      if (done) done->fetch_add(e - b, std::memory_order_relaxed);
-    }
-  };
-  const int n = std::max(1, threads);
-  std::vector<std::thread> pool;
-  pool.reserve(static_cast<std::size_t>(n - 1));
-  for (int i = 1; i < n; ++i) pool.emplace_back(work);
-  work();
-  for (std::thread& t : pool) t.join();
+  util::parallel_for(
+      in.size(), threads,
+      [&](std::size_t b, std::size_t e) {
+        for (std::size_t i = b; i < e; ++i) out[i] = drop(in[i].x, in[i].y);
+        if (done) done->fetch_add(e - b, std::memory_order_relaxed);
+      },
+      kChunk);
 }
 
 }  // namespace cnc::cam

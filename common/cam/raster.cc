@@ -4,7 +4,8 @@
 #include <cmath>
 #include <atomic>
 #include <stdexcept>
-#include <thread>
+
+#include "common/util/parallel_for.h"
 
 namespace cnc::cam {
 
@@ -65,19 +66,6 @@ RasterPath raster_fixed_step(const DropCutter& dc, const Bounds& bounds, const R
 }
 
 namespace {
-
-// Runs body(i) for i in [0, n) on `threads` threads, indices taken in turn.
-template <class F>
-void parallel_for(std::size_t n, int threads, F&& body) {
-  std::atomic<std::size_t> next{0};
-  auto work = [&] {
-    for (std::size_t i; (i = next.fetch_add(1)) < n;) body(i);
-  };
-  std::vector<std::thread> pool;
-  for (int k = 1; k < threads; ++k) pool.emplace_back(work);
-  work();
-  for (std::thread& t : pool) t.join();
-}
 
 struct PassWalker {
   const DropCutter& dc;
@@ -301,7 +289,7 @@ RasterPath raster_adaptive(const DropCutter& dc, const Bounds& bounds, const Ras
   const std::vector<std::vector<XY>> passes = raster_passes(bounds, spec);
   std::vector<std::vector<std::vector<Vec3>>> per_pass(passes.size());
   std::vector<std::size_t> dropped(passes.size(), 0), corners(passes.size(), 0);
-  parallel_for(passes.size(), std::max(1, threads), [&](std::size_t k) {
+  util::parallel_for(passes.size(), threads, [&](std::size_t k) {
     const XY a = passes[k].front(), b = passes[k].back();
     const double len = std::hypot(b.x - a.x, b.y - a.y);
     if (len > 0) PassWalker{dc, a, b, len, spec, adaptive}.walk(per_pass[k], dropped[k], corners[k]);
@@ -324,7 +312,7 @@ RasterPath raster_adaptive(const DropCutter& dc, const Bounds& bounds, const Ras
 double path_deviation(const DropCutter& dc, const RasterPath& path, int samples, int threads,
                       RasterProgress* progress) {
   std::vector<double> worst(path.cuts.size(), 0);
-  parallel_for(path.cuts.size(), std::max(1, threads), [&](std::size_t k) {
+  util::parallel_for(path.cuts.size(), threads, [&](std::size_t k) {
     const std::vector<Vec3>& cut = path.cuts[k];
     for (std::size_t i = 1; i < cut.size(); ++i) {
       for (int j = 1; j <= samples; ++j) {

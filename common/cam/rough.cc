@@ -9,7 +9,8 @@
 #include <limits>
 #include <mutex>
 #include <stdexcept>
-#include <thread>
+
+#include "common/util/parallel_for.h"
 
 namespace cnc::cam {
 namespace {
@@ -384,30 +385,26 @@ RoughPlan plan_roughing(const Mesh& mesh, const Stock& stock, const RoughSpec& s
       lp.ring_end.push_back(first_end);
     }
   };
-  std::atomic<std::size_t> next{0}, done{0};
+  std::atomic<std::size_t> done{0};
   std::mutex report;
-  std::exception_ptr failure;
-  auto worker = [&] {
-    for (std::size_t i; (i = next.fetch_add(1)) < total;) {
-      try {
-        plan_level(total - 1 - i);
-      } catch (...) {
-        const std::lock_guard<std::mutex> lock(report);
-        if (!failure) failure = std::current_exception();
-      }
-      const std::size_t d = done.fetch_add(1) + 1;
-      if (progress) {
-        const std::lock_guard<std::mutex> lock(report);
-        progress(d, total);
-      }
+  auto level_done = [&] {
+    const std::size_t d = done.fetch_add(1) + 1;
+    if (progress) {
+      const std::lock_guard<std::mutex> lock(report);
+      progress(d, total);
     }
   };
-  const int nthreads = std::max(1, std::min<int>(spec.threads, static_cast<int>(total)));
-  std::vector<std::thread> pool;
-  for (int t = 1; t < nthreads; ++t) pool.emplace_back(worker);
-  worker();
-  for (std::thread& t : pool) t.join();
-  if (failure) std::rethrow_exception(failure);
+  // Levels top-down; a level that fails still counts as done, and the first
+  // failure is rethrown once every level has run.
+  util::parallel_for(total, spec.threads, [&](std::size_t i) {
+    try {
+      plan_level(total - 1 - i);
+    } catch (...) {
+      level_done();
+      throw;
+    }
+    level_done();
+  });
   double above = stock.zmax;
   for (std::size_t k = total; k-- > 0;) {
     LevelPath& lp = per_level[k];

@@ -5,7 +5,8 @@
 #include <cmath>
 #include <limits>
 #include <numbers>
-#include <thread>
+
+#include "common/util/parallel_for.h"
 
 namespace cnc::process {
 namespace {
@@ -268,13 +269,7 @@ ZMapStats ZMap::cut(const BallCutter& tool, const std::vector<ToolSample>& path,
     const int tr0 = tile_rows * t / threads, tr1 = tile_rows * (t + 1) / threads;
     bands.emplace_back(*this, tr0 * kTile, std::min(ny_, tr1 * kTile));
   }
-  if (threads == 1) {
-    bands[0].sweep(steps, tool);
-  } else {
-    std::vector<std::thread> pool;
-    for (ZMapBand& b : bands) pool.emplace_back([&b, &steps, &tool] { b.sweep(steps, tool); });
-    for (std::thread& th : pool) th.join();
-  }
+  util::parallel_for(bands.size(), threads, [&](std::size_t k) { bands[k].sweep(steps, tool); });
   const size_t tiles = static_cast<size_t>((nx_ + kTile - 1) / kTile) * static_cast<size_t>(tile_rows);
   tile_max_.assign(tiles, 0.0f);
   for (const ZMapBand& b : bands) b.store();
