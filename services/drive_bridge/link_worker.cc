@@ -25,7 +25,8 @@ LinkWorker::~LinkWorker() {
 void LinkWorker::add_axis(int axis_index, const drive::DriveProfile& profile, int unit) {
   if (slots_.size() >= kMaxSlots) throw std::runtime_error("too many drives on link " + link_.name());
   auto s = std::make_unique<Slot>();
-  s->io = std::make_unique<drive::DriveIo>(profile, unit, link_);
+  s->dev = std::make_unique<drive::ModbusAxisDrive>(profile, unit, link_);
+  s->pdo = image_.add(s->dev->layout());
   slots_.push_back(std::move(s));
   axis_index_.push_back(axis_index);
 }
@@ -84,7 +85,7 @@ void LinkWorker::mark_lost(Slot& s) {
   s.work.answering = false;
   s.have_written = false;
   s.hold_valid = false;
-  s.io->forget();
+  forget(s);
   s.work.have_status = false;
 }
 
@@ -94,7 +95,7 @@ void LinkWorker::round(double now_s) {
   for (size_t i = 0; i < n; ++i) cmds[i] = slots_[i]->cmd.read();
   if (!link_.is_open()) {
     if (link_.ensure_open(now_s)) {
-      for (size_t i = 0; i < n; ++i) slots_[i]->io->forget();
+      for (size_t i = 0; i < n; ++i) forget(*slots_[i]);
     } else {
       for (size_t i = 0; i < n; ++i) {
         Slot& s = *slots_[i];
@@ -106,44 +107,46 @@ void LinkWorker::round(double now_s) {
   for (size_t i = 0; i < n && link_.is_open(); ++i) {
     Slot& s = *slots_[i];
     const AxisCommand& c = cmds[i];
-    drive::DriveIo& io = *s.io;
     // The target: the command while following an enabled drive; else where the
     // drive is (disabled: tracking its position, so enabling never jumps).
-    double target = 0;
-    bool write = false;
+    const drive::AxisInputs last = inputs(s);
+    drive::AxisOutputs out;
     bool holding = false;
-    if (io.have_status()) {
-      const bool enabled = io.status().enabled;
+    if (last.valid) {
+      const bool enabled = last.status.enabled;
       if (c.follow && enabled) {
-        target = c.cmd_mm;
+        out.target_mm = c.cmd_mm;
         s.hold_valid = true;
         holding = true;
       } else if (enabled && s.hold_valid) {
-        target = s.work.hold_mm;
+        out.target_mm = s.work.hold_mm;
         holding = true;
       } else {
-        target = io.actual_mm();
+        out.target_mm = last.actual_mm;
         s.hold_valid = enabled;
       }
-      s.work.hold_mm = target;
-      write = true;
+      s.work.hold_mm = out.target_mm;
+      out.write = true;
     }
-    const drive::TxResult r = io.exchange(write ? &target : nullptr, s.work.counters);
+    const bool write = out.write;
+    drive::put_pdo(image_.outputs(s.pdo), out);
+    const drive::TxResult r = s.dev->exchange(image_.outputs(s.pdo), image_.inputs(s.pdo), s.work.counters);
     if (r == drive::TxResult::kOk) {
+      const drive::AxisInputs in = inputs(s);
       if (write && s.have_written) {
         // The drive's own following error where its profile maps it (its position
         // demand, which ramps to the targets we write, minus actual); otherwise the
         // last target written minus actual, which also holds up to one write
         // interval of the link's delay.
-        s.work.lag_mm = s.written_mm - io.actual_mm();
-        s.work.fe_mm = io.reports_following_error() ? io.drive_following_error_mm() : s.work.lag_mm;
+        s.work.lag_mm = s.written_mm - in.actual_mm;
+        s.work.fe_mm = in.reports_following_error ? in.following_error_mm : s.work.lag_mm;
         ++s.work.fe_samples;
       }
       s.have_written = write;
-      s.written_mm = io.written_mm();
-      s.work.has_home_latch = io.has_home_latch();
-      s.work.home_latch_mm = io.home_latch_mm();
-      s.work.home_latch_count = io.home_latch_count();
+      s.written_mm = in.written_mm;
+      s.work.has_home_latch = in.has_home_latch;
+      s.work.home_latch_mm = in.home_latch_mm;
+      s.work.home_latch_count = in.home_latch_count;
       if (write && c.follow && probe_) probe_(axis_index_[i], c.cmd_cycle, now_s);
       s.last_answer_s = now_s;
       if (s.lost) {
@@ -153,11 +156,11 @@ void LinkWorker::round(double now_s) {
       s.work.answering = true;
       s.work.holding = holding;
       s.work.have_status = true;
-      s.work.statusword = io.statusword();
-      s.work.status = io.status();
-      s.work.error_code = io.error_code();
-      s.work.actual_mm = io.actual_mm();
-      const drive::TxResult rc = io.control(c.goal, s.work.counters);
+      s.work.statusword = in.statusword;
+      s.work.status = in.status;
+      s.work.error_code = in.error_code;
+      s.work.actual_mm = in.actual_mm;
+      const drive::TxResult rc = s.dev->control(c.goal, s.work.counters);
       if (rc == drive::TxResult::kLinkLost) {
         for (auto& other : slots_) mark_lost(*other);
       }

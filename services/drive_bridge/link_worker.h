@@ -1,6 +1,7 @@
 #pragma once
 // The Modbus side of the drive bridge: one worker per link (TCP endpoint, serial
-// line, loopback) runs the register transactions of the drives on it, on its own
+// line, loopback) runs the cycle of the drives on it (each a device with its slice
+// of the link's process image, common/drive/device.h), on its own
 // thread, so the servo loop never blocks on I/O (mb2hal keeps Modbus out of the
 // real-time thread the same way). Each round it writes every drive's latest
 // command, reads status and position, steps the profile's state machine toward
@@ -30,7 +31,8 @@
 #include <vector>
 
 #include "common/config/machine_config.h"
-#include "common/drive/drive_io.h"
+#include "common/drive/axis_drive.h"
+#include "common/drive/device.h"
 #include "common/drive/link.h"
 #include "common/util/triple_buffer.h"
 
@@ -91,7 +93,8 @@ class LinkWorker {
  private:
   static constexpr size_t kMaxSlots = 16;
   struct Slot {
-    std::unique_ptr<drive::DriveIo> io;
+    std::unique_ptr<drive::Device> dev;  // an axis drive: its slice of image_ is drive::kAxisLayout
+    size_t pdo = 0;                      // its index in image_
     util::TripleBuffer<AxisCommand> cmd;  // servo thread -> worker
     util::TripleBuffer<AxisReport> rep;   // worker -> servo thread
     // Worker-only state.
@@ -104,10 +107,13 @@ class LinkWorker {
   };
   void run();
   void mark_lost(Slot& s);
+  void forget(Slot& s) { s.dev->forget(image_.inputs(s.pdo)); }
+  drive::AxisInputs inputs(const Slot& s) { return drive::get_pdo<drive::AxisInputs>(image_.inputs(s.pdo)); }
 
   drive::Link& link_;
   config::DriveBridgeConfig cfg_;
   std::vector<std::unique_ptr<Slot>> slots_;
+  drive::ProcessImage image_;  // the cyclic process data of the drives on this link
   std::vector<int> axis_index_;
   WriteProbe probe_;
   sem_t wake_;
