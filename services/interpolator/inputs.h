@@ -6,7 +6,7 @@
 
 #include "cnc/lcmt_interp_input.hpp"
 #include "cnc/lcmt_program_command.hpp"
-#include "services/interpolator/interpolator.h"
+#include "common/motion/interpolator.h"
 
 namespace cnc::interp {
 

@@ -33,11 +33,11 @@
 #include "cnc/lcmt_setpoint.hpp"
 #include "common/bus/bus.h"
 #include "common/config/machine_config.h"
+#include "common/motion/feed_policy.h"
+#include "common/motion/interpolator.h"
+#include "common/motion/planner_thread.h"
 #include "common/service/bus_health.h"
 #include "common/service/peer_watch.h"
-#include "services/interpolator/feed_policy.h"
-#include "services/interpolator/interpolator.h"
-#include "services/interpolator/planner_thread.h"
 
 namespace cnc::interp {
 

@@ -20,9 +20,9 @@
 
 #include "common/config/machine_config.h"
 #include "common/config/yaml_reader.h"
-#include "services/interpolator/feed_policy.h"
-#include "services/interpolator/interpolator.h"
-#include "services/interpolator/planner_thread.h"
+#include "common/motion/feed_policy.h"
+#include "common/motion/interpolator.h"
+#include "common/motion/planner_thread.h"
 #include "services/monitor/monitor.h"
 #include "services/part_program_server/program_server.h"
 #include "tests/unit/alloc_guard.h"

@@ -14,7 +14,7 @@
 #include <vector>
 
 #include "common/config/machine_config.h"
-#include "services/interpolator/interpolator.h"
+#include "common/motion/interpolator.h"
 #include "tests/unit/program_test_util.h"
 
 namespace cnc::interp {

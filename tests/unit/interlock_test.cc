@@ -14,8 +14,8 @@
 #include "cnc/lcmt_setpoint.hpp"
 #include "common/bus/bus.h"
 #include "common/config/machine_config.h"
+#include "common/motion/interpolator.h"
 #include "services/interpolator/inputs.h"
-#include "services/interpolator/interpolator.h"
 #include "services/part_program_server/interlock.h"
 #include "services/part_program_server/program_server_node.h"
 

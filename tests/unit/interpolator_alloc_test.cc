@@ -13,9 +13,9 @@
 #include <vector>
 
 #include "common/config/machine_config.h"
-#include "services/interpolator/feed_policy.h"
-#include "services/interpolator/interpolator.h"
-#include "services/interpolator/planner_thread.h"
+#include "common/motion/feed_policy.h"
+#include "common/motion/interpolator.h"
+#include "common/motion/planner_thread.h"
 #include "services/part_program_server/program_server.h"
 #include "tests/unit/alloc_guard.h"
 

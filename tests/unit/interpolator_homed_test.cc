@@ -9,10 +9,10 @@
 
 #include "cnc/lcmt_interp_input.hpp"
 #include "common/config/machine_config.h"
+#include "common/motion/interpolator.h"
 #include "common/program/block.h"
 #include "common/program/block_msg.h"
 #include "services/interpolator/inputs.h"
-#include "services/interpolator/interpolator.h"
 
 namespace cnc::interp {
 namespace {

@@ -8,7 +8,7 @@
 #include "common/config/machine_config.h"
 #include "common/geometry/chord.h"
 #include "common/geometry/sample_curves.h"
-#include "services/interpolator/interpolator.h"
+#include "common/motion/interpolator.h"
 
 namespace cnc::interp {
 namespace {

@@ -37,9 +37,9 @@
 #include <vector>
 
 #include "common/config/machine_config.h"
+#include "common/motion/feed_policy.h"
+#include "common/motion/interpolator.h"
 #include "common/motion/path_segment.h"
-#include "services/interpolator/feed_policy.h"
-#include "services/interpolator/interpolator.h"
 #include "tests/unit/program_test_util.h"
 
 namespace cnc::proptest {

@@ -13,9 +13,9 @@
 
 #include "cnc/lcmt_interp_input.hpp"
 #include "common/config/machine_config.h"
+#include "common/motion/interpolator.h"
 #include "common/program/block.h"
 #include "services/interpolator/inputs.h"
-#include "services/interpolator/interpolator.h"
 
 namespace cnc::interp {
 namespace {

@@ -20,9 +20,9 @@
 
 #include "common/config/machine_config.h"
 #include "common/motion/chord_error.h"
+#include "common/motion/interpolator.h"
 #include "common/motion/path_segment.h"
 #include "common/program/block.h"
-#include "services/interpolator/interpolator.h"
 
 namespace cnc::interp {
 namespace {

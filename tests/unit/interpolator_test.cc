@@ -13,8 +13,8 @@
 #include <vector>
 
 #include "common/config/machine_config.h"
+#include "common/motion/interpolator.h"
 #include "common/program/block.h"
-#include "services/interpolator/interpolator.h"
 
 namespace cnc::interp {
 namespace {

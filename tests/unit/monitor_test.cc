@@ -10,10 +10,10 @@
 #include <vector>
 
 #include "common/config/machine_config.h"
-#include "services/interpolator/interpolator.h"
+#include "common/motion/interpolator.h"
 #include "services/monitor/monitor.h"
-#include "tests/unit/alloc_guard.h"
 #include "services/part_program_server/program_server.h"
+#include "tests/unit/alloc_guard.h"
 
 namespace cnc::monitor {
 namespace {

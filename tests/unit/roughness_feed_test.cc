@@ -8,8 +8,8 @@
 
 #include "common/config/machine_config.h"
 #include "common/geometry/nurbs.h"
+#include "common/motion/interpolator.h"
 #include "common/process/roughness.h"
-#include "services/interpolator/interpolator.h"
 #include "services/part_program_server/program_server.h"
 
 namespace cnc::interp {

@@ -13,7 +13,7 @@
 #include <vector>
 
 #include "common/config/machine_config.h"
-#include "services/interpolator/interpolator.h"
+#include "common/motion/interpolator.h"
 #include "services/part_program_server/program_server.h"
 #include "tests/unit/temp_dir.h"
 

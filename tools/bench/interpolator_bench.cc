@@ -32,12 +32,12 @@
 #include <sys/resource.h>
 #include <unistd.h>
 
+#include "common/motion/feed_policy.h"
+#include "common/motion/interpolator.h"
+#include "common/motion/planner_thread.h"
 #include "common/service/service.h"
 #include "common/util/realtime.h"
 #include "common/util/signals.h"
-#include "services/interpolator/feed_policy.h"
-#include "services/interpolator/interpolator.h"
-#include "services/interpolator/planner_thread.h"
 
 namespace {
 

@@ -14,10 +14,10 @@
 #include <memory>
 #include <string>
 
+#include "common/motion/feed_policy.h"
+#include "common/motion/interpolator.h"
 #include "common/service/service.h"
 #include "common/util/signals.h"
-#include "services/interpolator/feed_policy.h"
-#include "services/interpolator/interpolator.h"
 #include "services/part_program_server/program_server.h"
 
 namespace {

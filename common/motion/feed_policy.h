@@ -13,7 +13,7 @@
 #include <utility>
 
 #include "common/config/machine_config.h"
-#include "services/interpolator/interpolator.h"
+#include "common/motion/interpolator.h"
 
 namespace cnc::interp {
 

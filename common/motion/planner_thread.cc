@@ -1,4 +1,4 @@
-#include "services/interpolator/planner_thread.h"
+#include "common/motion/planner_thread.h"
 
 #include <pthread.h>
 #include <sched.h>

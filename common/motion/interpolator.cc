@@ -1,4 +1,4 @@
-#include "services/interpolator/interpolator.h"
+#include "common/motion/interpolator.h"
 
 #include <algorithm>
 #include <bit>

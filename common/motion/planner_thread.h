@@ -9,7 +9,7 @@
 #include <cstdint>
 #include <thread>
 
-#include "services/interpolator/planner.h"
+#include "common/motion/planner.h"
 #include "common/util/spsc_ring.h"
 
 namespace cnc::interp {

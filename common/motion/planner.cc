@@ -1,4 +1,4 @@
-#include "services/interpolator/planner.h"
+#include "common/motion/planner.h"
 
 #include <algorithm>
 #include <cmath>

@@ -34,8 +34,8 @@
 
 #include "common/config/machine_config.h"
 #include "common/motion/path_segment.h"
+#include "common/motion/planner.h"
 #include "common/program/block.h"
-#include "services/interpolator/planner.h"
 
 namespace cnc::interp {
 
