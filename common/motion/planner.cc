@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include "common/geometry/chord.h"
+#include "common/motion/corner.h"
 #include "common/process/roughness.h"
 
 namespace cnc::interp {
@@ -752,9 +753,9 @@ double Planner::corner_speed(const AxisVec& t0, const AxisVec& t1, double a_path
       *stop = true;
       continue;
     }
-    v = std::min(v, std::min(0.5 * accel_left * T, 0.5 * jerk_left * T * T) / dt);
+    v = std::min(v, motion::corner_step_mm_s(0.5 * accel_left, jerk_left, T) / dt);
   }
-  if (dt2 > 0) v = std::min(v, std::min(cfg_.path_accel_mm_s2 * T, 0.5 * cfg_.path_jerk_mm_s3 * T * T) / std::sqrt(dt2));
+  if (dt2 > 0) v = std::min(v, motion::corner_step_mm_s(cfg_.path_accel_mm_s2, cfg_.path_jerk_mm_s3, T) / std::sqrt(dt2));
   return v;
 }
 

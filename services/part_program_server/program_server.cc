@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <cstring>
 
+#include "common/motion/corner.h"
 #include "common/motion/path_segment.h"
 
 namespace cnc::pps {
@@ -208,11 +209,11 @@ ProgramSetup program_setup(const config::MachineConfig& cfg) {
   s.builder.fit_max_turn_deg = cfg.program.g64_fit_max_turn_deg;
   s.builder.ipo_period_s = cfg.ipo_period_s;
   {
-    // The interpolator's corner rule (planner.cc, corner_speed) with the path limits.
+    // The planner's corner step (common/motion/corner.h) with the path's and every axis's limits.
     const double T = cfg.ipo_period_s;
-    s.builder.corner_dv_mm_s = std::min(cfg.path_accel_mm_s2 * T, 0.5 * cfg.path_jerk_mm_s3 * T * T);
+    s.builder.corner_dv_mm_s = motion::corner_step_mm_s(cfg.path_accel_mm_s2, cfg.path_jerk_mm_s3, T);
     for (const auto& a : cfg.axes)
-      s.builder.corner_dv_mm_s = std::min(s.builder.corner_dv_mm_s, std::min(a.max_accel_mm_s2 * T, 0.5 * a.max_jerk_mm_s3 * T * T));
+      s.builder.corner_dv_mm_s = std::min(s.builder.corner_dv_mm_s, motion::corner_step_mm_s(a.max_accel_mm_s2, a.max_jerk_mm_s3, T));
   }
   for (const auto& a : cfg.axes) s.travel_mm.emplace_back(a.min_mm, a.max_mm);
   s.safe_z_mm = cfg.operator_.safe_z_mm;
