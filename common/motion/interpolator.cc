@@ -8,6 +8,7 @@
 #include <stdexcept>
 
 #include "common/geometry/chord.h"
+#include "common/motion/feed_override.h"
 #include "common/process/roughness.h"
 
 namespace cnc::interp {
@@ -458,7 +459,7 @@ bool Interpolator::apply_command(const Command& cmd) {
         r.kind = PlanRequest::Kind::kOverride;
         r.epoch = epoch_;
         const bool rapid = cmd.kind == Command::Kind::kRapidOverride;
-        r.feed_override = rapid ? override_ : std::clamp(cmd.feed_override, 0.0, 1.5);
+        r.feed_override = rapid ? override_ : std::clamp(cmd.feed_override, 0.0, motion::kMaxFeedOverride);
         r.rapid_override = rapid ? std::clamp(cmd.feed_override, 0.0, 1.0) : rapid_override_;
         if (!push_request(r)) return false;
         override_ = r.feed_override;

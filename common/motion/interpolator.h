@@ -65,7 +65,7 @@ struct Command {
     kRapidOverride = 18
   };
   Kind kind = Kind::kStart;
-  double feed_override = 1.0;  // kOverride: 0.0 .. 1.5; kRapidOverride: 0.0 .. 1.0
+  double feed_override = 1.0;  // kOverride: 0.0 .. kMaxFeedOverride; kRapidOverride: 0.0 .. 1.0
   // kReset: the program is dropped, the path is at rest at this position (where
   // the drives stand, as the node took it from AXIS_STATUS); one finite value per axis.
   std::array<double, program::kMaxAxes> position_mm{};

@@ -7,6 +7,7 @@
 
 #include "common/geometry/chord.h"
 #include "common/motion/corner.h"
+#include "common/motion/feed_override.h"
 #include "common/process/roughness.h"
 
 namespace cnc::interp {
@@ -199,7 +200,7 @@ void Planner::force_limits(const Planned& p, std::vector<double>* us, std::vecto
   // tooth (in XY) the deflection allows, as a path speed.
   v_force->assign(us->size(), kInf);
   const double flutes = force_->tool().flutes;
-  const double v_top = 1.5 * p.v_prog;  // the most an override can ask
+  const double v_top = motion::kMaxFeedOverride * p.v_prog;  // the most an override can ask
   if (!force_prev_valid_) force_prev_ = tip_at(u0);
   for (size_t i = 0; i < us->size(); ++i) {
     AxisVec P{}, d1{}, d2{};
@@ -303,7 +304,7 @@ void Planner::plan_block(Planned& p) {
                                 60.0);
       return r;
     };
-    // Nothing above the fastest the block can go (1.5 × override) needs refining.
+    // Nothing above the fastest the block can go (kMaxFeedOverride × F) needs refining.
     const double v_top = top_speed(p.v_prog);
     Probe pa = probe(grid[0]);
     for (size_t k = 0; k + 1 < grid.size(); ++k) {
@@ -425,7 +426,7 @@ void Planner::plan_block(Planned& p) {
           p.samples[i].v_geo = v;
           p.samples[i].limit = Limit::kCurvatureAccel;
         }
-        const double vs = std::min(p.samples[i].v_geo, 1.5 * p.v_prog);
+        const double vs = std::min(p.samples[i].v_geo, motion::kMaxFeedOverride * p.v_prog);
         if (std::isfinite(vs)) c_jump[a] = std::max(c_jump[a], vs * vs * dk / period_s_);
       }
     }
@@ -493,7 +494,7 @@ void Planner::plan_block(Planned& p) {
   // fastest speed.
   if (b.kind == program::BlockKind::kArcCw || b.kind == program::BlockKind::kArcCcw) {
     for (size_t i = 0; i < n; ++i) {
-      const double v = std::min(p.samples[i].v_geo, 1.5 * p.v_prog);
+      const double v = std::min(p.samples[i].v_geo, motion::kMaxFeedOverride * p.v_prog);
       if (!(v > 0) || !std::isfinite(v)) continue;
       for (int a = 0; a < naxes_; ++a)
         if (std::fabs(kvec[i][a]) > 0)
@@ -523,7 +524,7 @@ void Planner::plan_block(Planned& p) {
   // centripetal terms use almost nothing of the axes, and holding the tangential
   // limits to half of them slowed every start and stop (the raster at 117.5 % of its
   // length over the feed). Per axis, over each interval between samples at the
-  // fastest speed the interval allows (its samples' limits, at most 1.5 x F):
+  // fastest speed the interval allows (its samples' limits, at most kMaxFeedOverride x F):
   //   acceleration: v²·|k_a|, the centripetal part;
   //   jerk: v³·|dk_a/ds| + 3·v·A·|k_a|, the curvature's change and the tangential
   //   acceleration A turning with the tangent and growing the centripetal term, and
@@ -721,7 +722,7 @@ void Planner::plan_junction(const Planned& prev, Planned& next) const {
 }
 
 double Planner::top_speed(double v_prog) const {
-  double v = 1.5 * v_prog;
+  double v = motion::kMaxFeedOverride * v_prog;
   for (int a = 0; a < naxes_; ++a) v = std::min(v, std::sqrt(3.0) * cfg_.axes[a].max_velocity_mm_s);
   return v;
 }

@@ -144,7 +144,7 @@ class Planner {
   void force_limits(const Planned& p, std::vector<double>* us, std::vector<double>* v_force);
   void reset_stock();
   void plan_junction(const Planned& prev, Planned& next) const;
-  // The fastest a block programmed at v_prog can go: 1.5 x (the override's most) and
+  // The fastest a block programmed at v_prog can go: kMaxFeedOverride x F (the override's most) and
   // no faster than every axis at its velocity limit together.
   double top_speed(double v_prog) const;
   // The speed at which the path may turn from tangent t0 to t1 within one cycle, with

@@ -13,6 +13,7 @@
 #include "cnc/lcmt_drive_command.hpp"
 #include "cnc/lcmt_program_block.hpp"
 #include "cnc/lcmt_program_command.hpp"
+#include "common/motion/feed_override.h"
 #include "common/util/clock.h"
 #include "common/util/install.h"
 #include "services/hmi/programs.h"
@@ -437,7 +438,9 @@ void Api::open(uint64_t client, bool may_control, const std::string& user) {
                         {"programs", list_programs(cfg_.hmi.program_dir)},
                         // Commands the cell does not have yet: their controls stay disabled.
                         {"unavailable", json::array()},
-                        {"status_rate_hz", cfg_.hmi.status_rate_hz}});
+                        {"status_rate_hz", cfg_.hmi.status_rate_hz},
+                        // The feed slider's top: the largest override the cell accepts.
+                        {"max_feed_override", motion::kMaxFeedOverride}});
   out_.send_to(client, program_msg_);
   if (!preview_msg_.is_null()) out_.send_to(client, preview_msg_);
   json list = json::array();

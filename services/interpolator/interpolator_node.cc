@@ -12,6 +12,7 @@
 #include "cnc/lcmt_interp_state.hpp"
 #include "cnc/lcmt_setpoint.hpp"
 #include "cnc/lcmt_config.hpp"
+#include "common/motion/feed_override.h"
 #include "common/program/block_msg.h"
 #include "common/util/clock.h"
 #include "services/interpolator/inputs.h"
@@ -420,8 +421,8 @@ void InterpolatorNode::run_cycle() {
       last_request_first_ = -1;
     }
     if (c.kind == Command::Kind::kOverride &&
-        (!std::isfinite(m.feed_override) || m.feed_override < 0 || m.feed_override > 1.5)) {
-      spdlog::warn("feed override {} outside 0..1.5: ignored (seq {})", m.feed_override, m.seq);
+        (!std::isfinite(m.feed_override) || m.feed_override < 0 || m.feed_override > motion::kMaxFeedOverride)) {
+      spdlog::warn("feed override {} outside 0..{}: ignored (seq {})", m.feed_override, motion::kMaxFeedOverride, m.seq);
       continue;
     }
     if (c.kind == Command::Kind::kRapidOverride &&

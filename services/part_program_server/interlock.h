@@ -6,9 +6,11 @@
 // (tests/unit/interlock_test.cc checks every cell of it).
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <string>
 
 #include "cnc/lcmt_program_command.hpp"
+#include "common/motion/feed_override.h"
 
 namespace cnc::pps {
 
@@ -154,8 +156,11 @@ inline std::string refusal(const cnc::lcmt_program_command& c, const CellView& v
       break;
     case C::STOP: return "";
     case C::OVERRIDE:
-      if (!std::isfinite(c.feed_override) || c.feed_override < 0 || c.feed_override > 1.5)
-        return "feed override " + std::to_string(c.feed_override) + " is outside 0 .. 1.5";
+      if (!std::isfinite(c.feed_override) || c.feed_override < 0 || c.feed_override > motion::kMaxFeedOverride) {
+        char most[32];
+        std::snprintf(most, sizeof most, "%g", motion::kMaxFeedOverride);
+        return "feed override " + std::to_string(c.feed_override) + " is outside 0 .. " + most;
+      }
       return "";
     case C::RAPID_OVERRIDE:
       if (!std::isfinite(c.feed_override) || c.feed_override < 0 || c.feed_override > 1)

@@ -14,6 +14,7 @@
 #include <memory>
 #include <string>
 
+#include "common/motion/feed_override.h"
 #include "common/motion/feed_policy.h"
 #include "common/motion/interpolator.h"
 #include "common/service/service.h"
@@ -68,11 +69,11 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
     const std::string text = args.option("override");
     char* end = nullptr;
     const double value = std::strtod(text.c_str(), &end);
-    if (end == text.c_str() || *end != '\0' || !(value > 0) || value > 1.5) {
+    if (end == text.c_str() || *end != '\0' || !(value > 0) || value > cnc::motion::kMaxFeedOverride) {
       std::fprintf(stderr,
-                   "cnc-plan: --override %s: expected a feed override in (0, 1.5]; at override 0 the motion "
+                   "cnc-plan: --override %s: expected a feed override in (0, %g]; at override 0 the motion "
                    "stands still until resumed, so the program can never finish\n",
-                   text.c_str());
+                   text.c_str(), cnc::motion::kMaxFeedOverride);
       return cnc::service::kExitBadInput;
     }
     cnc::interp::Command c{cnc::interp::Command::Kind::kOverride, value};

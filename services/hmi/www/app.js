@@ -49,6 +49,7 @@ function connect() {
 const handlers = {
   hello(m) {
     S.axes = m.axes; S.mayControl = m.may_control; S.unavailable = m.unavailable || [];
+    if (typeof m.max_feed_override === 'number') $('feed-override').max = Math.round(m.max_feed_override * 100);
     $('machine').textContent = `${m.machine} · cnc-hmi ${m.version}`;
     $('who').textContent = m.may_control ? (m.login ? `user ${m.user}` : 'local') : 'view only';
     $('logout').hidden = !m.login;
