@@ -49,7 +49,7 @@ std::string fmt(const char* f, auto... args) {
 }  // namespace
 
 BridgeCore::BridgeCore(const config::MachineConfig& cfg)
-    : cfg_(cfg), n_(static_cast<int>(std::lround(cfg.ipo_period_s / cfg.servo_period_s))),
+    : cfg_(cfg), joints_(kinematics::make_kinematics(cfg)->joint_limits()), n_(static_cast<int>(std::lround(cfg.ipo_period_s / cfg.servo_period_s))),
       servo_s_(cfg.servo_period_s), ipo_s_(cfg.ipo_period_s), naxes_(static_cast<int>(cfg.axes.size())),
       lead_window_(std::min(n_, 128)), window_(std::clamp(n_, 1, kMaxWindow)),
       lead_cycles_(cfg.drive_bridge.lead_cycles) {}
@@ -102,10 +102,10 @@ BridgeCore::Verdict BridgeCore::on_setpoint(int64_t cycle, const AxisArray& p) {
   const bool first = last_cycle_ < 0;
   const int64_t gap = first ? 1 : std::min<int64_t>(cycle - last_cycle_, 1000);
   for (int a = 0; a < naxes_; ++a) {
-    const auto& ax = cfg_.axes[a];
-    if (!std::isfinite(p[a]) || p[a] < ax.min_mm || p[a] > ax.max_mm) {
+    const auto& j = joints_[static_cast<size_t>(a)];
+    if (!std::isfinite(p[a]) || p[a] < j.min_mm || p[a] > j.max_mm) {
       fault(fmt("setpoint cycle %lld: axis %s at %.4f mm is outside its travel [%g, %g]",
-                static_cast<long long>(cycle), ax.name.c_str(), p[a], ax.min_mm, ax.max_mm));
+                static_cast<long long>(cycle), j.name.c_str(), p[a], j.min_mm, j.max_mm));
       return Verdict::kFault;
     }
   }

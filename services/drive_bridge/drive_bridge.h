@@ -37,6 +37,7 @@
 #include <string>
 
 #include "common/config/machine_config.h"
+#include "common/kinematics/kinematics.h"
 #include "common/program/block.h"
 
 namespace cnc::bridge {
@@ -119,6 +120,9 @@ class BridgeCore {
 
   static constexpr int kMaxWindow = 128;  // ticks of one coarse period, at most
   config::MachineConfig cfg_;
+  // The joints' limits from the machine's kinematics (identity: the axes'); setpoints
+  // are joint positions.
+  std::array<kinematics::JointLimits, program::kMaxAxes> joints_;
   int n_;  // servo ticks per coarse period
   double servo_s_;
   double ipo_s_;
