@@ -1,8 +1,8 @@
 // Devices as slices of a cyclic process image (common/drive/device.h): the slices of
 // an image do not overlap; an axis drive behind the device interface puts the same
 // register transactions on the wire, in the same order, as the register-level
-// DriveIo it wraps; and a device that is no axis (a loopback I/O module, here only)
-// shares the image and the cycle with it.
+// DriveIo it wraps; and a device that is no axis (a loopback I/O module,
+// loopback_io_device.h) shares the image and the cycle with it.
 #include <gtest/gtest.h>
 
 #include <cerrno>
@@ -12,6 +12,7 @@
 #include "common/drive/axis_drive.h"
 #include "common/drive/device.h"
 #include "common/drive/drive_io.h"
+#include "common/drive/loopback_io_device.h"
 #include "common/drive/loopback_link.h"
 
 namespace cnc::drive {
@@ -53,26 +54,6 @@ class TapLink final : public Link {
     return err(inner.write_and_read(unit, waddr, wn, src, raddr, rn, dest, c_));
   }
   LinkCounters c_;
-};
-
-// A process-data loopback (an I/O module's shape): its outputs come back as its
-// inputs one cycle later; enabling it takes one acyclic step.
-class LoopbackIoDevice final : public Device {
- public:
-  static constexpr PdoLayout kLayout{4, 4};
-  PdoLayout layout() const override { return kLayout; }
-  TxResult exchange(std::span<const std::byte> outputs, std::span<std::byte> inputs, LinkCounters& c) override {
-    ++c.transactions;
-    if (!enabled) return TxResult::kOk;  // a module not yet operational keeps its inputs
-    put_pdo(inputs, get_pdo<uint32_t>(outputs));
-    return TxResult::kOk;
-  }
-  TxResult control(Goal goal, LinkCounters&) override {
-    enabled = goal == Goal::kEnable;
-    return TxResult::kOk;
-  }
-  void forget(std::span<std::byte> inputs) override { put_pdo<uint32_t>(inputs, 0); }
-  bool enabled = false;
 };
 
 TEST(ProcessImage, SlicesOfTheDevicesLieSideBySide) {
