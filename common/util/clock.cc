@@ -1,5 +1,6 @@
 #include "common/util/clock.h"
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 
@@ -15,6 +16,8 @@ timespec from_ns(int64_t ns) {
   return t;
 }
 }  // namespace
+
+int64_t next_token(int64_t previous) { return std::max(previous + 1, wall_utime()); }
 
 int64_t wall_utime() {
   timespec t{};

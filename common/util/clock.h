@@ -12,6 +12,11 @@ namespace cnc::util {
 int64_t wall_utime();
 // Monotonic time in s, for measuring durations.
 double monotonic_s();
+// A token larger than `previous` and than every token this function returned in
+// an earlier process on this host (the wall clock in µs, unless that stands
+// behind): names a setpoint stream or an engagement so that no receiver confuses
+// it with one before a reset or a restart.
+int64_t next_token(int64_t previous);
 
 // Waits on absolute deadlines (clock_nanosleep TIMER_ABSTIME) so the period does
 // not drift with the work done in each cycle. A cycle that starts after its

@@ -54,23 +54,29 @@ BridgeCore::BridgeCore(const config::MachineConfig& cfg)
       lead_window_(std::min(n_, 128)), window_(std::clamp(n_, 1, kMaxWindow)),
       lead_cycles_(cfg.drive_bridge.lead_cycles) {}
 
-void BridgeCore::engage(const AxisArray& hold_mm) {
+void BridgeCore::engage(const AxisArray& hold_mm, int64_t engagement) {
   mode_ = Mode::kFollowing;
+  engagement_ = engagement;
+  stream_ = 0;
   cmd_ = hold_mm;
-  last_sp_ = hold_mm;
   vel_.fill(0.0);
   acc_.fill(0.0);
-  sp_vel_.fill(0.0);
-  p_size_ = 0;
   rate_ = 1.0;
   braking_ = false;
-  reset_smoothing(hold_mm);
-  seg_cycle_ = -1;
-  last_cycle_ = -1;
-  last_gap_ = 1;
+  restart_stream();
   ticks_since_setpoint_ = 0;
   fault_reason_.clear();
   waiting_reason_.clear();
+}
+
+void BridgeCore::restart_stream() {
+  last_sp_ = cmd_;
+  sp_vel_.fill(0.0);
+  p_size_ = 0;
+  reset_smoothing(cmd_);
+  seg_cycle_ = -1;
+  last_cycle_ = -1;
+  last_gap_ = 1;
 }
 
 void BridgeCore::disengage(const AxisArray& at_mm) {
@@ -96,8 +102,26 @@ void BridgeCore::push(const Point& p) {
   ++p_size_;
 }
 
-BridgeCore::Verdict BridgeCore::on_setpoint(int64_t cycle, const AxisArray& p) {
+BridgeCore::Verdict BridgeCore::on_setpoint(int64_t cycle, const AxisArray& p, const StreamStamp& from) {
   if (mode_ != Mode::kFollowing) return Verdict::kIgnored;
+  if (from.engagement != engagement_ || from.stream < stream_) {
+    ++stale_;
+    return Verdict::kStale;
+  }
+  if (from.stream > stream_ && last_cycle_ >= 0) {
+    // A new stream (the interpolator was reset or restarted): joined where the
+    // axes stand, once the playback of the old one has come to rest (a limiter
+    // steering back onto a stream that broke its limits approaches rest only
+    // asymptotically; what is left of it, it takes into the new stream's start).
+    bool still = !braking_;
+    for (int a = 0; a < naxes_; ++a)
+      still = still && std::fabs(vel_[a]) <= kStillVelocity && std::fabs(acc_[a]) <= kStillAccel;
+    if (!still) {
+      waiting_reason_ = "a new setpoint stream while the axes still move: waiting until they stand";
+      return Verdict::kWaiting;
+    }
+    restart_stream();
+  }
   if (last_cycle_ >= 0 && cycle <= last_cycle_) return Verdict::kIgnored;  // duplicate or stale
   const bool first = last_cycle_ < 0;
   const int64_t gap = first ? 1 : std::min<int64_t>(cycle - last_cycle_, 1000);
@@ -169,6 +193,7 @@ BridgeCore::Verdict BridgeCore::on_setpoint(int64_t cycle, const AxisArray& p) {
   sp_vel_ = v;
   last_sp_ = p;
   last_cycle_ = cycle;
+  stream_ = from.stream;
   ticks_since_setpoint_ = 0;
   waiting_reason_.clear();
   return Verdict::kAccepted;

@@ -32,6 +32,13 @@
 // A setpoint outside an axis's travel, or implying more than its velocity or
 // acceleration limit, is never followed: the bridge faults and stops. A stream
 // is joined only where the axes stand (engage), and only after ENABLE.
+//
+// Streams. Each engagement has a token, and a setpoint carries the token the
+// interpolator had seen when it made it: one made before the bridge engaged (a
+// datagram queued across a fault and a reset) is dropped and counted, never joined.
+// A setpoint of a stream older than the one followed is dropped and counted too; a
+// newer stream (the interpolator's RESET or restart) is joined like a first one,
+// where the axes stand, once the old one has come to rest.
 #include <array>
 #include <cstdint>
 #include <string>
@@ -44,6 +51,12 @@ namespace cnc::bridge {
 
 using AxisArray = std::array<double, program::kMaxAxes>;
 
+// Where a setpoint comes from (lcmt_setpoint.stream, .engagement).
+struct StreamStamp {
+  int64_t stream = 0;
+  int64_t engagement = 0;
+};
+
 class BridgeCore {
  public:
   enum class Mode : int8_t {
@@ -52,15 +65,16 @@ class BridgeCore {
     kStopping,   // a fault: controlled stop at the stop deceleration
     kStopped,    // a fault, standing still: nothing moves until engaged again
   };
-  enum class Verdict : int8_t { kAccepted, kIgnored, kWaiting, kFault };
+  enum class Verdict : int8_t { kAccepted, kIgnored, kWaiting, kStale, kFault };
 
   explicit BridgeCore(const config::MachineConfig& cfg);
 
-  // Follow setpoints from here on, starting where the axes stand.
-  void engage(const AxisArray& hold_mm);
+  // Follow setpoints made after the interpolator saw `engagement` (larger than
+  // every engagement before), starting where the axes stand.
+  void engage(const AxisArray& hold_mm, int64_t engagement = 0);
   // Stop following (drives disabled): commands hold at `at_mm`.
   void disengage(const AxisArray& at_mm);
-  Verdict on_setpoint(int64_t cycle, const AxisArray& position_mm);
+  Verdict on_setpoint(int64_t cycle, const AxisArray& position_mm, const StreamStamp& from = {});
   // One servo tick: the commanded positions for this tick.
   const AxisArray& tick();
   // Instead of a tick, while the drives' link is stalled (the command of the last
@@ -101,6 +115,10 @@ class BridgeCore {
   int64_t rejoins() const { return rejoins_; }
   // Ticks the playback stood still for a stalled link.
   int64_t held_ticks() const { return held_ticks_; }
+  int64_t engagement() const { return engagement_; }
+  int64_t stream() const { return stream_; }
+  // Setpoints dropped as made before the engagement or of an older stream.
+  int64_t stale_setpoints() const { return stale_; }
 
  private:
   struct Point {
@@ -111,6 +129,8 @@ class BridgeCore {
   static constexpr int kPoints = 64;
   const Point& point(int i) const { return points_[static_cast<size_t>((p_head_ + i) % kPoints)]; }
   void push(const Point& p);
+  // Forget the stream followed so far: the next setpoint joins where the axes stand.
+  void restart_stream();
   void path_at(double tau, AxisArray& out);  // the stream's position at τ (straight lines)
   void smooth(const AxisArray& p);             // the two moving averages: ref_, ref_v_, ref_a_, ref_j_
   void reset_smoothing(const AxisArray& at);   // both averages full of `at`, at rest
@@ -119,6 +139,8 @@ class BridgeCore {
   void limit_step(bool follow);
 
   static constexpr int kMaxWindow = 128;  // ticks of one coarse period, at most
+  static constexpr double kStillVelocity = 0.01;  // mm/s: at rest, for joining a new stream
+  static constexpr double kStillAccel = 1.0;      // mm/s^2
   config::MachineConfig cfg_;
   // The joints' limits from the machine's kinematics (identity: the axes'); setpoints
   // are joint positions.
@@ -162,6 +184,9 @@ class BridgeCore {
   AxisArray sp_vel_{};   // velocity of the last accepted coarse step
   int64_t last_cycle_ = -1;
   int64_t last_gap_ = 1;  // cycles the last accepted step spanned
+  int64_t engagement_ = 0;
+  int64_t stream_ = 0;    // of the setpoints followed since the engagement
+  int64_t stale_ = 0;
   int64_t gaps_ = 0;
   int64_t bridged_ticks_ = 0;
   int64_t starved_ticks_ = 0;

@@ -121,18 +121,27 @@ void DriveBridgeNode::on_setpoint(const cnc::lcmt_setpoint& m) {
   // Setpoints lost on the way (up to the history this one carries) come back
   // exactly, oldest first, before it: the path through a burst of loss is the
   // programmed one, not a line bridging it.
+  const StreamStamp from{m.stream, m.engagement};
   const int n = static_cast<int>(axes_.size());
   const int64_t last = core_.last_cycle();
-  if (last >= 0 && m.cycle - last > 1 && m.num_prev_values > 0 &&
+  if (from.engagement == core_.engagement() && from.stream == core_.stream() && last >= 0 && m.cycle - last > 1 &&
+      m.num_prev_values > 0 &&
       static_cast<size_t>(m.num_prev_values) == m.prev_position_mm.size() && m.num_prev_values % n == 0) {
     const int64_t have = m.num_prev_values / n;
     for (int64_t j = std::min<int64_t>(have, m.cycle - last - 1); j >= 1; --j) {
       AxisArray q{};
       for (int i = 0; i < n; ++i) q[static_cast<size_t>(i)] = m.prev_position_mm[static_cast<size_t>((j - 1) * n + i)];
-      if (core_.on_setpoint(m.cycle - j, q) == BridgeCore::Verdict::kAccepted) ++recovered_setpoints_;
+      if (core_.on_setpoint(m.cycle - j, q, from) == BridgeCore::Verdict::kAccepted) ++recovered_setpoints_;
     }
   }
-  core_.on_setpoint(m.cycle, p);
+  if (core_.on_setpoint(m.cycle, p, from) == BridgeCore::Verdict::kStale && now - stale_report_s_ >= 1.0) {
+    stale_report_s_ = now;
+    spdlog::warn("setpoint seq {} cycle {} dropped: {} (stream {}, engagement {}; following stream {} since "
+                 "engagement {}); {} stale setpoint(s) dropped so far",
+                 m.seq, m.cycle,
+                 m.engagement != core_.engagement() ? "made before the drives were engaged" : "of an older stream",
+                 m.stream, m.engagement, core_.stream(), core_.engagement(), core_.stale_setpoints());
+  }
 }
 
 AxisArray DriveBridgeNode::actuals() const {
@@ -297,7 +306,8 @@ void DriveBridgeNode::servo_tick_inner(double now_s) {
       if (all) {
         AxisArray hold{};
         for (size_t i = 0; i < axes_.size(); ++i) hold[i] = axes_[i].rep.hold_mm;
-        core_.engage(hold);
+        engagement_ = util::next_token(engagement_);
+        core_.engage(hold, engagement_);
         state_ = State::kEnabled;
         ready_ = true;
         spdlog::info("{} drive(s) enabled", axes_.size());
@@ -459,6 +469,8 @@ void DriveBridgeNode::publish_status_inner(int64_t overruns) {
     s.home_latch_mm.resize(n);
   }
   s.setpoint_cycle = core_.last_cycle();
+  s.engagement = core_.mode() == BridgeCore::Mode::kFollowing ? core_.engagement() : 0;
+  s.stale_setpoints = core_.stale_setpoints();
   s.playback_cycle = core_.mode() == BridgeCore::Mode::kFollowing && core_.last_cycle() >= 0 ? core_.playback_cycle() : -1.0;
   for (size_t i = 0; i < n; ++i) {
     const Axis& a = axes_[i];

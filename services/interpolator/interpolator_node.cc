@@ -57,7 +57,8 @@ InterpolatorNode::InterpolatorNode(const config::MachineConfig& cfg, bus::Bus& b
       resend_cycles_(std::max<int64_t>(2, std::llround(0.1 / cfg.ipo_period_s))),
       health_(bus, cfg.channel(ch::kAlarm), "cnc-interpolator", cnc::lcmt_alarm::FAULT),
       inputs_(kMaxPendingInputs),
-      peers_(bus, cfg, "cnc-interpolator", {"cnc-drive-bridge", "cnc-program-server"}) {
+      peers_(bus, cfg, "cnc-interpolator", {"cnc-drive-bridge", "cnc-program-server"}),
+      stream_(util::next_token(0)) {
   bus_.subscribe<cnc::lcmt_program_command>(cfg.channel(ch::kProgramCmd),
                                             [this](const auto& m) { on_command(m); });
   bus_.subscribe<cnc::lcmt_program_state>(cfg.channel(ch::kProgramState),
@@ -343,6 +344,9 @@ void InterpolatorNode::run_cycle() {
         continue;
       }
       apply_command(c, r);
+      // The path jumps to where the drives stand: receivers must not take the
+      // setpoints before and after for one stream.
+      stream_ = util::next_token(stream_);
       const bool was_fault = fault_;
       fault_ = false;
       fault_cause_.clear();
@@ -533,6 +537,8 @@ void InterpolatorNode::run_cycle() {
   out.u = sp.u;
   out.limit = static_cast<int8_t>(sp.limit);
   out.state = static_cast<int8_t>(sp.state);
+  out.stream = stream_;
+  out.engagement = axis_status_.engagement;
   bus_.publish(ch_setpoints_, out);
   ++setpoints_published_;
   publish_state(false);

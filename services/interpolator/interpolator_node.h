@@ -191,6 +191,8 @@ class InterpolatorNode {
   double axis_status_s_ = -1e9;  // monotonic time it arrived
   bool drives_seen_enabled_ = false;  // every axis ENABLED in a status since the program started
   service::PeerWatch peers_;  // [0] the drive bridge, [1] the program server
+  // The setpoint stream (lcmt_setpoint.stream): new at the start and at every RESET.
+  int64_t stream_;
 };
 
 }  // namespace cnc::interp

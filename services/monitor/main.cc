@@ -60,9 +60,11 @@ int main(int argc, char** argv) {
       cnc::program::Block b;
       if (cnc::program::from_msg(m.block, naxes, &b).empty()) core.on_block(b, m.block.program_token);
     });
+    double stale_report_s = -1e9;
     bus.subscribe<cnc::lcmt_setpoint>(cfg.channel(ch::kSetpoints), [&](const cnc::lcmt_setpoint& m) {
       if (m.num_axes != naxes) return;
       cnc::monitor::SetpointIn sp;
+      sp.stream = m.stream;
       sp.cycle = m.cycle;
       sp.program_token = m.program_token;
       sp.block_index = m.block_index;
@@ -70,7 +72,13 @@ int main(int argc, char** argv) {
       sp.u = m.u;
       sp.feed_mm_per_min = m.feed_mm_per_min;
       for (int a = 0; a < naxes; ++a) sp.position_mm[a] = m.position_mm[a];
+      const int64_t stale = core.stale_setpoints();
       core.on_setpoint(sp);
+      if (core.stale_setpoints() > stale && cnc::util::monotonic_s() - stale_report_s >= 1.0) {
+        stale_report_s = cnc::util::monotonic_s();
+        spdlog::warn("setpoint seq {} cycle {} of stream {} dropped: a newer stream runs; {} stale so far", m.seq,
+                     m.cycle, m.stream, core.stale_setpoints());
+      }
     });
     // Reused every cycle (the report's vector keeps its size, the alarm list its
     // capacity): handling a status allocates nothing unless an alarm is raised.

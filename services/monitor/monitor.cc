@@ -128,6 +128,14 @@ double Monitor::step_chord_error(const SetpointIn& sa, const SetpointIn& sb) con
 }
 
 void Monitor::on_setpoint(const SetpointIn& sp) {
+  if (sp.stream < stream_) {
+    ++stale_;
+    return;
+  }
+  if (sp.stream > stream_) {
+    if (stream_ != 0) on_reset();
+    stream_ = sp.stream;
+  }
   double e = kNaN;
   if (last_sp_ && sp.cycle > last_sp_->cycle) {
     // Only steps between consecutive cycles are steps of the machine.

@@ -34,6 +34,7 @@
 namespace cnc::monitor {
 
 struct SetpointIn {
+  int64_t stream = 0;  // lcmt_setpoint.stream
   int64_t cycle = 0;
   int64_t program_token = 0;
   int64_t block_index = -1;
@@ -83,7 +84,10 @@ class Monitor {
 
   // A block the interpolator applied (INTERP_INPUT), of program `token`.
   void on_block(const program::Block& b, int64_t token);
+  // A setpoint of a stream older than the newest seen (one that waited in a queue
+  // across a RESET) is dropped and counted; a newer stream is a reset.
   void on_setpoint(const SetpointIn& sp);
+  int64_t stale_setpoints() const { return stale_; }
   // A RESET the interpolator applied: its path jumps to where the drives stand, so
   // the next setpoint is no step of the machine (no chord error across it).
   void on_reset() {
@@ -145,6 +149,8 @@ class Monitor {
   const SetpointIn* setpoint_at(int64_t cycle) const;
   bool commanded_at(double cycle, int n_axes, motion::AxisVec* out) const;
   std::optional<SetpointIn> last_sp_;
+  int64_t stream_ = 0;  // the newest setpoint stream seen
+  int64_t stale_ = 0;
   // The actual positions of the last statuses over a window (see on_status): a
   // fixed ring, oldest at recent_head_.
   struct Sample {

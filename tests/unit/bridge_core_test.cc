@@ -46,8 +46,8 @@ struct Runner {
     prev_a = {};
   }
   // One coarse cycle: the setpoint (unless skipped), then N servo ticks.
-  void cycle(int64_t k, const AxisArray& p, bool deliver = true) {
-    if (deliver) last = core.on_setpoint(k, p);
+  void cycle(int64_t k, const AxisArray& p, bool deliver = true, const StreamStamp& from = {}) {
+    if (deliver) last = core.on_setpoint(k, p, from);
     idle(n);
   }
   // Servo ticks the playback stands still for a stalled link: the drives see none
@@ -535,6 +535,91 @@ TEST(BridgeCore, DuplicateAndStaleSetpointsAreIgnored) {
   EXPECT_EQ(r.core.on_setpoint(1, at(0.01)), BridgeCore::Verdict::kIgnored);
   EXPECT_EQ(r.core.on_setpoint(0, at(0.0)), BridgeCore::Verdict::kIgnored);
   EXPECT_EQ(r.core.setpoint_gaps(), 0);
+}
+
+// The order of events of a live failure (integration.fault_reset, 1 suite run in
+// 15): a publish failure stopped X from 200 mm/s by the watchdog; after the reset
+// the bridge, engaged again, received a setpoint the interpolator had made before
+// the fault (queued 2249 ms), close enough to where the axes stood to be joined,
+// and then the next one, 0.061 mm on: "would accelerate at 3813 mm/s^2", a fault
+// that was a jump of the axes on a real machine. Such a setpoint carries the
+// engagement the interpolator had seen when it made it, and is dropped.
+TEST(BridgeCore, ASetpointQueuedAcrossAFaultAndAResetIsDroppedNotFollowed) {
+  const config::MachineConfig cfg = machine();
+  const std::vector<double> xs = smooth_stream(200.0, 2700.0, 100);
+  // `honest`: the stale setpoints carry the engagement of their time (the fix);
+  // otherwise they look like setpoints of the new engagement (the bridge before it).
+  auto run = [&](bool honest, Runner& r) {
+    const StreamStamp old_stream{100, 1};
+    r.core.engage(at(0), 1);
+    int64_t k = 0;
+    for (; k < 100; ++k) r.cycle(k, at(xs[static_cast<size_t>(k)]), true, old_stream);
+    EXPECT_FALSE(r.core.faulted()) << r.core.fault_reason();
+    while (r.core.mode() != BridgeCore::Mode::kStopped) r.idle(1);  // the watchdog's controlled stop
+    const AxisArray here = r.core.commanded();
+    r.core.engage(here, 2);  // RESET: the drives enabled again
+    r.reset_maxima();
+    const StreamStamp queued = honest ? old_stream : StreamStamp{100, 2};
+    r.cycle(k, here, true, queued);
+    const BridgeCore::Verdict first = r.last;
+    r.cycle(k + 1, at(here[0] + 0.061), true, queued);
+    return std::make_pair(first, r.last);
+  };
+  Runner before(cfg);
+  const auto [b1, b2] = run(false, before);
+  EXPECT_EQ(b1, BridgeCore::Verdict::kAccepted);
+  EXPECT_EQ(b2, BridgeCore::Verdict::kFault);
+  EXPECT_NE(before.core.fault_reason().find("would accelerate"), std::string::npos) << before.core.fault_reason();
+
+  Runner r(cfg);
+  const auto [v1, v2] = run(true, r);
+  EXPECT_EQ(v1, BridgeCore::Verdict::kStale);
+  EXPECT_EQ(v2, BridgeCore::Verdict::kStale);
+  EXPECT_EQ(r.core.stale_setpoints(), 2);
+  EXPECT_FALSE(r.core.faulted()) << r.core.fault_reason();
+  const AxisArray here = r.core.commanded();
+  EXPECT_EQ(r.max_speed[0], 0.0);
+  // The interpolator's new stream after its RESET (made after it saw engagement 2),
+  // from where the drives stand, is joined and followed within the limits.
+  const StreamStamp fresh{200, 2};
+  const std::vector<double> ys = smooth_stream(100.0, 2000.0, 80);
+  for (int64_t k = 0; k < 80; ++k) r.cycle(5000 + k, at(here[0] - ys[static_cast<size_t>(k)]), true, fresh);
+  EXPECT_FALSE(r.core.faulted()) << r.core.fault_reason();
+  EXPECT_EQ(r.core.stream(), 200);
+  EXPECT_NEAR(r.core.velocity()[0], -100.0, 0.01);
+  r.expect_limits("the new stream after the reset");
+  // A late setpoint of the old stream now, even of this engagement, is dropped too.
+  EXPECT_EQ(r.core.on_setpoint(5080, here, StreamStamp{100, 2}), BridgeCore::Verdict::kStale);
+  EXPECT_EQ(r.core.stale_setpoints(), 3);
+}
+
+TEST(BridgeCore, ANewStreamIsJoinedOnlyOnceTheOldOneStands) {
+  // The interpolator reset or restarted while the bridge follows: its new stream
+  // (cycles from anywhere) is joined where the axes stand, and not while they move.
+  const config::MachineConfig cfg = machine();
+  Runner r(cfg);
+  r.core.engage(at(0), 7);
+  const std::vector<double> xs = smooth_stream(100.0, 2000.0, 60);
+  int64_t k = 0;
+  for (; k < 60; ++k) r.cycle(k, at(xs[static_cast<size_t>(k)]), true, {1, 7});
+  EXPECT_EQ(r.core.on_setpoint(0, at(xs[59]), {2, 7}), BridgeCore::Verdict::kWaiting);  // X moving
+  EXPECT_NE(r.core.waiting_reason().find("still move"), std::string::npos);
+  // The old stream comes to rest, then the new one stands there: joined, its cycles restart at 0.
+  double x = xs[59], v = (xs[59] - xs[58]) / 0.004;
+  EXPECT_GT(v, 50.0);
+  for (; v > 0; ++k) {
+    v = std::max(0.0, v - 6.0);
+    x += v * 0.004;
+    r.cycle(k, at(x), true, {1, 7});
+  }
+  for (int j = 0; j < 100; ++j, ++k) r.cycle(k, at(x), true, {1, 7});  // standing until the RESET
+  EXPECT_FALSE(r.core.faulted()) << r.core.fault_reason();
+  for (int64_t j = 0; j < 5; ++j) r.cycle(j, at(x), true, {2, 7});
+  EXPECT_EQ(r.core.stream(), 2);
+  EXPECT_EQ(r.core.last_cycle(), 4);
+  EXPECT_FALSE(r.core.faulted()) << r.core.fault_reason();
+  EXPECT_EQ(r.core.on_setpoint(k, at(x), {1, 7}), BridgeCore::Verdict::kStale);
+  r.expect_limits("a new stream after the old one stood");
 }
 
 TEST(BridgeCore, RandomisedStreamsKeepTheLimits) {

@@ -79,6 +79,8 @@ class Cell {
   // them; `lose` drops it on the way.
   void setpoint(double x, double y, bool lose = false) {
     cnc::lcmt_setpoint m{};
+    m.stream = 1;
+    m.engagement = node.core().engagement();  // what the interpolator echoes from AXIS_STATUS
     m.cycle = cycle++;
     m.period_s = 0.004;
     m.num_axes = 2;

@@ -115,6 +115,49 @@ TEST(Monitor, ChordErrorIsTakenInMachineCoordinatesAfterAHoming) {
               told.max_chord * 1e3, untold.max_chord * 1e3);
 }
 
+TEST(Monitor, ASetpointOfAnOlderStreamIsDroppedAndCounted) {
+  // The demo's chord errors, with a setpoint of the stream before a RESET slipped
+  // in between every two (a datagram that waited in a queue, 50 mm off): dropped
+  // and counted, the chord errors are those of the demo alone.
+  const auto cfg = sim3();
+  pps::ProgramServer server(cfg);
+  ASSERT_TRUE(server.load(std::string(CNC_SOURCE_DIR) + "/config/programs/demo.ngc", 7).ok);
+  interp::Interpolator ip(cfg);
+  Monitor mon(cfg), clean(cfg);
+  ip.apply_command({interp::Command::Kind::kStart, 1.0});
+  for (int64_t i = 0; i < server.num_blocks(); ++i) {
+    ASSERT_TRUE(ip.apply_block(*server.block(i)));
+    mon.on_block(*server.block(i), 7);
+    clean.on_block(*server.block(i), 7);
+  }
+  int64_t stale = 0;
+  while (ip.state() != interp::RunState::kDone) {
+    const interp::Setpoint& sp = ip.step();
+    SetpointIn in;
+    in.stream = 20;
+    in.cycle = sp.cycle;
+    in.program_token = 7;
+    in.block_index = sp.block_index;
+    in.source_line = sp.source_line;
+    in.u = sp.u;
+    in.position_mm = sp.position_mm;
+    SetpointIn old = in;
+    old.stream = 10;
+    old.cycle = sp.cycle + 1;
+    old.position_mm[0] += 50.0;
+    mon.on_setpoint(in);
+    clean.on_setpoint(in);
+    if (sp.cycle > 0) {
+      mon.on_setpoint(old);
+      ++stale;
+    }
+  }
+  EXPECT_EQ(mon.stale_setpoints(), stale);
+  EXPECT_GT(stale, 1000);
+  EXPECT_GT(clean.largest_chord_error_mm(), 0.1 * cfg.chord_tolerance_mm);
+  EXPECT_EQ(mon.largest_chord_error_mm(), clean.largest_chord_error_mm());
+}
+
 TEST(Monitor, ACycleAllocatesNothing) {
   // Setpoint and status handling over the whole demo (lines, arcs, the NURBS
   // valley, dwells): per cycle the monitor allocates nothing (its blocks, one per

@@ -135,6 +135,7 @@ void latency(const std::string& dir, double seconds) {
   node.start();
   std::atomic<bool> stop{false};
   std::atomic<bool> go{false};
+  std::atomic<int64_t> engagement{0};  // the bridge's, echoed as the interpolator does
   std::thread publisher([&] {
     cnc::util::PeriodicTimer t(cfg.ipo_period_s);
     int64_t cycle = 0;
@@ -143,6 +144,8 @@ void latency(const std::string& dir, double seconds) {
     while (!stop) {
       t.wait();
       cnc::lcmt_setpoint sp{};
+      sp.stream = 1;
+      sp.engagement = engagement.load();
       sp.cycle = cycle;
       sp.period_s = cfg.ipo_period_s;
       sp.num_axes = static_cast<int32_t>(cfg.axes.size());
@@ -166,6 +169,7 @@ void latency(const std::string& dir, double seconds) {
   while (cnc::util::monotonic_s() - start < seconds + 3) {
     timer.wait();
     node.servo_tick(cnc::util::monotonic_s());
+    engagement.store(node.core().engagement());
     probe.drain();
     if (go_at < 0 && node.state() == cnc::bridge::DriveBridgeNode::State::kEnabled) {
       go_at = cnc::util::monotonic_s();
