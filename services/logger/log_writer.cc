@@ -10,6 +10,8 @@
 #include <limits>
 #include <stdexcept>
 
+#include "common/bus/log_format.h"
+
 namespace cnc::logger {
 namespace {
 // The LCM log event: magic, event number, timestamp (µs), channel length, data
@@ -30,8 +32,8 @@ void put_be(std::vector<uint8_t>& out, uint64_t v, int bytes) {
 }
 }  // namespace
 
-LogWriter::LogWriter(std::string base_path, double rotate_bytes, size_t buffer_bytes)
-    : base_(std::move(base_path)), rotate_bytes_(rotate_bytes), buffer_bytes_(buffer_bytes) {
+LogWriter::LogWriter(std::string base_path, double rotate_bytes, size_t buffer_bytes, std::string header)
+    : base_(std::move(base_path)), header_(std::move(header)), rotate_bytes_(rotate_bytes), buffer_bytes_(buffer_bytes) {
   buf_.reserve(buffer_bytes_ + 1024);
   pending_.reserve(1024);
   // Never over an earlier file (a logger restarted after a crash, two in one second):
@@ -89,6 +91,15 @@ bool LogWriter::write(const std::string& channel, const void* data, size_t size,
       rotation_failed_ = true;
     }
   }
+  if (file_events_ == 0 && !header_.empty())
+    append(bus::kLogFormatChannel, header_.data(), header_.size(), utime, channels_[bus::kLogFormatChannel]);
+  append(channel, data, size, utime, counts);
+  return true;
+}
+
+void LogWriter::append(const std::string& channel, const void* data, size_t size, int64_t utime,
+                       ChannelCounts& counts) {
+  const size_t event_bytes = kEventHeaderBytes + channel.size() + size;
   if (!buf_.empty() && buf_.size() + event_bytes > buffer_bytes_) write_out();
   put_be(buf_, kMagic, 4);
   put_be(buf_, static_cast<uint64_t>(file_events_++), 8);
@@ -100,7 +111,6 @@ bool LogWriter::write(const std::string& channel, const void* data, size_t size,
   buf_.insert(buf_.end(), bytes, bytes + size);
   pending_.push_back(&counts);
   if (buf_.size() >= buffer_bytes_) write_out();
-  return true;
 }
 
 bool LogWriter::write_out() {

@@ -30,7 +30,10 @@ class LogWriter {
   // DIR/NAME.lcmlog exists already, NAME-2 (-3, ...) instead: an earlier file is never overwritten.
   // A file is closed and the next one started before an event would take it past
   // rotate_bytes (a file holds at least one event, however large).
-  LogWriter(std::string base_path, double rotate_bytes, size_t buffer_bytes = kDefaultBufferBytes);
+  // header: when not empty, the first event of every file, on bus::kLogFormatChannel
+  // with the time stamp of the event after it (bus::log_format_record()).
+  LogWriter(std::string base_path, double rotate_bytes, size_t buffer_bytes = kDefaultBufferBytes,
+            std::string header = "");
   ~LogWriter();
   LogWriter(const LogWriter&) = delete;
   LogWriter& operator=(const LogWriter&) = delete;
@@ -56,10 +59,12 @@ class LogWriter {
  private:
   bool open_part(int part);
   bool write_out();
+  void append(const std::string& channel, const void* data, size_t size, int64_t utime, ChannelCounts& counts);
   void close_file();
   std::string part_path(int part) const;
 
   std::string base_;
+  std::string header_;
   double rotate_bytes_;
   size_t buffer_bytes_;
   int fd_ = -1;

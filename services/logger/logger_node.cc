@@ -10,6 +10,7 @@
 #include <set>
 #include <sstream>
 
+#include "common/bus/log_format.h"
 #include "cnc/lcmt_interp_input.hpp"
 #include "common/util/clock.h"
 
@@ -61,6 +62,8 @@ LoggerNode::LoggerNode(const config::MachineConfig& cfg, bus::Bus& bus, LogWrite
       flush_period_s_(cfg.log_flush_period_s) {
   bus_.subscribe_raw(bus::exact_channel(cfg.channel_prefix) + ".*",
                      [this](const std::string& channel, const void* data, size_t size, int64_t recv_utime) {
+                       // The format event is the writer's own, never one from the network.
+                       if (channel == bus::kLogFormatChannel) return;
                        // Our own stats are already in the file; the copy multicast loopback
                        // brings back is not written twice (another logger's stats are).
                        if (channel == stats_channel_) {

@@ -8,6 +8,7 @@
 #include <filesystem>
 
 #include "cnc/lcmt_heartbeat.hpp"
+#include "common/bus/log_format.h"
 #include "common/service/heartbeat.h"
 #include "common/service/service.h"
 #include "common/util/realtime.h"
@@ -43,7 +44,8 @@ int main(int argc, char** argv) {
     // A deep queue: the logger must ride out a stalled write without dropping (~10 s at 2 kHz).
     cnc::bus::Bus bus(cnc::logger::receive_url(cfg.lcm_url, kReceiveBufferBytes), 0, 20000,
                       cnc::service::bus_security(cfg, "cnc-logger"));
-    cnc::logger::LogWriter writer(base, cfg.log_rotate_mb * 1024 * 1024);
+    cnc::logger::LogWriter writer(base, cfg.log_rotate_mb * 1024 * 1024, cnc::logger::LogWriter::kDefaultBufferBytes,
+                                  cnc::bus::log_format_record());
     cnc::logger::LoggerNode node(cfg, bus, writer);
     spdlog::info("cnc-logger: writing {}", writer.current_path());
     cnc::service::Heartbeat hb(bus, cfg, "cnc-logger");

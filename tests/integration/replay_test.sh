@@ -30,7 +30,7 @@ for s in interpolator program-server monitor drive-bridge servo-sim logger; do s
 "$BUILD/tools/cnc-replay" --log "$WORK/run.lcmlog" >"$WORK/replay.out" 2>&1 || { cat "$WORK/replay.out" >&2; fail "replay is not identical"; }
 grep -q "^identical: " "$WORK/replay.out" || fail "no verdict from cnc-replay"
 note "$(cat "$WORK/replay.out")"
-n=$(sed -E 's/^identical: ([0-9]+) setpoints.*/\1/' "$WORK/replay.out" | head -1)
+n=$(sed -nE 's/^identical: ([0-9]+) setpoints.*/\1/p' "$WORK/replay.out" | head -1)
 [ "$n" -gt 3000 ] || fail "only $n setpoints compared"
 
 # A changed config: one unit of path acceleration.
@@ -42,7 +42,7 @@ rc=0; "$BUILD/tools/cnc-replay" --log "$WORK/run.lcmlog" --machine "$WORK/change
 [ "$rc" -eq 1 ] || { cat "$WORK/c.out" >&2; fail "changed config: exit $rc, expected 1"; }
 grep -qE "^diverges at cycle [0-9]+ \(t = [0-9.]+ s, block [0-9]+, line [0-9]+\): position_mm\[[0-9]\]" "$WORK/c.out" \
   || { cat "$WORK/c.out" >&2; fail "changed config: divergence not located"; }
-note "changed config: $(head -1 "$WORK/c.out")"
+note "changed config: $(grep "^diverges" "$WORK/c.out")"
 
 # A changed program: one control point of the valley 0.5 mm lower.
 mkdir -p "$WORK/edited"
@@ -54,7 +54,7 @@ grep -qE "^diverges at cycle [0-9]+ \(t = [0-9.]+ s, block [0-9]+, line [0-9]+\)
 # The first two programs are untouched: they replay identically up to the third.
 same=$(sed -nE 's/^([0-9]+) setpoints identical before it/\1/p' "$WORK/p.out")
 [ "${same:-0}" -gt 4000 ] || { cat "$WORK/p.out" >&2; fail "changed program: diverged too early ($same)"; }
-note "changed program: $(head -1 "$WORK/p.out")"
+note "changed program: $(grep "^diverges" "$WORK/p.out")"
 
 # lcm-logplayer drives a fresh monitor; its reports equal the live monitor's.
 # (An unsigned analysis cell: the signing cell drops a played-back log as a replay.)

@@ -18,6 +18,8 @@
 #include "cnc/lcmt_logger_stats.hpp"
 #include "cnc/lcmt_setpoint.hpp"
 #include "common/bus/bus.h"
+#include "common/bus/log_format.h"
+#include "common/util/install.h"
 #include "services/logger/log_writer.h"
 #include "services/logger/logger_node.h"
 
@@ -123,6 +125,51 @@ TEST_F(LoggerWriterTest, RotatesIntoReadableFilesWithEveryEventInOrder) {
   }
   EXPECT_EQ(next, kEvents) << "events lost across rotation";
   EXPECT_GT(total_bytes, 0u);
+}
+
+TEST_F(LoggerWriterTest, EveryFileBeginsWithTheFormatEvent) {
+  // Rotation at 2 kB: every file, not only the first, names its format, stamped
+  // with the time of the event after it (lcm-logplayer plays from the first stamp).
+  const std::string header = cnc::bus::log_format_record();
+  {
+    LogWriter w(base_, 2048, 512, header);
+    for (int i = 0; i < 200; ++i) {
+      const auto p = payload(i, 100);
+      ASSERT_TRUE(w.write("T.SETPOINTS", p.data(), p.size(), 5000 + i));
+    }
+    w.close();
+    EXPECT_GT(w.files(), 5);
+    EXPECT_EQ(w.channels().at(cnc::bus::kLogFormatChannel).logged, w.files());
+  }
+  int64_t next = 0;
+  for (int f = 0; fs::exists(part(base_, f)); ++f) {
+    const auto events = read_log(part(base_, f));
+    ASSERT_GE(events.size(), 2u) << part(base_, f);
+    EXPECT_EQ(events[0].channel, cnc::bus::kLogFormatChannel);
+    EXPECT_EQ(events[0].timestamp, events[1].timestamp);
+    cnc::bus::LogFormat fmt;
+    ASSERT_TRUE(cnc::bus::parse_log_format(events[0].data.data(), events[0].data.size(), &fmt));
+    EXPECT_EQ(fmt.format, cnc::bus::kLogFormat);
+    EXPECT_EQ(fmt.version, cnc::util::version());
+    EXPECT_EQ(cnc::bus::unreadable_log_format(fmt), "");
+    for (size_t k = 1; k < events.size(); ++k) EXPECT_EQ(index_of(events[k]), next++);
+  }
+  EXPECT_EQ(next, 200);
+}
+
+TEST(LogFormat, FormatsThisBuildCannotReadAreRefusedWithTheVersionAndWhatToDo) {
+  cnc::bus::LogFormat f;
+  const std::string text = "cnc-log-format 99 0.9.0+5.gabc";
+  ASSERT_TRUE(cnc::bus::parse_log_format(text.data(), text.size(), &f));
+  EXPECT_EQ(f.format, 99);
+  EXPECT_EQ(f.version, "0.9.0+5.gabc");
+  const std::string why = cnc::bus::unreadable_log_format(f);
+  EXPECT_NE(why.find("format 99 (recorded by cnc 0.9.0+5.gabc), newer than"), std::string::npos) << why;
+  EXPECT_NE(why.find("read it with the version that recorded it"), std::string::npos) << why;
+  cnc::bus::LogFormat old;  // no format event: format 1, readable
+  EXPECT_EQ(cnc::bus::unreadable_log_format(old), "");
+  const std::string junk = "cnc-log-format x";
+  EXPECT_FALSE(cnc::bus::parse_log_format(junk.data(), junk.size(), &f));
 }
 
 TEST_F(LoggerWriterTest, AnEventLargerThanTheRotateSizeGetsAFileOfItsOwn) {

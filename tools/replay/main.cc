@@ -25,6 +25,8 @@
 #include "cnc/lcmt_config.hpp"
 #include "cnc/lcmt_interp_input.hpp"
 #include "cnc/lcmt_setpoint.hpp"
+#include "cnc/lcmt_setpoint_v1.hpp"
+#include "common/bus/log_format.h"
 #include "common/bus/bus.h"
 #include "common/program/block_msg.h"
 #include "common/service/service.h"
@@ -45,6 +47,30 @@ bool decode(const void* data, size_t size, Msg* m) {
   } catch (...) {
     return false;
   }
+}
+
+// A setpoint as logs of format 1 hold it, into today's message (no stream, no engagement).
+bool decode_v1(const void* data, size_t size, cnc::lcmt_setpoint* out) {
+  cnc::lcmt_setpoint_v1 v;
+  if (!decode(data, size, &v)) return false;
+  *out = cnc::lcmt_setpoint{};
+  out->utime = v.utime;
+  out->seq = v.seq;
+  out->sender = v.sender;
+  out->cycle = v.cycle;
+  out->period_s = v.period_s;
+  out->num_axes = v.num_axes;
+  out->position_mm = v.position_mm;
+  out->feed_mm_per_min = v.feed_mm_per_min;
+  out->program_token = v.program_token;
+  out->block_index = v.block_index;
+  out->source_line = v.source_line;
+  out->u = v.u;
+  out->limit = v.limit;
+  out->state = v.state;
+  out->num_prev_values = v.num_prev_values;
+  out->prev_position_mm = v.prev_position_mm;
+  return true;
 }
 
 std::string bits(double v) {
@@ -95,13 +121,21 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
   std::map<int64_t, cnc::lcmt_setpoint> setpoints;
   int32_t sender = 0;
   int64_t foreign = 0;
+  cnc::bus::LogFormat format;  // format 1 unless the log says otherwise
+  bool format_seen = false;
   const std::string key_file = args.option("key");
   std::optional<cnc::bus::LogVerifier> verifier;
   if (!key_file.empty()) verifier.emplace(cnc::bus::read_key_file(key_file));
   {
     cnc::bus::Bus bus("file://" + log + "?speed=0");
     if (verifier)
-      bus.subscribe_raw(".*", [&](const std::string& ch, const void* d, size_t n, int64_t) { verifier->check(ch, d, n); });
+      bus.subscribe_raw(".*", [&](const std::string& ch, const void* d, size_t n, int64_t) {
+        if (ch != cnc::bus::kLogFormatChannel) verifier->check(ch, d, n);  // the logger's own, unsigned
+      });
+    bus.subscribe_raw(cnc::bus::exact_channel(cnc::bus::kLogFormatChannel), [&](const std::string&, const void* d,
+                                                                               size_t n, int64_t) {
+      if (!format_seen) format_seen = cnc::bus::parse_log_format(d, n, &format);
+    });
     bus.subscribe_raw(".*INTERP_CONFIG", [&](const std::string&, const void* d, size_t n, int64_t) {
       cnc::lcmt_config c;
       if (!config && decode(d, n, &c) && c.service == "cnc-interpolator") {
@@ -117,7 +151,7 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
     });
     bus.subscribe_raw(".*SETPOINTS", [&](const std::string&, const void* d, size_t n, int64_t) {
       cnc::lcmt_setpoint sp;
-      if (!decode(d, n, &sp)) return;
+      if (!decode(d, n, &sp) && !decode_v1(d, n, &sp)) return;
       if (sender != 0 && sp.sender != sender) return ++foreign, void();
       setpoints.emplace(sp.cycle, std::move(sp));
     });
@@ -145,6 +179,12 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
       return kExitUnreplayable;
     }
   }
+  if (const std::string why = cnc::bus::unreadable_log_format(format); !why.empty()) {
+    std::fprintf(stderr, "cnc-replay: %s: %s\n", log.c_str(), why.c_str());
+    return kExitUnreplayable;
+  }
+  std::printf("log format %d%s\n", format.format,
+              format.version.empty() ? " (before format records)" : (" recorded by cnc " + format.version).c_str());
   if (!config) {
     std::fprintf(stderr, "cnc-replay: %s holds no interpolator config (INTERP_CONFIG): not a cell log?\n", log.c_str());
     return kExitUnreplayable;

@@ -1,0 +1,32 @@
+#pragma once
+// The format of the cell's log files. Every file the logger writes begins with one
+// event on kLogFormatChannel whose data is the text "cnc-log-format N VERSION" (N
+// the format, VERSION the logger's). A log without it was recorded in format 1.
+// Readers take every format from kOldestReadableLogFormat on and refuse the others
+// with the format, the version that recorded it and what to do.
+//
+// Formats (one golden log each in tests/golden/logs, replayed by the suite):
+//   1  no format event; SETPOINTS without stream and engagement (lcmt_setpoint_v1)
+//   2  the format event; SETPOINTS carry the stream and the bridge's engagement
+#include <cstddef>
+#include <string>
+
+namespace cnc::bus {
+
+inline constexpr int kLogFormat = 2;
+inline constexpr int kOldestReadableLogFormat = 1;
+inline constexpr char kLogFormatChannel[] = "CNC_LOG_FORMAT";
+
+// The data of the format event that begins each file, this build's.
+std::string log_format_record();
+
+struct LogFormat {
+  int format = 1;       // 1 when the log has no format event
+  std::string version;  // the logger's version; empty for format 1
+};
+// Parses a format event's data; false when it is not one.
+bool parse_log_format(const void* data, size_t size, LogFormat* out);
+// "" when this build reads `f`; otherwise why not and what to do.
+std::string unreadable_log_format(const LogFormat& f);
+
+}  // namespace cnc::bus

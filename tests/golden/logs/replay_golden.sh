@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Every golden log (one per log format, recorded by record.sh with the version of
+# its time) replays in this build bit for bit, and names its format.
+#   replay_golden.sh BUILD_DIR SOURCE_DIR
+set -euo pipefail
+BUILD="$1"; SRC="$2"
+n=0
+for log in "$SRC"/tests/golden/logs/format-*.lcmlog; do
+  [ -e "$log" ] || continue
+  want="${log##*/format-}"; want="${want%%.*}"
+  out="$("$BUILD/tools/cnc-replay" --log "$log" 2>&1)" || { echo "$out" >&2; echo "FAIL: $log does not replay" >&2; exit 1; }
+  echo "$out" | grep -q "^log format $want\b" || { echo "$out" >&2; echo "FAIL: $log is not read as format $want" >&2; exit 1; }
+  echo "$out" | grep -q "^identical: " || { echo "$out" >&2; echo "FAIL: $log: no verdict" >&2; exit 1; }
+  echo "$(basename "$log"): $(echo "$out" | grep -E '^(log format|identical)' | tr '\n' ' ')"
+  n=$((n + 1))
+done
+[ "$n" -ge 2 ] || { echo "FAIL: only $n golden logs" >&2; exit 1; }
+# A format this build does not know (the newest golden log's format event made
+# 9): refused (exit 2), naming the format, the version that recorded it and what to do.
+newest="$(ls "$SRC"/tests/golden/logs/format-*.lcmlog | sort -V | tail -n 1)"
+tmp="$(mktemp /tmp/cnc-golden-future.XXXXXX.lcmlog)"
+trap 'rm -f "$tmp"' EXIT
+/usr/bin/python3 - "$newest" "$tmp" <<'PY'
+import re, sys
+data = open(sys.argv[1], "rb").read()
+patched, n = re.subn(rb"cnc-log-format [0-9]+ ", b"cnc-log-format 9 ", data, count=1)
+assert n == 1 and len(patched) == len(data), "no format event in " + sys.argv[1]
+open(sys.argv[2], "wb").write(patched)
+PY
+rc=0; out="$("$BUILD/tools/cnc-replay" --log "$tmp" 2>&1)" || rc=$?
+[ "$rc" -eq 2 ] || { echo "$out" >&2; echo "FAIL: a log of format 9 gave exit $rc, expected 2" >&2; exit 1; }
+echo "$out" | grep -q "format 9 (recorded by cnc .*), newer than this cnc .* read it with the version that recorded it" \
+  || { echo "$out" >&2; echo "FAIL: the refusal does not name the format, its version and what to do" >&2; exit 1; }
+echo "format 9: refused: ${out#*: }"
