@@ -141,6 +141,12 @@ void Api::message(uint64_t client, bool may_control, const std::string& text) {
     out_.send_to(client, {{"t", "result"}, {"id", nullptr}, {"ok", false}, {"text", std::string("not JSON: ") + ex.what()}});
     return;
   }
+  if (!j.is_object() || (j.contains("action") && !j["action"].is_string())) {
+    const json id = j.is_object() && j.contains("id") ? j["id"] : json(nullptr);
+    out_.send_to(client, {{"t", "result"}, {"id", id}, {"ok", false},
+                          {"text", "expected an object {\"action\": \"NAME\", ...}"}});
+    return;
+  }
   const json id = j.contains("id") ? j["id"] : json(nullptr);
   const std::string action = j.value("action", "");
   try {

@@ -131,6 +131,15 @@ TEST_F(HmiApi, AnswersByTheTable) {
   EXPECT_EQ(last()["ok"], false);
   EXPECT_TRUE(last()["id"].is_null());
   EXPECT_EQ(last()["text"].get<std::string>().rfind("not JSON: ", 0), 0u);
+  // JSON that is no request (the page never sends it; a script might): answered, nothing thrown.
+  for (const char* text : {"[1]", "5", "null", "\"ping\"", R"({"id": 9, "action": 3})"}) {
+    sent_.clear();
+    EXPECT_NO_THROW(api_->message(7, true, text)) << text;
+    ASSERT_EQ(sent_.size(), 1u) << text;
+    EXPECT_EQ(last()["ok"], false) << text;
+    EXPECT_EQ(last()["text"], "expected an object {\"action\": \"NAME\", ...}") << text;
+  }
+  EXPECT_EQ(last()["id"], 9);
   api_->message(7, true, R"({"id": 2, "action": "fly"})");
   EXPECT_EQ(last(), (json{{"t", "result"}, {"id", 2}, {"ok", false}, {"text", "unknown action 'fly'"}}));
   api_->message(7, true, R"({"id": 3, "action": "override", "value": "fast"})");

@@ -721,11 +721,17 @@ int Ctl::watch_to_end(int64_t token) {
 // Done means the axes are at the program's end: the bridge still reports, and
 // every axis stands within 0.01 mm of where the interpolator ended.
 int Ctl::check_at_end(double t0) {
-  // Let the servo loops settle on the end point (1 µm), for at most 3 s.
+  // Let the servo loops settle on the end point (1 µm from it, the following error
+  // under 0.1 µm), for at most 3 s: the bridge plays the stream back a few cycles
+  // late, so a small following error alone may still be on the way there.
   auto settled = [&] {
-    if (!view_.have_axes) return false;
+    if (!view_.have_axes || view_.interp.num_axes != view_.axes.num_axes) return false;
     for (double fe : view_.axes.following_error_mm)
       if (std::fabs(fe) > 1e-4) return false;
+    for (int i = 0; i < view_.axes.num_axes; ++i)
+      if (!(std::fabs(view_.interp.position_mm[static_cast<size_t>(i)] - view_.axes.actual_mm[static_cast<size_t>(i)]) <=
+            1e-3))
+        return false;
     return true;
   };
   const bool is_settled = wait(3.0, settled);
