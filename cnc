@@ -14,7 +14,7 @@
 #   ./cnc cam drop --stl MESH --tool ball:D|flat:D|bull:D:r --points XY.csv --out XYZ.csv [--threads N]
 #                                                  offline CAM: drop-cutter CL heights (cnc-cam --help)
 #   ./cnc cam rough --stl MESH --stock box|margin[:MM] --tool SPEC --cusp H --out rough.ngc [--compare T,T] [--png F]
-#                                                  offline CAM: z-level roughing, cusp-limited levels (seed 002)
+#                                                  offline CAM: z-level roughing, cusp-limited levels (Shin et al.)
 #   ./cnc conformance [conformance.py options]     our interpreter against LinuxCNC's rs274
 #   ./cnc bench latency [--load N] [--out DIR]     cycle timing of the demo, idle and with N busy loops
 #   ./cnc key gen|rotate|show [--machine FILE] [--grace S] [--activate-in S]  the cell's signing key

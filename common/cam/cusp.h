@@ -1,5 +1,5 @@
 #pragma once
-// Seed 002: the cusp (scallop) a z-level roughing path leaves on a slope between two
+// Shin et al.: the cusp (scallop) a z-level roughing path leaves on a slope between two
 // levels, and the largest z-step that keeps it under a limit.
 //
 // The cross-section normal to the contour: the part's surface is a line rising at θ

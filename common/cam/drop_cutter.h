@@ -1,5 +1,5 @@
 #pragma once
-// Seed 003, drop-cutter by inverse offset: for a point (x, y), the height z of the
+// Hwang, drop-cutter by inverse offset: for a point (x, y), the height z of the
 // cutter's tip at which the cutter, lowered along z, first touches the mesh.
 //
 // For one triangle T that height is max over p in T with rho(p) <= R of

@@ -1,5 +1,5 @@
 #pragma once
-// Triangle meshes for offline CAM (seed 003): a plain list of triangles in mm, no
+// Triangle meshes for offline CAM (Hwang): a plain list of triangles in mm, no
 // connectivity. STL has none, and the drop-cutter needs none.
 #include <array>
 #include <cstddef>

@@ -99,7 +99,7 @@ struct PassWalker {
     return {u_on, z_on};
   }
 
-  // Seed 003's concave corner inside the step (ua, za) - (ub, zb), where the CL surface
+  // Hwang's concave corner inside the step (ua, za) - (ub, zb), where the CL surface
   // has a crease: the CL surface's slopes along the pass at the step's two ends, taken
   // inwards over d = L/4096, give two tangents; the corner is sought only if they meet
   // inside the step, the slope rises across it (the CL surface, an upper envelope, only

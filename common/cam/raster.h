@@ -1,6 +1,6 @@
 #pragma once
 // Parallel-pass (raster) finishing paths over a mesh with a fixed step along each
-// pass: the first half of seed 003's paths, before its step control. Passes run along
+// pass: the first half of Hwang's paths, before its step control. Passes run along
 // `angle_deg` (from +X, counter-clockwise), `pick_mm` apart, covering the mesh's xy
 // bounds, alternately forward and back (zig-zag); along each pass the CL points are
 // `step_mm` apart at most (the step is shrunk to fit the pass exactly). Points whose
@@ -40,7 +40,7 @@ std::vector<std::vector<XY>> raster_passes(const Bounds& bounds, const RasterSpe
 RasterPath raster_fixed_step(const DropCutter& dc, const Bounds& bounds, const RasterSpec& spec, int threads,
                              RasterProgress* progress = nullptr);
 
-// Seed 003's step control along each pass (same passes as above): the next step is
+// Hwang's step control along each pass (same passes as above): the next step is
 // predicted from the circle through the last three CL points (chord error κL²/8 = β),
 // at most `spec.step_mm`; the CL points at k/n of the step (n = 16, more on steep chords
 // so that their spacing along the chord stays that of a flat one, up to 512) are computed and

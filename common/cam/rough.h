@@ -1,5 +1,5 @@
 #pragma once
-// Seed 002: z-level roughing. Levels are chosen bottom-up: from the part's lowest
+// Shin et al.: z-level roughing. Levels are chosen bottom-up: from the part's lowest
 // height, the next level is as high as the cusp limit allows at the smallest slope the
 // part shows anywhere between the two (slope_profile's bands, cusp.h's z-step), capped
 // at the cutter's largest step-down; heights of flat areas are levels of their own, and

@@ -1,8 +1,8 @@
 #pragma once
-// Analytic parts as meshes, for tests and for seed 002's Table 1: height fields over a
+// Analytic parts as meshes, for tests and for Shin et al.'s Table 1: height fields over a
 // rectangle (a grid, two triangles per cell, counter-clockwise seen from above), a box,
-// a square pyramid or frustum, a hemisphere cap, and the two symmetric parts of seed
-// 002's simulation (50 × 50 base, heights 43.9 and 32.4).
+// a square pyramid or frustum, a hemisphere cap, and the two symmetric parts of
+// Shin et al.'s simulation (50 × 50 base, heights 43.9 and 32.4).
 #include <functional>
 #include <string>
 
@@ -24,7 +24,7 @@ Mesh make_frustum(double base_side, double top_side, double h);
 // of `segments` quads (two triangles each; the top band is a fan), open at z = 0.
 Mesh make_hemisphere(double R, int rings, int segments);
 
-// Seed 002's Table 1 parts, which the paper shows only as a picture (its figure 6): a
+// Shin et al.'s Table 1 parts, which the paper shows only as a picture (its figure 6): a
 // symmetric bump on a 50 × 50 square base, centred at the origin, z = 0 on the base's
 // border, with a flat top at the stated height (both tools put their last level there).
 // The profile is z = min(H, 1.25 H·c(x)·c(y)) with c(t) = cos(π t / 50), H = 43.9 for "a"

@@ -1,5 +1,5 @@
 #pragma once
-// Slices of a triangle mesh by horizontal planes, and the slopes along them (seed 002).
+// Slices of a triangle mesh by horizontal planes, and the slopes along them (Shin et al.).
 //
 // slice_mesh cuts every triangle that has vertices on both sides of the plane z = h
 // (a vertex at h counts as below, so a horizontal facet at h is not part of the slice

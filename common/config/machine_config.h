@@ -49,7 +49,7 @@ struct ServoSimAxisConfig {
   // and faults, as a real drive's communication-loss reaction does.
   double comm_timeout_s = 0;
   double comm_stop_decel_mm_s2 = 0;
-  // A home switch (issue 17): closed beyond home_switch_mm in the axis's home
+  // A home switch: closed beyond home_switch_mm in the axis's home
   // direction (axes[].home.direction), where each closing happens at home_switch_mm
   // plus a normal draw of sigma (drawn anew each time it opens; seeded), and opens
   // again hysteresis_mm back. The drive latches its position at each closing edge.
@@ -60,7 +60,7 @@ struct ServoSimAxisConfig {
   uint64_t home_switch_seed = 1;
 };
 
-// Homing of one axis (axes[].home, issue 17), LinuxCNC's sequence: search towards the
+// Homing of one axis (axes[].home), LinuxCNC's sequence: search towards the
 // switch at search_velocity, back off, approach again at latch_velocity; the position
 // latched at the switch's edge is switch_position_mm in machine coordinates; then the
 // axis moves to position_mm. `absolute`: the drive's position is the machine's.
@@ -90,7 +90,7 @@ struct AxisConfig {
   double jog_velocity_mm_s = 0;  // jogging's speed (0: a tenth of max_velocity_mm_s)
 };
 
-// Operator functions (section `operator:`, issue 17).
+// Operator functions (section `operator:`).
 struct OperatorConfig {
   // No program, MDI or homing-free motion other than jogging until every axis with
   // a home method is homed.
@@ -104,7 +104,7 @@ struct OperatorConfig {
   double safe_z_mm = std::numeric_limits<double>::quiet_NaN();
 };
 
-// The browser HMI cnc-hmi (section `hmi:`, issue 17): where it listens, who may use it.
+// The browser HMI cnc-hmi (section `hmi:`): where it listens, who may use it.
 struct HmiConfig {
   std::string listen = "127.0.0.1";  // any other address needs users_file
   int port = 8080;
@@ -116,7 +116,7 @@ struct HmiConfig {
 };
 
 struct ProcessConfig {
-  // Seed 000's roughness feed law; all zero = not set.
+  // Choi et al. 2005's roughness feed law; all zero = not set.
   double ball_radius_mm = 0;
   int flutes = 0;
   double pick_feed_mm = 0;
@@ -124,7 +124,7 @@ struct ProcessConfig {
   double spindle_rpm = 0;
 };
 
-// The cutting-force model live (section `cutting:`, optional; issue 16 item 6):
+// The cutting-force model live (section `cutting:`, optional):
 // the monitor predicts force and tool deflection per setpoint and alarms over the
 // tolerance, and with feed_limit the interpolator's planner limits the feed so the
 // predicted deflection (and force, when max_force_n is set) stays within them. The
@@ -209,7 +209,7 @@ struct MachineConfig {
   // cycle's compute time bounded when many or large NURBS blocks arrive at once;
   // counted in samples, not time, so the cycle a block is applied at is deterministic.
   int plan_budget_samples = 1500;
-  // Curve-parameter update per cycle: first_order (u += Δs/|P'|), taylor2 (seed 000
+  // Curve-parameter update per cycle: first_order (u += Δs/|P'|), taylor2 (Choi et al. 2005
   // eq. 7), corrected (eq. 7, then Newton so the step's chord has the commanded length).
   std::string param_update = "corrected";
 

@@ -1,5 +1,5 @@
 #pragma once
-// Seed 001's chord-error feed limit: a step of length L along a curve of radius of
+// Kim, Song & Kwon's chord-error feed limit: a step of length L along a curve of radius of
 // curvature ρ leaves the chord at most h = ρ − sqrt(ρ² − L²/4) from the curve
 // (≈ L²/(8ρ), the paper's eq. 5); holding h <= ε bounds the step, and the step per
 // interpolation period bounds the feed.

@@ -1,5 +1,5 @@
 #pragma once
-// A NURBS curve in 3-D (seed 001, eq. 1 and 2), evaluated with the algorithms of
+// A NURBS curve in 3-D (Kim, Song & Kwon, eq. 1 and 2), evaluated with the algorithms of
 // Piegl & Tiller, The NURBS Book: span search (A2.1), basis functions and their
 // derivatives (A2.3) and rational derivatives (A4.2). The evaluation functions run
 // in the interpolator's cycle, so they use fixed-size arrays and never allocate.

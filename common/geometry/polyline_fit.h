@@ -1,5 +1,5 @@
 #pragma once
-// Polylines → smooth curves, for CAM output under G64 P (issue 13): a run of short
+// Polylines → smooth curves, for CAM output under G64 P: a run of short
 // G1 moves is a sampled surface curve; the interpolator runs it at the feed the
 // curve allows only when it sees the curve, not the segments.
 //

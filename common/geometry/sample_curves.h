@@ -1,6 +1,6 @@
 #pragma once
 // Reference NURBS curves for tests, benchmarks and demonstrations: the paper's
-// Fig. 11 valley (seed 000), a butterfly-like closed curve, an exact circle, a
+// Fig. 11 valley (Choi et al. 2005), a butterfly-like closed curve, an exact circle, a
 // non-uniform rational spiral, a 3-D space curve and a degree-5 wave. All in mm,
 // clamped, and valid for NurbsCurve.
 #include <string>
@@ -19,7 +19,7 @@ struct SampleCurve {
   NurbsCurve curve() const { return NurbsCurve(order, knots, control_points, weights); }
 };
 
-// Seed 000 Fig. 11: cubic, knots 0 0 0 0 .2 .4 .6 .8 1 1 1 1, a valley in XZ
+// Choi et al. 2005 Fig. 11: cubic, knots 0 0 0 0 .2 .4 .6 .8 1 1 1 1, a valley in XZ
 // (8 control points at y = y0), starting at (x0, y0, z0).
 SampleCurve fig11_valley(double x0 = 0, double y0 = 0, double z0 = 0);
 // A butterfly-like closed curve (Fay's butterfly r = e^cosθ − 2cos4θ, scaled),

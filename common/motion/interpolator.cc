@@ -817,7 +817,7 @@ double Interpolator::advance(double ds, bool* reached_stop) {
       continue;
     }
     const double step = ds - moved;
-    // Seed 000 eq. 7: u += Δs/|P'| − Δs²·(P'·P'')/(2|P'|⁴).
+    // Choi et al. 2005 eq. 7: u += Δs/|P'| − Δs²·(P'·P'')/(2|P'|⁴).
     AxisVec P{}, d1{}, d2{};
     eval_on(p, u_, &P, &d1, &d2);
     double sp2 = 0, dd = 0, d2sq = 0;

@@ -5,8 +5,8 @@
 //
 // Planning, per block on arrival: the block's curve is sampled along its arc
 // length and each sample gets the geometric feed limit, the least of
-//   * the chord-error limit of seed 001: step L = 2·sqrt(2ρε − ε²) per period,
-//   * the roughness limit of seed 000 (eqs. 4–6) when process parameters are set,
+//   * the chord-error limit of Kim, Song & Kwon: step L = 2·sqrt(2ρε − ε²) per period,
+//   * the roughness limit of Choi et al. 2005 (eqs. 4–6) when process parameters are set,
 //   * each axis's velocity limit v_i / |t_i|,
 //   * the centripetal limit sqrt(a_i / (κ·|n_i|)) on half of each axis's acceleration;
 // junctions between blocks get the speed at which the direction change stays
@@ -16,7 +16,7 @@
 // limit here) with a jerk-limited acceleration. Before each cycle commits to an
 // acceleration, it checks that from the resulting state a jerk-limited brake still
 // meets every limit ahead (look-ahead over the buffered blocks, which end in a stop
-// unless more blocks follow). The step along the curve uses seed 000's eq. 7
+// unless more blocks follow). The step along the curve uses Choi et al. 2005's eq. 7
 // parameter update, then a Newton correction so the chord length of the step
 // equals the commanded step length.
 //
@@ -50,7 +50,7 @@ ParamUpdate param_update_from_string(const std::string& s);
 struct Command {
   enum class Kind : int8_t {
     kLoad = 1, kStart = 2, kHold = 3, kResume = 4, kStop = 5, kOverride = 6, kReset = 7,
-    // Homing found the axis's machine position (issue 17): from now on the setpoints
+    // Homing found the axis's machine position: from now on the setpoints
     // of `axis` are its machine position plus `value` (the drive's position minus the
     // machine's), and it counts as homed. Applied only while the path stands.
     kHomed = 13,

@@ -20,7 +20,7 @@ constexpr double kCentripetalShare = 0.5;
 // Share of each axis's acceleration and jerk a line leaves to the velocity step of a
 // junction crossed at speed (corner_speed gives it half a cycle's jerk, and the
 // tangential jerk may fall into the same cycle): with the path's limits at the axes'
-// (sim3 since the raster of issue 13), lines at all of them ran G61 micro-segment
+// (sim3 since the G61 raster), lines at all of them ran G61 micro-segment
 // corners at up to 1.58x the jerk limit. A line between two stops gets it back
 // (Planned::accel_free).
 constexpr double kJunctionShare = 0.5;

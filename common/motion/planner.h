@@ -167,7 +167,7 @@ class Planner {
   std::deque<Entry> list_;  // this epoch's blocks not yet retired, and always the newest
   std::vector<std::unique_ptr<PlanUpdate>> pool_;  // recycled updates
   std::vector<std::unique_ptr<PlanUpdate>> live_;  // handed out (owned here until recycled)
-  // cutting.feed_limit: seed 004's deflection along the path, from a stock the planned
+  // cutting.feed_limit: VMCS 1999's deflection along the path, from a stock the planned
   // blocks are cut out of in planning order (reset with each epoch: a new program run).
   std::unique_ptr<process::LiveForce> force_;
   bool force_dirty_ = false;

@@ -1,5 +1,5 @@
 #pragma once
-// Seed 004 (VMCS, 1999): the cutting force of an end mill by Kline's mechanistic
+// VMCS 1999 (VMCS, 1999): the cutting force of an end mill by Kline's mechanistic
 // model. The tool is cut into M axial discs of height Dz; flute k of disc i at tool
 // rotation angle θ sits at the immersion angle
 //   φ(i, θ, k) = θ + k·2π/N − (i + 1/2)·Dz·tan(h)/R          (paper eq. 3, helix lag)

@@ -1,5 +1,5 @@
 #pragma once
-// Seed 004, section 2.2–2.3: the tool as a cantilever under the distributed disc
+// VMCS 1999, section 2.2–2.3: the tool as a cantilever under the distributed disc
 // loads, and the error of the wall it machines.
 //
 // Eq. 13 (u measured from the holder, a load dF at l from it):

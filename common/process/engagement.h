@@ -1,6 +1,6 @@
 #pragma once
-// Issue 16 item 4 (a start): a flat end mill's engagement from the stock, for seed
-// 004's force model along a tool path. The stock is a Z-map (dexel columns); the
+// A flat end mill's engagement from the stock, for VMCS
+// 1999's force model along a tool path. The stock is a Z-map (dexel columns); the
 // tool removes its envelope as it moves (a flat end mill's edges leave the envelope
 // on walls and floor up to feed marks far below the map's resolution).
 //

@@ -1,5 +1,5 @@
 #pragma once
-// Seed 004, eqs. 7–10: identifying the cutting coefficients from a measured force
+// VMCS 1999, eqs. 7–10: identifying the cutting coefficients from a measured force
 // history. The engaged arc is divided into angular positions β(n) one rotation step
 // apart, and the axial discs are as high as the helix lags by one step (eq. 11:
 // Dz = R·Δθ/tan h). Every element at position β(n) carries the same elemental force

@@ -1,5 +1,5 @@
 #pragma once
-// Issue 16 item 6: seed 004's cutting force and tool deflection along a running
+// VMCS 1999's cutting force and tool deflection along a running
 // tool path, for the monitor (per setpoint) and the interpolator's planner (the
 // force feed limit). The engagement comes from a Z-map stock (engagement.h) that the
 // flat end mill's envelope is removed from as the tool moves, as `cnc-predict

@@ -1,5 +1,5 @@
 #pragma once
-// Seed 000 (Choi, Lee, Jung, Yang 2005): the surface roughness R_max left by a ball
+// Choi et al. 2005 (Choi, Lee, Jung, Yang 2005): the surface roughness R_max left by a ball
 // end mill, extended to the region where the tool tip cuts, and its inverse, the
 // feed law that holds a target R_max. The forms are those of the seed digest
 // (docs/seed-digest.md, section 000), which were checked against the paper's numbers.

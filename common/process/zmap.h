@@ -1,5 +1,5 @@
 #pragma once
-// Seed 000's check: a Z-map of the surface a ball end mill leaves, from its rotating
+// Choi et al. 2005's check: a Z-map of the surface a ball end mill leaves, from its rotating
 // cutting edges rather than its envelope, so that feed marks, cusps and the tool
 // tip's "cutting remains" appear.
 //
@@ -94,7 +94,7 @@ struct RmaxMap {
 };
 RmaxMap zmap_rmax_map(const ZMap& m, const std::function<double(double, double, double)>& dev, int bx, int by);
 
-// Seed 000's Z-map case: a plane inclined at α along X (feed direction), machined by
+// Choi et al. 2005's Z-map case: a plane inclined at α along X (feed direction), machined by
 // parallel passes along +X, f_p apart in Y, each starting at the same X with the same
 // spindle phase, at feed per tooth f_t. The window [0, wx] × [0, wy] is the middle of
 // a cut that runs r beyond it on every side. Returns R_max (peak-to-valley of the

@@ -48,7 +48,7 @@ constexpr int kMaxFlutes = 64;
 
 const char* to_string(BlockKind kind);
 
-// Seed 000's process parameters for the roughness feed law. The law applies when
+// Choi et al. 2005's process parameters for the roughness feed law. The law applies when
 // all four are set (> 0) and the spindle turns.
 struct ProcessParams {
   double ball_radius_mm = 0;

@@ -33,7 +33,7 @@ struct NurbsPoint {
   bool has_z = false;  // Fanuc G6.2: x y z are X Y Z; G5.2: x y are the plane's two axes
 };
 
-// Seed 000's process parameters, changed from a program line by the comment
+// Choi et al. 2005's process parameters, changed from a program line by the comment
 // directive (PROCESS, BALL_RADIUS=5, FLUTES=2, PICK_FEED=0.5, RMAX_UM=10.67); has_*
 // says which keys the directive named.
 struct ProcessSettings {

@@ -1,5 +1,5 @@
 #pragma once
-// The cell's own comment directive for seed 000's roughness law:
+// The cell's own comment directive for Choi et al. 2005's roughness law:
 //   (PROCESS, BALL_RADIUS=5, FLUTES=2, PICK_FEED=0.5, RMAX_UM=10.67)
 // any subset of the keys, any case; BALL_RADIUS and PICK_FEED in mm and RMAX_UM in µm
 // whatever G20/G21 say; RMAX_UM=0 switches the law off. LinuxCNC reads it as a plain

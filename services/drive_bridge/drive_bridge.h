@@ -1,5 +1,5 @@
 #pragma once
-// Drive bridge core: fine interpolation of coarse setpoints (seed 001's two-step
+// Drive bridge core: fine interpolation of coarse setpoints (Kim, Song & Kwon's two-step
 // scheme) and the safety rules the architecture asks of the bridge. Pure: no
 // Modbus, no LCM, no clock, no allocation per tick; driven by servo ticks.
 //

@@ -1,5 +1,5 @@
 #pragma once
-// Run analysis beside the HMI (issue 17 item 3): what a recorded run was, read from
+// Run analysis beside the HMI: what a recorded run was, read from
 // its LCM log without touching the machine.
 #include <cstdint>
 #include <string>

@@ -74,7 +74,7 @@ class InterpolatorNode {
   std::string reset_position(cnc::lcmt_program_command* out) const;
   void watch_drives();
 
-  // Operator motion (issue 17, interpolator_node_manual.cc): jogs and the homing
+  // Operator motion (interpolator_node_manual.cc): jogs and the homing
   // sequence are moves the node makes itself, as a program of a line and an END
   // block under a token of its own (negative): its LOAD, blocks, plans and START are
   // recorded inputs like a program's, and so are the STOPs it decides (the jog's

@@ -1,4 +1,4 @@
-// Operator motion of the interpolator node (issue 17): jogging and homing. See
+// Operator motion of the interpolator node: jogging and homing. See
 // interpolator_node.h. Each move is a line block and an END block made here and
 // fed to the core through the same window, planner and recorded inputs as a
 // program's blocks; its jerk-limited start, cruise and brake are the core's.

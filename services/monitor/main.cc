@@ -1,6 +1,6 @@
 // cnc-monitor: live feed, chord error against the exact block geometry, predicted
-// R_max (seed 000), following error and, with `cutting:`, cutting force and tool
-// deflection (seed 004); alarms on R_max over target, chord error over ε, deflection
+// R_max (Choi et al. 2005), following error and, with `cutting:`, cutting force and tool
+// deflection (VMCS 1999); alarms on R_max over target, chord error over ε, deflection
 // over its tolerance, and sequence gaps in any stream it reads.
 #include <spdlog/spdlog.h>
 

@@ -7,10 +7,10 @@
 //   * commanded feed (the setpoint of that cycle) and actual feed (from the actual
 //     positions of consecutive statuses),
 //   * the chord error of the commanded step against the exact block geometry,
-//   * the R_max that seed 000's extended model predicts from the actual feed, the
+//   * the R_max that Choi et al. 2005's extended model predicts from the actual feed, the
 //     feed inclination angle and the block's process parameters,
 //   * the following error per axis,
-//   * with the machine config's `cutting:` section, seed 004's cutting force and
+//   * with the machine config's `cutting:` section, VMCS 1999's cutting force and
 //     tool deflection per setpoint (common/process/live_force.h): the engagement from
 //     a Z-map stock that every cutting step's envelope is removed from, the feed per
 //     tooth from the commanded step in XY and the block's spindle speed,
@@ -55,7 +55,7 @@ struct Report {
   double max_following_error_mm = 0;  // the largest |following error| of the status's axes
   int64_t block_index = -1;
   int32_t source_line = 0;
-  // Seed 004 (NaN without `cutting:` or where the setpoint's block is unknown; 0 off the stock or not cutting).
+  // VMCS 1999 (NaN without `cutting:` or where the setpoint's block is unknown; 0 off the stock or not cutting).
   double force_x_n = 0, force_y_n = 0, force_z_n = 0;  // mean over a tooth period
   double force_peak_n = 0;                             // largest |F| in XY over it
   double deflection_mm = 0;                            // largest tool-tip deflection over it
@@ -125,7 +125,7 @@ class Monitor {
   config::MachineConfig cfg_;
   int naxes_;
   std::map<std::pair<int64_t, int64_t>, Known> blocks_;  // (token, index), bounded
-  // Seed 004 per setpoint (NaN: unknown).
+  // VMCS 1999 per setpoint (NaN: unknown).
   struct ForceSlot {
     double fx = 0, fy = 0, fz = 0, peak = 0, deflection = 0;
   };

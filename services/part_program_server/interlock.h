@@ -42,7 +42,7 @@ struct CellView {
   std::string approach;
 };
 
-// The operator commands (issue 17) in `v`: "" allowed, else why not.
+// The operator commands in `v`: "" allowed, else why not.
 inline std::string operator_refusal(const cnc::lcmt_program_command& c, const CellView& v) {
   using C = cnc::lcmt_program_command;
   const std::string running = "program " + v.program + " is running: STOP it first";

@@ -76,7 +76,7 @@ class ProgramServerNode {
   std::string interp_fault_text_;
   bool own_fault_ = false;       // a publish of this node failed
   std::string own_fault_text_;
-  // The interpolator's operator motion (issue 17) and homed axes, from INTERP_STATE.
+  // The interpolator's operator motion and homed axes, from INTERP_STATE.
   int8_t interp_mode_ = 0;
   std::string interp_mode_text_;
   bool interp_active_ = false;

@@ -1,5 +1,5 @@
 #!/bin/bash
-# cnc-cam raster --nurbs through the project's own dry run (issue 15, item 6): the passes
+# cnc-cam raster --nurbs through the project's own dry run: the passes
 # over a generated terrain written as G6.2 cubic NURBS fitted within 5 um are accepted by
 # cnc-plan on sim3, every CL point (the G1 program's end points, same passes) lies within
 # 5 um + 0.1 um (the written digits: 8.7e-5 mm) of the dry run's path, and every axis keeps

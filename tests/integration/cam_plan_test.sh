@@ -1,6 +1,6 @@
 #!/bin/bash
-# cnc-cam's G-code through the project's own dry run (issue 15, item 6): rasters over a
-# generated terrain mesh, with a fixed step and with seed 003's step control, are each
+# cnc-cam's G-code through the project's own dry run: rasters over a
+# generated terrain mesh, with a fixed step and with Hwang's step control, are each
 # accepted by cnc-plan on sim3, every setpoint of a G1 move lies within 1 um of that
 # move's segment (tools/cam/check_plan.py), and every axis keeps its velocity,
 # acceleration and jerk limits (cnc-plan's finite differences, 1 %).

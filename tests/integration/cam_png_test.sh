@@ -1,5 +1,5 @@
 #!/bin/bash
-# cnc-cam's pictures (issue 15, item 7): drop --png (the CL surface of a grid of points
+# cnc-cam's pictures: drop --png (the CL surface of a grid of points
 # as a shaded height map), raster --png (the CL surface with the cuts and their CL
 # points) and rough --png (the levels) each write a PNG (its signature, a size and a
 # picture of some hundred pixels a side), and stdout keeps only the tool's figures line

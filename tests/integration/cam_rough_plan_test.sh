@@ -1,6 +1,6 @@
 #!/bin/bash
-# cnc-cam rough's G-code through the project's own dry run (issue 15, items 5 and 6): seed
-# 002's Table 1 part "b" (generated, 7,200 triangles) roughed with a flat and a filleted
+# cnc-cam rough's G-code through the project's own dry run: Shin
+# et al.'s Table 1 part "b" (generated, 7,200 triangles) roughed with a flat and a filleted
 # D10 at cusp 5 in its box stock, and a frustum with a 3 mm margin and a ball D6 at cusp
 # 1 entering down 3° ramps, each accepted by cnc-plan on sim3, every setpoint of a G1 move within 1 um of that
 # move's segment (tools/cam/check_plan.py), every axis within its limits (1 %); --compare

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Every installed executable's command line in one style (issue 18 item 5; common/util/cli.h).
+"""Every installed executable's command line in one style (common/util/cli.h).
 
   cli_style_test.py EXE...
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 16 item 6 on the real cell: config/machines/sim3_cutting_limit.yaml (seed 004's
+# config/machines/sim3_cutting_limit.yaml (VMCS 1999's
 # model live, the force feed limit on) runs a corner into the stock box: a wall taking
 # 0.5 mm radially, then a left turn into a 2 mm deep slot. The interpolator's setpoints
 # carry limit = force after the corner; the monitor's MONITOR reports carry a finite

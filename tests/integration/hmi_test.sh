@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The browser HMI (issue 17 items 2 and 4): the cell started by ./cnc up (cnc-hmi
+# The browser HMI: the cell started by ./cnc up (cnc-hmi
 # with it) in a private network namespace, listening with a users file; the page
 # driven in headless Chromium (tests/integration/hmi_drive.py: selenium with Debian's
 # chromium-driver): the login page and a refused WebSocket without a session, two

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Homing at the edge of the travel (issue 17): a search never commands past the travel
+# Homing at the edge of the travel: a search never commands past the travel
 # the drive bridge checks. X's switch is put 0.5 mm outside its travel: the search
 # stops at the travel's end (-5 mm) and the homing ends with "no home switch up to the
 # end of its travel", with no drive fault. (Unclamped, the search ran on past -5 mm

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Killed processes (issue 14, item 3): SIGKILL of one process of the cell in the
+# Killed processes: SIGKILL of one process of the cell in the
 # middle of a program, and what the rest of the cell must do about it.
 #   kill_test.sh WHO BUILD_DIR SOURCE_DIR
 # WHO:

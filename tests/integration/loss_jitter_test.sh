@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Loss and jitter between two hosts (issue 14, item 2's figure): two network
+# Loss and jitter between two hosts (item 2's figure): two network
 # namespaces joined only by cnc-netem, both ways, LOSS_PCT % (default 5) random loss
 # and 2 ± 1 ms delay (reordering allowed). Host a: program server and interpolator;
 # host b: servo simulator, drive bridge, logger, monitor, and the operator's cnc-ctl.

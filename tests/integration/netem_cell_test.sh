@@ -5,7 +5,7 @@
 # (`./cnc up --only`); host b: simulator and drive bridge. A program of straight
 # lines runs to its end, the axes end on its end point within 1 µm, the setpoints
 # cross the forwarder (its counters: none lost) and the log on a holds the setpoint
-# stream without a gap. The loss tests (issue 14, item 2) build
+# stream without a gap. The loss tests build
 # on this set-up.
 #   netem_cell_test.sh BUILD_DIR SOURCE_DIR
 source "$(dirname "$0")/lib.sh"

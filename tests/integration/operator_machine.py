@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """operator_machine.py SRC DST: SRC (a sim3 copy) with homing required, a home switch
 on each simulated axis and each axis's home sequence (Z first, then X and Y), for the
-operator-function tests (issue 17). The switches close 4 mm inside each axis's travel
+operator-function tests. The switches close 4 mm inside each axis's travel
 end, where the axes search for them (X, Y towards -, Z towards +)."""
 import re
 import sys

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Operator functions in the cell (issue 17 item 1) on the live cell, with homing
+# Operator functions in the cell on the live cell, with homing
 # required: the refusals before homing (run, MDI), a jog before homing, homing one
 # axis and all in order (Z first) on the simulator's home switches, the repeatability
 # of the latched position, incremental jogs (to the soft limit and refused there),

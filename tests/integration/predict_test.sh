@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issue 16 items 2 and 5 through ./cnc: `./cnc predict slot` prints the simulated full-slot
+# `./cnc predict slot` prints the simulated full-slot
 # means as one line, within 0.5 % of the closed form (Al7075-T6, N 4, D 6, helix 30°,
 # a 3 mm, c 0.05 mm: fx −142.9673, fy 225.2212, fz 42.3989 N); `./cnc predict PROGRAM`
 # runs the dry run through the stock model and writes an HTML report whose worst places

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Run from line N on the live cell (issue 17): a program with work offsets (G10 L2,
+# Run from line N on the live cell: a program with work offsets (G10 L2,
 # G55, G92), a tool change with its length (T2 M6, G43), spindle, coolant and an
 # O-word subroutine runs whole; then loaded from line 8 the cell names the approach
 # (safe height, across, tool change, spindle, coolant, down), refuses START until it is

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Single block, optional stop (M1) and block delete ('/') on the live cell (issue 17):
+# Single block, optional stop (M1) and block delete ('/') on the live cell:
 # with single block on, START and each RESUME run one program line and the path holds
 # at rest before the next (cnc-ctl names the line); an M1 holds with optional stop on
 # and not with it off; a '/' line is skipped with block delete on and runs with it off

@@ -1,4 +1,4 @@
-// The drive bridge core: fine interpolation (seed 001's two steps), a missed or
+// The drive bridge core: fine interpolation (Kim, Song & Kwon's two steps), a missed or
 // late setpoint bridged, the limits (travel, velocity, acceleration) faulting
 // before anything moves, the watchdog's controlled stop, joining a stream only
 // where the axes stand; and a randomised stream (fixed seed) never producing a

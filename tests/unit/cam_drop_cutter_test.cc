@@ -1,4 +1,4 @@
-// Drop-cutter (seed 003) against an independent reference: for each triangle, the
+// Drop-cutter (Hwang) against an independent reference: for each triangle, the
 // concave function p.z − h(rho(p)) maximised over the triangle ∩ {rho <= R} by nested
 // golden-section searches on the triangle's own parameters (u, v) — no facet, edge or
 // vertex cases, no closed forms. Every contact type, every cutter shape, within 1e-9 mm.

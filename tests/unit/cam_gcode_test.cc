@@ -62,7 +62,7 @@ TEST(CamRaster, FixedStepPointsLieOnTheExactClSurface) {
   EXPECT_GT(checked, 40u);
 }
 
-// Seed 003's step control on a smooth terrain: the measured deviation (32 CL points
+// Hwang's step control on a smooth terrain: the measured deviation (32 CL points
 // inside every segment, 3-D distance) stays within beta, with fewer points than the
 // largest fixed step that does.
 TEST(CamRaster, StepControlHoldsBetaWithFewerPointsThanAFixedStep) {
@@ -105,7 +105,7 @@ Mesh v_groove(double x0, double t1, double t2) {
   return m;
 }
 
-// Seed 003's concave corner: a cutter in the V-groove sits where its corner arc (a
+// Hwang's concave corner: a cutter in the V-groove sits where its corner arc (a
 // circle of radius r whose centre is a from the axis, r above the tip; ball: a = 0,
 // r = R; flat: r = 0) is r from both walls, two linear equations in the tip's x and z
 // (x' = x - x0): x' sin θ1 + z cos θ1 = r (1 - cos θ1) + a sin θ1 (left wall, the arc's

@@ -1,4 +1,4 @@
-// Seed 002's z-level roughing: the cusp-limited z-step's closed forms against bisection,
+// Shin et al.'s z-level roughing: the cusp-limited z-step's closed forms against bisection,
 // against a sampled envelope of the two cutter profiles and against values worked by
 // hand; slices of known meshes; the tool-offset contour against the drop-cutter; level
 // counts on a frustum; rings inside the stock and outside the keep-out.

@@ -1,4 +1,4 @@
-// Seed 004's cutting-force model: the disc simulation against the closed-form slot
+// VMCS 1999's cutting-force model: the disc simulation against the closed-form slot
 // means (digest, Al7075-T6), the projection, engagement, the chip-thickness law, the
 // calibration of eqs. 7–10 on synthetic histories with noise, and the config files.
 #include <gtest/gtest.h>

@@ -1,4 +1,4 @@
-// Seed 004's tool deflection (cantilever, eq. 13, D_e = 0.8·D) and the wall's surface
+// VMCS 1999's tool deflection (cantilever, eq. 13, D_e = 0.8·D) and the wall's surface
 // error from the rotation angle at which each height is generated (eqs. 15–16).
 #include <gtest/gtest.h>
 

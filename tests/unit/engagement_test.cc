@@ -1,4 +1,4 @@
-// Issue 16 item 4 (a start): a flat end mill's engagement from a Z-map stock — the
+// a flat end mill's engagement from a Z-map stock — the
 // engaged arc of a straight wall cut and a slot against the geometric arcs, the force
 // from the profile against the engagement-arc model, and a pocket corner's growing
 // engagement.

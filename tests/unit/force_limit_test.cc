@@ -1,4 +1,4 @@
-// Issue 16 item 6: seed 004 live. The interpolator's force feed limit (machine config
+// VMCS 1999 live. The interpolator's force feed limit (machine config
 // cutting.feed_limit) and the monitor's predicted force and tool deflection per
 // setpoint, with its alarm over cutting.deflection_tolerance_mm.
 //

@@ -1,4 +1,4 @@
-// G64 P on CAM-style programs (issue 13): runs of short G1 moves are fitted to cubic
+// G64 P on CAM-style programs: runs of short G1 moves are fitted to cubic
 // splines within P, the remaining corners between lines are rounded within P, and
 // G61 / G64 without P keep the programmed lines. PlanRun from G-code through the
 // interpreter, the block builder and the interpolator core (sim3's limits, 4 ms):

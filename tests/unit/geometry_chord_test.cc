@@ -1,4 +1,4 @@
-// Seed 001's chord-error limit: the step length on a circle, its feed, and the
+// Kim, Song & Kwon's chord-error limit: the step length on a circle, its feed, and the
 // measured chord error of a step on a circle NURBS against the closed form.
 #include <gtest/gtest.h>
 
@@ -57,7 +57,7 @@ TEST(ChordStep, EdgeCases) {
 }
 
 TEST(ChordFeed, IsSixtyStepsPerPeriodPerMinute) {
-  // Seed 001's simulation: ΔT = 8 ms, ε = 0.05 µm.
+  // Kim, Song & Kwon's simulation: ΔT = 8 ms, ε = 0.05 µm.
   const double rho = 20.0;
   const double eps = 0.05e-3;
   EXPECT_DOUBLE_EQ(chord_feed_limit_mm_per_min(rho, eps, 0.008), 60.0 * chord_step_length(rho, eps) / 0.008);

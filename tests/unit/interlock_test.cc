@@ -81,7 +81,7 @@ TEST(Interlock, StartNeedsEnabledDrivesAndOverrideItsRange) {
   EXPECT_EQ(pps::refusal(cmd(C::OVERRIDE, 0.0), v), "");
 }
 
-// Issue 17: the operator commands in every state, and the program commands while an
+// the operator commands in every state, and the program commands while an
 // operator move runs or the axes are not homed (README, commands and states).
 TEST(Interlock, OperatorCommandsInEveryState) {
   const CellState states[] = {CellState::kIdle,  CellState::kLoaded,  CellState::kRunning, CellState::kHeld,

@@ -1,4 +1,4 @@
-// The core's HOMED input (issue 17): the drive offset it records moves the machine
+// The core's HOMED input: the drive offset it records moves the machine
 // position and not the setpoint, later moves are in machine coordinates with the
 // offset on every setpoint, a RESET takes the drives' positions less the offset, and
 // the recorded command applies the same through inputs.cc (as replay applies it).

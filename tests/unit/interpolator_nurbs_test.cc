@@ -1,5 +1,5 @@
 // NURBS interpolation against the exact curve: the chord error of every step
-// (seed 001) and the axis limits, on the reference curves, for several tolerances.
+// (Kim, Song & Kwon) and the axis limits, on the reference curves, for several tolerances.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -117,7 +117,7 @@ void expect_axis_limits(const config::MachineConfig& cfg, const RunResult& r) {
               worst_j);
 }
 
-// Seed 001's simulation: T = 8 ms, F = 2000 mm/min, ε = 0.05 µm, 1 µm, 2 µm.
+// Kim, Song & Kwon's simulation: T = 8 ms, F = 2000 mm/min, ε = 0.05 µm, 1 µm, 2 µm.
 TEST(NurbsInterpolation, ChordErrorBoundedAndReachedOnReferenceCurves) {
   for (double eps_um : {0.05, 1.0, 2.0}) {
     const double eps = eps_um * 1e-3;

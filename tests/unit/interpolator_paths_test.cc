@@ -93,7 +93,7 @@ TEST(InterpolatorPaths, AnArcEndingOffItsRadiusIsASpiralWithinTheLimits) {
   EXPECT_NEAR(u.end[0], 89.981, 1e-9);
 }
 
-// Found by cnc-path-property (issue 13): control points in a line (clamped onto Y 0)
+// Found by cnc-path-property: control points in a line (clamped onto Y 0)
 // with weights 0.1-20, so the curve turns back on itself twice (cusps, P' = 0 inside).
 // Before: the path stopped at the second cusp for good (an interior curvature of
 // 1e24 from rounding at a vanishing tangent), or crossed a cusp at speed (jerk 188x).

@@ -1,5 +1,5 @@
 #pragma once
-// Randomized programs for the interpolator core (issue 13, "Paths without defects",
+// Randomized programs for the interpolator core ("Paths without defects",
 // item 3), shared by tests/unit/interpolator_property_test.cc and the driver
 // tools/bench/path_property.cc. A program is G-code text on sim3's travel, made of
 // pieces that each start where the one before ends:

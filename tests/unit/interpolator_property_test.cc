@@ -1,4 +1,4 @@
-// Issue 13 ("Paths without defects"), item 3: a randomized property test of the
+// A randomized property test of the
 // interpolator core. Random programs on sim3's travel (the generator and the checks:
 // tests/unit/interpolator_property.h) run from G-code through the interpreter and the
 // interpolator core, fed as the dry run feeds it; every program must give finite

@@ -1,4 +1,4 @@
-// Single block and optional stop in the interpolator core (issue 17): with single
+// Single block and optional stop in the interpolator core: with single
 // block on, the path comes to rest at the start of every program line and holds there
 // until RESUME (START runs the first line); switched on while the path runs at speed,
 // it stops at the first line start it can still reach at rest within its jerk and

@@ -1,5 +1,5 @@
 // The monitor core against the interpolator core: chord error of the commanded
-// steps, predicted R_max from the feed (seed 000's model, which the feed law
+// steps, predicted R_max from the feed (Choi et al. 2005's model, which the feed law
 // inverts), alarms, and reports that depend only on the messages.
 #include <gtest/gtest.h>
 
@@ -182,7 +182,7 @@ TEST(Monitor, PredictedRoughnessHoldsTheTargetUnderTheFeedLaw) {
 
 TEST(Monitor, RoughnessAlarmWhenNothingHoldsTheTarget) {
   // The same valley at F2000 without the law: at the bottom (|α| < α_c) the feed per
-  // tooth f_p leaves 25 µm (seed 000: 24.9 µm by Z-map), over 10.67 µm + 10 %.
+  // tooth f_p leaves 25 µm (Choi et al. 2005: 24.9 µm by Z-map), over 10.67 µm + 10 %.
   const auto cfg = sim3();
   const Outcome r = run(cfg, std::string(CNC_SOURCE_DIR) + "/config/programs/fig11_valley.ngc", false);
   int rmax_alarms = 0;

@@ -1,4 +1,4 @@
-// NURBS evaluation against an independent evaluation written here from seed 001's
+// NURBS evaluation against an independent evaluation written here from Kim, Song & Kwon's
 // own definitions (eq. 2: the Cox–de Boor recursion; eq. 1: the rational point),
 // derivatives against finite differences of that evaluation, the exact circle, arc
 // length, and validation messages. Randomised cases use a fixed seed.
@@ -21,7 +21,7 @@ namespace {
 
 using ::testing::HasSubstr;
 
-// ---- independent evaluation (seed 001, eqs. 1 and 2) -----------------------------
+// ---- independent evaluation (Kim, Song & Kwon, eqs. 1 and 2) -----------------------------
 
 // N_{i,k}(u) of order k by the recursion, 0/0 taken as 0. The half-open spans of
 // eq. 2 give zero everywhere at u = u_max; the usual convention closes the last

@@ -1,4 +1,4 @@
-// Seed 000's roughness-controlling feed on the paper's Fig. 11 valley: the feed
+// Choi et al. 2005's roughness-controlling feed on the paper's Fig. 11 valley: the feed
 // drops where the feed inclination |α| is below the critical angle α_c and holds the
 // programmed feed on the slopes (Fig. 12).
 #include <gtest/gtest.h>
@@ -32,7 +32,7 @@ TEST(RoughnessFeed, Fig11ValleySlowsWhereTheInclinationIsBelowTheCriticalAngle) 
   for (const auto& c : nb->nurbs.control_points) ctrl.emplace_back(c[0], c[1], c[2]);
   const geometry::NurbsCurve curve(nb->nurbs.order, nb->nurbs.knots, ctrl, nb->nurbs.weights);
 
-  // Seed 000's numbers for this process: α_c = 4.34° at f_t = f_p, and at α = 0 the
+  // Choi et al. 2005's numbers for this process: α_c = 4.34° at f_t = f_p, and at α = 0 the
   // feed that holds 10.67 µm is 0.653 of F = n·S·f_p = 2000 mm/min.
   const double r = 5, fp = 0.5, rmax = 10.67e-3, F = 2000;
   const double alpha_c = process::critical_angle(r, fp, fp);

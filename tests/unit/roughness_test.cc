@@ -1,4 +1,4 @@
-// Seed 000's extended roughness model and feed law: the digest's check table
+// Choi et al. 2005's extended roughness model and feed law: the digest's check table
 // (r = 5 mm, f_p = 0.5 mm, two flutes), the region boundary, and the feed law as the
 // exact inverse of the model, continuous at α_c and monotone in |α|.
 #include <gmock/gmock.h>

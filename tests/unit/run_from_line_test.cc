@@ -1,4 +1,4 @@
-// Run from line N (issue 17): on a program with work offsets (G10 L2, G54/G55, G92), a
+// Run from line N: on a program with work offsets (G10 L2, G54/G55, G92), a
 // tool change with its length (T2 M6 G43), spindle, coolant and an O-word subroutine,
 // the interpreter's state before line N as the run from N rebuilds it (the validation
 // run and the serving run) equals a full run's at line N, field by field; the blocks

@@ -1,4 +1,4 @@
-// Seed 000's check: the Z-map of a ball end mill's rotating edges against the
+// Choi et al. 2005's check: the Z-map of a ball end mill's rotating edges against the
 // extended roughness model (roughness.h) on the digest's cases (r = 5 mm,
 // f_p = 0.5 mm, two flutes), the cusp-only limit, and threads.
 #include <gtest/gtest.h>

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Arcs whose end point is off the start radius (issue 13), against LinuxCNC.
+"""Arcs whose end point is off the start radius, against LinuxCNC.
 
 LinuxCNC 2.9 accepts an arc whose end radius differs from its start radius by up to
 2*0.01*sqrt(2) mm (or 0.1 % of the radius), keeps the programmed centre, and draws a

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The demo's tracking, measured: runs config/programs/demo.ngc (or PROGRAM) on the
 # whole cell in a private network namespace, optionally with LOAD busy loops, and
-# prints the figures issue 12 asks for: the largest following error (axis, time,
+# prints the figures of the real-time core: the largest following error (axis, time,
 # program line), watchdog trips, setpoint gaps, alarms by code, and the bridge's and
 # the simulator's account of stalls. With KEEP=DIR the run's files stay in DIR.
 #   tools/bench/demo_fe_bench.sh BUILD_DIR SOURCE_DIR [LOAD] [PROGRAM]

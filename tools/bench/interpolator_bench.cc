@@ -3,7 +3,7 @@
 // the planner thread, as the node runs it (feed policy + plans taken + step), against
 // the same with the planner inline in the cycle (the former design); setpoints per
 // second of a dry run, and the feed fluctuation of the parameter updates — first
-// order (seed 001 eq. 6), second order (seed 000 eq. 7) and eq. 7 with the
+// order (Kim, Song & Kwon eq. 6), second order (Choi et al. 2005 eq. 7) and eq. 7 with the
 // chord-length correction — all measured in the same run on the same program.
 //
 //   cnc-bench-interpolator [--machine FILE] [--blocks N] [--paced] [--slowest] [--cyclic-only]
@@ -440,7 +440,7 @@ int bench(const cnc::config::MachineConfig& machine, const cnc::service::Args& a
   std::printf("feed fluctuation (realised step vs commanded, |.| max and rms, same program):\n");
   const std::pair<cnc::interp::ParamUpdate, const char*> modes[] = {
       {cnc::interp::ParamUpdate::kFirstOrder, "first order  u += ds/|P'|          "},
-      {cnc::interp::ParamUpdate::kTaylor2, "second order (seed 000 eq. 7)      "},
+      {cnc::interp::ParamUpdate::kTaylor2, "second order (Choi et al. 2005 eq. 7)      "},
       {cnc::interp::ParamUpdate::kCorrected, "eq. 7 + chord-length correction    "}};
   double base_max = 0;
   for (const auto& [mode, name] : modes) {

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Micro-segment bench (issue 13): CAM-style programs of short G1 moves through the
+"""Micro-segment bench: CAM-style programs of short G1 moves through the
 dry run (cnc-plan) under G61, G64 P with corner blends only, G64 P with spline
 fitting, and (the surface) the exact NURBS program they were sampled from.
 

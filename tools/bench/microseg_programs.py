@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Part programs for the micro-segment bench (issue 13): CAM-style runs of short G1
+"""Part programs for the micro-segment bench: CAM-style runs of short G1
 moves, and the exact NURBS program they were sampled from.
 
   raster   a raster over a gently curved surface: 10 rows of 200 moves of 0.3 mm,

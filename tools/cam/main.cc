@@ -1,4 +1,4 @@
-// cnc-cam: offline CAM on triangle meshes (seeds 002, 003).
+// cnc-cam: offline CAM on triangle meshes (Shin et al. and Hwang).
 //
 //   cnc-cam drop --stl MESH --tool ball:D|flat:D|bull:D:r --points XY.csv --out XYZ.csv [--threads N]
 //                [--png FILE]
@@ -23,7 +23,7 @@
 // the mesh's load and the index's build. --png: the CL surface (tools/cam/plot_cam.py;
 // a shaded height map when the points form a grid, coloured dots otherwise).
 //
-// rough: seed 002's z-level roughing (common/cam/rough.h): levels bottom-up from the
+// rough: Shin et al.'s z-level roughing (common/cam/rough.h): levels bottom-up from the
 // smallest slope on each contour and the cusp limit, plus flat areas; per level the
 // tool-offset contour (Clipper) and rings stepping in from the stock by --stepover
 // (a fraction of D, default 0.4), linked at the level or via the clearance plane;
@@ -35,7 +35,7 @@
 // part: writes an analytic test part as binary STL (common/cam/shapes.h).
 //
 // raster: parallel passes written as G-code (common/cam/gcode_writer.h), with a fixed
-// step, or with --tol-beta seed 003's step control up to --step (common/cam/raster.h),
+// step, or with --tol-beta Hwang's step control up to --step (common/cam/raster.h),
 // concave corners found by its bisection unless --no-corner-search;
 // then the path's measured deviation from the exact CL surface (32 CL points inside
 // every segment) is printed, and with --compare-fixed the point count of the largest
@@ -545,7 +545,7 @@ int main(int argc, char** argv) {
   r->add_option("--min-step", raster.min_step, "smallest step of the step control, mm")->check(cnc::util::cli::positive());
   r->add_flag("--compare-fixed", raster.compare_fixed, "also find the fixed step that is as accurate");
   r->add_flag("--no-corner-search", raster.no_corner_search,
-              "step control without seed 003's concave corner search (the halving alone closes in on corners)");
+              "step control without Hwang's concave corner search (the halving alone closes in on corners)");
   r->add_option("--png", raster.png, "picture of the CL surface and the cuts to write (matplotlib)");
   r->add_option("--png-cells", raster.png_cells, "the picture's CL grid: cells along the longer side")
       ->check(CLI::Range(10, 2000));
@@ -558,7 +558,7 @@ int main(int argc, char** argv) {
   r->add_option("--safe-z", raster.safe_z, "retract height above the part's top, mm");
   r->add_option("--threads", raster.threads, "worker threads (default: all cores)")->check(CLI::Range(1, 256));
   RoughArgs rough;
-  CLI::App* g = app.add_subcommand("rough", "z-level roughing with cusp-limited levels (seed 002), as G-code");
+  CLI::App* g = app.add_subcommand("rough", "z-level roughing with cusp-limited levels (Shin et al.), as G-code");
   g->add_option("--stl", rough.stl, "mesh, ASCII or binary STL")->required();
   g->add_option("--stock", rough.stock, "box (the mesh's bounds) or margin[:MM] (grown by MM in x, y and top; 2)");
   g->add_option("--tool", rough.tool, "ball:D, flat:D or bull:D:r (mm)")->required();

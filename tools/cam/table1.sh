@@ -1,5 +1,5 @@
 #!/bin/bash
-# Seed 002's Table 1 side by side: builds the two parts (cnc-cam part, CELLS cells a side,
+# Shin et al.'s Table 1 side by side: builds the two parts (cnc-cam part, CELLS cells a side,
 # default 200), roughs them at cusp 5 with a flat D10 and a filleted D10 r2 in their box
 # stock, and prints the levels and path lengths next to the paper's.
 #   tools/cam/table1.sh [BUILD_DIR] [CELLS]

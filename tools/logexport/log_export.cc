@@ -229,7 +229,7 @@ void LogExport::write(const std::string& dir, const std::vector<std::string>& lo
     head << "setpoint_cycle" << "t_s" << "commanded_feed_mm_min" << "actual_feed_mm_min" << "chord_error_mm"
          << "chord_tolerance_mm" << "predicted_rmax_um" << "target_rmax_um" << "spindle_rpm" << "max_following_error_mm";
     for (const auto& n : names) head << "fe_" + n + "_mm";
-    // Seed 004 live (machine config `cutting:`; NaN without it).
+    // VMCS 1999 live (machine config `cutting:`; NaN without it).
     f.line(head << "block" << "line" << "force_peak_n" << "deflection_mm" << "deflection_tolerance_mm");
     for (const auto& m : monitor_) {
       if (std::isfinite(m.chord_error_mm))

@@ -1,11 +1,11 @@
-// cnc-predict-bench: figures of the force model (seed 004) and the Z-map (seed 000).
+// cnc-predict-bench: figures of the force model (VMCS 1999) and the Z-map (Choi et al. 2005).
 //   cnc-predict-bench force   relative error of the disc simulation's slot means
 //                             against the closed form, by disc count
-//   cnc-predict-bench zmap    Z-map speed: seed 000's case (r 5, f_p = f_t = 0.5 mm,
+//   cnc-predict-bench zmap    Z-map speed: Choi et al. 2005's case (r 5, f_p = f_t = 0.5 mm,
 //                             α 10°, 2 flutes) on a 5×5 mm window at 2 µm, 1 and 2 threads
 //                             [--window MM] [--pitch MM] [--alpha DEG]; wall and process CPU
 //                             time, and the load average (other work on the machine)
-//   cnc-predict-bench zmap-converge  seed 000's α_c case (f_t = f_p = 0.5 mm, r 5, 2 flutes, 1×1 mm):
+//   cnc-predict-bench zmap-converge  Choi et al. 2005's α_c case (f_t = f_p = 0.5 mm, r 5, 2 flutes, 1×1 mm):
 //                             Z-map − model by grid pitch, by the edge's rotation step, and by α
 //                             around α_c, by window size, and by the spindle phase between passes (why the
 //                             paper's 1.8 µm is not met there)
@@ -214,7 +214,7 @@ int bench_calibration() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"figures of the force model (seed 004) and the Z-map (seed 000)", "cnc-predict-bench"};
+  CLI::App app{"figures of the force model (VMCS 1999) and the Z-map (Choi et al. 2005)", "cnc-predict-bench"};
   cnc::util::cli::setup(app);
   std::string what = "all";
   app.add_option("what", what, "force, deflection, calibration, zmap, zmap-converge or all")

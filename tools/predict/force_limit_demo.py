@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Issue 16 item 6: the force feed limit on a pocket with corners, side by side.
+"""The force feed limit on a pocket with corners, side by side.
 
 Plans config/programs/pocket_corner.ngc twice with cnc-plan (the dry run: the
 interpolator core as it runs live) - on config/machines/sim3_cutting.yaml (no feed

@@ -1,4 +1,4 @@
-// cnc-predict: offline prediction of the machined surface (seeds 000 and 004).
+// cnc-predict: offline prediction of the machined surface (Choi et al. 2005 and VMCS 1999).
 //
 //   cnc-predict slot --material FILE --flutes N --diameter D --helix DEG
 //                    --axial-depth A --feed-per-tooth C [--discs M] [--model linear_edge|chip_thickness_law]
@@ -9,7 +9,7 @@
 //       the wall's surface error (tool deflection at each height when it is generated)
 //   cnc-predict zmap --alpha DEG --feed-per-tooth C [--pick-feed P] [--radius R] [--flutes N]
 //                    [--window MM] [--pitch MM] [--threads N] [--out DIR]
-//       seed 000's inclined-plane case on a Z-map of the rotating edges: R_max against
+//       Choi et al. 2005's inclined-plane case on a Z-map of the rotating edges: R_max against
 //       the extended model; --out writes the surface (deviation from the plane) and its R_max map
 //   cnc-predict zmap-check --out DIR [--pitch MM] [--threads N]
 //       the digest's cases and an (α, f_t) grid: rmax_cases.csv, rmax_grid.csv, two surfaces;
@@ -277,7 +277,7 @@ int main(int argc, char** argv) {
         .number(c, "pass-phase-deg", "DEG", "spindle phase added from one pass to the next, degrees (default 0)")
         .number(c, "threads", "N", "threads (default 2)");
   };
-  CLI::App* zmap = app.add_subcommand("zmap", "seed 000's inclined-plane case on a Z-map: R_max against the model");
+  CLI::App* zmap = app.add_subcommand("zmap", "Choi et al. 2005's inclined-plane case on a Z-map: R_max against the model");
   zmap_case(zmap);
   a.text(zmap, "out", "DIR", "write the surface and its R_max map into DIR")
       .number(zmap, "block", "MM", "the R_max map's block, mm (default 0.25)");

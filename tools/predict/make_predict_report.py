@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""HTML report of `cnc-predict program --out DIR` (issue 16 item 5, a start).
+"""HTML report of `cnc-predict program --out DIR` (a start).
 
   make_predict_report.py DIR [--title T]  ->  DIR/index.html with
     force.png      mean force components and peak force over time (flat end mill)
@@ -55,7 +55,7 @@ def main():
         ax.grid(alpha=0.3)
         fig.tight_layout()
         fig.savefig(d / "force.png", dpi=100)
-        imgs.append(("Cutting force (Kline model, seed 004)", "force.png"))
+        imgs.append(("Cutting force (Kline model, VMCS 1999)", "force.png"))
         fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(11, 6), sharex=True)
         ax1.plot(t, [1e3 * float(r["deflection_peak_mm"]) for r in rows], lw=0.8, label="tool-tip deflection, peak")
         ax1.plot(t, [1e3 * float(r["surface_error_mm"]) for r in rows], lw=0.8, color="0.6",

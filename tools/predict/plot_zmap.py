@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Plots of `cnc-predict zmap-check --out DIR` (seed 000's Z-map check).
+"""Plots of `cnc-predict zmap-check --out DIR` (Choi et al. 2005's Z-map check).
 
   plot_zmap.py DIR   ->  DIR/zmap_vs_model.png   R_max over α: Z-map points, extended model lines,
                                                  the difference map over (α, f_t), and (when

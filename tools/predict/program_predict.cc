@@ -142,7 +142,7 @@ int cmd_program(const Args& a) {
   if (!out) throw std::invalid_argument("cannot write " + dir + "/predict.csv");
   std::map<int, double> worst_by_line;
   if (tool.type == "ball") {
-    // Seed 000: the ball's rotating edges over the whole program, R_max per block.
+    // Choi et al. 2005: the ball's rotating edges over the whole program, R_max per block.
     std::vector<ToolSample> path;
     for (const Setpoint& s : sp) {
       if (s.cutting || !path.empty()) path.push_back({s.t, s.p + Eigen::Vector3d(0, 0, r)});

@@ -1,7 +1,6 @@
 #pragma once
-// cnc-predict program: seed 004's force and deflection and seed 000's surface along a
-// program's dry-run setpoints (cnc-plan's CSV), through a Z-map stock (issue 16 item 5,
-// a start).
+// cnc-predict program: VMCS 1999's force and deflection and Choi et al. 2005's surface along a
+// program's dry-run setpoints (cnc-plan's CSV), through a Z-map stock (a start).
 #include <string>
 
 namespace cnc::predict {

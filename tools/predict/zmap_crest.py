@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Seed 000's Z-map check, independently of the Z-map's rasteriser: the height the rotating
+"""Choi et al. 2005's Z-map check, independently of the Z-map's rasteriser: the height the rotating
 edges leave at a point of simulate_inclined_plane's case (same set-up: r, 2 flutes, passes
 f_p apart along +X, each starting r + 2 f_t before the window with the same spindle phase,
 10000 rpm), from the moments each edge's plane passes over the point (sign changes on a

@@ -156,11 +156,11 @@ def plot_rmax(rep, mon, target_um, target_note):
 
 
 def plot_deflection(rep, mon):
-    """Seed 004 live: only when the monitor predicted a deflection (machine config `cutting:`)."""
+    """VMCS 1999 live: only when the monitor predicted a deflection (machine config `cutting:`)."""
     t, d = column(mon, "t_s"), [v * 1000 for v in column(mon, "deflection_mm")]
     if not finite(d):
         return
-    title = "(c2) predicted tool-tip deflection against time (seed 004, from the stock)"
+    title = "(c2) predicted tool-tip deflection against time (VMCS 1999, from the stock)"
     fig, ax = plt.subplots(figsize=(11, 3.5), constrained_layout=True)
     ax.plot(t, d, ".", ms=2, color="#8c564b", label="predicted deflection (peak per tooth period)")
     tol = [v * 1000 for v in column(mon, "deflection_tolerance_mm")]

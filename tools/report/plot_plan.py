@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """Feed profile of a dry run (cnc-plan --csv): feed against time coloured by the
 constraint that set it, the path, and the feed inclination angle with the critical
-angle of seed 000 when asked.
+angle of Choi et al. 2005 when asked.
 
     plot_plan.py PLAN.csv --out FEED.png [--title T] [--alpha-c DEG] [--only-line N]
 """
@@ -92,7 +92,7 @@ def main():
         ax.set_ylabel("feed inclination |alpha| [deg]")
         ax.set_yscale("symlog", linthresh=1.0)
         ax.set_ylim(0, 90)
-        ax.set_title("feed against the feed inclination angle (seed 000, Fig. 12)")
+        ax.set_title("feed against the feed inclination angle (Choi et al. 2005, Fig. 12)")
         ax.legend(loc="upper left", fontsize=8)
         ax.grid(alpha=0.3)
     fig.savefig(a.out, dpi=110)
