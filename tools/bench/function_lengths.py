@@ -4,6 +4,9 @@ a `{` after `)` outside any other function), for the house's size figures.
 
   function_lengths.py common services
 """
+import os
+import re
+import sys
 
 def strip(src):
     out=[];i=0;n=len(src)
