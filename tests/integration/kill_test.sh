@@ -237,11 +237,14 @@ drive-bridge)
   wait_for "the drives' watchdog fault" 10 in_log servo-sim "axis X: stopped at .*fault 0x8130"
   grep -q "axis X: communication watchdog" "$WORK/servo-sim.log" || fail "the simulator's watchdog did not brake X"
   wait_for "the axes stand" 10 standing
-  # The drives' own quick stop after the watchdog's 0.1 s. Delay: the watchdog's 0.1 s, plus
-  # 40 ms of measurement slack: the trace row before the kill is up to 10 ms older, and the
-  # kill lands a few ms after its time stamp (more on a loaded VM). (Measured from the kill,
-  # not from an onset of braking: the drive's demand after its stream ends is no clean cruise.)
-  stop_distance "$kill_wall" 2000 0.14 1.25
+  # The drives' own quick stop after the watchdog's 0.1 s. Delay: the watchdog's 0.1 s, the
+  # time the kill took to land (from its time stamp until the process was reaped: 3-50 ms,
+  # more on a loaded VM), plus 40 ms of measurement slack (the trace row before the kill is
+  # up to 10 ms older). (Measured from the kill, not from an onset of braking: the drive's
+  # demand after its stream ends is no clean cruise.)
+  delay=$(/usr/bin/python3 -c "print(0.14 + $kill_after - $kill_wall)")
+  note "the kill landed within $(/usr/bin/python3 -c "print(round(($kill_after - $kill_wall) * 1e3))") ms of its time stamp"
+  stop_distance "$kill_wall" 2000 "$delay" 1.25
   wait_for "the interpolator's peer_lost alarm" 10 in_log interpolator "\[peer_lost\] no heartbeat from cnc-drive-bridge"
   grep -q "fault: .*drive bridge" "$WORK/interpolator.log" || fail "the interpolator did not stop the program for the lost bridge"
   start drive-bridge "$BUILD/services/cnc-drive-bridge" --machine "$M"
