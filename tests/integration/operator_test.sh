@@ -250,15 +250,17 @@ M2
 NGC
 "${CTL[@]}" --do run --program "$WORK/long.ngc" --timeout 60 >"$WORK/long.out" 2>&1 &
 TEST_PIDS[long]=$!
+# Both the program server (naming the program) and the interpolator (which moves
+# the axes: "a program is running") refuse; whichever answers first is reported.
 # Running once RESUME is allowed (it has no effect on a program that runs; refused before).
 for ((i = 0; i < 300; i++)); do
   "${CTL[@]}" --do resume >"$WORK/probe2.out" 2>&1 && break
   sleep 0.02
 done
-expect_refused jog_running "long.ngc is running: STOP it first" "${CTL[@]}" --do jog --axis X --value 1
-expect_refused mdi_running "long.ngc is running: STOP it first" "${CTL[@]}" --do mdi --line "G0 X1"
-expect_refused home_running "long.ngc is running: STOP it first" "${CTL[@]}" --do home
-expect_refused touch_running "long.ngc is running: STOP it first" "${CTL[@]}" --do touch-off --axis X --value 0
+expect_refused jog_running "\\(long.ngc\\|a program\\) is running: STOP it first" "${CTL[@]}" --do jog --axis X --value 1
+expect_refused mdi_running "\\(long.ngc\\|a program\\) is running: STOP it first" "${CTL[@]}" --do mdi --line "G0 X1"
+expect_refused home_running "\\(long.ngc\\|a program\\) is running: STOP it first" "${CTL[@]}" --do home
+expect_refused touch_running "\\(long.ngc\\|a program\\) is running: STOP it first" "${CTL[@]}" --do touch-off --axis X --value 0
 rc=0; wait "${TEST_PIDS[long]}" || rc=$?; unset "TEST_PIDS[long]"
 [ "$rc" -eq 0 ] || { cat "$WORK/long.out" >&2; fail "the program after homing did not complete ($rc)"; }
 

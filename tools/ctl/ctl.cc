@@ -1,5 +1,6 @@
 #include "tools/ctl/ctl.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -721,47 +722,43 @@ int Ctl::watch_to_end(int64_t token) {
 // Done means the axes are at the program's end: the bridge still reports, and
 // every axis stands within 0.01 mm of where the interpolator ended.
 int Ctl::check_at_end(double t0) {
-  // Let the servo loops settle on the end point (1 µm from it, the following error
-  // under 0.1 µm), for at most 3 s: the bridge plays the stream back a few cycles
-  // late, so a small following error alone may still be on the way there.
-  auto settled = [&] {
-    if (!view_.have_axes || view_.interp.num_axes != view_.axes.num_axes) return false;
-    for (double fe : view_.axes.following_error_mm)
-      if (std::fabs(fe) > 1e-4) return false;
-    for (int i = 0; i < view_.axes.num_axes; ++i)
-      if (!(std::fabs(view_.interp.position_mm[static_cast<size_t>(i)] - view_.axes.actual_mm[static_cast<size_t>(i)]) <=
-            1e-3))
-        return false;
-    return true;
+  // The interpolator's position is in machine coordinates, the bridge's in the drives'
+  // (they differ by each homed axis's offset): the end is judged on the bridge's side.
+  // The bridge plays the stream back a few cycles late; once its playback has passed
+  // the cycle at which the interpolator reported the end, its command stands on the
+  // end point, and the following error is the distance from it.
+  const int64_t end_cycle = view_.interp.cycle;
+  auto fresh = [&] { return view_.have_axes && cnc::util::monotonic_s() - view_.axes_s <= 0.5; };
+  auto largest_fe = [&] {
+    double worst = 0;
+    for (double fe : view_.axes.following_error_mm) worst = std::max(worst, std::fabs(fe));
+    return worst;
   };
-  const bool is_settled = wait(3.0, settled);
-  auto at_end = [&] {
-    if (!view_.have_axes || cnc::util::monotonic_s() - view_.axes_s > 0.5) return false;
-    if (view_.interp.num_axes != view_.axes.num_axes) return false;
-    for (int i = 0; i < view_.axes.num_axes; ++i)
-      if (!(std::fabs(view_.interp.position_mm[static_cast<size_t>(i)] - view_.axes.actual_mm[static_cast<size_t>(i)]) <=
-            0.01))
-        return false;
-    return true;
-  };
-  if (!wait(1.0, at_end)) {
-    if (!view_.have_axes || cnc::util::monotonic_s() - view_.axes_s > 0.5) {
+  auto played = [&] { return fresh() && view_.axes.playback_cycle >= static_cast<double>(end_cycle); };
+  // Settled: within 0.1 um of the end, for at most 3 s.
+  const bool is_settled = wait(3.0, [&] { return played() && largest_fe() <= 1e-4; });
+  if (!wait(1.0, [&] { return played() && largest_fe() <= 0.01; })) {
+    if (!fresh()) {
       std::fprintf(stderr, "cnc-ctl: the interpolator ended the program, but the drive bridge reports nothing "
                            "(no AXIS_STATUS for 0.5 s): the axes did not follow it to its end\n");
+    } else if (!played()) {
+      std::fprintf(stderr, "cnc-ctl: the interpolator ended the program at cycle %lld, but the drive bridge plays "
+                           "cycle %.1f: the axes did not follow it to its end\n",
+                   static_cast<long long>(end_cycle), view_.axes.playback_cycle);
     } else {
       std::fprintf(stderr, "cnc-ctl: the interpolator ended the program, but the axes stand away from its end:");
       for (int i = 0; i < view_.axes.num_axes; ++i)
-        std::fprintf(stderr, " %s %.4f (end %.4f)", view_.axes.axis_name[static_cast<size_t>(i)].c_str(),
-                     view_.axes.actual_mm[static_cast<size_t>(i)],
-                     i < view_.interp.num_axes ? view_.interp.position_mm[static_cast<size_t>(i)] : 0.0);
+        std::fprintf(stderr, " %s %.4f mm", view_.axes.axis_name[static_cast<size_t>(i)].c_str(),
+                     view_.axes.following_error_mm[static_cast<size_t>(i)]);
       std::fprintf(stderr, "\n");
     }
     return kExitFault;
   }
+  char unsettled[96] = "";
+  if (!is_settled) std::snprintf(unsettled, sizeof unsettled, ", axes not settled within 3 s (%.2f um from the end)", 1e3 * largest_fe());
   std::printf("program done: %.3f s program time (%.1f s wall), %lld blocks, largest following error %.4f mm (%s)%s\n",
               view_.interp.program_time_s, cnc::util::monotonic_s() - t0,
-              static_cast<long long>(view_.interp.blocks_done), largest_fe_, largest_fe_axis_.c_str(),
-              is_settled ? "" : ", axes not settled within 3 s");
+              static_cast<long long>(view_.interp.blocks_done), largest_fe_, largest_fe_axis_.c_str(), unsettled);
   return 0;
 }
 
