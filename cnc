@@ -2,6 +2,7 @@
 # Entry point of the project. On a fresh Debian 12 machine, as root:
 #   ./cnc demo     install what is missing, build, run the whole cell on this PC once
 #   ./cnc test     install what is missing, build, run the test suite (ctest)
+#                  [--sanitize address,undefined|thread]: the suite under the sanitizers
 # and, once built:
 #   ./cnc up --machine FILE [--only SERVICE,...]   start a cell's services in the foreground
 #   ./cnc ctl --machine FILE --do run --program P  operator commands (see cnc-ctl --help)
@@ -393,12 +394,52 @@ cmd_package() {
   return $rc
 }
 
+# test [--sanitize address,undefined|thread] [ctest options]: the suite; with --sanitize
+# in its own build folder (build-sanitize-LIST) built with those sanitizers, every
+# process writing its reports to build-sanitize-LIST/sanitizer-reports/ (counted at the end).
 cmd_test() {
   [ "$INSTALLED" -eq 0 ] || die "test: the test suite runs in the source tree (git clone, then ./cnc test)"
+  local sanitize="" args=()
+  while [ $# -gt 0 ]; do
+    case "$1" in
+      --sanitize) [ $# -ge 2 ] || die "test: --sanitize needs a list (address,undefined or thread)"; sanitize="$2"; shift 2 ;;
+      --sanitize=*) sanitize="${1#--sanitize=}"; shift ;;
+      *) args+=("$1"); shift ;;
+    esac
+  done
+  local reports=""
+  if [ -n "$sanitize" ]; then
+    case "$sanitize" in
+      address | undefined | address,undefined | undefined,address | thread | thread,undefined | undefined,thread) ;;
+      *) die "test: --sanitize $sanitize: expected address,undefined or thread (ASan and TSan do not mix)" ;;
+    esac
+    BUILD="${CNC_BUILD_DIR:-$ROOT/build}-sanitize-${sanitize//,/-}"
+    mkdir -p "$BUILD"
+    cmake -S "$ROOT" -B "$BUILD" -DCMAKE_BUILD_TYPE=Release -DCNC_SANITIZE="$sanitize" >/dev/null
+    reports="$BUILD/sanitizer-reports"
+    rm -rf "$reports" && mkdir -p "$reports"
+    # Each process's reports in its own file (a service's stderr is often a log nobody reads).
+    export ASAN_OPTIONS="log_path=$reports/asan:detect_leaks=1:halt_on_error=1:strict_string_checks=1"
+    export UBSAN_OPTIONS="log_path=$reports/ubsan:print_stacktrace=1:halt_on_error=1"
+    export TSAN_OPTIONS="log_path=$reports/tsan:halt_on_error=1:second_deadlock_stack=1"
+    # Suppressions, each justified where it is written: tests/sanitizer/{lsan,tsan,ubsan}.supp.
+    local kind var
+    for kind in lsan tsan ubsan; do
+      var="$(echo "$kind" | tr a-z A-Z)_OPTIONS"
+      [ -f "$ROOT/tests/sanitizer/$kind.supp" ] && export "$var=${!var:+${!var}:}suppressions=$ROOT/tests/sanitizer/$kind.supp"
+    done
+  fi
   build
   cd "$BUILD"
-  local start=$SECONDS
-  run_child ctest --output-on-failure -j "$(nproc)" --timeout 900 "$@"
+  local start=$SECONDS rc=0
+  run_child ctest --output-on-failure -j "$(nproc)" --timeout 900 ${args[@]+"${args[@]}"} || rc=$?
+  if [ -n "$reports" ]; then
+    local n
+    n=$(find "$reports" -type f | wc -l)
+    say "sanitizers ($sanitize): $n report file(s) in $reports"
+    [ "$n" -eq 0 ] || { find "$reports" -type f | head -20 >&2; rc=1; }
+  fi
+  [ "$rc" -eq 0 ] || { say "the test suite failed (exit $rc) after $((SECONDS - start)) s"; exit "$rc"; }
   say "test suite passed in $((SECONDS - start)) s"
 }
 

@@ -69,6 +69,9 @@ std::string make_realtime(int priority) {
     if (err == EPERM) why += " (needs root, CAP_SYS_NICE or an RLIMIT_RTPRIO of at least " + std::to_string(priority) + ")";
     return why;
   }
+#ifdef CNC_SANITIZED
+  return "SCHED_FIFO set; memory not locked: a sanitizer build (its shadow memory cannot be locked)";
+#else
   if (mlockall(MCL_CURRENT | MCL_FUTURE) != 0) {
     const int err = errno;
     return std::string("mlockall: ") + std::strerror(err) +
@@ -76,11 +79,16 @@ std::string make_realtime(int priority) {
   }
   g_memory_locked = true;
   return "";
+#endif
 }
 
 namespace {
 
 bool may_lock_memory(std::string* why) {
+#ifdef CNC_SANITIZED
+  *why = "a sanitizer build (its shadow memory cannot be locked)";
+  return false;
+#endif
   rlimit lim{};
   if (getrlimit(RLIMIT_MEMLOCK, &lim) == 0 && lim.rlim_cur == RLIM_INFINITY) return true;
   // CAP_IPC_LOCK (bit 14) in the effective set.
