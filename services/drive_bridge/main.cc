@@ -18,12 +18,10 @@ int main(int argc, char** argv) {
                           {{"latency-dir", "DIR", "where the servo loop's timing goes at the end (cnc-drive-bridge.json; default $CNC_LATENCY_DIR)"}}, {}};
   return cnc::service::run(spec, argc, argv, [](const cnc::config::MachineConfig& cfg, const cnc::service::Args& args) {
     // First, so the threads LCM starts (its receive thread) inherit the scheduling,
-    // and the Modbus I/O threads too. Two priorities above the other cyclic services,
-    // so the link workers (one below the servo loop) are above them as well: neither
-    // the interpolator's planning nor anything else of the cell may hold up the servo
-    // loop, the delivery of setpoints to it, or the drives' stream (a round late by
-    // the interpolator's planning at the same priority ran the drives' targets dry).
-    const int priority = cfg.realtime_priority > 0 ? std::min(cfg.realtime_priority + 2, 98) : 0;
+    // and the Modbus I/O threads too. One priority above the other cyclic services:
+    // neither the interpolator's planning nor the simulator may hold up the servo
+    // loop or the delivery of setpoints to it.
+    const int priority = cfg.realtime_priority > 0 ? std::min(cfg.realtime_priority + 1, 98) : 0;
     cnc::util::apply_realtime("cnc-drive-bridge", priority, cfg.realtime_cpus);
     cnc::bus::Bus bus(cfg.lcm_url, 0, 1000, cnc::service::bus_security(cfg, "cnc-drive-bridge"));
     cnc::bridge::DriveBridgeNode node(cfg, bus);

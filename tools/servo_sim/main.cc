@@ -679,10 +679,7 @@ int Simulator::run() {
     dbg_.steps.reserve(400000);
     dbg_.writes.reserve(1200000);
   }
-  // The simulated drives stand in for drives on hardware of their own, which the cell
-  // cannot starve: above every service (the drive bridge runs at the cell's priority + 2).
-  cnc::util::apply_realtime("cnc-servo-sim", cfg_.realtime_priority > 0 ? std::min(cfg_.realtime_priority + 10, 98) : 0,
-                            cfg_.realtime_cpus);
+  cnc::util::apply_realtime("cnc-servo-sim", cfg_.realtime_priority, cfg_.realtime_cpus);
 
   // Cycle timing of the dynamics grid: how late a due step starts (wake-up latency)
   // and how long the step with the housekeeping takes (compute).
