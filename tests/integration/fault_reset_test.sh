@@ -87,6 +87,7 @@ refused_within_3s() {
 }
 
 # ---- 1. publish failure -------------------------------------------------------
+sim_world_steady "$WORK/trace.csv"
 "${CTL[@]}" --do run --program "$WORK/long.ngc" --timeout 30 >"$WORK/ctl1.out" 2>&1 &
 ctl_pid=$!
 x=$(wait_x 100)

@@ -194,6 +194,7 @@ reset_then_run() {
 case "$WHO" in
 interpolator)
   run_cell
+  sim_world_steady "$WORK/trace.csv"
   "$CTL" --machine "$M" --do run --program "$WORK/long.ngc" --timeout 30 >"$WORK/ctl.out" 2>&1 &
   ctl_pid=$!
   wait_for "X past 100 mm" 20 x_over 100

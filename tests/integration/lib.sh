@@ -65,6 +65,31 @@ start() {
   TEST_PIDS[$name]=$!
 }
 
+# sim_world_steady TRACE: waits (at most 15 s) until the simulator's world clock has run
+# at 0.95 of the wall's or better over the trace's last half second. A measurement on
+# the simulated world's time needs it: in a cell's first second the world stands up to
+# 30 % of the time (the bridge's stream late for the drives' buffer), and stop_trace.py
+# refuses a trace below 0.8 (0.748 and 0.788 seen right after start).
+sim_world_steady() {
+  local i
+  for ((i = 0; i < 150; i++)); do
+    /usr/bin/python3 - "$1" <<'PY' && return 0
+import csv, sys
+try:
+    rows = [r for r in csv.DictReader(open(sys.argv[1])) if None not in r.values() and "" not in r.values()]
+except OSError:
+    sys.exit(1)
+if len(rows) < 60: sys.exit(1)
+last = rows[-1]
+first = next(r for r in reversed(rows) if float(last["wall_s"]) - float(r["wall_s"]) >= 0.5)
+rate = (float(last["world_s"]) - float(first["world_s"])) / (float(last["wall_s"]) - float(first["wall_s"]))
+sys.exit(0 if rate >= 0.95 else 1)
+PY
+    sleep 0.1
+  done
+  note "the simulator's world clock stayed below 0.95 of the wall's for 15 s"
+}
+
 # services_list: config/services.txt, the cell's services in start order (name, executable).
 services_list() { grep -v -e '^[[:space:]]*#' -e '^[[:space:]]*$' "$(dirname "${BASH_SOURCE[0]}")/../../config/services.txt"; }
 
