@@ -64,12 +64,14 @@ all_alive() {
     kill -0 "${TEST_PIDS[$name]}" 2>/dev/null || { cat "$WORK/$name.log" >&2; fail "$name exited ($1)"; }
   done
 }
-# wait_x LIMIT: until the trace shows X beyond LIMIT mm.
+# wait_x LIMIT: until the trace shows X beyond LIMIT mm. awk, not a python per poll:
+# under two busy loops a python start took long enough that the route was cut at
+# X = 265.7 mm, where X already braked for its end point at 380.
 wait_x() {
   local i x
-  for ((i = 0; i < 300; i++)); do
-    x=$(tail -n 1 "$WORK/trace.csv" 2>/dev/null | cut -d, -f2 || true)
-    /usr/bin/python3 -c "import sys; sys.exit(0 if float('${x:-0}') > $1 else 1)" 2>/dev/null && { echo "$x"; return 0; }
+  for ((i = 0; i < 1500; i++)); do
+    x=$(tail -n 1 "$WORK/trace.csv" 2>/dev/null | awk -F, -v lim="$1" '$2 + 0 > lim + 0 {print $2}' || true)
+    [ -n "$x" ] && { echo "$x"; return 0; }
     sleep 0.02
   done
   fail "X did not pass $1 mm"
