@@ -98,6 +98,13 @@ std::string Ctl::refused() const {
   return cnc::service::refusal_of(view_.program, bus_.sender(), sent_seq_);
 }
 
+// Whether the program server has decided on the last command sent (its state names it,
+// with the refusal when it refused).
+bool Ctl::answered() const {
+  return view_.have_program && view_.program.answered_sender == bus_.sender() &&
+         view_.program.answered_seq == sent_seq_;
+}
+
 // Sends a program command and waits up to `wait_s` for its refusal: "" when none came.
 std::string Ctl::send_checked(int8_t command, double wait_s, const std::string& path, double value) {
   send(command, path, value);
@@ -339,10 +346,6 @@ int Ctl::program_switch() {
       return kExitSendFailed;
     }
     // Answered (the server names the command it decided on), then shown in the state.
-    auto answered = [&] {
-      return view_.have_program && view_.program.answered_sender == bus_.sender() &&
-             view_.program.answered_seq == sent_seq_;
-    };
     if (wait(0.7, [&] { return !refused().empty() || (answered() && shown()); }) && refused().empty()) {
       std::printf("%s %s\n", what_.c_str(), on ? "on" : "off");
       return 0;
@@ -407,17 +410,24 @@ int Ctl::plain() {
       case lcmt_program_command::STOP: return !active;
       case lcmt_program_command::OVERRIDE: return std::fabs(view_.interp.feed_override - value) < 1e-9;
       case lcmt_program_command::RAPID_OVERRIDE: return std::fabs(view_.interp.rapid_override - value) < 1e-9;
-      default: return true;  // START: answered by a refusal or by the run state
+      default: return true;  // START: taken once the server answered without a refusal
     }
   };
   for (int attempt = 0; attempt < 5; ++attempt) {
-    const std::string why = send_checked(cmd, attempt == 0 ? 0.5 : 0.3, "", value);
+    // The server's answer first: a refusal that comes late (a loaded machine) is still
+    // this command's, and the run state alone cannot tell a START that was refused
+    // ("running already") from one that was taken.
+    send(cmd, "", value);
+    wait(attempt == 0 ? 2.0 : 1.0, [&] { return answered() || !refused().empty(); });
+    const std::string why = refused();
     if (!why.empty()) {
       // A copy sent again after a lost answer may be refused for what the first did.
       if (attempt > 0 && wait(0.3, effect_seen)) return step_end();
       std::fprintf(stderr, "cnc-ctl: %s\n", why.c_str());
       return kExitRefused;
     }
+    // START is the server's to take; the others act in the interpolator, whose state shows them.
+    if (!answered() && cmd == lcmt_program_command::START) continue;  // lost on the way: sent again
     if (wait(0.7, effect_seen)) return step_end();
   }
   std::fprintf(stderr, "cnc-ctl: --do %s was sent 5 times and the interpolator does not show it\n", what_.c_str());

@@ -60,6 +60,7 @@ class Ctl {
   bool wait(double timeout_s, Pred done);
   void send(int8_t command, const std::string& path = "", double value = 1.0);
   std::string refused() const;
+  bool answered() const;
   std::string send_checked(int8_t command, double wait_s, const std::string& path = "", double value = 1.0);
   void drive_command(int8_t command);
   bool all_in(int8_t state) const;
