@@ -225,6 +225,35 @@ void Planner::force_limits(const Planned& p, std::vector<double>* us, std::vecto
 
 Planner::~Planner() = default;
 
+// One block's sampling: its parameter values and what each sample's limits are built from.
+struct Planner::BlockWork {
+  bool curved = false;
+  double share = 0;  // of each axis's limits left to the tangential planning
+  double eps = 0;    // the chord tolerance the samples are held to
+  bool rough = false;
+  process::RoughnessLaw law;
+  double sp_floor = 0;        // |P'| under which a point counts as singular
+  std::vector<double> us;       // the samples' parameter values
+  std::vector<double> v_force;  // cutting.feed_limit: the force limit per sample
+  // Per sample (filled by sample_limits):
+  std::vector<AxisVec> kvec;   // curvature vector d²P/ds²
+  std::vector<AxisVec> tvec;   // unit tangent (zero at a singular point)
+  std::vector<double> v_chord;
+  std::vector<AxisVec> kleft;  // the curvature's left-hand limit (differs at a knot where it jumps)
+  AxisVec c_jump{};            // per axis: the largest v²·|Δk_a|/T at a curvature jump (jerk)
+  bool inner_corner = false;   // an unresolved turn inside the block (crossed at speed)
+  std::vector<std::pair<AxisVec, AxisVec>> knot_corners;  // tangents either side of each knot
+};
+
+// The chord limit at curvature kappa: the step whose chord stays within eps, and
+// never below a step of arc length 2*eps, which never leaves its chord by more than
+// eps (each of its points is within half its length of an end): where the circle
+// formula gives 2*rho for a radius rho < eps (a near-cusp of an extreme-weight G5.2,
+// rho ~1e-9 mm, crawled at 3e-7 mm/s and never finished).
+double Planner::chord_speed(double kappa, double eps) const {
+  return kappa > 1e-12 ? std::max(geometry::chord_step_length(1.0 / kappa, eps), 2.0 * eps) / period_s_ : kInf;
+}
+
 void Planner::plan_block(Planned& p) {
   const program::Block& b = p.block;
   // A rapid has no programmed feed: it goes as fast as its axes allow, a finite
@@ -236,100 +265,134 @@ void Planner::plan_block(Planned& p) {
   p.jerk = cfg_.path_jerk_mm_s3;
   if (p.stop_block()) return;
 
-  const bool curved = p.path.curved();
-  const double share = curved ? 1.0 - kCentripetalShare : 1.0 - kJunctionShare;
+  BlockWork w;
+  w.curved = p.path.curved();
+  w.share = w.curved ? 1.0 - kCentripetalShare : 1.0 - kJunctionShare;
   // 1 % below the tolerance: the circle formula is exact for constant curvature;
   // where the curvature changes within a step the error runs up to ~0.5 % over it.
-  const double eps = 0.99 * cfg_.chord_tolerance_mm;
-  // The chord limit at curvature kappa: the step whose chord stays within eps, and
-  // never below a step of arc length 2*eps, which never leaves its chord by more than
-  // eps (each of its points is within half its length of an end): where the circle
-  // formula gives 2*rho for a radius rho < eps (a near-cusp of an extreme-weight G5.2,
-  // rho ~1e-9 mm, crawled at 3e-7 mm/s and never finished).
-  auto chord_speed = [&](double kappa) {
-    return kappa > 1e-12 ? std::max(geometry::chord_step_length(1.0 / kappa, eps), 2.0 * eps) / period_s_ : kInf;
-  };
+  w.eps = 0.99 * cfg_.chord_tolerance_mm;
   // The roughness law is for cutting moves; a rapid does not cut.
-  const bool rough = b.process.active() && b.spindle_rpm > 0 && b.kind != program::BlockKind::kRapid;
-  const process::RoughnessLaw law{b.process.ball_radius_mm, b.process.flutes, b.process.pick_feed_mm,
-                                  b.process.target_rmax_um * 1e-3};
-  if (rough) {
-    const std::string why = law.validate();
+  w.rough = b.process.active() && b.spindle_rpm > 0 && b.kind != program::BlockKind::kRapid;
+  w.law = process::RoughnessLaw{b.process.ball_radius_mm, b.process.flutes, b.process.pick_feed_mm,
+                                b.process.target_rmax_um * 1e-3};
+  if (w.rough) {
+    const std::string why = w.law.validate();
     if (!why.empty()) throw std::invalid_argument("process parameters: " + why);
   }
-
-  // Parameter values to sample: uniform per knot span (NURBS) or per angle (arcs),
-  // then refined where the chord or roughness limit changes quickly.
-  std::vector<double> us;
-  const double u0 = p.path.u_begin(), u1 = p.path.u_end();
-  double sp_floor = 0;
-  if (!curved) {
-    us = {u0, u1};
-  } else {
-    std::vector<double> grid;
-    if (b.kind == program::BlockKind::kNurbs) {
-      const std::vector<double> bp = p.path.nurbs_breakpoints();
-      for (size_t k = 0; k + 1 < bp.size(); ++k)
-        for (int i = 0; i < kSamplesPerSpan; ++i) grid.push_back(bp[k] + (bp[k + 1] - bp[k]) * i / kSamplesPerSpan);
-    } else {
-      const int n = std::max(2, static_cast<int>(std::ceil(p.path.arc_sweep_rad() * kArcSamplesPerRad)));
-      for (int i = 0; i < n; ++i) grid.push_back(u0 + (u1 - u0) * i / n);
-    }
-    grid.push_back(u1);
-    // |P'| under which a point counts as singular (a vanishing tangent, where the
-    // curvature's rounding error grows as 1/|P'|²): against the largest |P'| on the
-    // grid, far below any real variation of the speed; its neighbours carry the
-    // curvature limits.
-    for (double u : grid) {
-      AxisVec P{}, d1{}, d2{};
-      p.path.eval(u, &P, &d1, &d2);
-      sp_floor = std::max(sp_floor, norm(d1, naxes_));
-    }
-    sp_floor *= 1e-9;
-    auto probe = [&](double u) {
-      Probe r;
-      AxisVec d1{}, d2{}, k{};
-      p.path.eval(u, &r.p, &d1, &d2);
-      r.v = kInf;
-      r.sp = local_frame(d1, d2, naxes_, &r.t, &k);
-      if (r.sp <= sp_floor) {
-        r.sp = 0;
-        return r;
-      }
-      const double kappa = norm(k, naxes_);
-      r.v = chord_speed(kappa);
-      if (rough && naxes_ >= 3)
-        r.v = std::min(r.v, law.feed_mm_per_min(b.spindle_rpm, process::feed_inclination_angle(
-                                                                    Eigen::Vector3d(r.t[0], r.t[1], r.t[2]))) /
-                                60.0);
-      return r;
-    };
-    // Nothing above the fastest the block can go (kMaxFeedOverride × F) needs refining.
-    const double v_top = top_speed(p.v_prog);
-    Probe pa = probe(grid[0]);
-    for (size_t k = 0; k + 1 < grid.size(); ++k) {
-      const Probe pb = probe(grid[k + 1]);
-      refine(grid[k], pa, grid[k + 1], pb, probe, v_top, naxes_, 0, &us);
-      pa = pb;
-    }
-    us.push_back(u1);
+  sample_grid(p, w);
+  // Between two samples the cyclic side takes the limit as linear in the arc length,
+  // and the look-ahead brakes for the samples' own limits only. A limit that holds at
+  // one point (a curvature jump, a corner at a knot, the curvature changing fast over
+  // a short stretch) set on a sample whose neighbour is far (the refinement above
+  // skips stretches whose chord limit is above what the block can reach) made that
+  // line a slope the look-ahead did not see, down which the step's hard cap then
+  // braked without a jerk limit (a G6.2 with clustered knots: jerk 2.08x the limit).
+  // Such an interval gets samples closing in on its lower end by halving, so the
+  // low limit holds only at that end, and the look-ahead brakes for it.
+  if (!w.curved) {
+    if (force_) force_limits(p, &w.us, &w.v_force);
+    sample_limits(p, w);
+    return;
   }
-  // cutting.feed_limit: more samples (stations) and a force limit at each (below).
-  std::vector<double> v_force;
-  // The limits at the samples us (and the force limits v_force, if any).
-  auto sample_limits = [&]() {
+  sample_limits(p, w);
+  const bool extra = close_in_on_low_ends(p, w);
+  if (force_) force_limits(p, &w.us, &w.v_force);
+  if (extra || force_) sample_limits(p, w);
+}
+
+// Parameter values to sample: uniform per knot span (NURBS) or per angle (arcs),
+// then refined where the chord or roughness limit changes quickly.
+void Planner::sample_grid(const Planned& p, BlockWork& w) const {
+  const program::Block& b = p.block;
+  std::vector<double>& us = w.us;
+  const double u0 = p.path.u_begin(), u1 = p.path.u_end();
+  if (!w.curved) {
+    us = {u0, u1};
+    return;
+  }
+  std::vector<double> grid;
+  if (b.kind == program::BlockKind::kNurbs) {
+    const std::vector<double> bp = p.path.nurbs_breakpoints();
+    for (size_t k = 0; k + 1 < bp.size(); ++k)
+      for (int i = 0; i < kSamplesPerSpan; ++i) grid.push_back(bp[k] + (bp[k + 1] - bp[k]) * i / kSamplesPerSpan);
+  } else {
+    const int n = std::max(2, static_cast<int>(std::ceil(p.path.arc_sweep_rad() * kArcSamplesPerRad)));
+    for (int i = 0; i < n; ++i) grid.push_back(u0 + (u1 - u0) * i / n);
+  }
+  grid.push_back(u1);
+  // |P'| under which a point counts as singular (a vanishing tangent, where the
+  // curvature's rounding error grows as 1/|P'|²): against the largest |P'| on the
+  // grid, far below any real variation of the speed; its neighbours carry the
+  // curvature limits.
+  double sp_floor = 0;
+  for (double u : grid) {
+    AxisVec P{}, d1{}, d2{};
+    p.path.eval(u, &P, &d1, &d2);
+    sp_floor = std::max(sp_floor, norm(d1, naxes_));
+  }
+  sp_floor *= 1e-9;
+  w.sp_floor = sp_floor;
+  auto probe = [&](double u) {
+    Probe r;
+    AxisVec d1{}, d2{}, k{};
+    p.path.eval(u, &r.p, &d1, &d2);
+    r.v = kInf;
+    r.sp = local_frame(d1, d2, naxes_, &r.t, &k);
+    if (r.sp <= sp_floor) {
+      r.sp = 0;
+      return r;
+    }
+    const double kappa = norm(k, naxes_);
+    r.v = chord_speed(kappa, w.eps);
+    if (w.rough && naxes_ >= 3)
+      r.v = std::min(r.v, w.law.feed_mm_per_min(b.spindle_rpm, process::feed_inclination_angle(
+                                                                    Eigen::Vector3d(r.t[0], r.t[1], r.t[2]))) /
+                              60.0);
+    return r;
+  };
+  // Nothing above the fastest the block can go (kMaxFeedOverride × F) needs refining.
+  const double v_top = top_speed(p.v_prog);
+  Probe pa = probe(grid[0]);
+  for (size_t k = 0; k + 1 < grid.size(); ++k) {
+    const Probe pb = probe(grid[k + 1]);
+    refine(grid[k], pa, grid[k + 1], pb, probe, v_top, naxes_, 0, &us);
+    pa = pb;
+  }
+  us.push_back(u1);
+}
+
+// The limits at the samples us (and the force limits v_force, if any), from the
+// block's limits down.
+void Planner::sample_limits(Planned& p, BlockWork& w) const {
   p.accel = cfg_.path_accel_mm_s2;
   p.jerk = cfg_.path_jerk_mm_s3;
   p.accel_free = cfg_.path_accel_mm_s2;
   p.jerk_free = cfg_.path_jerk_mm_s3;
-  bool inner_corner = false;  // an unresolved turn inside the block (crossed at speed)
-  std::vector<std::pair<AxisVec, AxisVec>> knot_corners;  // tangents either side of each knot
-  // Per sample: speed limits from the local geometry.
+  w.inner_corner = false;
+  w.knot_corners.clear();
+  w.c_jump = AxisVec{};
+  local_limits(p, w);
+  knot_limits(p, w);
+  inner_turn_limits(p, w);
+  neighbour_limits(p, w);
+  arc_lengths(p, w);
+  curvature_jerk_limits(p, w);
+  free_limits(p, w);
+}
+
+// Per sample: speed limits from the local geometry (axis velocities, centripetal
+// acceleration, chord, roughness) and the block's tangential limits from its tangents.
+void Planner::local_limits(Planned& p, BlockWork& w) const {
+  const program::Block& b = p.block;
+  const bool rapid = b.kind == program::BlockKind::kRapid;
+  const std::vector<double>& us = w.us;
   const size_t n = us.size();
   p.samples.assign(n, Sample{0, 0, kInf, Limit::kNone});
-  std::vector<AxisVec> kvec(n);  // curvature vector d²P/ds²
-  std::vector<AxisVec> tvec(n);  // unit tangent (zero at a singular point)
-  std::vector<double> v_chord(n, kInf);
+  std::vector<AxisVec>& kvec = w.kvec;
+  std::vector<AxisVec>& tvec = w.tvec;
+  kvec.assign(n, AxisVec{});
+  tvec.assign(n, AxisVec{});
+  w.v_chord.assign(n, kInf);
   double v_rapid = p.v_prog;  // a rapid's speed: the least axis-velocity limit of its samples
   for (size_t i = 0; i < n; ++i) {
     AxisVec P{}, d1{}, d2{};
@@ -337,7 +400,7 @@ void Planner::plan_block(Planned& p) {
     AxisVec t{};
     Sample& smp = p.samples[i];
     smp.u = us[i];
-    if (local_frame(d1, d2, naxes_, &t, &kvec[i]) <= sp_floor) {
+    if (local_frame(d1, d2, naxes_, &t, &kvec[i]) <= w.sp_floor) {
       kvec[i] = AxisVec{};
       continue;
     }
@@ -355,8 +418,8 @@ void Planner::plan_block(Planned& p) {
         const double v_axis = cfg_.axes[a].max_velocity_mm_s / ta;
         take(v_axis, Limit::kAxisVelocity);
         v_rapid = std::min(v_rapid, v_axis);
-        p.accel = std::min(p.accel, share * cfg_.axes[a].max_accel_mm_s2 / ta);
-        p.jerk = std::min(p.jerk, share * cfg_.axes[a].max_jerk_mm_s3 / ta);
+        p.accel = std::min(p.accel, w.share * cfg_.axes[a].max_accel_mm_s2 / ta);
+        p.jerk = std::min(p.jerk, w.share * cfg_.axes[a].max_jerk_mm_s3 / ta);
         p.accel_free = std::min(p.accel_free, kFreeShare * cfg_.axes[a].max_accel_mm_s2 / ta);
         p.jerk_free = std::min(p.jerk_free, kFreeShare * cfg_.axes[a].max_jerk_mm_s3 / ta);
       }
@@ -364,37 +427,42 @@ void Planner::plan_block(Planned& p) {
         take(std::sqrt(kCentripetalShare * cfg_.axes[a].max_accel_mm_s2 / std::fabs(kvec[i][a])),
              Limit::kCurvatureAccel);
     }
-    v_chord[i] = chord_speed(kappa);
-    if (rough && naxes_ >= 3) {
+    w.v_chord[i] = chord_speed(kappa, w.eps);
+    if (w.rough && naxes_ >= 3) {
       const double alpha = process::feed_inclination_angle(Eigen::Vector3d(t[0], t[1], t[2]));
-      take(law.feed_mm_per_min(b.spindle_rpm, alpha) / 60.0, Limit::kRoughness);
+      take(w.law.feed_mm_per_min(b.spindle_rpm, alpha) / 60.0, Limit::kRoughness);
     }
   }
   if (rapid) p.v_prog = v_rapid;
+}
+
+// The knots of a NURBS: corners and curvature jumps the samples between them cannot see.
+void Planner::knot_limits(Planned& p, BlockWork& w) const {
+  const std::vector<double>& us = w.us;
+  w.kleft = w.kvec;
+  if (p.block.kind != program::BlockKind::kNurbs) return;
+  const std::vector<double> bp = p.path.nurbs_breakpoints();
   // Corners inside a NURBS: at a knot of multiplicity >= degree the tangent may
   // jump (a sharp corner the curvature samples cannot see). The sample on that
   // knot takes the corner speed of a junction between blocks with the same
   // tangents (its velocity step within one cycle's acceleration and half a cycle's
   // jerk per axis), never zero inside a block: a crawl, where a junction would stop.
-  if (b.kind == program::BlockKind::kNurbs) {
-    const std::vector<double> bp = p.path.nurbs_breakpoints();
-    for (size_t k = 1; k + 1 < bp.size(); ++k) {
-      const double h = 1e-7 * std::min(bp[k] - bp[k - 1], bp[k + 1] - bp[k]);
-      AxisVec P{}, tl{}, tr{}, d2{};
-      p.path.eval(bp[k] - h, &P, &tl, &d2);
-      p.path.eval(bp[k] + h, &P, &tr, &d2);
-      if (!(norm(tl, naxes_) > 0 && norm(tr, naxes_) > 0)) continue;
-      bool stop = false;
-      const double v = std::max(corner_speed(tl, tr, p.accel, p.jerk, &stop), 1e-3);
-      if (!std::isfinite(v)) continue;
-      knot_corners.emplace_back(tl, tr);
-      const auto it = std::lower_bound(us.begin(), us.end(), bp[k]);
-      if (it == us.end() || *it != bp[k]) continue;  // the grid holds every knot
-      Sample& smp = p.samples[static_cast<size_t>(it - us.begin())];
-      if (v < smp.v_geo) {
-        smp.v_geo = v;
-        smp.limit = Limit::kCurvatureAccel;
-      }
+  for (size_t k = 1; k + 1 < bp.size(); ++k) {
+    const double h = 1e-7 * std::min(bp[k] - bp[k - 1], bp[k + 1] - bp[k]);
+    AxisVec P{}, tl{}, tr{}, d2{};
+    p.path.eval(bp[k] - h, &P, &tl, &d2);
+    p.path.eval(bp[k] + h, &P, &tr, &d2);
+    if (!(norm(tl, naxes_) > 0 && norm(tr, naxes_) > 0)) continue;
+    bool stop = false;
+    const double v = std::max(corner_speed(tl, tr, p.accel, p.jerk, &stop), 1e-3);
+    if (!std::isfinite(v)) continue;
+    w.knot_corners.emplace_back(tl, tr);
+    const auto it = std::lower_bound(us.begin(), us.end(), bp[k]);
+    if (it == us.end() || *it != bp[k]) continue;  // the grid holds every knot
+    Sample& smp = p.samples[static_cast<size_t>(it - us.begin())];
+    if (v < smp.v_geo) {
+      smp.v_geo = v;
+      smp.limit = Limit::kCurvatureAccel;
     }
   }
   // A knot where the curvature jumps (every knot of a degree-2 NURBS, a repeated
@@ -403,37 +471,37 @@ void Planner::plan_block(Planned& p) {
   // junction between blocks. The curvature's change along the interval that ends on
   // the knot is taken from its left-hand limit (smeared over that interval, the jump
   // gave a limit up to 2% too high: a G5.2 at 1.02x the jerk limit).
-  std::vector<AxisVec> kleft = kvec;
-  AxisVec c_jump{};  // per axis: the largest v²·|Δk_a|/T at a curvature jump (jerk)
-  if (b.kind == program::BlockKind::kNurbs) {
-    const std::vector<double> bp = p.path.nurbs_breakpoints();
-    for (size_t k = 1; k + 1 < bp.size(); ++k) {
-      const auto it = std::lower_bound(us.begin(), us.end(), bp[k]);
-      if (it == us.end() || *it != bp[k]) continue;
-      const size_t i = static_cast<size_t>(it - us.begin());
-      const double h = 1e-7 * std::min(bp[k] - bp[k - 1], bp[k + 1] - bp[k]);
-      AxisVec P{}, d1{}, d2{}, t{}, kl{}, kr{};
-      p.path.eval(bp[k] - h, &P, &d1, &d2);
-      if (local_frame(d1, d2, naxes_, &t, &kl) <= sp_floor) continue;
-      p.path.eval(bp[k] + h, &P, &d1, &d2);
-      if (local_frame(d1, d2, naxes_, &t, &kr) <= sp_floor) continue;
-      kleft[i] = kl;
-      for (int a = 0; a < naxes_; ++a) {
-        const double dk = std::fabs(kr[a] - kl[a]);
-        if (!(dk > 0) || !std::isfinite(dk)) continue;
-        const double v = std::sqrt(kCentripetalShare * cfg_.axes[a].max_jerk_mm_s3 * period_s_ / dk);
-        if (v < p.samples[i].v_geo) {
-          p.samples[i].v_geo = v;
-          p.samples[i].limit = Limit::kCurvatureAccel;
-        }
-        const double vs = std::min(p.samples[i].v_geo, motion::kMaxFeedOverride * p.v_prog);
-        if (std::isfinite(vs)) c_jump[a] = std::max(c_jump[a], vs * vs * dk / period_s_);
+  for (size_t k = 1; k + 1 < bp.size(); ++k) {
+    const auto it = std::lower_bound(us.begin(), us.end(), bp[k]);
+    if (it == us.end() || *it != bp[k]) continue;
+    const size_t i = static_cast<size_t>(it - us.begin());
+    const double h = 1e-7 * std::min(bp[k] - bp[k - 1], bp[k + 1] - bp[k]);
+    AxisVec P{}, d1{}, d2{}, t{}, kl{}, kr{};
+    p.path.eval(bp[k] - h, &P, &d1, &d2);
+    if (local_frame(d1, d2, naxes_, &t, &kl) <= w.sp_floor) continue;
+    p.path.eval(bp[k] + h, &P, &d1, &d2);
+    if (local_frame(d1, d2, naxes_, &t, &kr) <= w.sp_floor) continue;
+    w.kleft[i] = kl;
+    for (int a = 0; a < naxes_; ++a) {
+      const double dk = std::fabs(kr[a] - kl[a]);
+      if (!(dk > 0) || !std::isfinite(dk)) continue;
+      const double v = std::sqrt(kCentripetalShare * cfg_.axes[a].max_jerk_mm_s3 * period_s_ / dk);
+      if (v < p.samples[i].v_geo) {
+        p.samples[i].v_geo = v;
+        p.samples[i].limit = Limit::kCurvatureAccel;
       }
+      const double vs = std::min(p.samples[i].v_geo, motion::kMaxFeedOverride * p.v_prog);
+      if (std::isfinite(vs)) w.c_jump[a] = std::max(w.c_jump[a], vs * vs * dk / period_s_);
     }
   }
-  // A turn the refinement could not resolve (it stopped at its chord or depth floor:
-  // a near-cusp narrower than kMinChord) is taken like a corner between blocks.
-  for (size_t i = 0; curved && i + 1 < n; ++i) {
+}
+
+// A turn the refinement could not resolve (it stopped at its chord or depth floor:
+// a near-cusp narrower than kMinChord) is taken like a corner between blocks.
+void Planner::inner_turn_limits(Planned& p, BlockWork& w) const {
+  const std::vector<AxisVec>& tvec = w.tvec;
+  const size_t n = w.us.size();
+  for (size_t i = 0; w.curved && i + 1 < n; ++i) {
     double dot = 0, n0 = 0, n1 = 0;
     for (int a = 0; a < naxes_; ++a) {
       dot += tvec[i][a] * tvec[i + 1][a];
@@ -443,36 +511,38 @@ void Planner::plan_block(Planned& p) {
     if (!(n0 > 0 && n1 > 0) || dot >= kCornerTurnCos) continue;
     bool stop = false;
     const double v = std::max(corner_speed(tvec[i], tvec[i + 1], p.accel, p.jerk, &stop), 1e-3);
-    inner_corner = true;
+    w.inner_corner = true;
     for (size_t k : {i, i + 1})
       if (v < p.samples[k].v_geo) {
         p.samples[k].v_geo = v;
         p.samples[k].limit = Limit::kCurvatureAccel;
       }
   }
-  // The chord limit holds over a whole step, and the curvature may peak between
-  // samples: each sample takes the least of its neighbours' chord limits.
-  for (size_t i = 0; i < n; ++i) {
-    double v = v_chord[i];
-    if (i > 0) v = std::min(v, v_chord[i - 1]);
-    if (i + 1 < n) v = std::min(v, v_chord[i + 1]);
-    if (v < p.samples[i].v_geo) {
-      p.samples[i].v_geo = v;
-      p.samples[i].limit = Limit::kChord;
+}
+
+// The chord and force limits hold over a whole step, and the curvature may peak
+// between samples (the force limit is interpolated linearly in between): each sample
+// takes the least of its neighbours'.
+void Planner::neighbour_limits(Planned& p, const BlockWork& w) const {
+  auto spread = [&p](const std::vector<double>& lim, Limit why) {
+    for (size_t i = 0; i < lim.size(); ++i) {
+      double v = lim[i];
+      if (i > 0) v = std::min(v, lim[i - 1]);
+      if (i + 1 < lim.size()) v = std::min(v, lim[i + 1]);
+      if (v < p.samples[i].v_geo) {
+        p.samples[i].v_geo = v;
+        p.samples[i].limit = why;
+      }
     }
-  }
-  // The force limit, like the chord limit, holds between samples: each sample takes
-  // the least of its neighbours' (the limit is interpolated linearly in between).
-  for (size_t i = 0; i < v_force.size(); ++i) {
-    double v = v_force[i];
-    if (i > 0) v = std::min(v, v_force[i - 1]);
-    if (i + 1 < v_force.size()) v = std::min(v, v_force[i + 1]);
-    if (v < p.samples[i].v_geo) {
-      p.samples[i].v_geo = v;
-      p.samples[i].limit = Limit::kForce;
-    }
-  }
-  // Arc length by 3-point Gauss–Legendre per sample interval (on top of dense samples).
+  };
+  spread(w.v_chord, Limit::kChord);
+  spread(w.v_force, Limit::kForce);
+}
+
+// Arc length by 3-point Gauss–Legendre per sample interval (on top of dense samples).
+void Planner::arc_lengths(Planned& p, const BlockWork& w) const {
+  const std::vector<double>& us = w.us;
+  const size_t n = us.size();
   double s = 0;
   for (size_t i = 0; i + 1 < n; ++i) {
     const double a = us[i], c = us[i + 1], h = 0.5 * (c - a), m = 0.5 * (a + c);
@@ -486,6 +556,14 @@ void Planner::plan_block(Planned& p) {
     p.samples[i + 1].s = s;
   }
   p.length = s;
+}
+
+// The jerk the curvature makes: on an arc through the tangential acceleration, on
+// any curve through the curvature changing along it.
+void Planner::curvature_jerk_limits(Planned& p, const BlockWork& w) const {
+  const program::Block& b = p.block;
+  const std::vector<AxisVec>& kvec = w.kvec;
+  const size_t n = w.us.size();
   // On an arc the curvature does not change, so the jerk share of the curvature term
   // goes to what the tangential acceleration a adds across the path: its turning with
   // the tangent, a·v·|k_a|, and the centripetal term's growth, d(v²k)/dt = 2·a·v·|k_a|
@@ -502,11 +580,11 @@ void Planner::plan_block(Planned& p) {
     }
   }
   // Jerk from the curvature changing along the path: v³·|dk/ds| per axis.
-  for (size_t i = 0; i + 1 < n && curved; ++i) {
+  for (size_t i = 0; i + 1 < n && w.curved; ++i) {
     const double ds = p.samples[i + 1].s - p.samples[i].s;
     if (ds <= 0) continue;
     for (int a = 0; a < naxes_; ++a) {
-      const double dk = std::fabs(kleft[i + 1][a] - kvec[i][a]) / ds;
+      const double dk = std::fabs(w.kleft[i + 1][a] - kvec[i][a]) / ds;
       if (dk <= 0) continue;
       const double v = std::cbrt(kCentripetalShare * cfg_.axes[a].max_jerk_mm_s3 / dk);
       for (size_t k : {i, i + 1}) {
@@ -517,82 +595,78 @@ void Planner::plan_block(Planned& p) {
       }
     }
   }
-  // Free limits (between two stops, no junction crossed at speed). A line has them
-  // from its axes alone (above). An arc keeps its shares. A NURBS without corners
-  // inside gets the tangential share of each axis's limits that its curvature leaves,
-  // not a fixed half: on a nearly straight curve (a CAM pass fitted under G64 P) the
-  // centripetal terms use almost nothing of the axes, and holding the tangential
-  // limits to half of them slowed every start and stop (the raster at 117.5 % of its
-  // length over the feed). Per axis, over each interval between samples at the
-  // fastest speed the interval allows (its samples' limits, at most kMaxFeedOverride x F):
-  //   acceleration: v²·|k_a|, the centripetal part;
-  //   jerk: v³·|dk_a/ds| + 3·v·A·|k_a|, the curvature's change and the tangential
-  //   acceleration A turning with the tangent and growing the centripetal term, and
-  //   v²·|Δk_a|/T at a curvature jump;
-  // each taken kFreeMargin x, and the rest, never less than the fixed share, divided
-  // by the largest |t_a|, bounds the block's free limits, within the path's.
-  if (curved) {
+}
+
+// Free limits (between two stops, no junction crossed at speed). A line has them
+// from its axes alone (local_limits). An arc keeps its shares. A NURBS without
+// corners inside gets the tangential share of each axis's limits that its curvature
+// leaves, not a fixed half: on a nearly straight curve (a CAM pass fitted under G64
+// P) the centripetal terms use almost nothing of the axes, and holding the
+// tangential limits to half of them slowed every start and stop (the raster at
+// 117.5 % of its length over the feed). Per axis, over each interval between samples
+// at the fastest speed the interval allows (its samples' limits, at most
+// kMaxFeedOverride x F):
+//   acceleration: v²·|k_a|, the centripetal part;
+//   jerk: v³·|dk_a/ds| + 3·v·A·|k_a|, the curvature's change and the tangential
+//   acceleration A turning with the tangent and growing the centripetal term, and
+//   v²·|Δk_a|/T at a curvature jump;
+// each taken kFreeMargin x, and the rest, never less than the fixed share, divided
+// by the largest |t_a|, bounds the block's free limits, within the path's.
+void Planner::free_limits(Planned& p, const BlockWork& w) const {
+  const std::vector<AxisVec>& kvec = w.kvec;
+  const std::vector<AxisVec>& tvec = w.tvec;
+  const std::vector<AxisVec>& kleft = w.kleft;
+  const size_t n = w.us.size();
+  if (w.curved) {
     p.accel_free = p.accel;
     p.jerk_free = p.jerk;
   }
-  if (b.kind == program::BlockKind::kNurbs && !inner_corner && n >= 2) {
-    const double v_top = top_speed(p.v_prog);
-    AxisVec c_acc{}, c_dk{}, c_k{}, t_max{};
-    for (size_t i = 0; i + 1 < n; ++i) {
-      const double v = std::min(std::max(p.samples[i].v_geo, p.samples[i + 1].v_geo), v_top);
-      const double ds = p.samples[i + 1].s - p.samples[i].s;
-      for (int a = 0; a < naxes_; ++a) {
-        const double k =
-            std::max({std::fabs(kvec[i][a]), std::fabs(kleft[i + 1][a]), std::fabs(kvec[i + 1][a])});
-        c_acc[a] = std::max(c_acc[a], v * v * k);
-        c_k[a] = std::max(c_k[a], v * k);
-        if (ds > 0) c_dk[a] = std::max(c_dk[a], v * v * v * std::fabs(kleft[i + 1][a] - kvec[i][a]) / ds);
-        t_max[a] = std::max({t_max[a], std::fabs(tvec[i][a]), std::fabs(tvec[i + 1][a])});
-      }
-    }
-    double accel = cfg_.path_accel_mm_s2;
+  if (p.block.kind != program::BlockKind::kNurbs || w.inner_corner || n < 2) return;
+  const double v_top = top_speed(p.v_prog);
+  AxisVec c_acc{}, c_dk{}, c_k{}, t_max{};
+  for (size_t i = 0; i + 1 < n; ++i) {
+    const double v = std::min(std::max(p.samples[i].v_geo, p.samples[i + 1].v_geo), v_top);
+    const double ds = p.samples[i + 1].s - p.samples[i].s;
     for (int a = 0; a < naxes_; ++a) {
-      if (!(t_max[a] > 0)) continue;
-      const double amax = cfg_.axes[a].max_accel_mm_s2;
-      const double budget = std::max((1.0 - kCentripetalShare) * amax, kFreeShare * amax - kFreeMargin * c_acc[a]);
-      accel = std::min(accel, budget / t_max[a]);
+      const double k = std::max({std::fabs(kvec[i][a]), std::fabs(kleft[i + 1][a]), std::fabs(kvec[i + 1][a])});
+      c_acc[a] = std::max(c_acc[a], v * v * k);
+      c_k[a] = std::max(c_k[a], v * k);
+      if (ds > 0) c_dk[a] = std::max(c_dk[a], v * v * v * std::fabs(kleft[i + 1][a] - kvec[i][a]) / ds);
+      t_max[a] = std::max({t_max[a], std::fabs(tvec[i][a]), std::fabs(tvec[i + 1][a])});
     }
-    double jerk = cfg_.path_jerk_mm_s3;
-    for (int a = 0; a < naxes_; ++a) {
-      if (!(t_max[a] > 0)) continue;
-      const double jmax = cfg_.axes[a].max_jerk_mm_s3;
-      const double used = kFreeMargin * (c_dk[a] + 3.0 * accel * c_k[a]) + c_jump[a];
-      const double budget = std::max((1.0 - kCentripetalShare) * jmax, kFreeShare * jmax - used);
-      jerk = std::min(jerk, budget / t_max[a]);
-    }
-    // A tangent that turns at a knot (by rounding, or a real corner) is crossed at
-    // speed: the raised limits hold only where that corner's speed with them stays
-    // above the fastest the block can go.
-    bool corners_ok = std::isfinite(accel) && std::isfinite(jerk);
-    for (const auto& [tl, tr] : knot_corners) {
-      bool stop = false;
-      if (!corners_ok) break;
-      corners_ok = corner_speed(tl, tr, accel, jerk, &stop) >= v_top && !stop;
-    }
-    if (corners_ok && accel > p.accel_free) p.accel_free = accel;
-    if (corners_ok && jerk > p.jerk_free) p.jerk_free = jerk;
   }
-  };
-  // Between two samples the cyclic side takes the limit as linear in the arc length,
-  // and the look-ahead brakes for the samples' own limits only. A limit that holds at
-  // one point (a curvature jump, a corner at a knot, the curvature changing fast over
-  // a short stretch) set on a sample whose neighbour is far (the refinement above
-  // skips stretches whose chord limit is above what the block can reach) made that
-  // line a slope the look-ahead did not see, down which the step's hard cap then
-  // braked without a jerk limit (a G6.2 with clustered knots: jerk 2.08x the limit).
-  // Such an interval gets samples closing in on its lower end by halving, so the
-  // low limit holds only at that end, and the look-ahead brakes for it.
-  if (!curved) {
-    if (force_) force_limits(p, &us, &v_force);
-    sample_limits();
-    return;
+  double accel = cfg_.path_accel_mm_s2;
+  for (int a = 0; a < naxes_; ++a) {
+    if (!(t_max[a] > 0)) continue;
+    const double amax = cfg_.axes[a].max_accel_mm_s2;
+    const double budget = std::max((1.0 - kCentripetalShare) * amax, kFreeShare * amax - kFreeMargin * c_acc[a]);
+    accel = std::min(accel, budget / t_max[a]);
   }
-  sample_limits();
+  double jerk = cfg_.path_jerk_mm_s3;
+  for (int a = 0; a < naxes_; ++a) {
+    if (!(t_max[a] > 0)) continue;
+    const double jmax = cfg_.axes[a].max_jerk_mm_s3;
+    const double used = kFreeMargin * (c_dk[a] + 3.0 * accel * c_k[a]) + w.c_jump[a];
+    const double budget = std::max((1.0 - kCentripetalShare) * jmax, kFreeShare * jmax - used);
+    jerk = std::min(jerk, budget / t_max[a]);
+  }
+  // A tangent that turns at a knot (by rounding, or a real corner) is crossed at
+  // speed: the raised limits hold only where that corner's speed with them stays
+  // above the fastest the block can go.
+  bool corners_ok = std::isfinite(accel) && std::isfinite(jerk);
+  for (const auto& [tl, tr] : w.knot_corners) {
+    bool stop = false;
+    if (!corners_ok) break;
+    corners_ok = corner_speed(tl, tr, accel, jerk, &stop) >= v_top && !stop;
+  }
+  if (corners_ok && accel > p.accel_free) p.accel_free = accel;
+  if (corners_ok && jerk > p.jerk_free) p.jerk_free = jerk;
+}
+
+// Samples that close in on the low end of each interval whose limit falls steeply
+// (see plan_block); true when any were added.
+bool Planner::close_in_on_low_ends(const Planned& p, BlockWork& w) const {
+  std::vector<double>& us = w.us;
   const double v_cap = top_speed(p.v_prog);
   std::vector<double> extra;
   for (size_t i = 0; i + 1 < us.size(); ++i) {
@@ -613,16 +687,14 @@ void Planner::plan_block(Planned& p) {
       if (d2 < ramp * ramp) break;
     }
   }
-  if (!extra.empty()) {
-    std::sort(extra.begin(), extra.end());
-    std::vector<double> merged;
-    merged.reserve(us.size() + extra.size());
-    std::merge(us.begin(), us.end(), extra.begin(), extra.end(), std::back_inserter(merged));
-    merged.erase(std::unique(merged.begin(), merged.end()), merged.end());
-    us = std::move(merged);
-  }
-  if (force_) force_limits(p, &us, &v_force);
-  if (!extra.empty() || force_) sample_limits();
+  if (extra.empty()) return false;
+  std::sort(extra.begin(), extra.end());
+  std::vector<double> merged;
+  merged.reserve(us.size() + extra.size());
+  std::merge(us.begin(), us.end(), extra.begin(), extra.end(), std::back_inserter(merged));
+  merged.erase(std::unique(merged.begin(), merged.end()), merged.end());
+  us = std::move(merged);
+  return true;
 }
 
 void Planner::plan_junction(const Planned& prev, Planned& next) const {

@@ -138,7 +138,21 @@ class Planner {
     bool free = false;         // runs with accel_free and jerk_free (Planned::entry_free_ok at both ends)
     bool recompute = false;    // its look-ahead values changed without its end's
   };
+  // One block's limits, in stages (planner.cc): the samples, the limits at each, and
+  // samples added where a limit falls steeply.
+  struct BlockWork;
   void plan_block(Planned& p);
+  double chord_speed(double kappa, double eps) const;
+  void sample_grid(const Planned& p, BlockWork& w) const;
+  void sample_limits(Planned& p, BlockWork& w) const;
+  void local_limits(Planned& p, BlockWork& w) const;
+  void knot_limits(Planned& p, BlockWork& w) const;
+  void inner_turn_limits(Planned& p, BlockWork& w) const;
+  void neighbour_limits(Planned& p, const BlockWork& w) const;
+  void arc_lengths(Planned& p, const BlockWork& w) const;
+  void curvature_jerk_limits(Planned& p, const BlockWork& w) const;
+  void free_limits(Planned& p, const BlockWork& w) const;
+  bool close_in_on_low_ends(const Planned& p, BlockWork& w) const;
   // The force feed limit (cutting.feed_limit): adds stations to *us and returns the
   // speed limit per station (∞ where none binds), cutting the block out of the stock.
   void force_limits(const Planned& p, std::vector<double>* us, std::vector<double>* v_force);
