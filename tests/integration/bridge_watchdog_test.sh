@@ -27,8 +27,7 @@ start_cell --no-monitor
 ctl_pid=$!
 # Wait until X is past 100 mm (cruising), then kill the interpolator outright.
 for ((i = 0; i < 200; i++)); do
-  x=$(tail -n 1 "$WORK/trace.csv" 2>/dev/null | cut -d, -f2 || true)
-  /usr/bin/python3 -c "import sys; sys.exit(0 if float('${x:-0}') > 100 else 1)" 2>/dev/null && break
+  trace_over 2 100 >/dev/null && break
   sleep 0.05
 done
 kill_time=$(date +%s.%N)

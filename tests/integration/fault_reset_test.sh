@@ -21,7 +21,7 @@ enter_private_netns "$@"
 BUILD="$1"; SRC="$2"
 [ -n "${CNC_IN_NETNS:-}" ] || { echo "SKIP: needs a private network namespace (unshare -n) to remove the multicast route"; exit 0; }
 WORK="$(mktemp -d /tmp/cnc-fault-reset.XXXXXX)"
-trap 'ip route replace 224.0.0.0/4 dev lo 2>/dev/null || true; cleanup' EXIT
+trap 'rc=$?; ip route replace 224.0.0.0/4 dev lo 2>/dev/null || true; cleanup "$rc"' EXIT
 M="$WORK/machine.yaml"
 make_machine "$SRC/config/machines/sim3.yaml" "$M"
 CTL=("$BUILD/tools/cnc-ctl" --machine "$M")
@@ -64,14 +64,13 @@ all_alive() {
     kill -0 "${TEST_PIDS[$name]}" 2>/dev/null || { cat "$WORK/$name.log" >&2; fail "$name exited ($1)"; }
   done
 }
-# wait_x LIMIT: until the trace shows X beyond LIMIT mm. awk, not a python per poll:
-# under two busy loops a python start took long enough that the route was cut at
-# X = 265.7 mm, where X already braked for its end point at 380.
+# wait_x LIMIT: until the trace shows X beyond LIMIT mm (polled without a python per
+# poll: under two busy loops a python start took long enough that the route was cut
+# at X = 265.7 mm, where X already braked for its end point at 380).
 wait_x() {
-  local i x
+  local i
   for ((i = 0; i < 1500; i++)); do
-    x=$(tail -n 1 "$WORK/trace.csv" 2>/dev/null | awk -F, -v lim="$1" '$2 + 0 > lim + 0 {print $2}' || true)
-    [ -n "$x" ] && { echo "$x"; return 0; }
+    trace_over 2 "$1" && return 0
     sleep 0.02
   done
   fail "X did not pass $1 mm"

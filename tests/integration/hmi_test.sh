@@ -67,7 +67,7 @@ rc=0; "$BUILD/services/cnc-hmi" --machine "$WORK/open.yaml" >"$WORK/open.out" 2>
 note "0.0.0.0 without users file refused: $(head -1 "$WORK/open.out")"
 
 # On a failure ./cnc up stops its services itself (SIGTERM) before the rest is killed.
-stop_up() { local p="${TEST_PIDS[up]:-}"; [ -z "$p" ] || { kill -TERM "$p" 2>/dev/null; wait "$p" 2>/dev/null; }; cleanup; }
+stop_up() { local rc=$? p="${TEST_PIDS[up]:-}"; [ -z "$p" ] || { kill -TERM "$p" 2>/dev/null; wait "$p" 2>/dev/null; }; cleanup "$rc"; }
 trap 'stop_up' EXIT
 (cd "$WORK" && CNC_BUILD_DIR="$BUILD" CNC_STATE_DIR="$WORK" exec "$SRC/cnc" up --machine "$M" --log-out "$WORK/cell") \
   >"$WORK/up.log" 2>&1 &

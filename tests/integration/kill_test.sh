@@ -49,11 +49,7 @@ wait_for() {
   done
   fail "timed out after $limit s waiting for: $desc"
 }
-x_over() {  # the simulator's X past $1 mm
-  local x
-  x=$(tail -n 1 "$WORK/trace.csv" 2>/dev/null | cut -d, -f2 || true)
-  /usr/bin/python3 -c "import sys; sys.exit(0 if float('${x:-0}' or 0) > $1 else 1)" 2>/dev/null
-}
+x_over() { trace_over 2 "$1" >/dev/null; }  # the simulator's X past $1 mm
 # The axes stand: the trace's last 0.3 s (30 rows) without motion (1 um).
 standing() {
   /usr/bin/python3 - "$WORK/trace.csv" <<'PY'
@@ -153,11 +149,7 @@ for x in range(300, -1, -2): print(x, 10)'
 { echo "G21 G90 G64"; raster_points | awk '{print "G1 X" $1 " Y" $2 " F9000"}'; echo "M30"; } >"$WORK/many.ngc"
 raster_points >"$WORK/many.xy"
 END_XY="0 10"
-y_over() {  # the simulator's Y past $1 mm
-  local y
-  y=$(tail -n 1 "$WORK/trace.csv" 2>/dev/null | cut -d, -f5 || true)
-  /usr/bin/python3 -c "import sys; sys.exit(0 if float('${y:-0}' or 0) > $1 else 1)" 2>/dev/null
-}
+y_over() { trace_over 5 "$1" >/dev/null; }  # the simulator's Y past $1 mm
 
 run_cell() {  # the cell, each process on its own (the monitor test uses ./cnc up)
   start logger "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/cell"
@@ -344,7 +336,7 @@ logger)
 monitor)
   # The whole cell under ./cnc up, as the issue found it: a killed monitor ended the cell.
   # On a failure ./cnc up stops its services itself (SIGTERM) before the rest is killed.
-  stop_up() { local p="${TEST_PIDS[up]:-}"; [ -z "$p" ] || { kill -TERM "$p" 2>/dev/null; wait "$p" 2>/dev/null; }; cleanup; }
+  stop_up() { local rc=$? p="${TEST_PIDS[up]:-}"; [ -z "$p" ] || { kill -TERM "$p" 2>/dev/null; wait "$p" 2>/dev/null; }; cleanup "$rc"; }
   trap 'stop_up' EXIT
   (cd "$WORK" && CNC_BUILD_DIR="$BUILD" CNC_STATE_DIR="$WORK" exec "$SRC/cnc" up --machine "$M" \
      --log-out "$WORK/cell" --sim-final-state "$WORK/final.json" --sim-trace "$WORK/trace.csv") >"$WORK/up.log" 2>&1 &
