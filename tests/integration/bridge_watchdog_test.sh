@@ -26,8 +26,9 @@ start_cell --no-monitor
 "$BUILD/tools/cnc-ctl" --machine "$M" --do run --program "$WORK/long.ngc" --timeout 30 >"$WORK/ctl.out" 2>&1 &
 ctl_pid=$!
 # Wait until X is past 100 mm (cruising), then kill the interpolator outright.
+x=""
 for ((i = 0; i < 200; i++)); do
-  trace_over 2 100 >/dev/null && break
+  x=$(trace_over 2 100) && break
   sleep 0.05
 done
 kill_time=$(date +%s.%N)
