@@ -23,6 +23,7 @@ NGC
 
 start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M" --trace "$WORK/trace.csv"
 start_cell --no-monitor
+sim_world_steady "$WORK/trace.csv"
 "$BUILD/tools/cnc-ctl" --machine "$M" --do run --program "$WORK/long.ngc" --timeout 30 >"$WORK/ctl.out" 2>&1 &
 ctl_pid=$!
 # Wait until X is past 100 mm (cruising), then kill the interpolator outright.
