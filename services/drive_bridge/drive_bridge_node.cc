@@ -252,37 +252,58 @@ void DriveBridgeNode::servo_tick_inner(double now_s) {
   bus_.drain();
   ++tick_;
   for (auto& a : axes_) a.rep = a.worker->report(a.slot);
+  take_operator_command(now_s);
+  advance_state(now_s);
+  report_reconnects();
 
-  // Operator commands. ENABLE acts only on drives that are disabled or stand in
-  // FAULT; it waits only for the start-up. An ENABLE that arrives while a controlled
-  // stop runs was sent before its sender knew of the fault (the drives looked
-  // enabled): kept, it would enable them again once the stop ended, with nobody
-  // having asked after the fault. It is refused; the operator sends it again.
-  if (pending_command_ != 0) {
-    const int8_t c = pending_command_;
-    pending_command_ = 0;
-    if (c == cnc::lcmt_drive_command::ENABLE) {
-      if (state_ == State::kDisabled || state_ == State::kFault) {
-        begin_enable(now_s);
-      } else if (state_ == State::kStarting) {
-        pending_command_ = c;
-      } else if (state_ == State::kStopping) {
-        spdlog::warn("ENABLE ignored: a controlled stop is running ({}); send it again when it has ended", fault_text_);
-        alarm(cnc::lcmt_alarm::WARNING, "enable_ignored",
-              "ENABLE ignored: a controlled stop is running; send it again when the axes stand");
-      }
-    } else if (c == cnc::lcmt_drive_command::DISABLE || c == cnc::lcmt_drive_command::FAULT_RESET) {
-      for (auto& a : axes_) {
-        a.cmd.goal = c == cnc::lcmt_drive_command::DISABLE ? drive::Goal::kDisable : drive::Goal::kFaultReset;
-        if (c == cnc::lcmt_drive_command::FAULT_RESET) a.link_down = false;
-      }
-      core_.disengage(actuals());
-      if (state_ != State::kStarting) state_ = State::kDisabled;
-      fault_text_.clear();
-      spdlog::info("drives {}", c == cnc::lcmt_drive_command::DISABLE ? "disabled" : "reset and disabled");
+  // A link that has not finished the round of the last tick's command is stalled
+  // (the drive, its network or this process's worker did not get to run): the
+  // playback waits for it, so the drive gets the next commands one tick after
+  // another instead of a jump over the ticks it missed (a jump the drive takes
+  // without feed-forward, as a following error of about v x the stall). The lag
+  // is made up by the playback rate afterwards. No post while holding: the same
+  // command written twice would be a standstill in the drive's demand.
+  const bool hold = link_stalled() && core_.hold();
+  const AxisArray& cmd = hold ? core_.commanded() : core_.tick();
+  follow_core_state();
+  set_axis_commands(cmd);
+  trace_tick(now_s, hold, cmd);
+  if (hold) return;
+  post_rounds(now_s);
+}
+
+void DriveBridgeNode::take_operator_command(double now_s) {
+  // ENABLE acts only on drives that are disabled or stand in FAULT; it waits only
+  // for the start-up. An ENABLE that arrives while a controlled stop runs was sent
+  // before its sender knew of the fault (the drives looked enabled): kept, it would
+  // enable them again once the stop ended, with nobody having asked after the fault.
+  // It is refused; the operator sends it again.
+  if (pending_command_ == 0) return;
+  const int8_t c = pending_command_;
+  pending_command_ = 0;
+  if (c == cnc::lcmt_drive_command::ENABLE) {
+    if (state_ == State::kDisabled || state_ == State::kFault) {
+      begin_enable(now_s);
+    } else if (state_ == State::kStarting) {
+      pending_command_ = c;
+    } else if (state_ == State::kStopping) {
+      spdlog::warn("ENABLE ignored: a controlled stop is running ({}); send it again when it has ended", fault_text_);
+      alarm(cnc::lcmt_alarm::WARNING, "enable_ignored",
+            "ENABLE ignored: a controlled stop is running; send it again when the axes stand");
     }
+  } else if (c == cnc::lcmt_drive_command::DISABLE || c == cnc::lcmt_drive_command::FAULT_RESET) {
+    for (auto& a : axes_) {
+      a.cmd.goal = c == cnc::lcmt_drive_command::DISABLE ? drive::Goal::kDisable : drive::Goal::kFaultReset;
+      if (c == cnc::lcmt_drive_command::FAULT_RESET) a.link_down = false;
+    }
+    core_.disengage(actuals());
+    if (state_ != State::kStarting) state_ = State::kDisabled;
+    fault_text_.clear();
+    spdlog::info("drives {}", c == cnc::lcmt_drive_command::DISABLE ? "disabled" : "reset and disabled");
   }
+}
 
+void DriveBridgeNode::advance_state(double now_s) {
   switch (state_) {
     case State::kStarting: {
       bool all = true;
@@ -298,39 +319,43 @@ void DriveBridgeNode::servo_tick_inner(double now_s) {
       }
       break;
     }
-    case State::kEnabling: {
-      check_drives();
-      if (core_.faulted()) break;
-      bool all = true;
-      for (const auto& a : axes_) all = all && a.rep.answering && a.rep.status.enabled && a.rep.holding;
-      if (all) {
-        AxisArray hold{};
-        for (size_t i = 0; i < axes_.size(); ++i) hold[i] = axes_[i].rep.hold_mm;
-        engagement_ = util::next_token(engagement_);
-        core_.engage(hold, engagement_);
-        state_ = State::kEnabled;
-        ready_ = true;
-        spdlog::info("{} drive(s) enabled", axes_.size());
-        alarm(cnc::lcmt_alarm::INFO, "drives_enabled", "drives enabled; following setpoints from where the axes stand");
-      } else if (now_s > enable_deadline_s_) {
-        for (size_t i = 0; i < axes_.size(); ++i) {
-          const Axis& a = axes_[i];
-          if (a.rep.answering && a.rep.status.enabled) continue;
-          fault(i, "axis " + cfg_.axes[i].name + " did not enable within " +
-                       std::to_string(cfg_.drive_bridge.enable_timeout_s).substr(0, 4) + " s: " +
-                       (a.rep.answering ? std::string("drive state ") + a.rep.status.state
-                                        : std::string("no answer (") + a.rep.last_error.data() + ")"),
-                true);
-          break;
-        }
-      }
-      break;
-    }
+    case State::kEnabling: advance_enabling(now_s); break;
     case State::kEnabled:
     case State::kStopping:
     case State::kFault: check_drives(); break;
     case State::kDisabled: break;
   }
+}
+
+void DriveBridgeNode::advance_enabling(double now_s) {
+  check_drives();
+  if (core_.faulted()) return;
+  bool all = true;
+  for (const auto& a : axes_) all = all && a.rep.answering && a.rep.status.enabled && a.rep.holding;
+  if (all) {
+    AxisArray hold{};
+    for (size_t i = 0; i < axes_.size(); ++i) hold[i] = axes_[i].rep.hold_mm;
+    engagement_ = util::next_token(engagement_);
+    core_.engage(hold, engagement_);
+    state_ = State::kEnabled;
+    ready_ = true;
+    spdlog::info("{} drive(s) enabled", axes_.size());
+    alarm(cnc::lcmt_alarm::INFO, "drives_enabled", "drives enabled; following setpoints from where the axes stand");
+  } else if (now_s > enable_deadline_s_) {
+    for (size_t i = 0; i < axes_.size(); ++i) {
+      const Axis& a = axes_[i];
+      if (a.rep.answering && a.rep.status.enabled) continue;
+      fault(i, "axis " + cfg_.axes[i].name + " did not enable within " +
+                   std::to_string(cfg_.drive_bridge.enable_timeout_s).substr(0, 4) + " s: " +
+                   (a.rep.answering ? std::string("drive state ") + a.rep.status.state
+                                    : std::string("no answer (") + a.rep.last_error.data() + ")"),
+            true);
+      break;
+    }
+  }
+}
+
+void DriveBridgeNode::report_reconnects() {
   for (size_t i = 0; i < axes_.size(); ++i) {
     Axis& a = axes_[i];
     if (a.rep.counters.reconnects > a.reconnects_seen) {
@@ -342,16 +367,9 @@ void DriveBridgeNode::servo_tick_inner(double now_s) {
       alarm(cnc::lcmt_alarm::WARNING, "drive_reconnected", text);
     }
   }
+}
 
-  // A link that has not finished the round of the last tick's command is stalled
-  // (the drive, its network or this process's worker did not get to run): the
-  // playback waits for it, so the drive gets the next commands one tick after
-  // another instead of a jump over the ticks it missed (a jump the drive takes
-  // without feed-forward, as a following error of about v x the stall). The lag
-  // is made up by the playback rate afterwards. No post while holding: the same
-  // command written twice would be a standstill in the drive's demand.
-  const bool hold = link_stalled() && core_.hold();
-  const AxisArray& cmd = hold ? core_.commanded() : core_.tick();
+void DriveBridgeNode::follow_core_state() {
   if (core_.faulted() && fault_text_.empty()) {
     fault_text_ = core_.fault_reason();
     spdlog::error("fault: {}", fault_text_);
@@ -373,6 +391,9 @@ void DriveBridgeNode::servo_tick_inner(double now_s) {
     detail_ = state_name(state_);
     if (!fault_text_.empty() && (state_ == State::kStopping || state_ == State::kFault)) detail_ += ": " + fault_text_;
   }
+}
+
+void DriveBridgeNode::set_axis_commands(const AxisArray& cmd) {
   const bool following_state = state_ == State::kEnabled || state_ == State::kStopping || state_ == State::kFault;
   for (size_t i = 0; i < axes_.size(); ++i) {
     Axis& a = axes_[i];
@@ -382,20 +403,24 @@ void DriveBridgeNode::servo_tick_inner(double now_s) {
     a.cmd.cmd_cycle = core_.segment_cycle();
     a.worker->set_command(a.slot, a.cmd);
   }
-  if (!dbg_file_.empty() && dbg_ticks_.size() < dbg_ticks_.capacity()) {
-    DbgTick t{};
-    t.mono = now_s;
-    t.tau = core_.playback_cycle();
-    t.last_cycle = core_.last_cycle();
-    t.held = hold ? 1 : 0;
-    for (size_t i = 0; i < axes_.size() && i < 3; ++i) {
-      t.cmd[i] = cmd[i];
-      t.fe[i] = axes_[i].rep.fe_mm;
-      t.act[i] = axes_[i].rep.actual_mm;
-    }
-    dbg_ticks_.push_back(t);
+}
+
+void DriveBridgeNode::trace_tick(double now_s, bool hold, const AxisArray& cmd) {
+  if (dbg_file_.empty() || dbg_ticks_.size() >= dbg_ticks_.capacity()) return;
+  DbgTick t{};
+  t.mono = now_s;
+  t.tau = core_.playback_cycle();
+  t.last_cycle = core_.last_cycle();
+  t.held = hold ? 1 : 0;
+  for (size_t i = 0; i < axes_.size() && i < 3; ++i) {
+    t.cmd[i] = cmd[i];
+    t.fe[i] = axes_[i].rep.fe_mm;
+    t.act[i] = axes_[i].rep.actual_mm;
   }
-  if (hold) return;
+  dbg_ticks_.push_back(t);
+}
+
+void DriveBridgeNode::post_rounds(double now_s) {
   for (size_t i = 0; i < workers_.size(); ++i) {
     auto& w = workers_[i];
     if (opt_.threaded) {

@@ -76,7 +76,17 @@ class DriveBridgeNode {
     int64_t reconnects_seen = 0;
     bool link_down = false;  // lost since the last ENABLE: stays disabled
   };
+  // servo_tick_inner and its stages.
   void servo_tick_inner(double now_s);
+  void take_operator_command(double now_s);
+  void advance_state(double now_s);
+  void advance_enabling(double now_s);
+  void report_reconnects();
+  // The bridge's state, ALARMs and detail text after the core's tick (a fault, a setpoint mismatch).
+  void follow_core_state();
+  void set_axis_commands(const AxisArray& cmd);
+  void trace_tick(double now_s, bool hold, const AxisArray& cmd);
+  void post_rounds(double now_s);
   void publish_status_inner(int64_t overruns);
   void on_exception(const char* where, const char* what);
   void on_setpoint(const cnc::lcmt_setpoint& m);

@@ -316,136 +316,166 @@ void InterpolatorNode::run_cycle() {
   flush_inputs();
   watch_drives();
   const int64_t cyc = core_.cycle();
+  publish_config(cyc);
+  apply_pending_load();
+  apply_pending_commands();
+  manual_cycle();
+  feed_planner(cyc);
+  request_blocks();
+
+  const Setpoint& sp = core_.step();
+  if (sp.state == RunState::kDone) done_token_ = token_;
+  publish_setpoint(sp);
+  publish_state(false);
+}
+
+void InterpolatorNode::publish_config(int64_t cyc) {
   // The config as loaded, at start and about once a second: a log alone replays.
-  if (cyc % config_period_cycles_ == 0) {
-    cnc::lcmt_config c{};
-    c.service = "cnc-interpolator";
-    c.source_file = cfg_.source_file;
-    c.yaml = cfg_.source_text;
-    c.cycle = cyc;
-    bus_.publish(ch_config_, c);
+  if (cyc % config_period_cycles_ != 0) return;
+  cnc::lcmt_config c{};
+  c.service = "cnc-interpolator";
+  c.source_file = cfg_.source_file;
+  c.yaml = cfg_.source_text;
+  c.cycle = cyc;
+  bus_.publish(ch_config_, c);
+}
+
+void InterpolatorNode::apply_pending_load() {
+  if (!load_pending_) return;
+  load_pending_ = false;
+  cnc::lcmt_program_command m{};
+  m.command = cnc::lcmt_program_command::LOAD;
+  m.program_path = program_path_;
+  apply_command(Command{Command::Kind::kLoad, 1.0}, m);
+  last_request_first_ = -1;
+}
+
+void InterpolatorNode::apply_pending_commands() {
+  for (const auto& m : pending_commands_) apply_pending_command(m);
+  pending_commands_.clear();
+}
+
+void InterpolatorNode::apply_pending_command(const cnc::lcmt_program_command& m) {
+  using PC = cnc::lcmt_program_command;
+  if (m.command == PC::RESET) {
+    apply_reset(m);
+    return;
   }
-  if (load_pending_) {
-    load_pending_ = false;
-    cnc::lcmt_program_command m{};
-    m.command = cnc::lcmt_program_command::LOAD;
-    m.program_path = program_path_;
-    apply_command(Command{Command::Kind::kLoad, 1.0}, m);
+  if (m.command == PC::HOME || m.command == PC::JOG || m.command == PC::JOG_KEEPALIVE) {
+    on_manual_command(m);
+    return;
+  }
+  if (m.command == PC::CONFIRM) {
+    approach_pending_ = false;
+    return;
+  }
+  if (m.command == PC::HOMED) {
+    spdlog::warn("HOMED from sender {} ignored: it is this interpolator's own input", m.sender);
+    return;
+  }
+  if (m.command == PC::STOP && manual_ == Manual::kHome) manual_stop("homing stopped by the operator");
+  Command c;
+  if (m.command == PC::LOAD || !to_core_command(m, &c)) return;  // LOAD: via PROGRAM_STATE
+  if (fault_ && (c.kind == Command::Kind::kStart || c.kind == Command::Kind::kResume)) {
+    spdlog::warn("{} refused: in FAULT ({}); RESET first", c.kind == Command::Kind::kStart ? "START" : "RESUME",
+                 fault_cause_);
+    return;
+  }
+  if (c.kind == Command::Kind::kStart) {
+    if (start_refused()) return;
     last_request_first_ = -1;
   }
-  for (const auto& m : pending_commands_) {
-    if (m.command == cnc::lcmt_program_command::RESET) {
-      cnc::lcmt_program_command r = m;
-      const std::string why = reset_position(&r);
-      Command c;
-      if (!why.empty() || !to_core_command(r, &c)) {
-        spdlog::warn("RESET refused: {}", why);
-        alarm(cnc::lcmt_alarm::WARNING, "reset_refused", "RESET refused: " + why);
-        continue;
-      }
-      apply_command(c, r);
-      // The path jumps to where the drives stand: receivers must not take the
-      // setpoints before and after for one stream.
-      stream_ = util::next_token(stream_);
-      const bool was_fault = fault_;
-      fault_ = false;
-      fault_cause_.clear();
-      detail_.clear();
-      retired_token_ = std::max(retired_token_, token_);
-      token_ = 0;
-      num_blocks_ = 0;
-      load_pending_ = false;
-      reorder_.clear();
-      std::string where;
-      for (size_t a = 0; a < cfg_.axes.size(); ++a)
-        where += (a ? ", " : "") + cfg_.axes[a].name + " " + std::to_string(r.position_mm[a]);
-      spdlog::info("reset{}: the path stands where the drives are ({})", was_fault ? " from FAULT" : "", where);
-      alarm(cnc::lcmt_alarm::INFO, "reset", std::string(was_fault ? "fault cleared; " : "") +
-                                                "the path stands where the drives are: " + where + " mm");
-      continue;
-    }
-    using PC = cnc::lcmt_program_command;
-    if (m.command == PC::HOME || m.command == PC::JOG || m.command == PC::JOG_KEEPALIVE) {
-      on_manual_command(m);
-      continue;
-    }
-    if (m.command == PC::CONFIRM) {
-      approach_pending_ = false;
-      continue;
-    }
-    if (m.command == PC::HOMED) {
-      spdlog::warn("HOMED from sender {} ignored: it is this interpolator's own input", m.sender);
-      continue;
-    }
-    if (m.command == PC::STOP && manual_ == Manual::kHome) manual_stop("homing stopped by the operator");
-    Command c;
-    if (m.command == cnc::lcmt_program_command::LOAD || !to_core_command(m, &c)) continue;  // LOAD: via PROGRAM_STATE
-    if (fault_ && (c.kind == Command::Kind::kStart || c.kind == Command::Kind::kResume)) {
-      spdlog::warn("{} refused: in FAULT ({}); RESET first", c.kind == Command::Kind::kStart ? "START" : "RESUME",
-                   fault_cause_);
-      continue;
-    }
-    if (c.kind == Command::Kind::kStart && peers_.lost(kPeerBridge)) {
-      spdlog::warn("START refused: the drive bridge is lost ({})", peers_.last_lost_text());
-      alarm(cnc::lcmt_alarm::WARNING, "start_refused",
-            std::string("START refused: the drive bridge is lost: ") + peers_.last_lost_text());
-      continue;
-    }
-    if (c.kind == Command::Kind::kStart && util::monotonic_s() - axis_status_s_ <= kStatusFresh_s) {
-      std::string why;
-      for (size_t i = 0; i < cfg_.axes.size() && why.empty(); ++i)
-        if (axis_status_.drive_state[i] != cnc::lcmt_axis_status::ENABLED)
-          why = "axis " + cfg_.axes[i].name + " is " + drive_state_name(axis_status_.drive_state[i]);
-      if (!why.empty()) {
-        spdlog::warn("START refused: {}: enable the drives first", why);
-        continue;
-      }
-    }
-    if (c.kind == Command::Kind::kStart && (manual_ != Manual::kNone || !unhomed().empty())) {
-      const std::string why = manual_ != Manual::kNone ? manual_text_ + " runs: STOP it first" : unhomed() + ": HOME first";
-      spdlog::warn("START refused: {}", why);
-      alarm(cnc::lcmt_alarm::WARNING, "start_refused", "START refused: " + why);
-      continue;
-    }
-    if (c.kind == Command::Kind::kStart && approach_pending_) {
-      spdlog::warn("START refused: program {} runs from a line: its approach waits for CONFIRM", program_path_);
-      continue;
-    }
-    if (c.kind == Command::Kind::kStart && core_.state() == RunState::kDone && token_ == done_token_) {
-      // A START sent again (cnc-ctl repeats one whose answer it did not see) after the
-      // program's end: the program ran once; it would stand STARVED with nothing to run.
-      spdlog::warn("START ignored: program {} has ended (LOAD it again)", program_path_);
-      continue;
-    }
-    if (c.kind == Command::Kind::kStart) {
-      if (token_ == 0) {
-        spdlog::warn("START without a loaded program: ignored");
-        continue;
-      }
-      last_request_first_ = -1;
-    }
-    if (c.kind == Command::Kind::kOverride &&
-        (!std::isfinite(m.feed_override) || m.feed_override < 0 || m.feed_override > motion::kMaxFeedOverride)) {
-      spdlog::warn("feed override {} outside 0..{}: ignored (seq {})", m.feed_override, motion::kMaxFeedOverride, m.seq);
-      continue;
-    }
-    if (c.kind == Command::Kind::kRapidOverride &&
-        (!std::isfinite(m.feed_override) || m.feed_override < 0 || m.feed_override > 1)) {
-      spdlog::warn("rapid override {} outside 0..1: ignored (seq {})", m.feed_override, m.seq);
-      continue;
-    }
-    if (c.kind == Command::Kind::kRapidOverride) spdlog::info("rapid override {}", m.feed_override);
-    if (c.kind == Command::Kind::kStart) spdlog::info("START {} (token {})", program_path_, token_);
-    apply_command(c, m);
-    if (c.kind == Command::Kind::kSingleBlock || c.kind == Command::Kind::kOptionalStop) {
-      spdlog::info("{} {}", c.kind == Command::Kind::kSingleBlock ? "single block" : "optional stop (M1)",
-                   c.value != 0 ? "on" : "off");
-      publish_state(true);
+  if (c.kind == Command::Kind::kOverride &&
+      (!std::isfinite(m.feed_override) || m.feed_override < 0 || m.feed_override > motion::kMaxFeedOverride)) {
+    spdlog::warn("feed override {} outside 0..{}: ignored (seq {})", m.feed_override, motion::kMaxFeedOverride, m.seq);
+    return;
+  }
+  if (c.kind == Command::Kind::kRapidOverride &&
+      (!std::isfinite(m.feed_override) || m.feed_override < 0 || m.feed_override > 1)) {
+    spdlog::warn("rapid override {} outside 0..1: ignored (seq {})", m.feed_override, m.seq);
+    return;
+  }
+  if (c.kind == Command::Kind::kRapidOverride) spdlog::info("rapid override {}", m.feed_override);
+  if (c.kind == Command::Kind::kStart) spdlog::info("START {} (token {})", program_path_, token_);
+  apply_command(c, m);
+  if (c.kind == Command::Kind::kSingleBlock || c.kind == Command::Kind::kOptionalStop) {
+    spdlog::info("{} {}", c.kind == Command::Kind::kSingleBlock ? "single block" : "optional stop (M1)",
+                 c.value != 0 ? "on" : "off");
+    publish_state(true);
+  }
+}
+
+void InterpolatorNode::apply_reset(const cnc::lcmt_program_command& m) {
+  cnc::lcmt_program_command r = m;
+  const std::string why = reset_position(&r);
+  Command c;
+  if (!why.empty() || !to_core_command(r, &c)) {
+    spdlog::warn("RESET refused: {}", why);
+    alarm(cnc::lcmt_alarm::WARNING, "reset_refused", "RESET refused: " + why);
+    return;
+  }
+  apply_command(c, r);
+  // The path jumps to where the drives stand: receivers must not take the
+  // setpoints before and after for one stream.
+  stream_ = util::next_token(stream_);
+  const bool was_fault = fault_;
+  fault_ = false;
+  fault_cause_.clear();
+  detail_.clear();
+  retired_token_ = std::max(retired_token_, token_);
+  token_ = 0;
+  num_blocks_ = 0;
+  load_pending_ = false;
+  reorder_.clear();
+  std::string where;
+  for (size_t a = 0; a < cfg_.axes.size(); ++a)
+    where += (a ? ", " : "") + cfg_.axes[a].name + " " + std::to_string(r.position_mm[a]);
+  spdlog::info("reset{}: the path stands where the drives are ({})", was_fault ? " from FAULT" : "", where);
+  alarm(cnc::lcmt_alarm::INFO, "reset", std::string(was_fault ? "fault cleared; " : "") +
+                                            "the path stands where the drives are: " + where + " mm");
+}
+
+bool InterpolatorNode::start_refused() {
+  if (peers_.lost(kPeerBridge)) {
+    spdlog::warn("START refused: the drive bridge is lost ({})", peers_.last_lost_text());
+    alarm(cnc::lcmt_alarm::WARNING, "start_refused",
+          std::string("START refused: the drive bridge is lost: ") + peers_.last_lost_text());
+    return true;
+  }
+  if (util::monotonic_s() - axis_status_s_ <= kStatusFresh_s) {
+    std::string why;
+    for (size_t i = 0; i < cfg_.axes.size() && why.empty(); ++i)
+      if (axis_status_.drive_state[i] != cnc::lcmt_axis_status::ENABLED)
+        why = "axis " + cfg_.axes[i].name + " is " + drive_state_name(axis_status_.drive_state[i]);
+    if (!why.empty()) {
+      spdlog::warn("START refused: {}: enable the drives first", why);
+      return true;
     }
   }
-  pending_commands_.clear();
-  manual_cycle();
+  if (manual_ != Manual::kNone || !unhomed().empty()) {
+    const std::string why = manual_ != Manual::kNone ? manual_text_ + " runs: STOP it first" : unhomed() + ": HOME first";
+    spdlog::warn("START refused: {}", why);
+    alarm(cnc::lcmt_alarm::WARNING, "start_refused", "START refused: " + why);
+    return true;
+  }
+  if (approach_pending_) {
+    spdlog::warn("START refused: program {} runs from a line: its approach waits for CONFIRM", program_path_);
+    return true;
+  }
+  if (core_.state() == RunState::kDone && token_ == done_token_) {
+    // A START sent again (cnc-ctl repeats one whose answer it did not see) after the
+    // program's end: the program ran once; it would stand STARVED with nothing to run.
+    spdlog::warn("START ignored: program {} has ended (LOAD it again)", program_path_);
+    return true;
+  }
+  if (token_ == 0) {
+    spdlog::warn("START without a loaded program: ignored");
+    return true;
+  }
+  return false;
+}
 
+void InterpolatorNode::feed_planner(int64_t cyc) {
   // Feed the planner and take its finished plans (the one feed policy of the core
   // library, feed_policy.h). Each block handed over and each group of plans taken is
   // an input recorded with this cycle: replay takes the plans at the same cycles.
@@ -482,32 +512,33 @@ void InterpolatorNode::run_cycle() {
         publish_input(in);
       });
   std::string failure = core_.take_plan_failure();
-  if (!fed || bad_index >= 0 || !failure.empty()) {
-    // A block the core cannot take ends the program: the path stops where it is
-    // (a recorded STOP) and the operator is told why. Nothing more is requested.
-    const int64_t index = bad_index >= 0 ? bad_index : core_.next_block_index();
-    const auto it = reorder_.find(index);
-    const std::string line = it != reorder_.end() ? " (line " + std::to_string(it->second.source_line) + ")" : "";
-    const std::string text = failure.empty() ? "block " + std::to_string(index) + line + " refused: " +
-                                                   (bad.empty() ? core_.last_refusal() : bad)
-                                             : "refused: " + failure;
-    spdlog::error("{}", text);
-    cnc::lcmt_alarm al{};
-    al.source = "cnc-interpolator";
-    al.severity = cnc::lcmt_alarm::FAULT;
-    al.code = "block_refused";
-    al.text = text;
-    bus_.publish(ch_alarm_, al);
-    cnc::lcmt_program_command stop{};
-    stop.command = cnc::lcmt_program_command::STOP;
-    apply_command(Command{Command::Kind::kStop, 1.0, {}}, stop);
-    token_ = 0;
-    reorder_.clear();
-  }
-  request_blocks();
+  if (!fed || bad_index >= 0 || !failure.empty()) stop_on_refused_block(bad_index, bad, failure);
+}
 
-  const Setpoint& sp = core_.step();
-  if (sp.state == RunState::kDone) done_token_ = token_;
+void InterpolatorNode::stop_on_refused_block(int64_t bad_index, const std::string& bad, const std::string& failure) {
+  // A block the core cannot take ends the program: the path stops where it is
+  // (a recorded STOP) and the operator is told why. Nothing more is requested.
+  const int64_t index = bad_index >= 0 ? bad_index : core_.next_block_index();
+  const auto it = reorder_.find(index);
+  const std::string line = it != reorder_.end() ? " (line " + std::to_string(it->second.source_line) + ")" : "";
+  const std::string text = failure.empty() ? "block " + std::to_string(index) + line + " refused: " +
+                                                 (bad.empty() ? core_.last_refusal() : bad)
+                                           : "refused: " + failure;
+  spdlog::error("{}", text);
+  cnc::lcmt_alarm al{};
+  al.source = "cnc-interpolator";
+  al.severity = cnc::lcmt_alarm::FAULT;
+  al.code = "block_refused";
+  al.text = text;
+  bus_.publish(ch_alarm_, al);
+  cnc::lcmt_program_command stop{};
+  stop.command = cnc::lcmt_program_command::STOP;
+  apply_command(Command{Command::Kind::kStop, 1.0, {}}, stop);
+  token_ = 0;
+  reorder_.clear();
+}
+
+void InterpolatorNode::publish_setpoint(const Setpoint& sp) {
   cnc::lcmt_setpoint& out = setpoint_msg_;
   out.cycle = sp.cycle;
   out.period_s = cfg_.ipo_period_s;
@@ -541,7 +572,6 @@ void InterpolatorNode::run_cycle() {
   out.engagement = axis_status_.engagement;
   bus_.publish(ch_setpoints_, out);
   ++setpoints_published_;
-  publish_state(false);
 }
 
 void InterpolatorNode::publish_state(bool force) {

@@ -63,7 +63,18 @@ class InterpolatorNode {
   void on_block(const cnc::lcmt_program_block& m);
   void apply_command(const Command& c, const cnc::lcmt_program_command& m);
   void request_blocks();
+  // run_cycle and its stages.
   void run_cycle();
+  void publish_config(int64_t cyc);
+  void apply_pending_load();
+  void apply_pending_commands();
+  void apply_pending_command(const cnc::lcmt_program_command& m);
+  void apply_reset(const cnc::lcmt_program_command& m);
+  // Says why (log, ALARM where the operator must act) when START cannot be taken now.
+  bool start_refused();
+  void feed_planner(int64_t cyc);
+  void stop_on_refused_block(int64_t bad_index, const std::string& bad, const std::string& failure);
+  void publish_setpoint(const Setpoint& sp);
   void publish_input(const cnc::lcmt_interp_input& in);
   void flush_inputs();
   // LOGGER_STATS: the inputs the logger confirms are forgotten, the older ones it

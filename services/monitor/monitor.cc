@@ -12,6 +12,9 @@ namespace {
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr size_t kMaxBlocks = 512;
 constexpr size_t kMaxSetpoints = 2048;
+// The actual feed's window (see track_actual_feed).
+constexpr int64_t kFeedWindowUs = 40'000;
+constexpr size_t kMaxFeedSamples = 64;
 }  // namespace
 
 Monitor::Monitor(const config::MachineConfig& cfg)
@@ -165,84 +168,10 @@ Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double
   r.target_rmax_um = kNaN;
   r.force_x_n = r.force_y_n = r.force_z_n = r.force_peak_n = r.deflection_mm = kNaN;
   r.deflection_tolerance_mm = force_ ? cfg_.cutting.deflection_tolerance_mm : kNaN;
-  // R_max is predicted from the commanded path (the setpoints: feed and inclination at
-  // the window's middle) corrected by how the axes actually followed it: the ratio of
-  // the actual positions' displacement to the commanded one over the same window of at
-  // least 40 ms (a moving average; about three tooth passes at 2000 rpm and 2 flutes,
-  // shorter than any feed change the law makes). Differentiating the actual positions
-  // over one or two 4 ms statuses on the bridge's jittering time stamps made feeds,
-  // and R_max predictions, several times the real ones (false alarms on every demo).
-  constexpr int64_t kFeedWindowUs = 40'000;
-  constexpr size_t kMaxFeedSamples = 64;
   const int n_axes = static_cast<int>(std::min(actual.size(), static_cast<size_t>(program::kMaxAxes)));
-  // The commanded stretch is read between the bridge's playback positions at the
-  // window's ends (AXIS_STATUS playback_cycle): the path the drives were sent over
-  // the same 40 ms as the actual positions moved, whatever the lead, the loss and
-  // the jitter of the setpoints did to the newest cycle received, and standing
-  // where the playback stood (the bridge held for a stalled link). Without it (an
-  // older bridge), the newest setpoint cycle stands in, tracking_lag_cycles behind:
-  // it advances in whole cycles as setpoints arrive, by two or none at a time on a
-  // jittery network, so a status whose cycle has not advanced keeps the ratio.
-  // A status older than the newest one (reordered on the network) is no new sample:
-  // the window keeps its samples and the feed its value. A jump back of more than a
-  // second (another sender, a clock set back) starts the window again.
   const bool have_playback = std::isfinite(playback) && playback >= 0;
   if (!have_playback) playback = -1;
-  bool reordered = false;
-  bool cycle_stood = false;  // a new sample for the actual feed, but no new tracking ratio
-  if (recent_n_ > 0) {
-    const Sample& last = recent(recent_n_ - 1);
-    if (last.naxes != n_axes || utime < last.utime - 1'000'000) {
-      recent_n_ = 0;
-    } else if (utime <= last.utime) {
-      reordered = true;
-    } else if (!have_playback && cycle <= last.cycle) {
-      cycle_stood = true;
-    }
-  }
-  if (!reordered) {
-    if (recent_n_ == kRecent) {  // full: the oldest goes
-      recent_head_ = (recent_head_ + 1) % kRecent;
-      --recent_n_;
-    }
-    {
-      Sample& s = recent_[(recent_head_ + recent_n_) % kRecent];
-      s.utime = utime;
-      s.cycle = cycle;
-      s.playback = playback;
-      s.naxes = n_axes;
-      for (int i = 0; i < n_axes; ++i) s.pos[i] = actual[static_cast<size_t>(i)];
-      ++recent_n_;
-    }
-    while (recent_n_ > 2 && (recent_n_ > kMaxFeedSamples || utime - recent(1).utime >= kFeedWindowUs)) {
-      recent_head_ = (recent_head_ + 1) % kRecent;
-      --recent_n_;
-    }
-    if (!cycle_stood) tracking_ratio_ = 1.0;
-  }
-  if (!reordered && recent_n_ >= 2) {
-    const Sample& a = recent(0);
-    double d2 = 0;
-    for (int i = 0; i < n_axes; ++i) d2 += (actual[static_cast<size_t>(i)] - a.pos[i]) * (actual[static_cast<size_t>(i)] - a.pos[i]);
-    actual_feed_ = std::sqrt(d2) / (static_cast<double>(utime - a.utime) * 1e-6) * 60.0;
-    // The axes follow the setpoints a few cycles late (the bridge's jitter buffer and
-    // fine interpolation, the drives' lag): compare with the commanded stretch that
-    // many cycles earlier, or a deceleration reads as overspeed.
-    // The lag may be a fraction of a cycle: the commanded position between two
-    // setpoints, linearly.
-    motion::AxisVec q0{}, q1{};
-    const bool by_playback = have_playback && a.playback >= 0;
-    const double c0 = by_playback ? a.playback - playback_lag_cycles_ : static_cast<double>(a.cycle) - lag_cycles_;
-    const double c1 = by_playback ? playback - playback_lag_cycles_ : static_cast<double>(cycle) - lag_cycles_;
-    if (!cycle_stood && commanded_at(c0, n_axes, &q0) && commanded_at(c1, n_axes, &q1)) {
-      double c2 = 0;
-      for (int i = 0; i < n_axes; ++i) {
-        const double d = q1[i] - q0[i];
-        c2 += d * d;
-      }
-      if (c2 > 1e-12) tracking_ratio_ = std::sqrt(d2 / c2);
-    }
-  }
+  track_actual_feed(utime, cycle, actual, n_axes, have_playback, playback);
   r.actual_feed_mm_per_min = actual_feed_;
   for (double e : fe) r.max_following_error_mm = std::max(r.max_following_error_mm, std::fabs(e));
   largest_fe_ = std::max(largest_fe_, r.max_following_error_mm);
@@ -262,7 +191,90 @@ Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double
     r.force_peak_n = f.peak;
     r.deflection_mm = f.deflection;
   }
+  predict_rmax(cycle, sp, have_playback, playback, &r);
+  raise_alarms(cycle, r, alarms);
+  return r;
+}
 
+// R_max is predicted from the commanded path (the setpoints: feed and inclination at
+// the window's middle) corrected by how the axes actually followed it: the ratio of
+// the actual positions' displacement to the commanded one over the same window of at
+// least 40 ms (a moving average; about three tooth passes at 2000 rpm and 2 flutes,
+// shorter than any feed change the law makes). Differentiating the actual positions
+// over one or two 4 ms statuses on the bridge's jittering time stamps made feeds,
+// and R_max predictions, several times the real ones (false alarms on every demo).
+void Monitor::track_actual_feed(int64_t utime, int64_t cycle, const std::vector<double>& actual, int n_axes,
+                                bool have_playback, double playback) {
+  // The commanded stretch is read between the bridge's playback positions at the
+  // window's ends (AXIS_STATUS playback_cycle): the path the drives were sent over
+  // the same 40 ms as the actual positions moved, whatever the lead, the loss and
+  // the jitter of the setpoints did to the newest cycle received, and standing
+  // where the playback stood (the bridge held for a stalled link). Without it (an
+  // older bridge), the newest setpoint cycle stands in, tracking_lag_cycles behind:
+  // it advances in whole cycles as setpoints arrive, by two or none at a time on a
+  // jittery network, so a status whose cycle has not advanced keeps the ratio.
+  // A status older than the newest one (reordered on the network) is no new sample:
+  // the window keeps its samples and the feed its value. A jump back of more than a
+  // second (another sender, a clock set back) starts the window again.
+  bool reordered = false;
+  bool cycle_stood = false;  // a new sample for the actual feed, but no new tracking ratio
+  if (recent_n_ > 0) {
+    const Sample& last = recent(recent_n_ - 1);
+    if (last.naxes != n_axes || utime < last.utime - 1'000'000) {
+      recent_n_ = 0;
+    } else if (utime <= last.utime) {
+      reordered = true;
+    } else if (!have_playback && cycle <= last.cycle) {
+      cycle_stood = true;
+    }
+  }
+  if (reordered) return;
+  push_sample(utime, cycle, actual, n_axes, playback);
+  if (!cycle_stood) tracking_ratio_ = 1.0;
+  if (recent_n_ < 2) return;
+  const Sample& a = recent(0);
+  double d2 = 0;
+  for (int i = 0; i < n_axes; ++i) d2 += (actual[static_cast<size_t>(i)] - a.pos[i]) * (actual[static_cast<size_t>(i)] - a.pos[i]);
+  actual_feed_ = std::sqrt(d2) / (static_cast<double>(utime - a.utime) * 1e-6) * 60.0;
+  // The axes follow the setpoints a few cycles late (the bridge's jitter buffer and
+  // fine interpolation, the drives' lag): compare with the commanded stretch that
+  // many cycles earlier, or a deceleration reads as overspeed.
+  // The lag may be a fraction of a cycle: the commanded position between two
+  // setpoints, linearly.
+  motion::AxisVec q0{}, q1{};
+  const bool by_playback = have_playback && a.playback >= 0;
+  const double c0 = by_playback ? a.playback - playback_lag_cycles_ : static_cast<double>(a.cycle) - lag_cycles_;
+  const double c1 = by_playback ? playback - playback_lag_cycles_ : static_cast<double>(cycle) - lag_cycles_;
+  if (!cycle_stood && commanded_at(c0, n_axes, &q0) && commanded_at(c1, n_axes, &q1)) {
+    double c2 = 0;
+    for (int i = 0; i < n_axes; ++i) {
+      const double d = q1[i] - q0[i];
+      c2 += d * d;
+    }
+    if (c2 > 1e-12) tracking_ratio_ = std::sqrt(d2 / c2);
+  }
+}
+
+void Monitor::push_sample(int64_t utime, int64_t cycle, const std::vector<double>& actual, int n_axes,
+                          double playback) {
+  if (recent_n_ == kRecent) {  // full: the oldest goes
+    recent_head_ = (recent_head_ + 1) % kRecent;
+    --recent_n_;
+  }
+  Sample& s = recent_[(recent_head_ + recent_n_) % kRecent];
+  s.utime = utime;
+  s.cycle = cycle;
+  s.playback = playback;
+  s.naxes = n_axes;
+  for (int i = 0; i < n_axes; ++i) s.pos[i] = actual[static_cast<size_t>(i)];
+  ++recent_n_;
+  while (recent_n_ > 2 && (recent_n_ > kMaxFeedSamples || utime - recent(1).utime >= kFeedWindowUs)) {
+    recent_head_ = (recent_head_ + 1) % kRecent;
+    --recent_n_;
+  }
+}
+
+void Monitor::predict_rmax(int64_t cycle, const SetpointIn& sp, bool have_playback, double playback, Report* r) const {
   // Feed and inclination where the commanded path was in the middle of the window.
   const int64_t window_cycles = recent_n_ >= 2 ? cycle - recent(0).cycle : 0;
   const int64_t mid_cycle =
@@ -276,21 +288,22 @@ Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double
   }
   const SetpointIn& mid = mid_p != nullptr ? *mid_p : sp;
   const Known* k = find(mid.program_token, mid.block_index);
-  if (k != nullptr) {
-    const program::Block& b = k->block;
-    r.spindle_rpm = b.spindle_rpm;
-    const bool cutting = b.kind != program::BlockKind::kRapid;
-    if (b.process.active() && b.spindle_rpm > 0 && cutting && naxes_ >= 3) {
-      motion::AxisVec p{}, d1{}, d2{};
-      k->path->eval(mid.u, &p, &d1, &d2);
-      const double alpha = process::feed_inclination_angle(Eigen::Vector3d(d1[0], d1[1], d1[2]));
-      const double f_t = mid.feed_mm_per_min * tracking_ratio_ / (b.process.flutes * b.spindle_rpm);
-      r.target_rmax_um = b.process.target_rmax_um;
-      if (f_t > 0)
-        r.predicted_rmax_um = process::rmax_extended(b.process.ball_radius_mm, f_t, b.process.pick_feed_mm, alpha) * 1e3;
-    }
+  if (k == nullptr) return;
+  const program::Block& b = k->block;
+  r->spindle_rpm = b.spindle_rpm;
+  const bool cutting = b.kind != program::BlockKind::kRapid;
+  if (b.process.active() && b.spindle_rpm > 0 && cutting && naxes_ >= 3) {
+    motion::AxisVec p{}, d1{}, d2{};
+    k->path->eval(mid.u, &p, &d1, &d2);
+    const double alpha = process::feed_inclination_angle(Eigen::Vector3d(d1[0], d1[1], d1[2]));
+    const double f_t = mid.feed_mm_per_min * tracking_ratio_ / (b.process.flutes * b.spindle_rpm);
+    r->target_rmax_um = b.process.target_rmax_um;
+    if (f_t > 0)
+      r->predicted_rmax_um = process::rmax_extended(b.process.ball_radius_mm, f_t, b.process.pick_feed_mm, alpha) * 1e3;
   }
+}
 
+void Monitor::raise_alarms(int64_t cycle, const Report& r, std::vector<Alarm>* alarms) {
   // Alarms on entering the condition (not on every report while it lasts).
   const bool rmax_bad = std::isfinite(r.predicted_rmax_um) &&
                         r.predicted_rmax_um > r.target_rmax_um * (1.0 + cfg_.monitor_rmax_margin);
@@ -328,7 +341,6 @@ Report Monitor::on_status(int64_t utime, int64_t cycle, const std::vector<double
     alarms->push_back({"force", os.str()});
   }
   force_alarm_ = force_bad;
-  return r;
 }
 
 }  // namespace cnc::monitor

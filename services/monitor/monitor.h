@@ -120,6 +120,12 @@ class Monitor {
     std::unique_ptr<motion::PathSegment> path;
   };
   const Known* find(int64_t token, int64_t index) const;
+  // on_status's stages.
+  void track_actual_feed(int64_t utime, int64_t cycle, const std::vector<double>& actual, int n_axes,
+                         bool have_playback, double playback);
+  void push_sample(int64_t utime, int64_t cycle, const std::vector<double>& actual, int n_axes, double playback);
+  void predict_rmax(int64_t cycle, const SetpointIn& sp, bool have_playback, double playback, Report* r) const;
+  void raise_alarms(int64_t cycle, const Report& r, std::vector<Alarm>* alarms);
   double step_chord_error(const SetpointIn& prev, const SetpointIn& cur) const;
 
   config::MachineConfig cfg_;
