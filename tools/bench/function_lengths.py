@@ -18,6 +18,8 @@ def strip(src):
             j=src.find('*/',i+2); i=n if j<0 else j+2; continue
         if src.startswith('R"(',i):
             j=src.find(')"',i+3); out.append('""'); i=n if j<0 else j+2; continue
+        if c == "'" and i > 0 and src[i-1].isalnum() and i + 1 < n and src[i+1].isalnum():
+            i+=1; continue  # a digit separator (40'000), not a character literal
         if c in '"\'':
             j=i+1
             while j<n and src[j]!=c:
