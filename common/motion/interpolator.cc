@@ -8,16 +8,12 @@
 #include <stdexcept>
 
 #include "common/geometry/chord.h"
-#include "common/motion/feed_override.h"
 #include "common/process/roughness.h"
 
 namespace cnc::interp {
 
 namespace {
 constexpr double kInf = std::numeric_limits<double>::infinity();
-
-using motion::AxisVec;
-
 
 // One phase of constant jerk j for time t applied to (s, v, a).
 void integrate(double j, double t, double* s, double* v, double* a) {
@@ -273,207 +269,6 @@ std::string Interpolator::take_plan_failure() {
   f.swap(failure_);
   return f;
 }
-
-// ---- inputs ----------------------------------------------------------------------
-
-bool Interpolator::check_block(const program::Block& block) {
-  refusal_.clear();
-  if (block.index != next_index_) {
-    refusal_ = "block " + std::to_string(block.index) + " out of order (expected " + std::to_string(next_index_) + ")";
-    return false;
-  }
-  if (static_cast<int>(block.end.size()) != naxes_ || static_cast<int>(block.start.size()) != naxes_) {
-    refusal_ = "block has the wrong number of axes";
-    return false;
-  }
-  for (int a = 0; a < naxes_; ++a) {
-    if (!std::isfinite(block.start[a]) || !std::isfinite(block.end[a])) {
-      refusal_ = "block " + std::to_string(block.index) + ": coordinate is not finite";
-      return false;
-    }
-  }
-  // The path is continuous: a block starts where the one before ended, the first
-  // where the machine stands. Anything else would be a jump in one cycle.
-  {
-    double gap = 0;
-    for (int a = 0; a < naxes_; ++a) {
-      const double expected = have_tail_ ? tail_[a] : pos_[a];
-      gap = std::max(gap, std::fabs(block.start[a] - expected));
-    }
-    if (gap > 1e-6) {
-      refusal_ = "block " + std::to_string(block.index) + " (line " + std::to_string(block.source_line) +
-                 ") starts " + std::to_string(gap) + " mm away from where the path is: reload the program here";
-      return false;
-    }
-  }
-  if (!(block.feed_mm_per_min >= 0) || !std::isfinite(block.feed_mm_per_min) ||
-      (block.kind == program::BlockKind::kLine && block.feed_mm_per_min <= 0) ||
-      (block.kind == program::BlockKind::kDwell && !(block.dwell_s >= 0 && std::isfinite(block.dwell_s)))) {
-    refusal_ = "block " + std::to_string(block.index) + ": feed or dwell time out of range";
-    return false;
-  }
-  return true;
-}
-
-bool Interpolator::submit_block(std::unique_ptr<program::Block> block) {
-  if (!block || !check_block(*block)) return false;
-  if (!inline_ && pending_n_ > 0 && !flush_requests()) {
-    refusal_ = "the planner is busy";
-    return false;
-  }
-  const bool had_tail = have_tail_;
-  const bool was_stopping = stopping_;
-  const auto tail = tail_;
-  const int64_t index = block->index;
-  for (int a = 0; a < naxes_; ++a) tail_[a] = block->end[a];
-  have_tail_ = true;
-  PlanRequest r;
-  r.kind = PlanRequest::Kind::kBlock;
-  r.epoch = epoch_;
-  r.serial = next_serial_;
-  r.block = block.get();
-  if (!link_->push(r)) {  // full: not taken, nothing changed
-    have_tail_ = had_tail;
-    tail_ = tail;
-    refusal_ = "the planner is busy";
-    return false;
-  }
-  block.release();  // the planner's now
-  ++next_serial_;
-  ++next_index_;
-  ++submitted_;
-  if (inline_) {
-    int64_t used = 0;
-    apply_plans(std::numeric_limits<int64_t>::max(), &used);
-    if (!failure_.empty()) {
-      // Planned inline: refused as a whole, as if never submitted.
-      failure_.clear();
-      failed_ = false;
-      stopping_ = was_stopping;
-      --next_index_;
-      have_tail_ = had_tail;
-      tail_ = tail;
-      (void)index;
-      return false;
-    }
-  }
-  return true;
-}
-
-bool Interpolator::apply_block(const program::Block& block) {
-  if (!check_block(block)) return false;
-  return submit_block(std::make_unique<program::Block>(block));
-}
-
-bool Interpolator::apply_command(const Command& cmd) {
-  switch (cmd.kind) {
-    case Command::Kind::kLoad:
-      if (state_ == RunState::kRunning || state_ == RunState::kHeld || state_ == RunState::kStarved) return true;
-      clear_blocks();
-      next_index_ = 0;
-      blocks_done_ = 0;
-      program_cycles_ = 0;
-      starved_cycles_ = 0;
-      u_ = s_ = v_ = a_ = 0;
-      dwell_left_ = -1;
-      rest_next_ = false;
-      state_ = RunState::kIdle;
-      // No block of the new program is under way until its first step: the
-      // setpoints until then name none (they carried the last path's block and u,
-      // which the monitor read on the new program's block 0: a false chord error
-      // of 22 mm after a homing and a touch-off, seen in integration.hmi).
-      out_.block_index = -1;
-      out_.source_line = 0;
-      out_.u = 0;
-      break;
-    case Command::Kind::kStart:
-      if (state_ == RunState::kIdle || state_ == RunState::kDone) {
-        state_ = RunState::kRunning;
-        hold_ = false;
-        stopping_ = false;
-        single_block_held_ = false;
-        single_block_go_ = true;  // single block: the first line runs
-      }
-      break;
-    case Command::Kind::kHold:
-      hold_ = true;
-      single_block_held_ = false;
-      break;
-    case Command::Kind::kResume:
-      hold_ = false;
-      single_block_held_ = false;
-      break;
-    case Command::Kind::kSingleBlock:
-      if (!std::isfinite(cmd.value)) break;
-      if ((cmd.value != 0) != single_block_) {
-        single_block_ = cmd.value != 0;
-        single_block_go_ = false;  // switched on in a run: the next line start holds
-        if (single_block_) mark_single_block_stops();
-        else unmark_single_block_stops();
-      }
-      break;
-    case Command::Kind::kOptionalStop:
-      if (std::isfinite(cmd.value)) optional_stop_ = cmd.value != 0;
-      break;
-    case Command::Kind::kStop:
-      if (state_ != RunState::kIdle && state_ != RunState::kDone) stopping_ = true;
-      break;
-    case Command::Kind::kReset:
-      // After a fault: nothing of the program is left, the path rests where the drives are.
-      clear_blocks();
-      next_index_ = 0;
-      blocks_done_ = 0;
-      program_cycles_ = 0;
-      starved_cycles_ = 0;
-      u_ = s_ = v_ = a_ = 0;
-      dwell_left_ = -1;
-      rest_next_ = false;
-      hold_ = false;
-      single_block_held_ = false;
-      stopping_ = false;
-      state_ = RunState::kIdle;
-      // The drives' positions, less the offsets of homed axes.
-      for (int a = 0; a < naxes_; ++a)
-        if (std::isfinite(cmd.position_mm[a])) pos_[a] = cmd.position_mm[a] - drive_offset_[a];
-      output_position();
-      break;
-    case Command::Kind::kHomed: {
-      if (cmd.axis < 0 || cmd.axis >= naxes_ || !std::isfinite(cmd.value)) break;
-      if (state_ == RunState::kRunning || state_ == RunState::kHeld || state_ == RunState::kStarved) break;
-      const auto a = static_cast<size_t>(cmd.axis);
-      // The drive stays where it is: the machine position moves by the change of offset.
-      pos_[a] += drive_offset_[a] - cmd.value;
-      drive_offset_[a] = cmd.value;
-      homed_[a] = true;
-      any_offset_ = any_offset_ || cmd.value != 0;
-      have_tail_ = false;  // the next program starts where the path now is
-      output_position();
-      break;
-    }
-    case Command::Kind::kOverride:
-    case Command::Kind::kRapidOverride:
-      if (std::isfinite(cmd.feed_override)) {
-        // The cap follows at once; the look-ahead over the buffer is re-planned by
-        // the planner and follows when that plan is taken.
-        PlanRequest r;
-        r.kind = PlanRequest::Kind::kOverride;
-        r.epoch = epoch_;
-        const bool rapid = cmd.kind == Command::Kind::kRapidOverride;
-        r.feed_override = rapid ? override_ : std::clamp(cmd.feed_override, 0.0, motion::kMaxFeedOverride);
-        r.rapid_override = rapid ? std::clamp(cmd.feed_override, 0.0, 1.0) : rapid_override_;
-        if (!push_request(r)) return false;
-        override_ = r.feed_override;
-        rapid_override_ = r.rapid_override;
-        if (inline_) {
-          int64_t used = 0;
-          apply_plans(std::numeric_limits<int64_t>::max(), &used);
-        }
-      }
-      break;
-  }
-  return true;
-}
-
 
 // ---- motion ----------------------------------------------------------------------
 
@@ -760,224 +555,6 @@ bool Interpolator::safe_gathered(double v_n, double a_n, double s_n, double* v_t
   return false;
 }
 
-void Interpolator::eval_on(const Planned& p, double u, AxisVec* P, AxisVec* d1, AxisVec* d2) {
-  const uint64_t bits = std::bit_cast<uint64_t>(u);
-  if (last_eval_.serial == p.serial && last_eval_.u_bits == bits) {
-    ++work_.curve_reuses;
-  } else {
-    ++work_.curve_evals;
-    p.path.eval(u, &last_eval_.P, &last_eval_.d1, &last_eval_.d2);
-    last_eval_.serial = p.serial;
-    last_eval_.u_bits = bits;
-  }
-  *P = last_eval_.P;
-  *d1 = last_eval_.d1;
-  *d2 = last_eval_.d2;
-}
-
-double Interpolator::advance(double ds, bool* reached_stop) {
-  *reached_stop = false;
-  double moved = 0;
-  while (!blocks_.empty()) {
-    Planned& p = blocks_.front();
-    if (p.stop_block()) {
-      *reached_stop = true;
-      return moved;
-    }
-    const double left = p.length - s_;
-    // The block's end by its arc-length count, or (on a curve, whose steps are chords
-    // a little shorter than the arc) by distance when the count says it is near.
-    const double step_left = ds - moved;
-    double to_end = 0;
-    for (int a = 0; a < naxes_; ++a) to_end += (p.path.end()[a] - pos_[a]) * (p.path.end()[a] - pos_[a]);
-    to_end = std::sqrt(to_end);
-    // Only into a block the path runs on into: where it stops, its jerk-limited stop
-    // profile ends on the count.
-    const bool runs_on = blocks_.size() > 1 && !blocks_[1].stop_at_start();
-    if (left <= step_left + 1e-12 || (runs_on && left <= 2 * step_left && to_end <= step_left)) {
-      // The distance actually covered to the end point (on a line the same as the
-      // count): the rest of the step goes on along the next block, so the setpoints
-      // keep their spacing across the junction (the count's surplus was a dip in the
-      // speed there, and a jerk spike).
-      moved += std::min(to_end, std::max(0.0, step_left));
-      for (int a = 0; a < naxes_; ++a) pos_[a] = p.path.end()[a];
-      out_.block_index = p.block.index;
-      out_.source_line = p.block.source_line;
-      out_.u = p.path.u_end();
-      pop_block();
-      ++blocks_done_;
-      ++work_.blocks_started;
-      s_ = 0;
-      u_ = blocks_.empty() ? 0 : blocks_.front().path.u_begin();
-      if (!blocks_.empty() && blocks_.front().stop_at_start()) {
-        // A corner that is a stop: the step ends on it.
-        *reached_stop = true;
-        return moved;
-      }
-      continue;
-    }
-    const double step = ds - moved;
-    // Choi et al. 2005 eq. 7: u += Δs/|P'| − Δs²·(P'·P'')/(2|P'|⁴).
-    AxisVec P{}, d1{}, d2{};
-    eval_on(p, u_, &P, &d1, &d2);
-    double sp2 = 0, dd = 0, d2sq = 0;
-    for (int a = 0; a < naxes_; ++a) {
-      sp2 += d1[a] * d1[a];
-      dd += d1[a] * d2[a];
-      d2sq += d2[a] * d2[a];
-    }
-    const double sp = std::sqrt(sp2);
-    double u = u_ + step / sp;
-    if (param_update_ != ParamUpdate::kFirstOrder) u -= step * step * dd / (2 * sp2 * sp2);
-    // Where the curve's tangent vanishes (a first or last control point doubled, a
-    // cusp) eq. 7 divides by (nearly) zero and its u runs off: start from the
-    // planner's arc-length table instead (the Newton step below, or the table
-    // alone, then lands on it). Elsewhere eq. 7 is far closer than the table's
-    // sample spacing and is kept as it is.
-    double du_table = 0;
-    const double u_tab = u_on_table(p, s_ + step, &du_table);
-    ++work_.table_lookups;
-    if (!std::isfinite(u) || !(std::fabs(u - u_tab) <= 0.5 * du_table)) u = u_tab;
-    u = std::clamp(u, u_, p.path.u_end());  // forward only (eq. 7 can step back where |P'| is tiny)
-    if (param_update_ == ParamUpdate::kCorrected) {
-      // Newton on |P(u) − P(u_k)| = Δs: the chord of the step has the commanded length.
-      bool converged = false;  // |P(u) − P(u_k)| = Δs at the u that stands
-      for (int it = 0; it < 4; ++it) {
-        ++work_.newton_iters;
-        AxisVec Q{}, q1{}, q2{};
-        eval_on(p, u, &Q, &q1, &q2);
-        double L = 0, dLdu = 0;
-        for (int a = 0; a < naxes_; ++a) L += (Q[a] - P[a]) * (Q[a] - P[a]);
-        L = std::sqrt(L);
-        if (L <= 0) break;
-        for (int a = 0; a < naxes_; ++a) dLdu += (Q[a] - P[a]) * q1[a];
-        dLdu /= L;
-        const double err = step - L;
-        if (std::fabs(err) <= 1e-12 * std::max(1.0, step)) {
-          converged = true;
-          break;
-        }
-        if (dLdu <= 0) break;
-        u = std::clamp(u + err / dLdu, u_, p.path.u_end());
-      }
-      // Where Newton could not reach the commanded chord (near a point where the
-      // tangent vanishes, at clustered knots), find it by bracketing and bisection:
-      // the chord from the current point grows from 0 at u_, so the first u
-      // forward where it reaches the step is bracketed by doubling and then
-      // halved down to it. The arc length then never runs ahead of the curve (it
-      // did by 44 um at the end of LinuxCNC's trident, closed by a jump in the
-      // block's last cycle); and the path always moves on.
-      auto chord = [&](double uu) {
-        ++work_.bisect_evals;
-        motion::AxisVec Q{}, q1{}, q2{};
-        eval_on(p, uu, &Q, &q1, &q2);
-        double L2 = 0;
-        for (int a = 0; a < naxes_; ++a) L2 += (Q[a] - P[a]) * (Q[a] - P[a]);
-        return std::sqrt(L2);
-      };
-      const double tol = 1e-9 * std::max(1.0, step);
-      // A chord of the step's length far along the curve (past a sharp turn or a
-      // near-cusp, where the curve comes back near where it was) is not the step:
-      // the arc length between the two, by the planner's table, must not exceed
-      // the step by more than the table's resolution. Else the first u forward is
-      // sought by bracketing as below.
-      bool past_turn = false;
-      if (converged && p.path.curved()) {
-        const double arc = s_on_table(p, u) - s_on_table(p, u_);
-        past_turn = arc > 1.5 * step + 1e-9;
-      }
-      if (past_turn || (!converged && !(std::fabs(chord(u) - step) <= tol))) {
-        const double u_end = p.path.u_end();
-        // The first bracket holds about a quarter step (by |P'| here; at most the
-        // table's spacing): doubling from there meets the first u where the chord
-        // reaches the step, not one past a turn narrower than the table's spacing
-        // (a bisection over both would pick either).
-        double h0 = du_table;
-        if (sp > 0 && std::isfinite(0.25 * step / sp)) h0 = std::min(h0 > 0 ? h0 : kInf, 0.25 * step / sp);
-        double lo = u_, h = std::max(h0, 1e-12 * (u_end - p.path.u_begin()));
-        double hi = std::min(u_ + h, u_end);
-        for (int it = 0; it < 200 && hi < u_end && chord(hi) < step; ++it) {
-          lo = hi;
-          h *= 2;
-          hi = std::min(u_ + h, u_end);
-        }
-        if (chord(hi) >= step) {
-          for (int it = 0; it < 200; ++it) {
-            const double mid = 0.5 * (lo + hi);
-            if (mid <= lo || mid >= hi) break;
-            const double L = chord(mid);
-            if (std::fabs(L - step) <= tol) {
-              lo = hi = mid;
-              break;
-            }
-            (L < step ? lo : hi) = mid;
-          }
-          u = hi;
-        } else if (u <= u_ && p.length - s_ < 2 * step) {
-          // Newton found no forward u and the block's end is less than a step away
-          // along the curve, though the arc-length count (chords fall short of the
-          // arc) says a little more is left: the step ends the block here and goes
-          // on into the next, rather than standing still for a cycle (a jerk spike,
-          // seen at the ends of G64 P fits).
-          s_ = p.length - chord(u_end);
-          continue;
-        }
-        // Else (a curve closing on itself) Newton's u stands, as everywhere else.
-      }
-    }
-    u_ = u;
-    // The arc the step covers: its chord plus the chord's shortfall on the local
-    // curvature, L³κ²/24 (at most a tenth of the step). Counting chords alone, the
-    // count fell behind the curve by ~L³κ²/24 a cycle (2 um over a 42 mm block), so
-    // the brake for a near-cusp ahead landed microns past where it should, and the
-    // step crossed the turn at speed.
-    double arc = step;
-    if (p.path.curved() && sp2 > 0) {
-      const double k2 = std::max(0.0, sp2 * d2sq - dd * dd) / (sp2 * sp2 * sp2);
-      arc += std::min(step * step * step * k2 / 24.0, 0.1 * step);
-    }
-    s_ += arc;
-    {
-      AxisVec q1{}, q2{};
-      eval_on(p, u_, &pos_, &q1, &q2);
-    }
-    out_.block_index = p.block.index;
-    out_.source_line = p.block.source_line;
-    out_.u = u_;
-    return ds;
-  }
-  return moved;
-}
-
-double Interpolator::s_on_table(const Planned& p, double u) {
-  // The inverse of u_on_table: arc length at u, linear between the samples around it.
-  const auto& sm = p.samples;
-  if (sm.empty()) return 0;
-  const auto hi = std::partition_point(sm.begin(), sm.end(), [&](const Sample& x) { return x.u < u; });
-  if (hi == sm.begin()) return sm.front().s;
-  if (hi == sm.end()) return sm.back().s;
-  const Sample& b = *hi;
-  const Sample& a = *(hi - 1);
-  const double f = b.u > a.u ? (u - a.u) / (b.u - a.u) : 1.0;
-  return a.s + (b.s - a.s) * f;
-}
-
-double Interpolator::u_on_table(const Planned& p, double s, double* du) {
-  // The planner's samples are in increasing arc length: linear between the two
-  // around s. *du: the u spacing of those two samples.
-  const auto& sm = p.samples;
-  *du = 0;
-  if (sm.empty()) return p.path.u_end();
-  const auto hi = std::partition_point(sm.begin(), sm.end(), [&](const Sample& x) { return x.s < s; });
-  if (hi == sm.begin()) return sm.front().u;
-  if (hi == sm.end()) return sm.back().u;
-  const Sample& b = *hi;
-  const Sample& a = *(hi - 1);
-  *du = b.u - a.u;
-  const double f = b.s > a.s ? (s - a.s) / (b.s - a.s) : 1.0;
-  return a.u + (b.u - a.u) * f;
-}
-
 bool Interpolator::creep_to_stop() {
   // Within half a cycle's jerk-limited travel (J·T³/2) of the next stop point.
   const double T = period_s_;
@@ -1070,71 +647,12 @@ const Setpoint& Interpolator::step() {
   const bool active = state_ == RunState::kRunning || state_ == RunState::kHeld || state_ == RunState::kStarved;
   if (active) {
     ++program_cycles_;
-    const double T = period_s_;
-    // Single block: at rest at a line's start, hold until RESUME (the line START
-    // began with runs; an event that holds by itself, M0 M1 M6, holds there instead).
-    if (single_block_ && !auto_resume_pauses_ && !hold_ && !stopping_ && v_ == 0 && s_ == 0 && !blocks_.empty()) {
-      const Planned& f = blocks_.front();
-      const bool own_pause = f.block.kind == program::BlockKind::kEvent && f.block.event.pauses() &&
-                             (f.block.event.kind != program::EventKind::kOptionalStop || optional_stop_);
-      if (f.line_start && f.serial != single_block_passed_ && f.block.kind != program::BlockKind::kEnd && !own_pause) {
-        single_block_passed_ = f.serial;
-        if (single_block_go_) {
-          single_block_go_ = false;
-        } else {
-          hold_ = true;
-          single_block_held_ = true;
-        }
-      }
-    }
+    hold_at_line_start();
     const bool pausing = hold_ || stopping_;
-    // Arrived at a stop block: dwell, end, or wait.
     if (!blocks_.empty() && blocks_.front().stop_block() && v_ == 0) {
-      Planned& p = blocks_.front();
-      out_.block_index = p.block.index;
-      out_.source_line = p.block.source_line;
-      if (p.block.kind == program::BlockKind::kEnd) {
-        pop_block();
-        ++blocks_done_;
-        state_ = RunState::kDone;
-      } else if (stopping_) {
-        // STOP at rest before a dwell or an event: the program ends here.
-        clear_blocks();
-        stopping_ = false;
-        hold_ = false;
-        state_ = RunState::kIdle;
-        v_ = a_ = 0;
-      } else if (!pausing && p.block.kind == program::BlockKind::kEvent && p.block.event.pauses() &&
-                 (p.block.event.kind != program::EventKind::kOptionalStop || optional_stop_) && !event_paused_ &&
-                 !auto_resume_pauses_) {
-        // M0, M1, M6: at rest here until the operator resumes (a RESUME input).
-        event_paused_ = true;
-        hold_ = true;
-        state_ = RunState::kHeld;
-      } else if (!pausing) {
-        if (dwell_left_ < 0) dwell_left_ = static_cast<int64_t>(std::ceil(p.block.dwell_s / T - 1e-9));
-        if (dwell_left_ > 0) --dwell_left_;
-        state_ = RunState::kRunning;
-        if (dwell_left_ == 0) {
-          pop_block();
-          ++blocks_done_;
-          dwell_left_ = -1;
-          event_paused_ = false;
-          if (!blocks_.empty()) u_ = blocks_.front().path.u_begin();
-        }
-      } else if (hold_) {
-        state_ = RunState::kHeld;  // held at rest before a dwell or an event
-      }
+      at_stop_block(pausing);
     } else if (blocks_.empty() || (stopping_ && v_ == 0 && a_ == 0)) {
-      if (stopping_) {
-        clear_blocks();
-        stopping_ = false;
-        state_ = RunState::kIdle;
-        v_ = a_ = 0;
-      } else {
-        state_ = RunState::kStarved;
-        ++starved_cycles_;
-      }
+      end_or_starve();
     } else if (rest_next_) {
       // One cycle at rest on the stop point the last cycle ended on (the start from
       // rest assumes it: without it the axes' jerk ran up to 1.07x the limit there).
@@ -1144,93 +662,7 @@ const Setpoint& Interpolator::step() {
       // A discrete brake ended a hair short of a stop point: step onto it.
       out_.limit = Limit::kLookahead;
     } else {
-      Planned& p = blocks_.front();
-      Limit why = Limit::kNone;
-      double geo_here = kInf;
-      const double cap = pausing ? 0.0 : cap_at(p, s_, &why, &geo_here);
-      const double A = p.live_accel, J = p.live_jerk;
-      const double a_lo = std::max(-A, a_ - J * T), a_hi = std::min(A, a_ + J * T);
-      // Acceleration that approaches the cap and lands on it within the jerk limit.
-      double a_n = std::clamp(landing_accel(cap - v_, A, J, T), a_lo, a_hi);
-      horizon_limits(&hz_A_, &hz_J_);  // the brake checks' horizon, for this cycle's buffer
-      auto next_v = [&](double a) { return std::max(0.0, v_ + a * T); };
-      auto ok = [&](double a, double* v_target = nullptr) {
-        const double vn = next_v(a);
-        return safe(vn, a, s_ + 0.5 * (v_ + vn) * T, v_target);
-      };
-      bool limited = false;
-      if (!ok(a_n)) {
-        limited = true;
-        // The search below tries accelerations in [a_lo, a_n] only: gather what they check once.
-        const double vn_lo = next_v(a_lo), vn_hi = next_v(a_n);
-        build_look(vn_lo, a_lo, s_ + 0.5 * (v_ + vn_lo) * T, vn_hi, a_n, s_ + 0.5 * (v_ + vn_hi) * T);
-        auto ok_in = [&](double a, double* v_target = nullptr) {
-          const double vn = next_v(a);
-          return safe_cached(vn, a, s_ + 0.5 * (v_ + vn) * T, v_target);
-        };
-        double v_target = 0;
-        if (!ok_in(a_lo, &v_target)) {
-          // Even the hardest brake misses a limit ahead (an override dropped it under
-          // the current speed): brake towards it as hard as the jerk limit lets the
-          // brake still land on it, rather than braking flat out and hitting zero
-          // speed with the brake still on.
-          a_n = std::clamp(landing_accel(std::min(cap, v_target) - v_, A, J, T), a_lo, a_hi);
-        } else {
-          double lo = a_lo, hi = a_n;
-          for (int i = 0; i < 14; ++i) {
-            const double mid = 0.5 * (lo + hi);
-            (ok_in(mid) ? lo : hi) = mid;
-          }
-          a_n = lo;
-        }
-      }
-      double v_n = next_v(a_n);
-      // Approaching the cap from below, the discrete ramp must not overshoot it by
-      // its rounding, as far as the jerk limit lets the acceleration drop this cycle.
-      // (A cap that dropped under a running ramp, by an override, is overshot and
-      // returned to within the jerk limit instead: clipped onto it, the acceleration
-      // fell by up to 2·J·T in one cycle, 1.2x an axis's jerk limit once the path's
-      // jerk was the axis's.)
-      if (v_ <= cap && v_n > cap && v_n - cap <= J * T * T) v_n = std::max(cap, v_ + a_lo * T);
-      // Hard geometric caps over the step (chord error, axis velocity) bound its
-      // mean speed; the programmed feed and override are followed jerk-limited.
-      const double v_avg = 0.5 * (v_ + v_n);
-      Limit w2;
-      double geo_end = kInf;
-      cap_at(p, std::min(p.length, s_ + v_avg * T), &w2, &geo_end);
-      double hard = std::min(geo_here, geo_end);
-      // And the samples the step passes over: a narrow dip between them (a turn the
-      // planner resolved only at its chord floor) bounds the step too.
-      if (p.path.curved()) {
-        const double s_hi = std::min(p.length, s_ + v_avg * T);
-        auto it = std::partition_point(p.samples.begin(), p.samples.end(),
-                                       [&](const Sample& x) { return x.s <= s_; });
-        // (Never below 1 um/s: a sample's limit of zero, a singular point, would hold
-        // the step short of it for good; the look-ahead brakes for it as before.)
-        for (; it != p.samples.end() && it->s < s_hi; ++it) hard = std::min(hard, std::max(it->v_geo, 1e-3));
-      }
-      if (v_avg > hard) {
-        v_n = std::max(0.0, 2.0 * hard - v_);
-        if (geo_end < geo_here) why = w2;
-      }
-      a_n = (v_n - v_) / T;
-      // Creep onto a stop point that a discrete brake ended just short of.
-      double ds = 0.5 * (v_ + v_n) * T;
-      bool at_stop = false;
-      const double moved = advance(ds, &at_stop);
-      if (at_stop) {
-        v_n = 0;
-        a_n = 0;
-        rest_next_ = moved > 0 && !blocks_.empty() && !blocks_.front().stop_block();
-      }
-      out_.feed_mm_per_min = moved / T * 60.0;
-      out_.path_accel_mm_s2 = a_n;
-      if (moved <= 0) out_.limit = Limit::kNone;
-      else out_.limit = (limited || v_n < cap * (1 - 1e-6)) ? Limit::kLookahead : why;
-      v_ = v_n;
-      a_ = a_n;  // the realised acceleration, also on the cycle that comes to rest
-      state_ = (hold_ && v_ == 0) ? RunState::kHeld : RunState::kRunning;
-      if (blocks_.empty() && v_ > 0) v_ = a_ = 0;
+      move_along_path(pausing);
     }
   }
   output_position();
@@ -1242,6 +674,177 @@ const Setpoint& Interpolator::step() {
     link_->retire(retired_below_);
   }
   return out_;
+}
+
+void Interpolator::hold_at_line_start() {
+  // Single block: at rest at a line's start, hold until RESUME (the line START
+  // began with runs; an event that holds by itself, M0 M1 M6, holds there instead).
+  if (single_block_ && !auto_resume_pauses_ && !hold_ && !stopping_ && v_ == 0 && s_ == 0 && !blocks_.empty()) {
+    const Planned& f = blocks_.front();
+    const bool own_pause = f.block.kind == program::BlockKind::kEvent && f.block.event.pauses() &&
+                           (f.block.event.kind != program::EventKind::kOptionalStop || optional_stop_);
+    if (f.line_start && f.serial != single_block_passed_ && f.block.kind != program::BlockKind::kEnd && !own_pause) {
+      single_block_passed_ = f.serial;
+      if (single_block_go_) {
+        single_block_go_ = false;
+      } else {
+        hold_ = true;
+        single_block_held_ = true;
+      }
+    }
+  }
+}
+
+void Interpolator::at_stop_block(bool pausing) {
+  // Arrived at a stop block: dwell, end, or wait.
+  Planned& p = blocks_.front();
+  out_.block_index = p.block.index;
+  out_.source_line = p.block.source_line;
+  if (p.block.kind == program::BlockKind::kEnd) {
+    pop_block();
+    ++blocks_done_;
+    state_ = RunState::kDone;
+  } else if (stopping_) {
+    // STOP at rest before a dwell or an event: the program ends here.
+    clear_blocks();
+    stopping_ = false;
+    hold_ = false;
+    state_ = RunState::kIdle;
+    v_ = a_ = 0;
+  } else if (!pausing && p.block.kind == program::BlockKind::kEvent && p.block.event.pauses() &&
+             (p.block.event.kind != program::EventKind::kOptionalStop || optional_stop_) && !event_paused_ &&
+             !auto_resume_pauses_) {
+    // M0, M1, M6: at rest here until the operator resumes (a RESUME input).
+    event_paused_ = true;
+    hold_ = true;
+    state_ = RunState::kHeld;
+  } else if (!pausing) {
+    if (dwell_left_ < 0) dwell_left_ = static_cast<int64_t>(std::ceil(p.block.dwell_s / period_s_ - 1e-9));
+    if (dwell_left_ > 0) --dwell_left_;
+    state_ = RunState::kRunning;
+    if (dwell_left_ == 0) {
+      pop_block();
+      ++blocks_done_;
+      dwell_left_ = -1;
+      event_paused_ = false;
+      if (!blocks_.empty()) u_ = blocks_.front().path.u_begin();
+    }
+  } else if (hold_) {
+    state_ = RunState::kHeld;  // held at rest before a dwell or an event
+  }
+}
+
+void Interpolator::end_or_starve() {
+  // No block left to run (or a STOP came to rest): the program ends, or waits for blocks.
+  if (stopping_) {
+    clear_blocks();
+    stopping_ = false;
+    state_ = RunState::kIdle;
+    v_ = a_ = 0;
+  } else {
+    state_ = RunState::kStarved;
+    ++starved_cycles_;
+  }
+}
+
+void Interpolator::move_along_path(bool pausing) {
+  const double T = period_s_;
+  Planned& p = blocks_.front();
+  Limit why = Limit::kNone;
+  double geo_here = kInf;
+  const double cap = pausing ? 0.0 : cap_at(p, s_, &why, &geo_here);
+  const double A = p.live_accel, J = p.live_jerk;
+  const double a_lo = std::max(-A, a_ - J * T), a_hi = std::min(A, a_ + J * T);
+  bool limited = false;
+  double a_n = lookahead_accel(cap, A, J, a_lo, a_hi, &limited);
+  double v_n = std::max(0.0, v_ + a_n * T);
+  // Approaching the cap from below, the discrete ramp must not overshoot it by
+  // its rounding, as far as the jerk limit lets the acceleration drop this cycle.
+  // (A cap that dropped under a running ramp, by an override, is overshot and
+  // returned to within the jerk limit instead: clipped onto it, the acceleration
+  // fell by up to 2·J·T in one cycle, 1.2x an axis's jerk limit once the path's
+  // jerk was the axis's.)
+  if (v_ <= cap && v_n > cap && v_n - cap <= J * T * T) v_n = std::max(cap, v_ + a_lo * T);
+  v_n = geometric_speed_bound(p, v_n, geo_here, &why);
+  a_n = (v_n - v_) / T;
+  // Creep onto a stop point that a discrete brake ended just short of.
+  double ds = 0.5 * (v_ + v_n) * T;
+  bool at_stop = false;
+  const double moved = advance(ds, &at_stop);
+  if (at_stop) {
+    v_n = 0;
+    a_n = 0;
+    rest_next_ = moved > 0 && !blocks_.empty() && !blocks_.front().stop_block();
+  }
+  out_.feed_mm_per_min = moved / T * 60.0;
+  out_.path_accel_mm_s2 = a_n;
+  if (moved <= 0) out_.limit = Limit::kNone;
+  else out_.limit = (limited || v_n < cap * (1 - 1e-6)) ? Limit::kLookahead : why;
+  v_ = v_n;
+  a_ = a_n;  // the realised acceleration, also on the cycle that comes to rest
+  state_ = (hold_ && v_ == 0) ? RunState::kHeld : RunState::kRunning;
+  if (blocks_.empty() && v_ > 0) v_ = a_ = 0;
+}
+
+double Interpolator::lookahead_accel(double cap, double A, double J, double a_lo, double a_hi, bool* limited) {
+  const double T = period_s_;
+  // Acceleration that approaches the cap and lands on it within the jerk limit.
+  double a_n = std::clamp(landing_accel(cap - v_, A, J, T), a_lo, a_hi);
+  horizon_limits(&hz_A_, &hz_J_);  // the brake checks' horizon, for this cycle's buffer
+  auto next_v = [&](double a) { return std::max(0.0, v_ + a * T); };
+  auto ok = [&](double a) {
+    const double vn = next_v(a);
+    return safe(vn, a, s_ + 0.5 * (v_ + vn) * T);
+  };
+  if (ok(a_n)) return a_n;
+  *limited = true;
+  // The search below tries accelerations in [a_lo, a_n] only: gather what they check once.
+  const double vn_lo = next_v(a_lo), vn_hi = next_v(a_n);
+  build_look(vn_lo, a_lo, s_ + 0.5 * (v_ + vn_lo) * T, vn_hi, a_n, s_ + 0.5 * (v_ + vn_hi) * T);
+  auto ok_in = [&](double a, double* v_target = nullptr) {
+    const double vn = next_v(a);
+    return safe_cached(vn, a, s_ + 0.5 * (v_ + vn) * T, v_target);
+  };
+  double v_target = 0;
+  if (!ok_in(a_lo, &v_target)) {
+    // Even the hardest brake misses a limit ahead (an override dropped it under
+    // the current speed): brake towards it as hard as the jerk limit lets the
+    // brake still land on it, rather than braking flat out and hitting zero
+    // speed with the brake still on.
+    return std::clamp(landing_accel(std::min(cap, v_target) - v_, A, J, T), a_lo, a_hi);
+  }
+  double lo = a_lo, hi = a_n;
+  for (int i = 0; i < 14; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (ok_in(mid) ? lo : hi) = mid;
+  }
+  return lo;
+}
+
+double Interpolator::geometric_speed_bound(const Planned& p, double v_n, double geo_here, Limit* why) const {
+  // Hard geometric caps over the step (chord error, axis velocity) bound its
+  // mean speed; the programmed feed and override are followed jerk-limited.
+  const double T = period_s_;
+  const double v_avg = 0.5 * (v_ + v_n);
+  Limit w2;
+  double geo_end = kInf;
+  cap_at(p, std::min(p.length, s_ + v_avg * T), &w2, &geo_end);
+  double hard = std::min(geo_here, geo_end);
+  // And the samples the step passes over: a narrow dip between them (a turn the
+  // planner resolved only at its chord floor) bounds the step too.
+  if (p.path.curved()) {
+    const double s_hi = std::min(p.length, s_ + v_avg * T);
+    auto it = std::partition_point(p.samples.begin(), p.samples.end(),
+                                   [&](const Sample& x) { return x.s <= s_; });
+    // (Never below 1 um/s: a sample's limit of zero, a singular point, would hold
+    // the step short of it for good; the look-ahead brakes for it as before.)
+    for (; it != p.samples.end() && it->s < s_hi; ++it) hard = std::min(hard, std::max(it->v_geo, 1e-3));
+  }
+  if (v_avg > hard) {
+    v_n = std::max(0.0, 2.0 * hard - v_);
+    if (geo_end < geo_here) *why = w2;
+  }
+  return v_n;
 }
 
 }  // namespace cnc::interp

@@ -243,7 +243,31 @@ class Interpolator {
   void horizon_limits(double* A, double* J) const;
   double hz_A_ = 0, hz_J_ = 0;  // horizon_limits() of the cycle's buffer, for its brake checks
   void verify(bool r, double v_n, double a_n, double s_n, const double* v_target) const;
+  // step()'s stages, by what the path does this cycle.
+  void hold_at_line_start();
+  void at_stop_block(bool pausing);
+  void end_or_starve();
+  void move_along_path(bool pausing);
+  // The next cycle's acceleration: towards the cap, as far as the look-ahead lets.
+  double lookahead_accel(double cap, double A, double J, double a_lo, double a_hi, bool* limited);
+  // v_n lowered so the step's mean speed meets the geometric limits it passes over.
+  double geometric_speed_bound(const Planned& p, double v_n, double geo_here, Limit* why) const;
+
+  // Moves the path ds along the blocks (interpolator_advance.cc); *reached_stop when
+  // it ends on a stop point. Returns the distance moved.
   double advance(double ds, bool* reached_stop);
+  // advance()'s stages: a step that reaches the block's end goes on into the next
+  // block; one inside the block finds its u (false: it ended the block after all).
+  struct CurveStep;
+  bool step_reaches_end(const Planned& p, double step_left, double* to_end) const;
+  bool cross_into_next_block(const Planned& p);
+  bool step_in_block(const Planned& p, double step);
+  double eq7_estimate(const Planned& p, double step, CurveStep* c);
+  double newton_on_chord(const Planned& p, double step, const motion::AxisVec& P, double u, bool* converged);
+  bool bisect_on_chord(const Planned& p, double step, const CurveStep& c, bool converged, double* u);
+  void commit_step(const Planned& p, double step, double u, const CurveStep& c);
+  // |P(u) − P|, counted as a bisection evaluation.
+  double chord_from(const Planned& p, const motion::AxisVec& P, double u);
   // p.path.eval(u, ...), or the result of the last call when it was for the same
   // block and the same u (bit for bit): a step starts where the last one's Newton
   // iteration ended, and the setpoint is the point it converged on.
