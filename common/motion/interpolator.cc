@@ -22,8 +22,8 @@ void integrate(double j, double t, double* s, double* v, double* a) {
   *a += j * t;
 }
 
-// Shortest distance in which a jerk-limited (J) and acceleration-limited (A) brake
-// brings the speed from v (acceleration a) to vt; 0 when the speed never exceeds vt.
+}  // namespace
+
 double brake_distance(double v, double a, double vt, double A, double J) {
   if (a >= 0 ? v + a * a / (2 * J) <= vt : v <= vt) return 0.0;
   const double ap2 = J * (v - vt) + 0.5 * a * a;
@@ -44,6 +44,8 @@ double brake_distance(double v, double a, double vt, double A, double J) {
   integrate(J, ap / J, &s, &vv, &aa);
   return s;
 }
+
+namespace {
 
 // The acceleration with which a path at speed v approaches the speed v + gap in
 // cycles of T: the largest a (at most A) from which lowering the acceleration by
@@ -339,58 +341,15 @@ void Interpolator::horizon_limits(double* A, double* J) const {
   }
 }
 
-bool Interpolator::safe_plain(double v_n, double a_n, double s_n, double* v_target) const {
-  // The look-ahead check as it was before safe() skipped and safe_cached() gathered:
-  // every sample from s_n to the horizon (the reference of set_verify_lookahead).
-  double A = kInf, J = kInf;
-  const double T = period_s_;
-  double offset = 0;
-  double A_h = kInf, J_h = kInf;
-  horizon_limits(&A_h, &J_h);
-  const double horizon = brake_distance(v_n, a_n, 0.0, A_h, J_h) + v_n * period_s_ + 1e-9;
-  for (size_t b = 0; b < blocks_.size(); ++b) {
-    const Planned& p = blocks_[b];
-    A = std::min(A, p.live_accel);
-    J = std::min(J, p.live_jerk);
-    if (p.stop_block() || (p.live_entry == 0 && offset > 0)) {
-      if (v_target != nullptr) *v_target = 0;
-      return brake_distance(v_n, a_n, 0.0, A, J) + 0.5 * v_n * T <= offset - s_n + 1e-9;
-    }
-    const size_t n = p.samples.size();
-    const auto first = std::partition_point(p.samples.begin(), p.samples.end(),
-                                            [&](const Sample& x) { return offset + x.s - s_n < 0; });
-    for (size_t i = static_cast<size_t>(first - p.samples.begin()); i < n; ++i) {
-      const double d = offset + p.samples[i].s - s_n;
-      if (d > horizon) return true;
-      const double vt = p.v_bw[i];
-      if (!own_limit(p, i)) continue;
-      if (vt < v_n + a_n * a_n / (2 * J) &&
-          brake_distance(v_n, a_n, vt, A, J) + 0.5 * std::max(0.0, v_n - vt) * T > d + 1e-9) {
-        if (v_target != nullptr) *v_target = vt;
-        return false;
-      }
-    }
-    offset += p.length;
-  }
-  return true;
-}
-
-void Interpolator::verify(bool r, double v_n, double a_n, double s_n, const double* v_target) const {
-  double vt = -1;
-  const bool r0 = safe_plain(v_n, a_n, s_n, &vt);
-  if (r0 != r || (!r && v_target != nullptr && std::bit_cast<uint64_t>(vt) != std::bit_cast<uint64_t>(*v_target)))
-    ++lookahead_mismatches_;
-}
-
 bool Interpolator::safe(double v_n, double a_n, double s_n, double* v_target) const {
   const bool r = safe_scan(v_n, a_n, s_n, v_target);
-  if (verify_lookahead_) verify(r, v_n, a_n, s_n, v_target);
+  if (lookahead_check_ != nullptr) lookahead_check_->check(*this, r, v_n, a_n, s_n, v_target);
   return r;
 }
 
 bool Interpolator::safe_cached(double v_n, double a_n, double s_n, double* v_target) {
   const bool r = safe_gathered(v_n, a_n, s_n, v_target);
-  if (verify_lookahead_) verify(r, v_n, a_n, s_n, v_target);
+  if (lookahead_check_ != nullptr) lookahead_check_->check(*this, r, v_n, a_n, s_n, v_target);
   return r;
 }
 

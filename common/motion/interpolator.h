@@ -107,6 +107,12 @@ struct WorkCounters {
   int64_t curve_reuses = 0;    // ...and taken from the one before instead
 };
 
+// The shortest distance in which a brake limited by jerk J and acceleration A brings
+// the speed from v (acceleration a) to vt; 0 when the speed never exceeds vt.
+double brake_distance(double v, double a, double vt, double A, double J);
+
+class LookaheadReference;
+
 class Interpolator {
  public:
   // Plans inline: apply_block and an override take their plans at once.
@@ -173,10 +179,16 @@ class Interpolator {
   bool homed(int axis) const { return homed_[static_cast<size_t>(axis)]; }
   double drive_offset(int axis) const { return drive_offset_[static_cast<size_t>(axis)]; }
   const WorkCounters& work() const { return work_; }
-  // Tests: every look-ahead check also done as a plain scan of every sample to the
-  // horizon; lookahead_mismatches() counts the answers (and limits) that differ.
-  void set_verify_lookahead(bool on) { verify_lookahead_ = on; }
-  int64_t lookahead_mismatches() const { return lookahead_mismatches_; }
+  // Tests: every brake check's answer (and the limit it misses) handed to a check,
+  // such as the plain scan of every sample to the horizon that the look-ahead's
+  // shortcuts must answer as (tests/unit/lookahead_reference.h).
+  class LookaheadCheck {
+   public:
+    virtual ~LookaheadCheck() = default;
+    virtual void check(const Interpolator& ip, bool safe, double v_n, double a_n, double s_n,
+                       const double* v_target) = 0;
+  };
+  void set_lookahead_check(LookaheadCheck* c) { lookahead_check_ = c; }
   // Arc length into the block being executed (mm).
   double s_in_block() const { return s_; }
   void set_param_update(ParamUpdate mode) { param_update_ = mode; }
@@ -184,6 +196,7 @@ class Interpolator {
   const std::string& last_refusal() const { return refusal_; }
 
  private:
+  friend class LookaheadReference;  // tests: the reference scan reads the buffer a check judged
   // The cyclic side's blocks: a ring of pointers (storage grows only if more blocks
   // are queued than it was sized for, which the feed policy's window prevents).
   class Ring {
@@ -237,12 +250,10 @@ class Interpolator {
   // brake check meets by meeting that later limit.
   bool own_limit(const Planned& p, size_t i) const;
   bool safe_gathered(double v_n, double a_n, double s_n, double* v_target);
-  bool safe_plain(double v_n, double a_n, double s_n, double* v_target) const;
   // The least acceleration and jerk limits of the blocks up to the next stop point:
   // the brake check's horizon is what a brake with them needs (see its definition).
   void horizon_limits(double* A, double* J) const;
   double hz_A_ = 0, hz_J_ = 0;  // horizon_limits() of the cycle's buffer, for its brake checks
-  void verify(bool r, double v_n, double a_n, double s_n, const double* v_target) const;
   // step()'s stages, by what the path does this cycle.
   void hold_at_line_start();
   void at_stop_block(bool pausing);
@@ -365,8 +376,7 @@ class Interpolator {
   Setpoint out_;
   std::string refusal_;
   mutable WorkCounters work_;
-  bool verify_lookahead_ = false;
-  mutable int64_t lookahead_mismatches_ = 0;
+  LookaheadCheck* lookahead_check_ = nullptr;
 };
 
 }  // namespace cnc::interp

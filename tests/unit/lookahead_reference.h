@@ -1,0 +1,62 @@
+#pragma once
+// The look-ahead's reference: every brake check answered again as the plain scan of
+// every sample from s_n to the horizon (what Interpolator::safe_scan and the
+// gathered checks shortcut), and the answers (and limits missed) that differ counted.
+#include <algorithm>
+#include <bit>
+#include <cstdint>
+#include <limits>
+
+#include "common/motion/interpolator.h"
+
+namespace cnc::interp {
+
+class LookaheadReference : public Interpolator::LookaheadCheck {
+ public:
+  void check(const Interpolator& ip, bool safe, double v_n, double a_n, double s_n, const double* v_target) override {
+    double vt = -1;
+    const bool r0 = plain(ip, v_n, a_n, s_n, &vt);
+    if (r0 != safe ||
+        (!safe && v_target != nullptr && std::bit_cast<uint64_t>(vt) != std::bit_cast<uint64_t>(*v_target)))
+      ++mismatches;
+    ++checks;
+  }
+  int64_t mismatches = 0;
+  int64_t checks = 0;
+
+ private:
+  static bool plain(const Interpolator& ip, double v_n, double a_n, double s_n, double* v_target) {
+    constexpr double kInf = std::numeric_limits<double>::infinity();
+    double A = kInf, J = kInf;
+    const double T = ip.period_s_;
+    double offset = 0;
+    double A_h = kInf, J_h = kInf;
+    ip.horizon_limits(&A_h, &J_h);
+    const double horizon = brake_distance(v_n, a_n, 0.0, A_h, J_h) + v_n * T + 1e-9;
+    for (size_t b = 0; b < ip.blocks_.size(); ++b) {
+      const Planned& p = ip.blocks_[b];
+      A = std::min(A, p.live_accel);
+      J = std::min(J, p.live_jerk);
+      if (p.stop_block() || (p.live_entry == 0 && offset > 0)) {
+        *v_target = 0;
+        return brake_distance(v_n, a_n, 0.0, A, J) + 0.5 * v_n * T <= offset - s_n + 1e-9;
+      }
+      for (size_t i = 0; i < p.samples.size(); ++i) {
+        const double d = offset + p.samples[i].s - s_n;
+        if (d < 0) continue;
+        if (d > horizon) return true;
+        const double vt = p.v_bw[i];
+        if (!ip.own_limit(p, i)) continue;
+        if (vt < v_n + a_n * a_n / (2 * J) &&
+            brake_distance(v_n, a_n, vt, A, J) + 0.5 * std::max(0.0, v_n - vt) * T > d + 1e-9) {
+          *v_target = vt;
+          return false;
+        }
+      }
+      offset += p.length;
+    }
+    return true;
+  }
+};
+
+}  // namespace cnc::interp
