@@ -415,7 +415,10 @@ cmd_test() {
     esac
     BUILD="${CNC_BUILD_DIR:-$ROOT/build}-sanitize-${sanitize//,/-}"
     mkdir -p "$BUILD"
-    cmake -S "$ROOT" -B "$BUILD" -DCMAKE_BUILD_TYPE=Release -DCNC_SANITIZE="$sanitize" >/dev/null
+    # Warnings are not errors here: GCC's manual warns that sanitizers raise the rate of
+    # false warnings (GCC 12: -Wmaybe-uninitialized inside libstdc++'s <regex>,
+    # -Wrestrict on a string assignment); the plain build keeps the code warning-free.
+    cmake -S "$ROOT" -B "$BUILD" -DCMAKE_BUILD_TYPE=Release -DCNC_SANITIZE="$sanitize" -DCNC_WERROR=OFF >/dev/null
     reports="$BUILD/sanitizer-reports"
     rm -rf "$reports" && mkdir -p "$reports"
     # Each process's reports in its own file (a service's stderr is often a log nobody reads).
