@@ -114,7 +114,7 @@ svc() {
   esac
 }
 for s in logger servo-sim drive-bridge monitor program-server interpolator; do svc "$s"; done
-trap 'cleanup' EXIT
+trap 'CNC_KEEP_WORK=1 cleanup' EXIT  # the folder is the outer test's, which goes on in it
 ctl() { /usr/bin/cnc-ctl --machine /etc/cnc/cell.yaml "$@"; }
 sleep 1.5
 ctl --do status >"$WORK/status.txt" 2>&1 || { cat "$WORK/status.txt"; fail "cnc-ctl --do status"; }
