@@ -335,7 +335,8 @@ void DriveBridgeNode::advance_enabling(double now_s) {
   if (all) {
     AxisArray hold{};
     for (size_t i = 0; i < axes_.size(); ++i) hold[i] = axes_[i].rep.hold_mm;
-    core_.engage(hold, util::next_token(core_.engagement()));
+    engagement_ = util::next_token(engagement_);
+    core_.engage(hold, engagement_);
     state_ = State::kEnabled;
     ready_ = true;
     spdlog::info("{} drive(s) enabled", axes_.size());

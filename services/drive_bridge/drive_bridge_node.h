@@ -112,6 +112,7 @@ class DriveBridgeNode {
   };
   std::vector<LinkPace> pace_;
   int64_t recovered_setpoints_ = 0;  // lost, and taken from a later setpoint's history
+  int64_t engagement_ = 0;           // the last engagement's token (util::next_token)
   double stale_report_s_ = -1e9;
   bool link_stalled();
   std::vector<Axis> axes_;
