@@ -112,7 +112,9 @@ class DriveBridgeNode {
   };
   std::vector<LinkPace> pace_;
   int64_t recovered_setpoints_ = 0;  // lost, and taken from a later setpoint's history
-  int64_t engagement_ = 0;           // the last engagement's token (util::next_token)
+  // The last engagement's token (util::next_token), kept here: the core's goes to 0 on
+  // disengage, and the next token must exceed every earlier one even if the wall clock steps back.
+  int64_t engagement_ = 0;
   double stale_report_s_ = -1e9;
   bool link_stalled();
   std::vector<Axis> axes_;
