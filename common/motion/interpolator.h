@@ -225,6 +225,7 @@ class Interpolator {
   // Recomputes p.v_min after p.v_bw changed in [from, end).
   static void update_suffix_min(Planned& p, size_t from, size_t end);
   void clear_blocks();
+  void clear_program();  // LOAD and RESET: clear_blocks() and the program's counts and motion state
   void pop_block();
   bool check_block(const program::Block& block);
   // Speed limit at arc length s of block p: programmed feed × override and the

@@ -100,18 +100,23 @@ bool Interpolator::apply_block(const program::Block& block) {
   return submit_block(std::make_unique<program::Block>(block));
 }
 
+// Nothing of a program left: no block, no counts, the path at rest.
+void Interpolator::clear_program() {
+  clear_blocks();
+  next_index_ = 0;
+  blocks_done_ = 0;
+  program_cycles_ = 0;
+  starved_cycles_ = 0;
+  u_ = s_ = v_ = a_ = 0;
+  dwell_left_ = -1;
+  rest_next_ = false;
+}
+
 bool Interpolator::apply_command(const Command& cmd) {
   switch (cmd.kind) {
     case Command::Kind::kLoad:
       if (state_ == RunState::kRunning || state_ == RunState::kHeld || state_ == RunState::kStarved) return true;
-      clear_blocks();
-      next_index_ = 0;
-      blocks_done_ = 0;
-      program_cycles_ = 0;
-      starved_cycles_ = 0;
-      u_ = s_ = v_ = a_ = 0;
-      dwell_left_ = -1;
-      rest_next_ = false;
+      clear_program();
       state_ = RunState::kIdle;
       // No block of the new program is under way until its first step: the
       // setpoints until then name none (they carried the last path's block and u,
@@ -155,14 +160,7 @@ bool Interpolator::apply_command(const Command& cmd) {
       break;
     case Command::Kind::kReset:
       // After a fault: nothing of the program is left, the path rests where the drives are.
-      clear_blocks();
-      next_index_ = 0;
-      blocks_done_ = 0;
-      program_cycles_ = 0;
-      starved_cycles_ = 0;
-      u_ = s_ = v_ = a_ = 0;
-      dwell_left_ = -1;
-      rest_next_ = false;
+      clear_program();
       hold_ = false;
       single_block_held_ = false;
       stopping_ = false;
