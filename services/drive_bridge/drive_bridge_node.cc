@@ -578,7 +578,9 @@ void DriveBridgeNode::shut_down() {
     if (FILE* f = std::fopen(dbg_file_.c_str(), "w")) {
       std::fprintf(f, "mono,tau,last_cycle,held,cmd0,cmd1,cmd2,fe0,fe1,fe2,act0,act1,act2\n");
       for (const auto& t : dbg_ticks_)
-        std::fprintf(f, "%.6f,%.4f,%lld,%d,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f\n", t.mono, t.tau,
+        // Commands to the nanometre: their third differences over 1 ms are jerks (a
+        // micrometre's rounding there reads as 2,000 mm/s^3).
+        std::fprintf(f, "%.6f,%.4f,%lld,%d,%.9f,%.9f,%.9f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f\n", t.mono, t.tau,
                      static_cast<long long>(t.last_cycle), t.held, t.cmd[0], t.cmd[1], t.cmd[2], t.fe[0], t.fe[1],
                      t.fe[2], t.act[0], t.act[1], t.act[2]);
       std::fclose(f);

@@ -10,8 +10,9 @@
 #    cell publishes with no sequence gap (cnc-logstat), the setpoint stream complete.
 # 2. A long X move at 200 mm/s; the link of h2 is cut (its veth on the bridge set
 #    down) past X = 50 (read from the trace): the drive bridge on h2 stops the axes by its watchdog at the
-#    configured deceleration, within v^2/(2a) + v*timeout + 0.05 mm, braking no
-#    shorter than 0.8 v^2/(2a) (not a hard stop); they stay still when the link is back.
+#    configured deceleration, within v^2/(2a) + v*timeout + 0.05 mm; its braking on its
+#    own ticks (stop_ticks.py) within the deceleration and jerk and no shorter than
+#    v^2/(2a) (not a hard stop); they stay still when the link is back.
 #    h1 and the operator end in a fault, never "program done": today h1's
 #    interpolator learns of it only when the link is back and the bridge's
 #    AXIS_STATUS says FAULT (nothing watches the bridge's heartbeat yet: during the
@@ -119,7 +120,10 @@ final_at "$WORK/final.json" 0 0 0 || fail "the axes do not end on the demo's end
 # 2. Cut h2's link mid-program. h2's and h3's parts start again (a new trace and log);
 # h1 carries on, standing where the demo ended (0, 0, 0), as does the new simulator.
 up up-h3 h3 logger,monitor --log-out "$WORK/h3-cut"
+# The bridge's ticks (written as it exits): its stop, on its own clock.
+export CNC_BRIDGE_DEBUG_TRACE="$WORK/ticks-cut.csv"
 up up-h2 h2 servo-sim,drive-bridge --sim-trace "$SHM/trace.csv"
+unset CNC_BRIDGE_DEBUG_TRACE
 # 380 mm along X at 200 mm/s, back and again: about 6 s, cruising from 0.1 s on
 # (the link is back long before the program would end).
 cat >"$WORK/long.ngc" <<'NGC'
@@ -193,23 +197,25 @@ vmax = max(abs(v[k]) for k in range(i, before[-1] + 1))
 v_bound = max(v_cut, vmax)
 brake = v_bound ** 2 / (2 * decel)
 bound = brake + v_bound * timeout
-# Braking: from the last row at full speed after the cut (the bridge plays its
-# buffered setpoints for the watchdog's timeout first) to the stop, no shorter than
-# 0.8 of what the configured deceleration takes: not a hard stop (at 4x: 0.25).
-b = max(k for k in range(i, before[-1] + 1) if abs(v[k]) >= 0.97 * vmax)
-v_b, braked = abs(v[b]), (x_stop - x[b]) * sign
-brake_b = v_b ** 2 / (2 * decel)
 rest = next(k for k in range(i, len(t)) if all(abs(x[j] - x_stop) < 1e-3 for j in range(k, before[-1] + 1)))
 print(f"# at the cut: X = {x_cut:.3f} mm at {v_cut:.1f} mm/s; stopped at X = {x_stop:.3f} mm "
       f"{(t[rest] - cut) * 1e3:.0f} ms later", file=sys.stderr)
 print(f"# stopping distance {dist:.3f} mm; bound v^2/(2a) + v*timeout = {brake:.3f} + {v_bound * timeout:.3f} = "
       f"{bound:.3f} mm (a = {decel:g} mm/s^2, timeout {timeout * 1e3:g} ms)", file=sys.stderr)
-print(f"# braking from {v_b:.1f} mm/s took {braked:.3f} mm, at least 0.8 v^2/(2a) = {0.8 * brake_b:.3f} mm "
-      f"(mean deceleration {v_b ** 2 / (2 * braked) if braked > 0 else float('inf'):.0f} mm/s^2)", file=sys.stderr)
 print(f"# after the link came back: {len(after)} trace rows, largest move {moved_after * 1e3:.4f} µm", file=sys.stderr)
-ok = v_cut > 150 and 0 <= dist <= bound + 0.05 and braked >= 0.8 * brake_b and len(after) >= 20 and moved_after < 1e-4
+ok = v_cut > 150 and 0 <= dist <= bound + 0.05 and len(after) >= 20 and moved_after < 1e-4
 sys.exit(0 if ok else 1)
 PY
+# The braking itself, on the bridge's ticks: within the stop deceleration and jerk,
+# no shorter than v^2/(2a) (not a hard stop), the drive following it. (Read off the
+# simulator's world in seconds it once read 2,560 mm/s^2 for 2,000: the world stands
+# while the stream is late and the bridge's playback catches up after.)
+DECEL=$(sed -n 's/^ *stop_decel_mm_s2: *\([0-9.]*\).*/\1/p' "$M")
+JERK_X=$(sed -n 's/^ *max_jerk_mm_s3: *\([0-9.]*\).*/\1/p' "$M" | head -n 1)
+FE_X=$(sed -n 's/^ *max_following_error_mm: *\([0-9.]*\).*/\1/p' "$M" | head -n 1)
+SERVO_T=$(sed -n 's/^ *servo_period_s: *\([0-9.]*\).*/\1/p' "$M")
+/usr/bin/python3 "$(dirname "$0")/stop_ticks.py" "cut of h2's link" "$WORK/ticks-cut.csv" "$cut_time" "$cut_time" \
+  "$DECEL" "$JERK_X" "$SERVO_T" 150 "$FE_X" 0 0.1 || fail "the bridge on h2 did not brake at the configured deceleration"
 grep -q "no setpoint for" "$WORK/up-h2.log" || fail "the drive bridge on h2 did not report the lost setpoint stream"
 # h1 and the operator: a fault, never "program done". Today h1 learns of the stop
 # only when the link is back (the drive bridge's AXIS_STATUS in FAULT); nothing
