@@ -322,6 +322,23 @@ double Interpolator::cap_at(const Planned& p, double s, Limit* why, double* v_ge
   return v;
 }
 
+void Interpolator::landing_limits(double cap, double a_hi, double* A, double* J) const {
+  if (!std::isfinite(cap)) return;  // no landing: the full acceleration
+  const double T = period_s_;
+  // A landing takes at most a/(J·T) + 2 cycles at speeds up to max(v, cap); a lower J
+  // further on lengthens it, so the reach is taken again with each block's.
+  double offset = 0;  // the block's start, relative to s_
+  for (size_t b = 0; b < blocks_.size(); ++b) {
+    const Planned& p = blocks_[b];
+    const double reach = std::max(v_, cap) * T * (std::fabs(a_hi) / (*J * T) + 2.0);
+    if (b > 0 && offset - s_ >= reach) return;
+    *A = std::min(*A, p.live_accel);
+    *J = std::min(*J, p.live_jerk);
+    if (p.stop_block()) return;
+    offset += p.length;
+  }
+}
+
 void Interpolator::horizon_limits(double* A, double* J) const {
   // A brake to a sample uses the least limits of the blocks up to it; the horizon,
   // beyond which no sample is checked, must be what a brake with the least limits of
@@ -747,8 +764,13 @@ void Interpolator::move_along_path(bool pausing) {
 
 double Interpolator::lookahead_accel(double cap, double A, double J, double a_lo, double a_hi, bool* limited) {
   const double T = period_s_;
-  // Acceleration that approaches the cap and lands on it within the jerk limit.
-  double a_n = std::clamp(landing_accel(cap - v_, A, J, T), a_lo, a_hi);
+  // Acceleration that approaches the cap and lands on it within the jerk limit, of
+  // every block the landing runs into: with the front block's alone, a landing begun
+  // in a 0.133 mm block (J 58,200) went on in one of J 30,000 under the same cap,
+  // overshot it and was clipped onto it (Y's jerk 2.25x its limit).
+  double A_land = A, J_land = J;
+  landing_limits(cap, a_hi, &A_land, &J_land);
+  double a_n = std::clamp(landing_accel(cap - v_, A_land, J_land, T), a_lo, a_hi);
   horizon_limits(&hz_A_, &hz_J_);  // the brake checks' horizon, for this cycle's buffer
   auto next_v = [&](double a) { return std::max(0.0, v_ + a * T); };
   auto ok = [&](double a) {

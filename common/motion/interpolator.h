@@ -254,6 +254,9 @@ class Interpolator {
   // The least acceleration and jerk limits of the blocks up to the next stop point:
   // the brake check's horizon is what a brake with them needs (see its definition).
   void horizon_limits(double* A, double* J) const;
+  // The least limits of the blocks a landing on `cap` from this cycle's state can
+  // reach (its acceleration ramped down by J·T per cycle), starting from A and J.
+  void landing_limits(double cap, double a_hi, double* A, double* J) const;
   double hz_A_ = 0, hz_J_ = 0;  // horizon_limits() of the cycle's buffer, for its brake checks
   // step()'s stages, by what the path does this cycle.
   void hold_at_line_start();

@@ -9,7 +9,8 @@ trap 'rm -rf "$WORK"' EXIT
 M="$SRC/config/machines/sim3.yaml"
 for prog in "$SRC/config/programs/fig11_valley.ngc" "$SRC/config/programs/demo.ngc" \
             "$SRC/tests/golden/programs/valid/arcs_planes_helix.ngc" \
-            "$SRC/tests/golden/programs/valid/linuxcnc_doc_example.ngc"; do
+            "$SRC/tests/golden/programs/valid/linuxcnc_doc_example.ngc" \
+            "$SRC/tests/golden/programs/valid/landing_into_lower_jerk.ngc"; do
   name=$(basename "$prog" .ngc)
   "$BUILD/tools/cnc-plan" --machine "$M" --program "$prog" --csv "$WORK/$name.1.csv" >"$WORK/out1" \
     || fail "$name: dry run failed"
