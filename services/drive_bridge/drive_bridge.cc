@@ -70,6 +70,7 @@ void BridgeCore::engage(const AxisArray& hold_mm, int64_t engagement) {
 }
 
 void BridgeCore::restart_stream() {
+  braking_ = false;
   last_sp_ = cmd_;
   sp_vel_.fill(0.0);
   p_size_ = 0;
@@ -113,7 +114,10 @@ BridgeCore::Verdict BridgeCore::on_setpoint(int64_t cycle, const AxisArray& p, c
     // axes stand, once the playback of the old one has come to rest (a limiter
     // steering back onto a stream that broke its limits approaches rest only
     // asymptotically; what is left of it, it takes into the new stream's start).
-    bool still = !braking_;
+    // Whether the playback brakes for the old stream does not count: once a brake
+    // has begun only a setpoint of the old stream ends it, and a quiet old stream
+    // (the interpolator resetting) then held the new one off until the watchdog.
+    bool still = true;
     for (int a = 0; a < naxes_; ++a)
       still = still && std::fabs(vel_[a]) <= kStillVelocity && std::fabs(acc_[a]) <= kStillAccel;
     if (!still) {

@@ -622,6 +622,38 @@ TEST(BridgeCore, ANewStreamIsJoinedOnlyOnceTheOldOneStands) {
   r.expect_limits("a new stream after the old one stood");
 }
 
+TEST(BridgeCore, ANewStreamAfterTheOldOneWentQuietIsJoined) {
+  // fault_reset under two busy loops (run 13 of a 50-run): ENABLE engaged the bridge, two
+  // setpoints of the interpolator's standing stream (from before its RESET) were
+  // followed, then the RESET's new stream came later than the playback's one-period
+  // allowance. The playback had begun to brake, from rest, and the new stream waited
+  // for "the old one to stand" on that flag, which only a setpoint of the old stream
+  // clears: "no setpoint for 51 ms", a fault after a reset that had done nothing wrong.
+  const config::MachineConfig cfg = machine();
+  Runner r(cfg);
+  r.start(at(212.0316));
+  r.core.engage(at(212.0316), 3);
+  r.cycle(3348, at(212.0316), true, {10, 3});
+  r.cycle(3349, at(212.0316), true, {10, 3});
+  ASSERT_EQ(r.last, BridgeCore::Verdict::kAccepted);
+  for (int j = 0; j < 6; ++j) r.cycle(0, at(0), false);  // 24 ms without a setpoint: braking, from rest
+  EXPECT_GT(r.core.starved_ticks(), 0);
+  EXPECT_FALSE(r.core.faulted()) << r.core.fault_reason();
+  for (int64_t j = 0; j < 50; ++j) {
+    r.cycle(3350 + j, at(212.0316), true, {11, 3});
+    ASSERT_EQ(r.last, BridgeCore::Verdict::kAccepted) << "setpoint " << j << " of the new stream: "
+                                                      << r.core.waiting_reason();
+  }
+  EXPECT_FALSE(r.core.faulted()) << r.core.fault_reason();
+  EXPECT_EQ(r.core.stream(), 11);
+  // And the new stream is followed: a move from there keeps the limits.
+  const std::vector<double> xs = smooth_stream(100.0, 2000.0, 60);
+  for (int64_t j = 0; j < 60; ++j) r.cycle(3400 + j, at(212.0316 - xs[static_cast<size_t>(j)]), true, {11, 3});
+  EXPECT_FALSE(r.core.faulted()) << r.core.fault_reason();
+  EXPECT_NEAR(r.core.velocity()[0], -100.0, 0.01);
+  r.expect_limits("a new stream after the old one went quiet");
+}
+
 TEST(BridgeCore, RandomisedStreamsKeepTheLimits) {
   const config::MachineConfig cfg = machine();
   std::mt19937 rng(20240601);
