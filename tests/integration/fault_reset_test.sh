@@ -96,10 +96,12 @@ refused_within_3s() {
 sim_world_steady "$WORK/trace.csv"
 "${CTL[@]}" --do run --program "$WORK/long.ngc" --timeout 30 >"$WORK/ctl1.out" 2>&1 &
 ctl_pid=$!
+stimulus_rt on
 x=$(wait_x 100)
 cut_before=$(date +%s.%N)
 ip route del 224.0.0.0/4 dev lo
 cut_after=$(date +%s.%N)
+stimulus_rt off
 note "multicast route removed at X = $x mm"
 sleep 1
 all_alive "with the route removed"
@@ -133,10 +135,12 @@ for p in "${pids[@]}"; do wait "$p" || fail "a command was not refused within 3 
 # ---- 3. drive fault -----------------------------------------------------------
 "${CTL[@]}" --do run --program "$WORK/diag.ngc" --timeout 30 >"$WORK/ctl.out" 2>&1 &
 ctl_pid=$!
+stimulus_rt on
 x=$(wait_x 120)
 fault_before=$(date +%s.%N)
 echo "fault Y" >"$WORK/sim.ctl"
 fault_after=$(date +%s.%N)
+stimulus_rt off
 note "drive Y faulted at X = $x mm"
 expect_drive_fault "$ctl_pid" "fault"
 sleep 1

@@ -94,6 +94,16 @@ trace_over() {
     awk -F, -v c="$1" -v lim="$2" '$c ~ /^-?[0-9.]+$/ && $c + 0 > lim + 0 { print $c; found = 1 } END { exit !found }'
 }
 
+# stimulus_rt on|off: the test's own shell (and what it starts) as a real-time process
+# (SCHED_FIFO 30, below the cell's 40/41) while it times a stimulus against the
+# motion, and back. Under two busy loops the shell's polls of the trace came 0.6 s
+# late at normal priority: a cut meant for X = 100 mm landed after the 380 mm move
+# had ended (fault_reset, a 50-run). Without the privilege it stays as it is.
+stimulus_rt() {
+  if [ "$1" = on ]; then chrt -f -p 30 $$ 2>/dev/null || note "no SCHED_FIFO for the test's shell"
+  else chrt -o -p 0 $$ 2>/dev/null || true; fi
+}
+
 # services_list: config/services.txt, the cell's services in start order (name, executable).
 services_list() { grep -v -e '^[[:space:]]*#' -e '^[[:space:]]*$' "$(dirname "${BASH_SOURCE[0]}")/../../config/services.txt"; }
 

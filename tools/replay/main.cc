@@ -13,7 +13,9 @@
 // --machine replays with another config, --program with another version of a
 // program: its blocks replace the recorded blocks of every recorded program with
 // the same file name. Both show where a change would alter the run.
+#include <algorithm>
 #include <chrono>
+#include <cstdlib>
 #include <cinttypes>
 #include <cmath>
 #include <cstdio>
@@ -115,12 +117,21 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
     std::fprintf(stderr, "cnc-replay: --log FILE is required\n");
     return cnc::service::kExitBadInput;
   }
-  // Everything the interpolator recorded, from the first interpolator in the log.
-  std::optional<cnc::lcmt_config> config;
-  std::vector<cnc::lcmt_interp_input> inputs;
-  std::map<int64_t, cnc::lcmt_setpoint> setpoints;
-  int32_t sender = 0;
-  int64_t foreign = 0;
+  // Everything each interpolator run in the log recorded (a run: one interpolator
+  // process, told apart by its sender; a restart is a new run); --run picks one.
+  int run_no = 1;
+  if (const std::string r = args.option("run"); !r.empty()) {
+    char* end = nullptr;
+    const long v = std::strtol(r.c_str(), &end, 10);
+    if (end == r.c_str() || *end != '\0' || v < 1 || v > 1000000) {
+      std::fprintf(stderr, "cnc-replay: --run '%s' is not a run number (1, 2, ...)\n", r.c_str());
+      return cnc::service::kExitBadInput;
+    }
+    run_no = static_cast<int>(v);
+  }
+  std::vector<cnc::lcmt_config> runs;  // each run's config, in the order they began
+  std::map<int32_t, std::vector<cnc::lcmt_interp_input>> inputs_of;
+  std::map<int32_t, std::map<int64_t, cnc::lcmt_setpoint>> setpoints_of;
   cnc::bus::LogFormat format;  // format 1 unless the log says otherwise
   bool format_seen = false;
   const std::string key_file = args.option("key");
@@ -138,22 +149,17 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
     });
     bus.subscribe_raw(".*INTERP_CONFIG", [&](const std::string&, const void* d, size_t n, int64_t) {
       cnc::lcmt_config c;
-      if (!config && decode(d, n, &c) && c.service == "cnc-interpolator") {
-        config = c;
-        sender = c.sender;
-      }
+      if (!decode(d, n, &c) || c.service != "cnc-interpolator") return;
+      if (std::none_of(runs.begin(), runs.end(), [&](const auto& r) { return r.sender == c.sender; }))
+        runs.push_back(std::move(c));
     });
     bus.subscribe_raw(".*INTERP_INPUT", [&](const std::string&, const void* d, size_t n, int64_t) {
       cnc::lcmt_interp_input in;
-      if (!decode(d, n, &in)) return;
-      if (sender != 0 && in.sender != sender) return ++foreign, void();
-      inputs.push_back(std::move(in));
+      if (decode(d, n, &in)) inputs_of[in.sender].push_back(std::move(in));
     });
     bus.subscribe_raw(".*SETPOINTS", [&](const std::string&, const void* d, size_t n, int64_t) {
       cnc::lcmt_setpoint sp;
-      if (!decode(d, n, &sp) && !decode_v1(d, n, &sp)) return;
-      if (sender != 0 && sp.sender != sender) return ++foreign, void();
-      setpoints.emplace(sp.cycle, std::move(sp));
+      if (decode(d, n, &sp) || decode_v1(d, n, &sp)) setpoints_of[sp.sender].emplace(sp.cycle, std::move(sp));
     });
     while (bus.handle(1000) > 0) {
     }
@@ -185,10 +191,24 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
   }
   std::printf("log format %d%s\n", format.format,
               format.version.empty() ? " (before format records)" : (" recorded by cnc " + format.version).c_str());
-  if (!config) {
+  if (runs.empty()) {
     std::fprintf(stderr, "cnc-replay: %s holds no interpolator config (INTERP_CONFIG): not a cell log?\n", log.c_str());
     return kExitUnreplayable;
   }
+  std::printf("interpolator runs in the log: %zu; replaying run %d\n", runs.size(), run_no);
+  if (static_cast<size_t>(run_no) > runs.size()) {
+    std::fprintf(stderr, "cnc-replay: --run %d: the log holds %zu interpolator run(s)\n", run_no, runs.size());
+    return cnc::service::kExitBadInput;
+  }
+  const cnc::lcmt_config* config = &runs[static_cast<size_t>(run_no - 1)];
+  const int32_t sender = config->sender;
+  int64_t foreign = 0;
+  for (const auto& [who, v] : inputs_of)
+    if (who != sender) foreign += static_cast<int64_t>(v.size());
+  for (const auto& [who, m] : setpoints_of)
+    if (who != sender) foreign += static_cast<int64_t>(m.size());
+  std::vector<cnc::lcmt_interp_input>& inputs = inputs_of[sender];
+  std::map<int64_t, cnc::lcmt_setpoint>& setpoints = setpoints_of[sender];
   // Inputs from the interpolator that sent the config, each index once (an input
   // the logger did not confirm in time was sent again: the copies are equal), in
   // index order; none may be missing.
@@ -315,7 +335,8 @@ int main(int argc, char** argv) {
                           
                           {{"log", "LOG", "the recorded run"},
                            {"program", "FILE", "replay with this version of a recorded program (same file name)"},
-                           {"key", "KEYFILE", "verify every message's MAC first; a log that does not verify is refused"}},
+                           {"key", "KEYFILE", "verify every message's MAC first; a log that does not verify is refused"},
+                           {"run", "N", "which interpolator run of the log (1: the first; a restart begins a new one)"}},
                           {},
                           false};
   return cnc::service::run(spec, argc, argv, replay);
