@@ -256,6 +256,7 @@ std::span<const KeySection> machine_config_keys();
 namespace channels {
 inline constexpr const char* kProgramCmd = "PROGRAM_CMD";
 inline constexpr const char* kProgramState = "PROGRAM_STATE";
+inline constexpr const char* kProgramAnswers = "PROGRAM_ANSWERS";
 inline constexpr const char* kProgramBlocks = "PROGRAM_BLOCKS";
 inline constexpr const char* kBlockRequest = "BLOCK_REQUEST";
 inline constexpr const char* kSetpoints = "SETPOINTS";

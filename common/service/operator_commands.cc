@@ -1,5 +1,6 @@
 #include "common/service/operator_commands.h"
 
+#include <algorithm>
 #include <map>
 
 namespace cnc::service {
@@ -41,6 +42,19 @@ bool send_drive_command(bus::Bus& bus, const config::MachineConfig& cfg, int8_t 
 std::string refusal_of(const lcmt_program_state& state, int32_t sender, int64_t seq) {
   if (seq < 0 || state.refused_sender != sender || state.refused_seq != seq) return "";
   return state.refusal;
+}
+
+bool answer_of(const lcmt_command_answers& answers, int32_t sender, int64_t seq, std::string* refusal) {
+  if (seq < 0) return false;
+  const auto n = static_cast<size_t>(std::max(0, answers.num_answers));
+  for (size_t i = 0; i < n && i < answers.answer_sender.size() && i < answers.answer_seq.size() &&
+                     i < answers.refusal.size();
+       ++i) {
+    if (answers.answer_sender[i] != sender || answers.answer_seq[i] != seq) continue;
+    if (refusal != nullptr) *refusal = answers.refusal[i];
+    return true;
+  }
+  return false;
 }
 
 std::string mdi_program_suffix(int32_t sender, int64_t seq) {

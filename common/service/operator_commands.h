@@ -7,6 +7,7 @@
 #include <optional>
 #include <string>
 
+#include "cnc/lcmt_command_answers.hpp"
 #include "cnc/lcmt_drive_command.hpp"
 #include "cnc/lcmt_program_command.hpp"
 #include "cnc/lcmt_program_state.hpp"
@@ -42,6 +43,9 @@ bool send_drive_command(bus::Bus& bus, const config::MachineConfig& cfg, int8_t 
 // The interlock's refusal of the command `seq` this client (`sender`) sent, from
 // PROGRAM_STATE; "" while the state names another command.
 std::string refusal_of(const lcmt_program_state& state, int32_t sender, int64_t seq);
+// Whether the program server's last decisions (PROGRAM_ANSWERS) hold one on the command
+// `seq` this client (`sender`) sent; its refusal ("" when it was taken) in *refusal.
+bool answer_of(const lcmt_command_answers& answers, int32_t sender, int64_t seq, std::string* refusal);
 
 // The file the program server writes an MDI or touch-off line to, by the command's
 // sender and seq: a PROGRAM_STATE whose path ends so is that command's answer.

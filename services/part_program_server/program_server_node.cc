@@ -28,7 +28,7 @@ namespace ch = config::channels;
 
 ProgramServerNode::ProgramServerNode(const config::MachineConfig& cfg, bus::Bus& bus)
     : cfg_(cfg), bus_(bus), core_(cfg), ch_blocks_(cfg.channel(ch::kProgramBlocks)),
-      ch_state_(cfg.channel(ch::kProgramState)), state_(cnc::lcmt_program_state::IDLE),
+      ch_state_(cfg.channel(ch::kProgramState)), ch_answers_(cfg.channel(ch::kProgramAnswers)), state_(cnc::lcmt_program_state::IDLE),
       health_(bus, cfg.channel(ch::kAlarm), "cnc-program-server", cnc::lcmt_alarm::WARNING) {
   bus_.subscribe<cnc::lcmt_program_command>(cfg.channel(ch::kProgramCmd), [this](const auto& m) { on_command(m); });
   bus_.subscribe<cnc::lcmt_block_request>(cfg.channel(ch::kBlockRequest), [this](const auto& m) { on_request(m); });
@@ -153,8 +153,26 @@ void ProgramServerNode::refuse(const cnc::lcmt_program_command& m, const std::st
   refused_sender_ = m.sender;
   refused_seq_ = m.seq;
   ++refusals_;
+  if (answers_.num_answers > 0 && answers_.answer_sender[0] == m.sender && answers_.answer_seq[0] == m.seq)
+    answers_.refusal[0] = refusal_;
   spdlog::warn("{}", refusal_);
   publish_state(true);
+}
+
+void ProgramServerNode::remember_answer(int32_t sender, int64_t seq) {
+  auto& a = answers_;
+  if (a.num_answers < kAnswers) {
+    ++a.num_answers;
+    a.answer_sender.resize(static_cast<size_t>(a.num_answers));
+    a.answer_seq.resize(static_cast<size_t>(a.num_answers));
+    a.refusal.resize(static_cast<size_t>(a.num_answers));
+  }
+  std::move_backward(a.answer_sender.begin(), a.answer_sender.end() - 1, a.answer_sender.end());
+  std::move_backward(a.answer_seq.begin(), a.answer_seq.end() - 1, a.answer_seq.end());
+  std::move_backward(a.refusal.begin(), a.refusal.end() - 1, a.refusal.end());
+  a.answer_sender[0] = sender;
+  a.answer_seq[0] = seq;
+  a.refusal[0].clear();
 }
 
 void ProgramServerNode::poll(double now_s) {
@@ -168,12 +186,17 @@ void ProgramServerNode::poll(double now_s) {
 }
 
 void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {
+  if (m.command == cnc::lcmt_program_command::JOG_KEEPALIVE) return decide(m);
+  answered_sender_ = m.sender;
+  answered_seq_ = m.seq;
+  remember_answer(m.sender, m.seq);
+  decide(m);
+  bus_.publish(ch_answers_, answers_);  // every decision at once, not only with the next state
+}
+
+void ProgramServerNode::decide(const cnc::lcmt_program_command& m) {
   using C = cnc::lcmt_program_command;
   using S = cnc::lcmt_program_state;
-  if (m.command != C::JOG_KEEPALIVE) {
-    answered_sender_ = m.sender;
-    answered_seq_ = m.seq;
-  }
   if (const std::string why = refusal(m, view(util::monotonic_s())); !why.empty()) {
     refuse(m, why);
     return;
@@ -509,6 +532,7 @@ void ProgramServerNode::publish_state(bool force) {
   s.approach = core_.approach_text();
   s.approach_pending = approach_pending_ && program_ready_ ? 1 : 0;
   bus_.publish(ch_state_, s);
+  if (answers_.num_answers > 0) bus_.publish(ch_answers_, answers_);
 }
 
 }  // namespace cnc::pps

@@ -3,6 +3,7 @@
 
 #include "cnc/lcmt_axis_status.hpp"
 #include "cnc/lcmt_block_request.hpp"
+#include "cnc/lcmt_command_answers.hpp"
 #include "cnc/lcmt_interp_state.hpp"
 #include "cnc/lcmt_program_command.hpp"
 #include "common/bus/bus.h"
@@ -19,7 +20,9 @@ namespace cnc::pps {
 //
 // Interlock (interlock.h): a command the cell's state does not allow (LOAD or START
 // while a program runs, START in FAULT, ...) is refused: PROGRAM_STATE carries the
-// reason and the refused command's sender and seq, the state stays as it was. The
+// reason and the refused command's sender and seq, the state stays as it was;
+// PROGRAM_ANSWERS the last 16 decisions, so that no client's answer is lost to the
+// next client's command. The
 // state follows the interpolator (INTERP_STATE: running, held, done, fault) and the
 // drives (AXIS_STATUS). A failed publish here puts the server in FAULT until RESET.
 //
@@ -57,7 +60,7 @@ class ProgramServerNode {
   config::MachineConfig cfg_;
   bus::Bus& bus_;
   ProgramServer core_;
-  std::string ch_blocks_, ch_state_;
+  std::string ch_blocks_, ch_state_, ch_answers_;
   int8_t state_;
   LoadResult last_refusal_;
   std::string refused_path_;
@@ -103,6 +106,11 @@ class ProgramServerNode {
   int64_t refusals_ = 0;
   int32_t answered_sender_ = 0;
   int64_t answered_seq_ = -1;
+  // The last decisions, newest first (PROGRAM_ANSWERS: each client finds its own).
+  static constexpr int kAnswers = 16;
+  cnc::lcmt_command_answers answers_{};
+  void remember_answer(int32_t sender, int64_t seq);
+  void decide(const cnc::lcmt_program_command& m);  // on_command's decision, answered around it
   service::BusHealth health_;
   std::string state_file_;
   bool restored_ = false;  // loaded again from the state file; not yet seen running (until a LOAD)

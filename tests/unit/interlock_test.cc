@@ -15,6 +15,7 @@
 #include "common/bus/bus.h"
 #include "common/config/machine_config.h"
 #include "common/motion/interpolator.h"
+#include "common/service/operator_commands.h"
 #include "services/interpolator/inputs.h"
 #include "services/part_program_server/interlock.h"
 #include "services/part_program_server/program_server_node.h"
@@ -275,6 +276,43 @@ TEST_F(ServerInterlock, LoadAndStartWhileRunningAreRefusedNamingTheProgram) {
   send(C::LOAD, path("b.ngc"));
   EXPECT_EQ(states_.back().state, int8_t{lcmt_program_state::LOADED});
   EXPECT_NE(states_.back().program_token, token);
+}
+
+TEST_F(ServerInterlock, EveryDecisionStaysInTheAnswersWhenTheStateNamesTheNextOne) {
+  // fault_reset's interlock section under two busy loops: three cnc-ctl at once; the
+  // state named a LOAD's refusal for 36 ms before the next command's answer replaced it,
+  // that one datagram did not reach its cnc-ctl, and it waited 2 s for its resend.
+  lcmt_command_answers answers{};
+  int n_answers = 0;
+  bus_.subscribe<lcmt_command_answers>(cfg_.channel(config::channels::kProgramAnswers),
+                                       [&](const lcmt_command_answers& m) { answers = m, ++n_answers; });
+  pps::ProgramServerNode node(cfg_, bus_);
+  send(C::LOAD, path("a.ngc"));
+  const int64_t token = states_.back().program_token;
+  send(C::START);
+  interp(lcmt_setpoint::RUNNING, token);
+  const int64_t load = send(C::LOAD, path("b.ngc"));
+  const int64_t start = send(C::START);
+  const int64_t hold = send(C::HOLD);
+  // The state names one decision, a later one than the LOAD's: that answer is gone from it.
+  EXPECT_GT(states_.back().answered_seq, load);
+  EXPECT_EQ(service::refusal_of(states_.back(), bus_.sender(), load), "");
+  // The answers hold each, newest first, with its refusal ("" when taken).
+  ASSERT_GT(n_answers, 0);
+  std::string why;
+  ASSERT_TRUE(service::answer_of(answers, bus_.sender(), load, &why));
+  EXPECT_EQ(why, "LOAD " + path("b.ngc") + " refused: program " + path("a.ngc") + " is running: STOP it first");
+  ASSERT_TRUE(service::answer_of(answers, bus_.sender(), start, &why));
+  EXPECT_NE(why.find("START refused"), std::string::npos) << why;
+  ASSERT_TRUE(service::answer_of(answers, bus_.sender(), hold, &why));
+  EXPECT_EQ(why, "");
+  EXPECT_FALSE(service::answer_of(answers, bus_.sender() + 1, hold, &why));  // another client's seq
+  EXPECT_FALSE(service::answer_of(answers, bus_.sender(), hold + 1, &why));
+  EXPECT_EQ(answers.answer_seq[0], hold);
+  // At most the last 16: the oldest go first.
+  for (int i = 0; i < 20; ++i) send(C::OVERRIDE);
+  EXPECT_EQ(answers.num_answers, 16);
+  EXPECT_FALSE(service::answer_of(answers, bus_.sender(), load, &why));
 }
 
 TEST_F(ServerInterlock, InterpolatorFaultRefusesLoadUntilReset) {

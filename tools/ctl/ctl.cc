@@ -55,6 +55,8 @@ Ctl::Ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& args)
     view_.program = m;
     view_.have_program = true;
   });
+  bus_.subscribe<cnc::lcmt_command_answers>(cfg.channel(ch::kProgramAnswers),
+                                            [this](const auto& m) { view_.answers = m; });
   bus_.subscribe<cnc::lcmt_interp_state>(cfg.channel(ch::kInterpState), [this](const auto& m) {
     view_.interp = m;
     view_.have_interp = true;
@@ -94,6 +96,8 @@ void Ctl::send(int8_t command, const std::string& path, double value) {
 
 // The refusal of the last command sent, "" while none came.
 std::string Ctl::refused() const {
+  std::string why;
+  if (cnc::service::answer_of(view_.answers, bus_.sender(), sent_seq_, &why)) return why;
   if (!view_.have_program) return "";
   return cnc::service::refusal_of(view_.program, bus_.sender(), sent_seq_);
 }
@@ -101,6 +105,7 @@ std::string Ctl::refused() const {
 // Whether the program server has decided on the last command sent (its state names it,
 // with the refusal when it refused).
 bool Ctl::answered() const {
+  if (cnc::service::answer_of(view_.answers, bus_.sender(), sent_seq_, nullptr)) return true;
   return view_.have_program && view_.program.answered_sender == bus_.sender() &&
          view_.program.answered_seq == sent_seq_;
 }
@@ -715,7 +720,13 @@ int Ctl::watch_to_end(int64_t token) {
     return kExitFault;
   }
   if (bridge_fault()) {
-    std::fprintf(stderr, "cnc-ctl: drive fault: %s\n", view_.axes.fault.empty() ? "" : view_.axes.fault[0].c_str());
+    // Every axis's reason (the first axis's alone was empty when another axis faulted).
+    std::string why;
+    for (size_t i = 0; i < view_.axes.fault.size() && i < view_.axes.axis_name.size(); ++i) {
+      if (view_.axes.fault[i].empty() || why.find(view_.axes.fault[i]) != std::string::npos) continue;
+      why += (why.empty() ? "" : "; ") + view_.axes.axis_name[i] + ": " + view_.axes.fault[i];
+    }
+    std::fprintf(stderr, "cnc-ctl: drive fault: %s\n", why.empty() ? "(the drive bridge gave no reason)" : why.c_str());
     return kExitFault;
   }
   if (!lost.empty()) {

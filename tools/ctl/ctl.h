@@ -11,6 +11,7 @@
 #include "cnc/lcmt_axis_status.hpp"
 #include "cnc/lcmt_heartbeat.hpp"
 #include "cnc/lcmt_interp_state.hpp"
+#include "cnc/lcmt_command_answers.hpp"
 #include "cnc/lcmt_program_state.hpp"
 #include "common/bus/bus.h"
 #include "common/config/machine_config.h"
@@ -25,6 +26,7 @@ struct CellView {
   double axes_s = -1e9;                       // ... and the last AXIS_STATUS
   cnc::lcmt_program_state program{};
   bool have_program = false;
+  cnc::lcmt_command_answers answers{};  // the server's last decisions (PROGRAM_ANSWERS)
   cnc::lcmt_interp_state interp{};
   bool have_interp = false;
   cnc::lcmt_axis_status axes{};
