@@ -18,6 +18,8 @@
 #                                                  offline CAM: z-level roughing, cusp-limited levels (Shin et al.)
 #   ./cnc conformance [conformance.py options]     our interpreter against LinuxCNC's rs274
 #   ./cnc bench latency [--load N] [--out DIR]     cycle timing of the demo, idle and with N busy loops
+#   ./cnc soak --minutes M [--seed S] [--out DIR]  programs back to back with operator actions and injected
+#                                                  faults, every log replayed (tools/soak/soak.py)
 #   ./cnc key gen|rotate|show [--machine FILE] [--grace S] [--activate-in S]  the cell's signing key
 #   ./cnc package                                  Debian packages (cnc, cnc-cam) into build/packages, lintian-checked
 #   ./cnc build                                    set up and build only
@@ -363,6 +365,12 @@ cmd_bench() {
   esac
 }
 
+# soak --minutes M [soak.py options]: see tools/soak/soak.py.
+cmd_soak() {
+  build
+  run_child python3 "$ROOT/tools/soak/soak.py" --build "$BUILD" --src "$ROOT" "$@"
+}
+
 # key gen|rotate|show [--machine FILE | --file KEYFILE] [...]: see tools/key/main.cc.
 cmd_key() {
   [ -x "$(bin cnc-key)" ] || build
@@ -464,6 +472,7 @@ main() {
     predict) { [ -x "$(bin cnc-predict)" ] && [ -x "$(bin cnc-plan)" ]; } || build; cmd_predict "$@" ;;
     conformance) [ -x "$(bin cnc-rs274)" ] || build; cmd_conformance "$@" ;;
     bench) cmd_bench "$@" ;;
+    soak) cmd_soak "$@" ;;
     key) cmd_key "$@" ;;
     --version) [ -x "$(bin cnc-ctl)" ] || die "--version: not built yet (./cnc build)"
                echo "cnc $("$(bin cnc-ctl)" --version | cut -d' ' -f2)" ;;
