@@ -569,7 +569,7 @@ struct Playback {
   std::vector<int> shape;  // and the Shape of its block
   std::vector<V3> fine;    // the bridge's commands, one per servo tick
   V3 fine_settle{};        // the command kSettleCycles after the setpoints stand
-  std::string bridge_fault;
+  std::string bridge_fault;  // a fault, or the first setpoint the bridge did not accept
 };
 
 // The program through the dry run's pipeline (tools/plan/main.cc), then its setpoints
@@ -612,7 +612,10 @@ Playback play(const config::MachineConfig& cfg, const std::string& text) {
   br.engage(hold);
   const int ticks = static_cast<int>(std::lround(cfg.ipo_period_s / cfg.servo_period_s));
   auto to_bridge = [&](int64_t cycle, const bridge::AxisArray& p) {
-    br.on_setpoint(cycle, p);
+    const bridge::BridgeCore::Verdict v = br.on_setpoint(cycle, p);
+    if (v != bridge::BridgeCore::Verdict::kAccepted && r.bridge_fault.empty())
+      r.bridge_fault = "setpoint " + std::to_string(cycle) + " not accepted (" + std::to_string(static_cast<int>(v)) +
+                       "): " + br.fault_reason() + br.waiting_reason();
     for (int t = 0; t < ticks; ++t) {
       const bridge::AxisArray& c = br.tick();
       r.fine.push_back({c[0], c[1], c[2]});
@@ -649,7 +652,7 @@ Playback play(const config::MachineConfig& cfg, const std::string& text) {
     to_bridge(cycle + k, last);
     if (k == kSettleCycles) r.fine_settle = r.fine.back();
   }
-  if (br.faulted()) r.bridge_fault = br.fault_reason();
+  if (br.faulted() && r.bridge_fault.empty()) r.bridge_fault = br.fault_reason();
   return r;
 }
 
@@ -849,6 +852,48 @@ int programs_per_kind() {
   return env != nullptr && std::atoi(env) > 0 ? std::atoi(env) : kDefaultProgramsPerKind;
 }
 
+// The measurement against dense sampling: random zig-zag polylines (segments of
+// 0.01-0.5 mm, turns of up to 180 degrees) and random chords near them; the bound
+// must lie above every sample and within kEps + the sampling's own error (half its
+// spacing, the distance being 1-Lipschitz) of the largest.
+TEST(PathTolerance, TheLargestDistanceIsBoundedWithinEpsOfDenseSampling) {
+  std::mt19937_64 rng(31);
+  auto uni = [&](double a, double b) { return std::uniform_real_distribution<double>(a, b)(rng); };
+  double worst_gap = 0;
+  for (int trial = 0; trial < 200; ++trial) {
+    SegmentSet set(0.25);
+    std::vector<V3> pts{{uni(0, 1), uni(0, 1), uni(0, 0.1)}};
+    for (int k = 0; k < 20; ++k) {
+      const double l = uni(0.01, 0.5), th = uni(0, 2 * std::numbers::pi);
+      const V3& b = pts.back();
+      pts.push_back({b[0] + l * std::cos(th), b[1] + l * std::sin(th), b[2] + uni(-0.02, 0.02)});
+      set.add(pts[pts.size() - 2], pts.back());
+    }
+    const size_t at = static_cast<size_t>(uni(0, 19.99));
+    const V3 p = lerp(pts[at], pts[at + 1], uni(0, 1)), dir{uni(-1, 1), uni(-1, 1), uni(-0.1, 0.1)};
+    const double len = uni(0.001, 0.6);
+    const V3 q{p[0] + len * dir[0], p[1] + len * dir[1], p[2] + len * dir[2]};
+    FarthestPoint fp(set);
+    const Range r = fp.of(p, q);
+    constexpr int kSamples = 20000;
+    double dense = 0;
+    std::vector<int> all;
+    set.all(&all);
+    for (int k = 0; k <= kSamples; ++k) {
+      const V3 x = lerp(p, q, static_cast<double>(k) / kSamples);
+      double d = 1e300;
+      for (int i : all) d = std::min(d, set.dist(i, x));
+      dense = std::max(dense, d);
+    }
+    const double spacing = norm(sub(q, p)) / kSamples;
+    EXPECT_GE(r.hi, dense - 1e-12) << trial;
+    EXPECT_LE(r.hi, dense + kEps + 0.5 * spacing + 1e-12) << trial;
+    EXPECT_LE(r.lo, r.hi) << trial;
+    worst_gap = std::max(worst_gap, r.hi - dense);
+  }
+  std::printf("largest bound above dense sampling: %.3g mm\n", worst_gap);
+}
+
 // The largest distance of the commanded path from the programmed geometry, under
 // G64 P (bounds of this commit: see below) and under G61.
 TEST(PathTolerance, G64PAtEveryPointOfRandomCamPrograms) {
@@ -929,7 +974,8 @@ TEST(PathTolerance, G64PAtEveryPointOfRandomCamPrograms) {
       for (size_t k = 0; k < kShapes; ++k)
         if (w.coarse.chords_over_by_shape[k] > 0)
           by_shape += std::string(1, kShapeLetters[k]) + ":" + std::to_string(w.coarse.chords_over_by_shape[k]) + " ";
-      std::printf("%-11s %-9s %8lld %6lld %6lld %10.6f %7.2f %8lld %6lld %6lld %10.6f %7.2f %10.6f %7.2f  %d:%d%c  %s\n",
+      std::printf("%-11s %-9s %8lld %6lld %6lld %10.6f %7.2f %8lld %6lld %6lld %10.6f %7.2f %10.6f %7.2f  "
+                  "%d:%d%c  %s\n",
                   kKindNames[kind], m, static_cast<long long>(w.coarse.points),
                   static_cast<long long>(w.coarse.points_over), static_cast<long long>(w.coarse.chords_over),
                   w.coarse.max_mm, w.coarse.max_mm / p, static_cast<long long>(w.fine.points),
