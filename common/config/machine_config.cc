@@ -27,7 +27,7 @@ std::set<std::string> transport_names() {
 // given its table: it may read no other key, and the table rejects every other key.
 constexpr std::string_view kTopKeys[] = {"cell",    "timing", "motion", "operator",     "hmi",    "process",
                                          "cutting", "program", "axes",  "drive_bridge", "logger", "security",
-                                         "monitor"};
+                                         "monitor", "spindle"};
 constexpr std::string_view kCellKeys[] = {"name", "channel_prefix", "lcm_url"};
 constexpr std::string_view kTimingKeys[] = {"ipo_period_s",       "servo_period_s",      "setpoint_timeout_s",
                                             "stop_decel_mm_s2",   "heartbeat_period_s",  "heartbeat_timeout_s",
@@ -60,6 +60,9 @@ constexpr std::string_view kSimKeys[] = {"bandwidth_hz",         "damping",     
 constexpr std::string_view kHomeKeys[] = {"method",      "search_velocity_mm_s", "latch_velocity_mm_s",
                                           "direction",   "switch_position_mm",   "position_mm",
                                           "backoff_mm",  "order"};
+constexpr std::string_view kSpindleKeys[] = {"drive", "max_rpm", "rpm_per_hz", "at_speed_tolerance",
+                                             "at_speed_timeout_s", "sim"};
+constexpr std::string_view kSpindleSimKeys[] = {"time_constant_s", "load_current_a", "inertia_current_a"};
 constexpr std::string_view kDriveBridgeKeys[] = {"enable_on_start", "profile_dir",     "enable_timeout_s",
                                                  "link_loss_timeout_s", "reconnect_min_s", "reconnect_max_s",
                                                  "lead_cycles"};
@@ -83,6 +86,9 @@ constexpr KeySection kSections[] = {
     {"axes[].sim", kSimKeys},
     {"axes[].home", kHomeKeys},
     {"drive_bridge", kDriveBridgeKeys},
+    {"spindle", kSpindleKeys},
+    {"spindle.drive", kDriveKeys},
+    {"spindle.sim", kSpindleSimKeys},
     {"logger", kLoggerKeys},
     {"security", kSecurityKeys},
     {"monitor", kMonitorKeys},
@@ -352,6 +358,34 @@ void read_drive_bridge(MapReader r, MachineConfig& c) {
   r.finish();
 }
 
+void read_spindle(MapReader r, MachineConfig& c) {
+  SpindleConfig& s = c.spindle;
+  s.enabled = true;
+  if (!r.has("drive")) r.fail("drive", "is required: the spindle's VFD (transport, address, unit_id, profile)");
+  s.drive = read_drive(r.map("drive", kDriveKeys));
+  if (drive::transport_named(s.drive.transport) == Transport::kLoopback)
+    r.fail("drive", "transport loopback has no spindle drive: modbus_tcp or modbus_rtu");
+  for (const auto& a : c.axes) {
+    if (a.drive.link_key() == s.drive.link_key() && a.drive.unit_id == s.drive.unit_id)
+      r.fail("drive", "unit_id " + std::to_string(s.drive.unit_id) + " is axis " + a.name + "'s drive on the same link");
+    if (a.drive.link_key() == s.drive.link_key() &&
+        (a.drive.baud != s.drive.baud || a.drive.parity != s.drive.parity || a.drive.stop_bits != s.drive.stop_bits))
+      r.fail("drive", "axis " + a.name + " is on the same serial line with other line settings");
+  }
+  s.max_rpm = r.get_double("max_rpm", s.max_rpm, 1.0, 200000.0);
+  s.rpm_per_hz = r.get_double("rpm_per_hz", s.rpm_per_hz, 1.0, 1000.0);
+  s.at_speed_tolerance = r.get_double("at_speed_tolerance", s.at_speed_tolerance, 0.001, 0.5);
+  s.at_speed_timeout_s = r.get_double("at_speed_timeout_s", s.at_speed_timeout_s, 0.1, 600.0);
+  if (c.drive_bridge.link_loss_timeout_s < s.drive.response_timeout_s)
+    r.fail("drive", "drive.response_timeout_s must not exceed drive_bridge.link_loss_timeout_s");
+  MapReader m = r.map("sim", kSpindleSimKeys);
+  s.sim.time_constant_s = m.get_double("time_constant_s", s.sim.time_constant_s, 0.001, 600.0);
+  s.sim.load_current_a = m.get_double("load_current_a", s.sim.load_current_a, 0.0, 1000.0);
+  s.sim.inertia_current_a = m.get_double("inertia_current_a", s.sim.inertia_current_a, 0.0, 1000.0);
+  m.finish();
+  r.finish();
+}
+
 void read_logger(MapReader r, MachineConfig& c) {
   c.log_directory = r.get_string("directory", c.log_directory);
   c.log_rotate_mb = r.get_double("rotate_mb", c.log_rotate_mb, 1.0, 1e6);
@@ -385,6 +419,7 @@ MachineConfig read_machine(MapReader top) {
   read_program(top.map("program", kProgramKeys), c.program);
   read_axes(top, c);
   read_drive_bridge(top.map("drive_bridge", kDriveBridgeKeys), c);
+  if (top.has("spindle")) read_spindle(top.map("spindle", kSpindleKeys), c);
   read_logger(top.map("logger", kLoggerKeys), c);
   read_security(top.map("security", kSecurityKeys), c.security);
   read_monitor(top.map("monitor", kMonitorKeys), c);

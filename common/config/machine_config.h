@@ -90,6 +90,26 @@ struct AxisConfig {
   double jog_velocity_mm_s = 0;  // jogging's speed (0: a tenth of max_velocity_mm_s)
 };
 
+// The simulated VFD of a spindle (spindle.sim, cnc-servo-sim only): a first-order
+// speed response and a load figure (output current).
+struct SpindleSimConfig {
+  double time_constant_s = 0.5;     // the output frequency follows the setpoint with this time constant
+  double load_current_a = 2.0;      // output current at max_rpm, turning steadily
+  double inertia_current_a = 6.0;   // extra current while accelerating at max_rpm / time_constant_s
+};
+
+// A spindle driven by a VFD on the bus (section `spindle:`, optional). Without the
+// section the cell has no spindle device and M3/M4/M5/S stay events in the log.
+struct SpindleConfig {
+  bool enabled = false;  // the section is present
+  DriveConfig drive;     // transport, address, unit id and a profile with state_machine delta_vfd
+  double max_rpm = 24000;          // S is limited to this
+  double rpm_per_hz = 60;          // spindle rpm per Hz of the drive's output frequency (2-pole motor: 60)
+  double at_speed_tolerance = 0.05;  // at speed: |actual - commanded| <= this fraction of commanded
+  double at_speed_timeout_s = 10;    // a change not at speed within this is a fault
+  SpindleSimConfig sim;
+};
+
 // Operator functions (section `operator:`).
 struct OperatorConfig {
   // No program, MDI or homing-free motion other than jogging until every axis with
@@ -197,6 +217,7 @@ struct MachineConfig {
   std::vector<int> realtime_cpus;
 
   std::vector<AxisConfig> axes;
+  SpindleConfig spindle;
 
   // motion
   double default_feed_mm_per_min = 1000.0;
@@ -268,6 +289,8 @@ inline constexpr const char* kMonitor = "MONITOR";
 inline constexpr const char* kAlarm = "ALARM";
 inline constexpr const char* kHeartbeat = "HEARTBEAT";
 inline constexpr const char* kDriveCmd = "DRIVE_CMD";
+inline constexpr const char* kSpindleCmd = "SPINDLE_CMD";
+inline constexpr const char* kSpindleStatus = "SPINDLE_STATUS";
 }  // namespace channels
 
 }  // namespace cnc::config

@@ -4,7 +4,7 @@
 // keys and bad values are errors naming the file and the key path.
 //
 //   name: cia402_modbus
-//   state_machine: cia402          # sim | cia402 | leadshine: the enable / fault-reset logic in code
+//   state_machine: cia402          # sim | cia402 | leadshine | delta_vfd: the enable / fault-reset logic in code
 //   write_and_read: true           # the drive answers function 23 (write and read in one transaction)
 //   read_gap_max: 0                # unused registers a cyclic read may span to merge two fields
 //   mode_of_operation: 8           # cia402: the mode written before enabling
@@ -35,8 +35,12 @@ enum class Role : int8_t {
   kFollowingError,  // mm, the drive's own position demand minus actual (CiA-402 0x60F4; read)
   kHomeLatchPosition,  // mm, the position latched at the home switch's last closing edge (CiA-402 touch probe 0x60BA; read)
   kHomeLatchCount,     // closing edges latched so far, wrapping (read)
+  // A spindle drive (VFD; state_machine delta_vfd): frequencies in Hz, current in A.
+  kSpeedSetpoint,   // frequency command (written)
+  kActualSpeed,     // output frequency (read)
+  kOutputCurrent,   // output current, the drive's load figure (read)
 };
-inline constexpr int kRoleCount = 12;
+inline constexpr int kRoleCount = 15;
 const char* role_name(Role r);
 
 enum class WordOrder : int8_t { kLowFirst, kHighFirst };
@@ -64,7 +68,7 @@ struct DriveProfile {
   std::string name;
   std::string file;
   std::string description;
-  std::string state_machine;  // sim | cia402 | leadshine
+  std::string state_machine;  // sim | cia402 | leadshine | delta_vfd (a spindle drive)
   bool write_and_read = false;
   int read_gap_max = 0;
   int mode_of_operation = 8;

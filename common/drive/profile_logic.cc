@@ -3,13 +3,14 @@
 #include <stdexcept>
 
 #include "common/drive/cia402_profile.h"
+#include "common/drive/delta_vfd_profile.h"
 #include "common/drive/leadshine_profile.h"
 #include "common/drive/sim_profile.h"
 
 namespace cnc::drive {
 
 const ProfileLogic* find_profile_logic(const std::string& state_machine) {
-  for (const ProfileLogic* l : {&sim_logic(), &cia402_logic(), &leadshine_logic()})
+  for (const ProfileLogic* l : {&sim_logic(), &cia402_logic(), &leadshine_logic(), &delta_vfd_logic()})
     if (state_machine == l->name()) return l;
   return nullptr;
 }
@@ -20,6 +21,6 @@ const ProfileLogic& profile_logic(const DriveProfile& p) {
   return *l;
 }
 
-std::vector<std::string> profile_logic_names() { return {"sim", "cia402", "leadshine"}; }
+std::vector<std::string> profile_logic_names() { return {"sim", "cia402", "leadshine", "delta_vfd"}; }
 
 }  // namespace cnc::drive

@@ -144,6 +144,49 @@ TEST(MachineConfig, DuplicateDriveAddress) {
                   "another axis already uses this drive address");
 }
 
+// The spindle section (optional): its VFD configured like a drive, ranges and relations.
+const char* const kSpindle =
+    "spindle:\n"
+    "  drive: {transport: modbus_tcp, host: 127.0.0.1, port: 1502, unit_id: 4, profile: delta_vfd}\n"
+    "  at_speed_tolerance: 0.02\n"
+    "  at_speed_timeout_s: 5\n"
+    "  sim: {time_constant_s: 0.4}\n";
+
+TEST(MachineConfig, SpindleSection) {
+  EXPECT_FALSE(parse_machine_config(sim3_text(), kLabel).spindle.enabled) << "no section, no spindle";
+  const MachineConfig c = parse_machine_config(sim3_text() + kSpindle, kLabel);
+  EXPECT_TRUE(c.spindle.enabled);
+  EXPECT_EQ(c.spindle.drive.unit_id, 4);
+  EXPECT_EQ(c.spindle.drive.profile, "delta_vfd");
+  EXPECT_EQ(c.spindle.drive.link_key(), c.axes[0].drive.link_key());
+  EXPECT_DOUBLE_EQ(c.spindle.at_speed_tolerance, 0.02);
+  EXPECT_DOUBLE_EQ(c.spindle.at_speed_timeout_s, 5);
+  EXPECT_DOUBLE_EQ(c.spindle.max_rpm, 24000);
+  EXPECT_DOUBLE_EQ(c.spindle.rpm_per_hz, 60);
+  EXPECT_DOUBLE_EQ(c.spindle.sim.time_constant_s, 0.4);
+  EXPECT_TRUE(load_machine_config(std::string(CNC_SOURCE_DIR) + "/config/machines/sim3_spindle.yaml").spindle.enabled);
+}
+
+TEST(MachineConfig, SpindleErrors) {
+  const std::string with = sim3_text() + kSpindle;
+  expect_error_at(sim3_text() + "spindle: {max_rpm: 1000}\n", "spindle.drive", "is required");
+  expect_error_at(replace_nth(with, "unit_id: 4", "unit_id: 2"), "spindle.drive", "axis Y's drive on the same link");
+  expect_error_at(replace_nth(with, "transport: modbus_tcp, host: 127.0.0.1, port: 1502, unit_id: 4",
+                              "transport: loopback, unit_id: 4"),
+                  "spindle.drive", "transport loopback has no spindle drive");
+  expect_error_at(replace_nth(with, "at_speed_tolerance: 0.02", "at_speed_tolerance: 0.9"),
+                  "spindle.at_speed_tolerance", "out of range");
+  expect_error_at(replace_nth(with, "at_speed_timeout_s: 5", "at_speed_timeout_s: 0"),
+                  "spindle.at_speed_timeout_s", "out of range");
+  expect_error_at(replace_nth(with, "time_constant_s: 0.4", "time_constant_s: -1"), "spindle.sim.time_constant_s",
+                  "out of range");
+  expect_error_at(with + "  max_rpm: 0\n", "spindle.max_rpm", "out of range");
+  expect_error_at(with + "  rpm_per_hz: 5000\n", "spindle.rpm_per_hz", "out of range");
+  expect_error_at(with + "  colour: red\n", "spindle.colour", "unknown key");
+  expect_error_at(replace_nth(with, "profile: delta_vfd}", "profile: delta_vfd, response_timeout_s: 1}"),
+                  "spindle.drive", "must not exceed drive_bridge.link_loss_timeout_s");
+}
+
 TEST(MachineConfig, DuplicateKey) {
   expect_error_at(replace_nth(sim3_text(), "timing:\n", "timing:\n  stop_decel_mm_s2: 100\n"),
                   "timing.stop_decel_mm_s2", "duplicate key");

@@ -122,6 +122,15 @@ TEST(DriveProfile, ShippedProfilesLoad) {
   EXPECT_EQ(ls.field(Role::kActualPosition).order, WordOrder::kHighFirst);
   EXPECT_TRUE(ls.has(Role::kFaultReset));
   EXPECT_DOUBLE_EQ(ls.field(Role::kTargetPosition).scale, 1000.0);
+
+  const DriveProfile vfd = load_drive_profile(kDrives + "delta_vfd.yaml");
+  EXPECT_EQ(vfd.state_machine, "delta_vfd");
+  EXPECT_EQ(vfd.field(Role::kControlword).address, 0x2000);
+  EXPECT_EQ(vfd.field(Role::kSpeedSetpoint).address, 0x2001);
+  EXPECT_DOUBLE_EQ(vfd.field(Role::kSpeedSetpoint).scale, 100.0);
+  EXPECT_EQ(vfd.field(Role::kActualSpeed).address, 0x2103);
+  EXPECT_EQ(vfd.field(Role::kOutputCurrent).address, 0x2104);
+  EXPECT_FALSE(vfd.has(Role::kTargetPosition));
 }
 
 const std::string kGood =
@@ -165,7 +174,7 @@ TEST(DriveProfile, ErrorsNameTheKeyPath) {
                "'middle_first' is not one of: high_first, low_first");
   expect_error(kGood + "  mode: {address: 9, scale: 0}\n", "registers.mode.scale", "out of range");
   expect_error(kGood + "  mode: {address: 3}\n", "registers.target_position", "overlaps mode");
-  expect_error("name: t\nstate_machine: canopen\n", "state_machine", "is not one of: cia402, leadshine, sim");
+  expect_error("name: t\nstate_machine: canopen\n", "state_machine", "is not one of: cia402, delta_vfd, leadshine, sim");
   std::string no_status = kGood;
   no_status.replace(no_status.find("  statusword: {address: 1}\n"), 27, "");
   expect_error(no_status, "registers.statusword", "is required by state_machine sim");
@@ -177,6 +186,11 @@ TEST(DriveProfile, ErrorsNameTheKeyPath) {
   std::string cia = kGood;
   cia.replace(cia.find("state_machine: sim"), 18, "state_machine: cia402");
   expect_error(cia, "registers.mode", "is required by state_machine cia402");
+  // A spindle VFD needs its frequency command and output frequency.
+  expect_error("name: v\nstate_machine: delta_vfd\nregisters:\n  controlword: {address: 0x2000}\n"
+               "  statusword: {address: 0x2101}\n  error_code: {address: 0x2100}\n  fault_reset: {address: 0x2002}\n"
+               "  actual_speed: {address: 0x2103, scale: 100}\n",
+               "registers.speed_setpoint", "is required by state_machine delta_vfd");
 }
 
 TEST(DriveProfile, FoundBesideTheMachineOrInTheSourceTree) {

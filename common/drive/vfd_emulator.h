@@ -1,0 +1,61 @@
+#pragma once
+// The drive end of a spindle VFD profile (state_machine delta_vfd): its register
+// image and a motor whose output frequency follows the command with a first-order
+// response, with a load figure (output current) of a steady part proportional to
+// speed and an inertial part proportional to the acceleration. The servo simulator
+// serves it over Modbus (modbus_reply on mapping()) and steps it on its 1 ms grid;
+// tests drive it through a link of their own.
+#include <modbus.h>
+
+#include <cstdint>
+
+#include "common/config/machine_config.h"
+#include "common/drive/drive_profile.h"
+#include "common/drive/profile_logic.h"
+
+namespace cnc::drive {
+
+class VfdEmulator {
+ public:
+  // `max_hz`: the frequency at the spindle's max_rpm (the load figure's scale).
+  VfdEmulator(const DriveProfile& profile, const config::SpindleSimConfig& sim, double max_hz);
+  ~VfdEmulator();
+  VfdEmulator(const VfdEmulator&) = delete;
+  VfdEmulator& operator=(const VfdEmulator&) = delete;
+
+  modbus_mapping_t* mapping() { return map_; }
+  // Direct access: 0 or a Modbus exception code.
+  int read(int addr, int n, uint16_t* dest) const;
+  int write(int addr, int n, const uint16_t* src);
+  // After the registers [addr, addr + n) were written through mapping().
+  void after_write(int addr, int n);
+  // The motor over dt_s seconds; refreshes the read registers.
+  void step(double dt_s);
+  // A fault inside the drive: it coasts down and reports `code` until a fault reset.
+  void inject_fault(uint16_t code);
+
+  bool running() const;
+  // Signed: negative in reverse.
+  double command_hz() const;
+  double output_hz() const { return hz_; }
+  double current_a() const { return current_a_; }
+  const DriveProfile& profile() const { return profile_; }
+
+ private:
+  uint16_t* reg(int addr) { return &map_->tab_registers[addr - base_]; }
+  const uint16_t* reg(int addr) const { return &map_->tab_registers[addr - base_]; }
+  void refresh();
+
+  DriveProfile profile_;
+  const ProfileLogic& logic_;
+  config::SpindleSimConfig sim_;
+  double max_hz_;
+  modbus_mapping_t* map_ = nullptr;
+  int base_;
+  int count_;
+  EmulatedDrive drive_;
+  double hz_ = 0;
+  double current_a_ = 0;
+};
+
+}  // namespace cnc::drive
