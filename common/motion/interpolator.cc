@@ -112,6 +112,7 @@ Interpolator::Interpolator(const config::MachineConfig& cfg)
       blocks_(static_cast<size_t>(std::max(64, 2 * cfg.block_window + 4))), look_(kLookCapacity) {
   for (int a = 0; a < naxes_; ++a) pos_[a] = cfg_.axes[a].home_mm;
   optional_stop_ = cfg_.program.optional_stop;
+  wait_for_spindle_ = cfg_.spindle.enabled;
 }
 
 Interpolator::Interpolator(const config::MachineConfig& cfg, PlanLink& link)
@@ -120,6 +121,7 @@ Interpolator::Interpolator(const config::MachineConfig& cfg, PlanLink& link)
       blocks_(static_cast<size_t>(std::max(64, 2 * cfg.block_window + 4))), look_(kLookCapacity) {
   for (int a = 0; a < naxes_; ++a) pos_[a] = cfg_.axes[a].home_mm;
   optional_stop_ = cfg_.program.optional_stop;
+  wait_for_spindle_ = cfg_.spindle.enabled;
 }
 
 Interpolator::~Interpolator() = default;
@@ -680,9 +682,11 @@ void Interpolator::at_stop_block(bool pausing) {
     pop_block();
     ++blocks_done_;
     state_ = RunState::kDone;
+    spindle_off();
   } else if (stopping_) {
     // STOP at rest before a dwell or an event: the program ends here.
     clear_blocks();
+    spindle_off();
     stopping_ = false;
     hold_ = false;
     state_ = RunState::kIdle;
@@ -695,6 +699,13 @@ void Interpolator::at_stop_block(bool pausing) {
     hold_ = true;
     state_ = RunState::kHeld;
   } else if (!pausing) {
+    if (p.block.kind == program::BlockKind::kEvent && p.block.event.kind == program::EventKind::kSpindle &&
+        spindle_taken_ != p.serial)
+      take_spindle_event(p);
+    if (spindle_wait_) {
+      state_ = RunState::kRunning;  // at rest until the spindle is at speed
+      return;
+    }
     if (dwell_left_ < 0) dwell_left_ = static_cast<int64_t>(std::ceil(p.block.dwell_s / period_s_ - 1e-9));
     if (dwell_left_ > 0) --dwell_left_;
     state_ = RunState::kRunning;
@@ -710,10 +721,30 @@ void Interpolator::at_stop_block(bool pausing) {
   }
 }
 
+void Interpolator::take_spindle_event(const Planned& p) {
+  spindle_taken_ = p.serial;
+  const int dir = p.block.event.number > 0 ? 1 : p.block.event.number < 0 ? -1 : 0;
+  const double rpm = dir == 0 || !(p.block.event.value > 0) ? 0.0 : p.block.event.value;
+  if (dir == spindle_.direction && rpm == spindle_.rpm) return;  // no change: nothing to wait for
+  ++spindle_.seq;
+  spindle_.direction = dir;
+  spindle_.rpm = rpm;
+  spindle_wait_ = wait_for_spindle_ && !auto_resume_pauses_ && dir != 0 && rpm > 0;
+}
+
+void Interpolator::spindle_off() {
+  spindle_wait_ = false;
+  if (spindle_.direction == 0 && spindle_.rpm == 0) return;
+  ++spindle_.seq;
+  spindle_.direction = 0;
+  spindle_.rpm = 0;
+}
+
 void Interpolator::end_or_starve() {
   // No block left to run (or a STOP came to rest): the program ends, or waits for blocks.
   if (stopping_) {
     clear_blocks();
+    spindle_off();
     stopping_ = false;
     state_ = RunState::kIdle;
     v_ = a_ = 0;

@@ -62,7 +62,11 @@ struct Command {
     kSingleBlock = 14, kOptionalStop = 15,
     // The rapids' speed scale (feed_override, 0.0 .. 1.0), on top of the feed override's
     // (which a rapid takes up to 1): a G0 runs at v * min(feed, 1) * rapid.
-    kRapidOverride = 18
+    kRapidOverride = 18,
+    // The spindle reached the speed of change `value` (a SpindleState::seq): the path,
+    // at rest at that change, goes on. The node applies it when the drive bridge
+    // reports the change at speed (SPINDLE_STATUS), recorded like every input.
+    kSpindleAtSpeed = 19
   };
   Kind kind = Kind::kStart;
   double feed_override = 1.0;  // kOverride: 0.0 .. kMaxFeedOverride; kRapidOverride: 0.0 .. 1.0
@@ -70,7 +74,8 @@ struct Command {
   // the drives stand, as the node took it from AXIS_STATUS); one finite value per axis.
   std::array<double, program::kMaxAxes> position_mm{};
   int axis = -1;      // kHomed
-  double value = 0;   // kHomed: drive minus machine position, mm; kSingleBlock, kOptionalStop: 1 on, 0 off
+  double value = 0;   // kHomed: drive minus machine position, mm; kSingleBlock, kOptionalStop: 1 on, 0 off;
+                      // kSpindleAtSpeed: the change's seq
 };
 
 struct Setpoint {
@@ -107,6 +112,15 @@ struct WorkCounters {
   int64_t curve_reuses = 0;    // ...and taken from the one before instead
 };
 
+// The spindle as the program has it where the path stands: each spindle event
+// (M3, M4, M5, S) is taken when the path reaches it; program end, a finished STOP,
+// LOAD and RESET turn it off. Every change gets a new seq.
+struct SpindleState {
+  int64_t seq = 0;
+  int direction = 0;  // 1 cw, -1 ccw, 0 off
+  double rpm = 0;     // 0 when off
+};
+
 // The shortest distance in which a brake limited by jerk J and acceleration A brings
 // the speed from v (acceleration a) to vt; 0 when the speed never exceeds vt.
 double brake_distance(double v, double a, double vt, double A, double J);
@@ -132,7 +146,8 @@ class Interpolator {
   // allocation here). On refusal the block is dropped.
   bool submit_block(std::unique_ptr<program::Block> block);
   // Program stops and tool changes (M0, M1, M6) hold the path until a RESUME; the dry
-  // run resumes them at once, as an operator pressing resume without delay.
+  // run resumes them at once, as an operator pressing resume without delay, and takes
+  // every spindle change as at speed at once.
   void set_auto_resume_pauses(bool on) { auto_resume_pauses_ = on; }
   // False for an override the planner could not be told of now (its queue is full:
   // not applied, try again).
@@ -179,6 +194,10 @@ class Interpolator {
   bool homed(int axis) const { return homed_[static_cast<size_t>(axis)]; }
   double drive_offset(int axis) const { return drive_offset_[static_cast<size_t>(axis)]; }
   const WorkCounters& work() const { return work_; }
+  const SpindleState& spindle() const { return spindle_; }
+  // At rest at a spindle change until kSpindleAtSpeed (a machine with a spindle:
+  // spindle.enabled; a change to a speed > 0, turning).
+  bool spindle_waiting() const { return spindle_wait_; }
   // Tests: every brake check's answer (and the limit it misses) handed to a check,
   // such as the plain scan of every sample to the horizon that the look-ahead's
   // shortcuts must answer as (tests/unit/lookahead_reference.h).
@@ -292,6 +311,9 @@ class Interpolator {
   // Arc length at u from the planner's samples.
   static double s_on_table(const Planned& p, double u);
   bool creep_to_stop();
+  // A spindle event at the front, reached: the change taken (and waited for).
+  void take_spindle_event(const Planned& p);
+  void spindle_off();
 
   config::MachineConfig cfg_;
   double period_s_;
@@ -365,6 +387,11 @@ class Interpolator {
     uint64_t u_bits = 0;
     motion::AxisVec P{}, d1{}, d2{};
   } last_eval_;
+
+  SpindleState spindle_;
+  uint64_t spindle_taken_ = UINT64_MAX;  // serial of the spindle event last taken
+  bool spindle_wait_ = false;
+  bool wait_for_spindle_ = false;  // cfg.spindle.enabled
 
   std::array<double, program::kMaxAxes> pos_{};
   std::array<double, program::kMaxAxes> drive_offset_{};

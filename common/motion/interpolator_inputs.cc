@@ -110,6 +110,7 @@ void Interpolator::clear_program() {
   u_ = s_ = v_ = a_ = 0;
   dwell_left_ = -1;
   rest_next_ = false;
+  spindle_off();
 }
 
 bool Interpolator::apply_command(const Command& cmd) {
@@ -183,6 +184,10 @@ bool Interpolator::apply_command(const Command& cmd) {
       output_position();
       break;
     }
+    case Command::Kind::kSpindleAtSpeed:
+      if (spindle_wait_ && std::isfinite(cmd.value) && cmd.value >= static_cast<double>(spindle_.seq))
+        spindle_wait_ = false;
+      break;
     case Command::Kind::kOverride:
     case Command::Kind::kRapidOverride:
       if (std::isfinite(cmd.feed_override)) {

@@ -11,6 +11,7 @@
 #include "cnc/lcmt_alarm.hpp"
 #include "cnc/lcmt_axis_status.hpp"
 #include "common/config/yaml_reader.h"
+#include "common/drive/delta_vfd_profile.h"
 #include "common/drive/link_factory.h"
 #include "common/drive/loopback_link.h"
 #include "common/util/clock.h"
@@ -51,6 +52,10 @@ DriveBridgeNode::DriveBridgeNode(const config::MachineConfig& cfg, bus::Bus& bus
       by_file[file] = profiles_.back().get();
     }
     const drive::DriveProfile* profile = by_file[file];
+    if (drive::is_spindle_profile(*profile))
+      throw config::ConfigError(cfg.source_file, "axes[" + std::to_string(i) + "].drive.profile",
+                                "'" + d.profile + "' is a spindle drive's profile (state_machine " +
+                                    profile->state_machine + "), not an axis drive's");
     const std::string key = d.link_key();
     if (!by_link.count(key)) {
       links_.push_back(drive::make_link(d));
@@ -66,6 +71,37 @@ DriveBridgeNode::DriveBridgeNode(const config::MachineConfig& cfg, bus::Bus& bus
     ax.slot = ax.worker->axes().size();
     ax.worker->add_axis(static_cast<int>(i), *profile, d.unit_id);
     axes_.push_back(ax);
+  }
+  if (cfg.spindle.enabled) {
+    const config::DriveConfig& d = cfg.spindle.drive;
+    const std::string file = drive::find_drive_profile(d.profile, cfg.source_file, cfg.drive_profile_dir);
+    if (!std::filesystem::exists(file))
+      throw config::ConfigError(cfg.source_file, "spindle.drive.profile",
+                                "no drive profile '" + d.profile + "' (looked for " + file + ")");
+    profiles_.push_back(std::make_unique<drive::DriveProfile>(drive::load_drive_profile(file)));
+    spindle_ = std::make_unique<Spindle>(cfg.spindle);
+    spindle_->profile = profiles_.back().get();
+    if (!drive::is_spindle_profile(*spindle_->profile))
+      throw config::ConfigError(cfg.source_file, "spindle.drive.profile",
+                                "'" + d.profile + "' is no spindle drive's profile (its state_machine is " +
+                                    spindle_->profile->state_machine + ", a spindle needs delta_vfd)");
+    const std::string key = d.link_key();
+    if (!by_link.count(key)) {
+      links_.push_back(drive::make_link(d));
+      workers_.push_back(std::make_unique<LinkWorker>(*links_.back(), cfg.drive_bridge));
+      by_link[key] = workers_.back().get();
+    }
+    spindle_->worker = by_link[key];
+    spindle_->worker->add_spindle(*spindle_->profile, d.unit_id);
+    ch_spindle_status_ = cfg.channel(ch::kSpindleStatus);
+    bus_.subscribe<cnc::lcmt_spindle_command>(cfg.channel(ch::kSpindleCmd), [this](const auto& m) {
+      Spindle& sp = *spindle_;
+      if (m.command_seq <= sp.pending_seq) return;  // the newest change wins; a repeat changes nothing
+      sp.pending = true;
+      sp.pending_seq = m.command_seq;
+      sp.pending_direction = m.direction;
+      sp.pending_rpm = m.rpm;
+    });
   }
   pace_.assign(workers_.size(), LinkPace{});
   if (const char* f = std::getenv("CNC_BRIDGE_DEBUG_TRACE")) {
@@ -92,6 +128,9 @@ void DriveBridgeNode::start() {
   for (size_t i = 0; i < axes_.size(); ++i)
     spdlog::info("axis {}: profile {} ({}), unit {}", cfg_.axes[i].name, axes_[i].profile->name,
                  axes_[i].profile->file, cfg_.axes[i].drive.unit_id);
+  if (spindle_)
+    spdlog::info("spindle: profile {} ({}), unit {} on {}", spindle_->profile->name, spindle_->profile->file,
+                 cfg_.spindle.drive.unit_id, spindle_->worker->link().name());
   if (opt_.threaded)
     for (auto& w : workers_) w->start();
   started_ = true;
@@ -172,6 +211,10 @@ void DriveBridgeNode::begin_enable(double now_s) {
   for (auto& a : axes_) {
     a.cmd.goal = drive::Goal::kEnable;
     a.link_down = false;
+  }
+  if (spindle_) {
+    spindle_->ctl.clear_fault();
+    spindle_->cmd.goal = drive::Goal::kFaultReset;  // a fault the VFD still reports is cleared
   }
   core_.disengage(actuals());
   state_ = State::kEnabling;
@@ -255,6 +298,7 @@ void DriveBridgeNode::servo_tick_inner(double now_s) {
   take_operator_command(now_s);
   advance_state(now_s);
   report_reconnects();
+  spindle_tick(now_s);
 
   // A link that has not finished the round of the last tick's command is stalled
   // (the drive, its network or this process's worker did not get to run): the
@@ -270,6 +314,69 @@ void DriveBridgeNode::servo_tick_inner(double now_s) {
   trace_tick(now_s, hold, cmd);
   if (hold) return;
   post_rounds(now_s);
+}
+
+void DriveBridgeNode::spindle_tick(double now_s) {
+  if (!spindle_) return;
+  Spindle& sp = *spindle_;
+  sp.rep = sp.worker->spindle_report();
+  // The spindle turns only while the bridge follows setpoints: a command that comes
+  // otherwise is spent, and any fault or stop of the bridge stops it.
+  const bool following = state_ == State::kEnabled && !core_.faulted();
+  const bool was_at_speed = sp.ctl.at_speed();
+  if (sp.pending) {
+    sp.pending = false;
+    const int64_t before = sp.ctl.command_seq();
+    sp.ctl.on_command(sp.pending_seq, sp.pending_direction, sp.pending_rpm, following, now_s);
+    // A line per change (events, not every tick).
+    if (sp.ctl.command_seq() != before)
+      spdlog::info("spindle: change {}: {} {:.0f} rpm{}", sp.ctl.command_seq(),
+                   sp.ctl.direction() > 0 ? "clockwise" : sp.ctl.direction() < 0 ? "counterclockwise" : "stop",
+                   sp.ctl.commanded_rpm(), following ? "" : " (not followed: the drives do not follow setpoints)");
+  }
+  if (!following) sp.ctl.stop();
+  sp.fb.answering = sp.rep.answering;
+  sp.fb.have_status = sp.rep.in.valid;
+  sp.fb.running = sp.rep.in.running;
+  sp.fb.error_code = sp.rep.in.error_code;
+  sp.fb.output_hz = sp.rep.in.output_hz;
+  sp.fb.lost_events = sp.rep.lost_events;
+  if (sp.ctl.update(sp.fb, now_s)) {
+    if (state_ == State::kEnabled || state_ == State::kEnabling || state_ == State::kStopping) {
+      fault(0, sp.ctl.fault_reason(), false);
+    } else {
+      spdlog::error("{}", sp.ctl.fault_reason());
+      alarm(cnc::lcmt_alarm::FAULT, "spindle_fault", sp.ctl.fault_reason());
+    }
+  }
+  if (!was_at_speed && sp.ctl.at_speed() && sp.ctl.direction() != 0)
+    spdlog::info("spindle: at speed: {:.0f} rpm, {:.3f} s after change {}", sp.ctl.actual_rpm(sp.fb),
+                 sp.ctl.time_to_speed_s(now_s), sp.ctl.command_seq());
+  sp.cmd.direction = static_cast<int8_t>(sp.ctl.direction());
+  sp.cmd.hz = sp.ctl.commanded_hz();
+  sp.worker->set_spindle_command(sp.cmd);
+}
+
+void DriveBridgeNode::publish_spindle_status() {
+  const Spindle& sp = *spindle_;
+  cnc::lcmt_spindle_status& m = spindle_msg_;
+  if (m.fault.capacity() < 256) m.fault.reserve(256);
+  const bool faulted = sp.ctl.faulted() || (sp.rep.in.valid && sp.rep.in.error_code != 0);
+  m.state = faulted ? cnc::lcmt_spindle_status::FAULT
+            : !sp.rep.in.valid ? cnc::lcmt_spindle_status::STARTING
+            : sp.rep.in.running ? cnc::lcmt_spindle_status::RUNNING
+                                : cnc::lcmt_spindle_status::STOPPED;
+  m.command_seq = sp.ctl.command_seq();
+  m.at_speed_seq = sp.ctl.at_speed_seq();
+  m.direction = static_cast<int8_t>(sp.ctl.direction());
+  m.commanded_rpm = sp.ctl.commanded_rpm();
+  m.actual_rpm = sp.ctl.actual_rpm(sp.fb);
+  m.current_a = sp.rep.in.current_a;
+  m.error_code = sp.rep.in.error_code;
+  m.fault.assign(sp.ctl.fault_reason());
+  m.transactions = sp.rep.counters.transactions;
+  m.timeouts = sp.rep.counters.timeouts;
+  bus_.publish(ch_spindle_status_, m);
 }
 
 void DriveBridgeNode::take_operator_command(double now_s) {
@@ -295,6 +402,10 @@ void DriveBridgeNode::take_operator_command(double now_s) {
     for (auto& a : axes_) {
       a.cmd.goal = c == cnc::lcmt_drive_command::DISABLE ? drive::Goal::kDisable : drive::Goal::kFaultReset;
       if (c == cnc::lcmt_drive_command::FAULT_RESET) a.link_down = false;
+    }
+    if (spindle_ && c == cnc::lcmt_drive_command::FAULT_RESET) {
+      spindle_->ctl.clear_fault();
+      spindle_->cmd.goal = drive::Goal::kFaultReset;
     }
     core_.disengage(actuals());
     if (state_ != State::kStarting) state_ = State::kDisabled;
@@ -537,6 +648,7 @@ void DriveBridgeNode::publish_status_inner(int64_t overruns) {
   s.setpoint_gaps = core_.setpoint_gaps();
   s.servo_overruns = overruns;
   bus_.publish(ch_status_, s);
+  if (spindle_) publish_spindle_status();
 }
 
 void DriveBridgeNode::shut_down() {
@@ -550,6 +662,12 @@ void DriveBridgeNode::shut_down() {
     a.cmd.goal = drive::Goal::kDisable;
     a.cmd.follow = false;
     a.worker->set_command(a.slot, a.cmd);
+  }
+  if (spindle_) {
+    spindle_->ctl.stop();
+    spindle_->cmd.direction = 0;
+    spindle_->cmd.hz = 0;
+    spindle_->worker->set_spindle_command(spindle_->cmd);
   }
   // Disable whatever answers: a few rounds, each at most one step of a state machine.
   for (int round = 0; round < 10; ++round) {

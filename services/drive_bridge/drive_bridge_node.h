@@ -20,12 +20,15 @@
 #include "cnc/lcmt_axis_status.hpp"
 #include "cnc/lcmt_drive_command.hpp"
 #include "cnc/lcmt_setpoint.hpp"
+#include "cnc/lcmt_spindle_command.hpp"
+#include "cnc/lcmt_spindle_status.hpp"
 #include "common/bus/bus.h"
 #include "common/drive/drive_profile.h"
 #include "common/drive/link.h"
 #include "common/service/bus_health.h"
 #include "services/drive_bridge/drive_bridge.h"
 #include "services/drive_bridge/link_worker.h"
+#include "services/drive_bridge/spindle_control.h"
 
 namespace cnc::bridge {
 
@@ -61,6 +64,8 @@ class DriveBridgeNode {
   const AxisReport& report(size_t axis) const { return axes_[axis].rep; }
   const drive::DriveProfile& profile_of(size_t axis) const { return *axes_[axis].profile; }
   int64_t tick_count() const { return tick_; }
+  // The spindle (spindle: in the config), else nullptr.
+  const SpindleControl* spindle() const { return spindle_ ? &spindle_->ctl : nullptr; }
   // Setpoints lost on the way and taken from a later one's history.
   int64_t recovered_setpoints() const { return recovered_setpoints_; }
 
@@ -90,6 +95,9 @@ class DriveBridgeNode {
   void publish_status_inner(int64_t overruns);
   void on_exception(const char* where, const char* what);
   void on_setpoint(const cnc::lcmt_setpoint& m);
+  // The spindle's share of a servo tick and of a status publish.
+  void spindle_tick(double now_s);
+  void publish_spindle_status();
   void fault(size_t axis, const std::string& why, bool disable_axis);
   void begin_enable(double now_s);
   void check_drives();
@@ -118,6 +126,23 @@ class DriveBridgeNode {
   double stale_report_s_ = -1e9;
   bool link_stalled();
   std::vector<Axis> axes_;
+  // The spindle's VFD (cfg.spindle.enabled): on a link worker like the axes' drives.
+  struct Spindle {
+    explicit Spindle(const config::SpindleConfig& c) : ctl(c) {}
+    SpindleControl ctl;
+    LinkWorker* worker = nullptr;
+    const drive::DriveProfile* profile = nullptr;
+    SpindleCommand cmd;
+    SpindleReport rep;
+    SpindleFeedback fb;
+    bool pending = false;  // a SPINDLE_CMD arrived since the last tick (the newest kept)
+    int64_t pending_seq = 0;
+    int8_t pending_direction = 0;
+    double pending_rpm = 0;
+  };
+  std::unique_ptr<Spindle> spindle_;
+  std::string ch_spindle_status_;
+  cnc::lcmt_spindle_status spindle_msg_{};  // reused by every status publish
   std::string ch_status_;
   cnc::lcmt_axis_status status_msg_{};  // reused by every status publish
   std::string ch_alarm_;

@@ -31,6 +31,13 @@ void LinkWorker::add_axis(int axis_index, const drive::DriveProfile& profile, in
   axis_index_.push_back(axis_index);
 }
 
+void LinkWorker::add_spindle(const drive::DriveProfile& profile, int unit) {
+  if (spindle_) throw std::runtime_error("a second spindle on link " + link_.name());
+  spindle_ = std::make_unique<SpindleSlot>();
+  spindle_->dev = std::make_unique<drive::SpindleDevice>(profile, unit, link_);
+  spindle_->pdo = image_.add(spindle_->dev->layout());
+}
+
 void LinkWorker::start() {
   stopping_.store(false, std::memory_order_release);
   thread_ = std::thread([this] { run(); });
@@ -89,6 +96,45 @@ void LinkWorker::mark_lost(Slot& s) {
   s.work.have_status = false;
 }
 
+void LinkWorker::mark_spindle_lost() {
+  if (!spindle_) return;
+  SpindleReport& w = spindle_->work;
+  if (w.answering) ++w.lost_events;
+  w.answering = false;
+  spindle_->dev->forget(image_.inputs(spindle_->pdo));
+  w.in = drive::SpindleInputs{};
+}
+
+void LinkWorker::mark_all_lost() {
+  for (auto& other : slots_) mark_lost(*other);
+  mark_spindle_lost();
+}
+
+void LinkWorker::spindle_round(double now_s) {
+  SpindleSlot& sp = *spindle_;
+  const SpindleCommand c = sp.cmd.read();
+  drive::SpindleOutputs out;
+  out.write = sp.work.in.valid;  // the first exchange after (re)opening only reads
+  out.direction = c.direction;
+  out.hz = c.hz;
+  drive::put_pdo(image_.outputs(sp.pdo), out);
+  const drive::TxResult r = sp.dev->exchange(image_.outputs(sp.pdo), image_.inputs(sp.pdo), sp.work.counters);
+  if (r == drive::TxResult::kOk) {
+    sp.work.in = drive::get_pdo<drive::SpindleInputs>(image_.inputs(sp.pdo));
+    sp.work.answering = true;
+    sp.last_answer_s = now_s;
+    if (sp.dev->control(c.goal, sp.work.counters) == drive::TxResult::kLinkLost) mark_all_lost();
+    return;
+  }
+  std::snprintf(sp.work.last_error.data(), sp.work.last_error.size(), "%s: %s", drive::tx_result_name(r),
+                link_.last_error().c_str());
+  if (r == drive::TxResult::kLinkLost) {
+    mark_all_lost();
+  } else if (sp.work.answering && now_s - sp.last_answer_s > cfg_.link_loss_timeout_s) {
+    mark_spindle_lost();
+  }
+}
+
 void LinkWorker::round(double now_s) {
   AxisCommand cmds[kMaxSlots];
   const size_t n = slots_.size();
@@ -96,11 +142,17 @@ void LinkWorker::round(double now_s) {
   if (!link_.is_open()) {
     if (link_.ensure_open(now_s)) {
       for (size_t i = 0; i < n; ++i) forget(*slots_[i]);
+      if (spindle_) mark_spindle_lost();
     } else {
       for (size_t i = 0; i < n; ++i) {
         Slot& s = *slots_[i];
         if (s.work.answering) mark_lost(s);
         std::snprintf(s.work.last_error.data(), s.work.last_error.size(), "%s", link_.last_error().c_str());
+      }
+      if (spindle_) {
+        mark_spindle_lost();
+        std::snprintf(spindle_->work.last_error.data(), spindle_->work.last_error.size(), "%s",
+                      link_.last_error().c_str());
       }
     }
   }
@@ -161,16 +213,14 @@ void LinkWorker::round(double now_s) {
       s.work.error_code = in.error_code;
       s.work.actual_mm = in.actual_mm;
       const drive::TxResult rc = s.dev->control(c.goal, s.work.counters);
-      if (rc == drive::TxResult::kLinkLost) {
-        for (auto& other : slots_) mark_lost(*other);
-      }
+      if (rc == drive::TxResult::kLinkLost) mark_all_lost();
       continue;
     }
     std::snprintf(s.work.last_error.data(), s.work.last_error.size(), "%s: %s", drive::tx_result_name(r),
                   link_.last_error().c_str());
     s.have_written = false;
     if (r == drive::TxResult::kLinkLost) {
-      for (auto& other : slots_) mark_lost(*other);
+      mark_all_lost();
       break;
     }
     if (s.work.answering && now_s - s.last_answer_s > cfg_.link_loss_timeout_s) {
@@ -178,7 +228,7 @@ void LinkWorker::round(double now_s) {
       // gone silent on a serial line): that drive's link is lost all the same.
       // When no drive on the link answers, reopen it, which drops stale replies.
       mark_lost(s);
-      bool any = false;
+      bool any = spindle_ && spindle_->work.answering;
       for (const auto& other : slots_) any = any || other->work.answering;
       if (!any) {
         link_.close(now_s);
@@ -186,7 +236,9 @@ void LinkWorker::round(double now_s) {
       }
     }
   }
+  if (spindle_ && link_.is_open()) spindle_round(now_s);
   for (size_t i = 0; i < n; ++i) slots_[i]->rep.write(slots_[i]->work);
+  if (spindle_) spindle_->rep.write(spindle_->work);
   ++rounds_;
 }
 

@@ -34,6 +34,7 @@
 #include "common/drive/axis_drive.h"
 #include "common/drive/device.h"
 #include "common/drive/link.h"
+#include "common/drive/spindle_device.h"
 #include "common/util/triple_buffer.h"
 
 namespace cnc::bridge {
@@ -66,6 +67,21 @@ struct AxisReport {
   std::array<char, 96> last_error{};  // fixed size: reports are copied every tick
 };
 
+// What the servo loop and a worker exchange for the spindle drive (a VFD).
+struct SpindleCommand {
+  drive::Goal goal = drive::Goal::kDisable;  // kFaultReset: clear the drive's fault
+  int8_t direction = 0;                      // 1, -1, 0 (stop)
+  double hz = 0;
+};
+
+struct SpindleReport {
+  bool answering = false;
+  int64_t lost_events = 0;
+  drive::SpindleInputs in;  // in.valid: a status since the link was (re)opened
+  drive::LinkCounters counters;
+  std::array<char, 96> last_error{};
+};
+
 class LinkWorker {
  public:
   // Called on the worker's thread for every target write while following.
@@ -75,6 +91,11 @@ class LinkWorker {
   ~LinkWorker();
   void add_axis(int axis_index, const drive::DriveProfile& profile, int unit);
   const std::vector<int>& axes() const { return axis_index_; }
+  // The spindle's VFD on this link (at most one); its exchange follows the axes' in a round.
+  void add_spindle(const drive::DriveProfile& profile, int unit);
+  bool has_spindle() const { return spindle_ != nullptr; }
+  void set_spindle_command(const SpindleCommand& c) { spindle_->cmd.write(c); }
+  const SpindleReport& spindle_report() { return spindle_->rep.read(); }
   drive::Link& link() { return link_; }
   void set_probe(WriteProbe p) { probe_ = std::move(p); }
 
@@ -105,8 +126,19 @@ class LinkWorker {
     double written_mm = 0;
     bool hold_valid = false;
   };
+  struct SpindleSlot {
+    std::unique_ptr<drive::Device> dev;  // a drive::SpindleDevice
+    size_t pdo = 0;
+    util::TripleBuffer<SpindleCommand> cmd;
+    util::TripleBuffer<SpindleReport> rep;
+    SpindleReport work;
+    double last_answer_s = -1;
+  };
   void run();
   void mark_lost(Slot& s);
+  void mark_spindle_lost();
+  void mark_all_lost();
+  void spindle_round(double now_s);
   void forget(Slot& s) { s.dev->forget(image_.inputs(s.pdo)); }
   drive::AxisInputs inputs(const Slot& s) { return drive::get_pdo<drive::AxisInputs>(image_.inputs(s.pdo)); }
 
@@ -115,6 +147,7 @@ class LinkWorker {
   std::vector<std::unique_ptr<Slot>> slots_;
   drive::ProcessImage image_;  // the cyclic process data of the drives on this link
   std::vector<int> axis_index_;
+  std::unique_ptr<SpindleSlot> spindle_;
   WriteProbe probe_;
   sem_t wake_;
   std::atomic<bool> stopping_{false};

@@ -23,6 +23,12 @@ bool to_core_command(const cnc::lcmt_program_command& m, Command* out) {
       out->axis = m.axis;
       out->value = m.value;
       return true;
+    case C::SPINDLE_AT_SPEED:
+      if (!std::isfinite(m.value) || m.value < 0) return false;
+      *out = Command{};
+      out->kind = Command::Kind::kSpindleAtSpeed;
+      out->value = m.value;
+      return true;
     case C::SINGLE_BLOCK:
     case C::OPTIONAL_STOP:
       if (!(m.value == 0 || m.value == 1)) return false;

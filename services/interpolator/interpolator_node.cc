@@ -11,6 +11,7 @@
 #include "cnc/lcmt_interp_input.hpp"
 #include "cnc/lcmt_interp_state.hpp"
 #include "cnc/lcmt_setpoint.hpp"
+#include "cnc/lcmt_spindle_status.hpp"
 #include "cnc/lcmt_config.hpp"
 #include "common/motion/feed_override.h"
 #include "common/program/block_msg.h"
@@ -58,7 +59,7 @@ InterpolatorNode::InterpolatorNode(const config::MachineConfig& cfg, bus::Bus& b
       health_(bus, cfg.channel(ch::kAlarm), "cnc-interpolator", cnc::lcmt_alarm::FAULT),
       inputs_(kMaxPendingInputs),
       peers_(bus, cfg, "cnc-interpolator", {"cnc-drive-bridge", "cnc-program-server"}),
-      stream_(util::next_token(0)) {
+      stream_(util::next_token(0)), spindle_seq_base_(stream_), ch_spindle_cmd_(cfg.channel(ch::kSpindleCmd)) {
   bus_.subscribe<cnc::lcmt_program_command>(cfg.channel(ch::kProgramCmd),
                                             [this](const auto& m) { on_command(m); });
   bus_.subscribe<cnc::lcmt_program_state>(cfg.channel(ch::kProgramState),
@@ -66,6 +67,10 @@ InterpolatorNode::InterpolatorNode(const config::MachineConfig& cfg, bus::Bus& b
   bus_.subscribe<cnc::lcmt_program_block>(cfg.channel(ch::kProgramBlocks), [this](const auto& m) { on_block(m); });
   bus_.subscribe<cnc::lcmt_logger_stats>(cfg.channel("LOGGER_STATS"),
                                          [this](const cnc::lcmt_logger_stats& m) { on_logger_stats(m); });
+  if (cfg.spindle.enabled)
+    bus_.subscribe<cnc::lcmt_spindle_status>(cfg.channel(ch::kSpindleStatus), [this](const cnc::lcmt_spindle_status& m) {
+      spindle_at_speed_seq_ = std::max(spindle_at_speed_seq_, m.at_speed_seq);
+    });
   bus_.subscribe<cnc::lcmt_axis_status>(cfg.channel(ch::kAxisStatus), [this](const cnc::lcmt_axis_status& m) {
     if (m.num_axes != static_cast<int32_t>(cfg_.axes.size())) return;
     axis_status_ = m;
@@ -320,13 +325,45 @@ void InterpolatorNode::run_cycle() {
   apply_pending_load();
   apply_pending_commands();
   manual_cycle();
+  take_spindle_at_speed();
   feed_planner(cyc);
   request_blocks();
 
   const Setpoint& sp = core_.step();
   if (sp.state == RunState::kDone) done_token_ = token_;
   publish_setpoint(sp);
+  publish_spindle(cyc);
   publish_state(false);
+}
+
+void InterpolatorNode::take_spindle_at_speed() {
+  if (!core_.spindle_waiting()) return;
+  const int64_t seq = spindle_seq_base_ + core_.spindle().seq;
+  if (spindle_at_speed_seq_ < seq) return;
+  cnc::lcmt_program_command m{};
+  m.command = cnc::lcmt_program_command::SPINDLE_AT_SPEED;
+  m.value = static_cast<double>(core_.spindle().seq);
+  Command c;
+  c.kind = Command::Kind::kSpindleAtSpeed;
+  c.value = m.value;
+  apply_command(c, m);
+}
+
+void InterpolatorNode::publish_spindle(int64_t cyc) {
+  // With every change, and again every 0.1 s: a lost datagram only delays the change.
+  if (!cfg_.spindle.enabled) return;
+  const SpindleState& s = core_.spindle();
+  const int64_t seq = spindle_seq_base_ + s.seq;
+  const int64_t repeat = std::max<int64_t>(1, std::llround(0.1 / cfg_.ipo_period_s));
+  if (seq == spindle_sent_seq_ && cyc - spindle_sent_cycle_ < repeat) return;
+  spindle_msg_.command_seq = seq;
+  spindle_msg_.direction = static_cast<int8_t>(s.direction);
+  spindle_msg_.rpm = s.rpm;
+  spindle_msg_.stream = stream_;
+  if (bus_.publish(ch_spindle_cmd_, spindle_msg_)) {
+    spindle_sent_seq_ = seq;
+    spindle_sent_cycle_ = cyc;
+  }
 }
 
 void InterpolatorNode::publish_config(int64_t cyc) {
@@ -369,8 +406,9 @@ void InterpolatorNode::apply_pending_command(const cnc::lcmt_program_command& m)
     approach_pending_ = false;
     return;
   }
-  if (m.command == PC::HOMED) {
-    spdlog::warn("HOMED from sender {} ignored: it is this interpolator's own input", m.sender);
+  if (m.command == PC::HOMED || m.command == PC::SPINDLE_AT_SPEED) {
+    spdlog::warn("{} from sender {} ignored: it is this interpolator's own input",
+                 m.command == PC::HOMED ? "HOMED" : "SPINDLE_AT_SPEED", m.sender);
     return;
   }
   if (m.command == PC::STOP && manual_ == Manual::kHome) manual_stop("homing stopped by the operator");

@@ -31,6 +31,7 @@
 #include "cnc/lcmt_program_command.hpp"
 #include "cnc/lcmt_program_state.hpp"
 #include "cnc/lcmt_setpoint.hpp"
+#include "cnc/lcmt_spindle_command.hpp"
 #include "common/bus/bus.h"
 #include "common/config/machine_config.h"
 #include "common/motion/feed_policy.h"
@@ -84,6 +85,10 @@ class InterpolatorNode {
   // "" when RESET can be applied now (and fills `out` with the position), else why not.
   std::string reset_position(cnc::lcmt_program_command* out) const;
   void watch_drives();
+  // The spindle (spindle: in the config): the at-speed wait ended by SPINDLE_STATUS
+  // (a recorded SPINDLE_AT_SPEED input), and the core's spindle sent on SPINDLE_CMD.
+  void take_spindle_at_speed();
+  void publish_spindle(int64_t cyc);
 
   // Operator motion (interpolator_node_manual.cc): jogs and the homing
   // sequence are moves the node makes itself, as a program of a line and an END
@@ -204,6 +209,14 @@ class InterpolatorNode {
   service::PeerWatch peers_;  // [0] the drive bridge, [1] the program server
   // The setpoint stream (lcmt_setpoint.stream): new at the start and at every RESET.
   int64_t stream_;
+  // SPINDLE_CMD's command_seq is this plus the core's SpindleState::seq: larger than
+  // any an interpolator started before this one sent (the bridge takes each once).
+  int64_t spindle_seq_base_;
+  int64_t spindle_at_speed_seq_ = -1;  // the newest SPINDLE_STATUS at_speed_seq
+  int64_t spindle_sent_seq_ = -1;
+  int64_t spindle_sent_cycle_ = 0;
+  std::string ch_spindle_cmd_;
+  cnc::lcmt_spindle_command spindle_msg_{};
 };
 
 }  // namespace cnc::interp

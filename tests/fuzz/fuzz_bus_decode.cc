@@ -33,6 +33,8 @@
 #include "cnc/lcmt_program_command.hpp"
 #include "cnc/lcmt_program_state.hpp"
 #include "cnc/lcmt_setpoint.hpp"
+#include "cnc/lcmt_spindle_command.hpp"
+#include "cnc/lcmt_spindle_status.hpp"
 #include "common/bus/auth.h"
 #include "common/bus/bus.h"
 #include "common/program/block.h"
@@ -44,7 +46,7 @@ using namespace cnc;
 const char* const kChannels[] = {"F.ALARM",     "F.AXIS_STATUS",  "F.BLOCK_REQUEST",  "F.CONFIG",
                                  "F.DRIVE_CMD", "F.HEARTBEAT",    "F.INTERP_INPUT",   "F.INTERP_STATE",
                                  "F.LOGGER",    "F.MONITOR",      "F.PROGRAM_BLOCK",  "F.PROGRAM_CMD",
-                                 "F.PROGRAM_STATE", "F.SETPOINTS"};
+                                 "F.PROGRAM_STATE", "F.SETPOINTS",     "F.SPINDLE_CMD",    "F.SPINDLE_STATUS"};
 constexpr size_t kNumChannels = sizeof(kChannels) / sizeof(kChannels[0]);
 
 bus::Key test_key() {
@@ -78,6 +80,8 @@ void subscribe_all(bus::Bus& b) {
   sub<lcmt_program_command>(b, i++);
   sub<lcmt_program_state>(b, i++);
   sub<lcmt_setpoint>(b, i++);
+  sub<lcmt_spindle_command>(b, i++);
+  sub<lcmt_spindle_status>(b, i++);
   b.subscribe_raw("F\\..*", [](const std::string&, const void* data, size_t size, int64_t) {
     (void)bus::peek_header(data, size);
   });

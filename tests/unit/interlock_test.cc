@@ -99,6 +99,7 @@ TEST(Interlock, OperatorCommandsInEveryState) {
       {C::TOUCH_OFF, {"", "", "p.ngc is running: STOP it first", "p.ngc is held: STOP it first", "FAULT (why): RESET first", kMove, kMove}},
       {C::MDI, {"", "", "p.ngc is running: STOP it first", "p.ngc is held: STOP it first", "FAULT (why): RESET first", kMove, kMove}},
       {C::HOMED, {"interpolator's own", "interpolator's own", "interpolator's own", "interpolator's own", "interpolator's own", "interpolator's own", "interpolator's own"}},
+      {C::SPINDLE_AT_SPEED, {"interpolator's own", "interpolator's own", "interpolator's own", "interpolator's own", "interpolator's own", "interpolator's own", "interpolator's own"}},
       {C::LOAD, {"", "", "STOP it first", "STOP it first", "RESET first", kMove, kMove}},
       {C::START, {"no program is loaded", "", "already", "RESUME it", "RESET first", kMove, kMove}},
       {C::HOLD, {"no program is running", "no program is running", "", "", "nothing runs", "no program is running", "no program is running"}},

@@ -1,6 +1,8 @@
 // cnc-servo-sim: emulates the cell's servo drives over Modbus TCP and Modbus RTU,
 // one unit id per axis, each axis with the drive profile its machine config names
-// (config/drives/*.yaml) and the servo dynamics of its `sim:` section.
+// (config/drives/*.yaml) and the servo dynamics of its `sim:` section; and the
+// spindle's VFD when the config has one (spindle:, its unit id on the same port or
+// line; a first-order speed response and a load figure, spindle.sim).
 //
 //   cnc-servo-sim --machine M [--port P] [--bind ADDR]      TCP axes: one port
 //                 [--device PTY] [--rtu-timing real|none]   RTU axes: the simulator's end of the line
@@ -46,7 +48,9 @@
 #include <nlohmann/json.hpp>
 
 #include "common/config/yaml_reader.h"
+#include "common/drive/delta_vfd_profile.h"
 #include "common/drive/drive_profile.h"
+#include "common/drive/vfd_emulator.h"
 #include "common/drive/link_factory.h"
 #include "common/service/service.h"
 #include "common/util/clock.h"
@@ -266,6 +270,14 @@ struct DebugTrace {
   std::string file;
 };
 
+// A change of the VFD's command: a line in the log (not on every step).
+void spindle_log(bool run, double command_hz, double output_hz) {
+  if (run)
+    spdlog::info("cnc-servo-sim: spindle: run at {:.2f} Hz (output {:.2f} Hz)", command_hz, output_hz);
+  else
+    spdlog::info("cnc-servo-sim: spindle: stop (output {:.2f} Hz)", output_hz);
+}
+
 class Simulator {
  public:
   Simulator(const cnc::config::MachineConfig& cfg, const cnc::service::Args& args);
@@ -284,6 +296,7 @@ class Simulator {
   void answer_rtu(const uint8_t* frame, int len, double rx_end_s);
   void read_control();
   void housekeeping(double now);
+  void reply_vfd(modbus_t* ctx, const uint8_t* query, int len, int header);
 
   const cnc::config::MachineConfig& cfg_;
   const cnc::service::Args& args_;
@@ -291,6 +304,13 @@ class Simulator {
   std::vector<std::unique_ptr<SimDrive>> drives_;
   std::vector<SimDrive*> all_, tcp_, rtu_;
   std::unique_ptr<cnc::servo_sim::SimWorld> world_;
+  // The spindle's VFD (nullptr: none); on TCP or on the RTU line, by its unit id.
+  std::unique_ptr<cnc::drive::VfdEmulator> vfd_;
+  int vfd_unit_ = -1;
+  bool vfd_tcp_ = false;
+  double vfd_t_ = -1;
+  double vfd_logged_hz_ = 0;
+  bool vfd_logged_run_ = false;
   cnc::servo_sim::FaultInjector injector_;
   // TCP
   std::string bind_;
@@ -330,6 +350,10 @@ Simulator::Simulator(const cnc::config::MachineConfig& cfg, const cnc::service::
         for (SimDrive* d : all_) {
           if (d->name() != axis) continue;
           d->emulator().inject_fault(code);
+          return true;
+        }
+        if (axis == "spindle" && vfd_) {
+          vfd_->inject_fault(code);
           return true;
         }
         return false;
@@ -373,7 +397,31 @@ Simulator::Simulator(const cnc::config::MachineConfig& cfg, const cnc::service::
       char_s_ = bits / static_cast<double>(baud_);
     }
   }
-  if (all_.empty()) throw std::runtime_error("no axis uses transport modbus_tcp or modbus_rtu");
+  if (cfg.spindle.enabled) {
+    const auto& d = cfg.spindle.drive;
+    const cnc::drive::Transport transport = cnc::drive::transport_of(d);
+    const std::string file = cnc::drive::find_drive_profile(d.profile, cfg.source_file, cfg.drive_profile_dir);
+    if (!std::filesystem::exists(file))
+      throw cnc::config::ConfigError(cfg.source_file, "spindle.drive.profile",
+                                     "no drive profile '" + d.profile + "' (looked for " + file + ")");
+    profiles_.push_back(std::make_unique<cnc::drive::DriveProfile>(cnc::drive::load_drive_profile(file)));
+    if (!cnc::drive::is_spindle_profile(*profiles_.back()))
+      throw cnc::config::ConfigError(cfg.source_file, "spindle.drive.profile",
+                                     "'" + d.profile + "' is no spindle drive's profile");
+    vfd_ = std::make_unique<cnc::drive::VfdEmulator>(*profiles_.back(), cfg.spindle.sim,
+                                                     cfg.spindle.max_rpm / cfg.spindle.rpm_per_hz);
+    vfd_unit_ = d.unit_id;
+    vfd_tcp_ = transport == cnc::drive::Transport::kModbusTcp;
+    if (vfd_tcp_) {
+      if (port_ < 0) port_ = d.port;
+      if (d.port != port_)
+        throw std::runtime_error("the spindle: the simulator serves one TCP port; the axes use " +
+                                 std::to_string(port_) + ", the spindle " + std::to_string(d.port));
+    } else if (rtu_.empty()) {
+      throw std::runtime_error("the spindle's VFD on RTU is served only on the axes' line");
+    }
+  }
+  if (all_.empty() && !vfd_) throw std::runtime_error("no axis uses transport modbus_tcp or modbus_rtu");
   {
     // How long a stalled master's dry stream stops the simulated world (SimWorld).
     const std::string p = args.option("master-stall-pause-s");
@@ -437,6 +485,15 @@ void Simulator::after_reply(SimDrive& d, const uint8_t* pdu) {
   }
 }
 
+void Simulator::reply_vfd(modbus_t* ctx, const uint8_t* query, int len, int header) {
+  modbus_reply(ctx, query, len, vfd_->mapping());
+  int addr = 0, n = 0;
+  written_range(query + header, &addr, &n);
+  const int first = vfd_->profile().first_address();
+  const int end = vfd_->profile().end_address();
+  if (n > 0 && addr >= first && addr + n <= end) vfd_->after_write(addr, n);
+}
+
 void Simulator::open_listener() {
   listen_fd_ = modbus_tcp_listen(tcp_ctx_, 8);
   if (listen_fd_ < 0)
@@ -489,6 +546,11 @@ void Simulator::step_dynamics() {
     ++steps;
   }
   if (steps >= 1000) next_step_s_ = now + dt_;
+  if (vfd_) {
+    // The VFD is a motor of its own: it runs on the wall's time, stalls or not.
+    if (vfd_t_ >= 0) vfd_->step(now - vfd_t_);
+    vfd_t_ = now;
+  }
 }
 
 void Simulator::serve_tcp_client(int fd, std::vector<int>& closed) {
@@ -500,6 +562,14 @@ void Simulator::serve_tcp_client(int fd, std::vector<int>& closed) {
     return;
   }
   const int header = modbus_get_header_length(tcp_ctx_);
+  if (vfd_ && vfd_tcp_ && query[header - 1] == vfd_unit_) {
+    if (const int code = injector_.take_exception()) {
+      modbus_reply_exception(tcp_ctx_, query, static_cast<unsigned>(code));
+    } else {
+      reply_vfd(tcp_ctx_, query, len, header);
+    }
+    return;
+  }
   SimDrive* d = drive_for(tcp_, query[header - 1]);
   const double delay = injector_.reply_delay_s(cnc::util::monotonic_s());
   if (delay > 0) sleep_until_mono(cnc::util::monotonic_s() + delay);
@@ -518,13 +588,16 @@ void Simulator::serve_tcp_client(int fd, std::vector<int>& closed) {
 
 void Simulator::answer_rtu(const uint8_t* frame, int len, double rx_end_s) {
   SimDrive* d = drive_for(rtu_, frame[0]);
-  if (d == nullptr) return;  // another unit's request: on a real line nobody here answers
+  const bool vfd = vfd_ && !vfd_tcp_ && frame[0] == vfd_unit_;
+  if (d == nullptr && !vfd) return;  // another unit's request: on a real line nobody here answers
   // The reply is built into a socket pair first: its length sets the line time,
   // and a CRC injection corrupts it before it goes out.
-  modbus_set_slave(rtu_ctx_, d->unit());
+  modbus_set_slave(rtu_ctx_, frame[0]);
   modbus_set_socket(rtu_ctx_, capture_[0]);
   if (const int code = injector_.take_exception()) {
     modbus_reply_exception(rtu_ctx_, frame, static_cast<unsigned>(code));
+  } else if (vfd) {
+    reply_vfd(rtu_ctx_, frame, len, 1);
   } else {
     world_->advance_to(cnc::util::monotonic_s());  // the reply reads the registers as they are at this moment
     modbus_reply(rtu_ctx_, frame, len, d->emulator().mapping());
@@ -623,6 +696,11 @@ void Simulator::housekeeping(double now) {
     }
   }
   if (!rtu_.empty() && serial_fd_ < 0) serial_fd_ = open_serial(device_, baud_);
+  if (vfd_ && (vfd_->running() != vfd_logged_run_ || std::fabs(vfd_->command_hz() - vfd_logged_hz_) > 1e-9)) {
+    vfd_logged_run_ = vfd_->running();
+    vfd_logged_hz_ = vfd_->command_hz();
+    spindle_log(vfd_logged_run_, vfd_logged_hz_, vfd_->output_hz());
+  }
   const bool trace_row = writer_->tracing() && now >= next_trace_s_;
   if (trace_row || now >= next_persist_s_) {
     if (trace_row) next_trace_s_ = now + 0.01;
@@ -641,7 +719,7 @@ void Simulator::housekeeping(double now) {
 }
 
 int Simulator::run() {
-  if (!tcp_.empty()) {
+  if (!tcp_.empty() || (vfd_ && vfd_tcp_)) {
     tcp_ctx_ = modbus_new_tcp(bind_.c_str(), port_);
     if (tcp_ctx_ == nullptr) throw std::runtime_error("cannot create a Modbus TCP context");
     open_listener();
@@ -659,6 +737,9 @@ int Simulator::run() {
   for (SimDrive* d : all_)
     spdlog::info("cnc-servo-sim: axis {} unit {} profile {} at {:.4f} mm", d->name(), d->unit(),
                  d->emulator().profile().name, d->position_mm());
+  if (vfd_)
+    spdlog::info("cnc-servo-sim: spindle unit {} profile {}: time constant {:g} s", vfd_unit_, vfd_->profile().name,
+                 cfg_.spindle.sim.time_constant_s);
   if (!args_.option("control").empty()) {
     const std::string path = args_.option("control");
     if (!std::filesystem::exists(path) && mkfifo(path.c_str(), 0600) != 0)

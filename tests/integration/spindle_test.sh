@@ -1,0 +1,140 @@
+#!/usr/bin/env bash
+# The spindle on the bus: a VFD (profile delta_vfd) simulated by cnc-servo-sim on the
+# axes' Modbus TCP link (unit 4, a first-order speed response), commanded by the
+# program's M3 / M5 in order with motion (config/machines/sim3_spindle.yaml).
+#  1. M3 S6000, a feed move, M5, M30: the feed move starts only once the spindle is
+#     within spindle.at_speed_tolerance of 6000 rpm (measured from the logged
+#     SPINDLE_CMD, SPINDLE_STATUS and SETPOINTS: the time from M3 to at speed, the
+#     speed when X starts to move); M5 reaches the drive when the path reaches it (X
+#     at the move's end); after M30 the spindle runs down to a stop; the run replays
+#     bit for bit (the at-speed input is recorded).
+#  2. The same program on a VFD too slow for spindle.at_speed_timeout_s (time constant
+#     5 s, timeout 1 s): a drive fault naming the reason, X never moves, the VFD is
+#     told to stop.
+#   spindle_test.sh BUILD_DIR SOURCE_DIR
+source "$(dirname "$0")/lib.sh"
+enter_private_netns "$@"
+BUILD="$1"; SRC="$2"
+WORK="$(mktemp -d /tmp/cnc-spindle.XXXXXX)"
+trap 'cleanup $?' EXIT
+M="$WORK/machine.yaml"
+make_machine "$SRC/config/machines/sim3_spindle.yaml" "$M"
+CTL=("$BUILD/tools/cnc-ctl" --machine "$M")
+TOL=$(sed -n 's/^ *at_speed_tolerance: *\([0-9.]*\).*/\1/p' "$M")
+
+cat >"$WORK/spindle.ngc" <<'NGC'
+G21 G90
+M3 S6000
+G1 X20 F3000
+M5
+M30
+NGC
+
+# ---- 1. at speed before the feed move -------------------------------------------
+start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M"
+start logger "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/cell"
+start_cell
+"${CTL[@]}" --do run --program "$WORK/spindle.ngc" --timeout 60 >"$WORK/ctl1.out" 2>&1 ||
+  { cat "$WORK/ctl1.out" >&2; fail "the spindle program did not run to its end"; }
+sleep 3  # the spindle runs down after M30 (SPINDLE_STATUS in the log)
+for s in interpolator program-server monitor drive-bridge servo-sim logger; do stop "$s" TERM; done
+grep "spindle" "$WORK/drive-bridge.log" >&2 || true
+/usr/bin/python3 - "$WORK/cell.lcmlog" "$TEST_PREFIX" "$TOL" <<'PY' || fail "the spindle did not run as it should"
+import struct, sys
+log, prefix, tol = sys.argv[1], sys.argv[2], float(sys.argv[3])
+data = open(log, "rb").read()
+events, p = [], 0
+while p + 28 <= len(data):
+    sync, _, ts, clen, dlen = struct.unpack(">IqqII", data[p:p + 28])
+    if sync != 0xEDA1DA01: break
+    events.append((ts, data[p + 28:p + 28 + clen].decode(), data[p + 28 + clen:p + 28 + clen + dlen]))
+    p += 28 + clen + dlen
+def fields(b, fmt):
+    return struct.unpack_from(">" + fmt, b, 8)
+cmds, stats, xs = [], [], []
+for ts, ch, b in events:
+    if ch == prefix + "SPINDLE_CMD":
+        _, _, _, seq, d, rpm, _ = fields(b, "qqiqbdq")
+        cmds.append((ts, seq, d, rpm))
+    elif ch == prefix + "SPINDLE_STATUS":
+        _, _, _, state, seq, at_seq, d, crpm, arpm, cur = fields(b, "qqibqqbddd")
+        stats.append((ts, state, seq, at_seq, d, crpm, arpm, cur))
+    elif ch == prefix + "SETPOINTS":
+        _, _, _, cycle, _, n, x = fields(b, "qqiqdid")
+        xs.append((ts, x))
+ok = True
+def check(cond, what):
+    global ok
+    print(("# " if cond else "# FAILED: ") + what, file=sys.stderr)
+    ok = ok and cond
+m3 = next((c for c in cmds if c[2] == 1 and c[3] == 6000), None)
+check(m3 is not None, "SPINDLE_CMD clockwise 6000 rpm sent")
+if not m3: sys.exit(1)
+at = next((s for s in stats if s[3] >= m3[1] and s[0] >= m3[0]), None)
+check(at is not None, "SPINDLE_STATUS reports the change at speed")
+if not at: sys.exit(1)
+x0 = xs[0][1]
+move = next((x for x in xs if x[1] > x0 + 1e-6), None)
+check(move is not None, "X moved")
+if not move: sys.exit(1)
+before = [s for s in stats if s[0] <= move[0]]
+rpm_at_move = before[-1][6] if before else float("nan")
+print(f"# time from M3 (SPINDLE_CMD) to at speed: {(at[0] - m3[0]) * 1e-6:.3f} s", file=sys.stderr)
+print(f"# speed at at-speed: {at[6]:.0f} rpm; current then {at[7]:.2f} A", file=sys.stderr)
+print(f"# time from M3 to the feed move's first setpoint: {(move[0] - m3[0]) * 1e-6:.3f} s", file=sys.stderr)
+print(f"# spindle speed when the feed move begins: {rpm_at_move:.0f} rpm", file=sys.stderr)
+check(move[0] >= at[0], "the feed move began after the at-speed report")
+check(abs(rpm_at_move - 6000) <= tol * 6000, f"within {tol * 100:.1f} % of 6000 rpm when the feed move began")
+peak_current = max(s[7] for s in stats if m3[0] <= s[0] <= at[0])
+print(f"# output current while accelerating: up to {peak_current:.1f} A", file=sys.stderr)
+check(peak_current > 0, "a load figure (output current) on the bus")
+# M5 in order with motion: sent when X had reached the feed move's end.
+m5 = next((c for c in cmds if c[0] > m3[0] and c[2] == 0), None)
+check(m5 is not None, "SPINDLE_CMD stop sent (M5)")
+if m5:
+    x_at_m5 = [x for x in xs if x[0] <= m5[0]][-1][1]
+    check(abs(x_at_m5 - (x0 + 20)) < 1e-6 or abs(x_at_m5 - 20) < 1e-6, f"M5 sent with X at the move's end ({x_at_m5:.4f})")
+last = stats[-1]
+print(f"# last SPINDLE_STATUS: state {last[1]}, commanded {last[5]:.0f} rpm, actual {last[6]:.0f} rpm", file=sys.stderr)
+check(last[5] == 0 and abs(last[6]) < 0.05 * 6000, "stopped after M30 (commanded 0, below 5 % of the speed 3 s on)")
+sys.exit(0 if ok else 1)
+PY
+"$BUILD/tools/cnc-replay" --log "$WORK/cell.lcmlog" >"$WORK/replay.out" 2>&1 || { cat "$WORK/replay.out" >&2; fail "the run does not replay"; }
+grep "^identical" "$WORK/replay.out" >&2 || fail "no verdict from cnc-replay"
+
+# ---- 2. a VFD too slow: the at-speed timeout --------------------------------------
+sed -e 's#time_constant_s: [0-9.]*#time_constant_s: 5#' -e 's#at_speed_timeout_s: [0-9.]*#at_speed_timeout_s: 1#' \
+  "$M" >"$WORK/slow.yaml"
+M="$WORK/slow.yaml"
+CTL=("$BUILD/tools/cnc-ctl" --machine "$M")
+start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M"
+start logger "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/slow"
+start_cell
+rc=0
+"${CTL[@]}" --do run --program "$WORK/spindle.ngc" --timeout 30 >"$WORK/ctl.out" 2>&1 || rc=$?
+cat "$WORK/ctl.out" >&2
+[ "$rc" -eq 5 ] || fail "cnc-ctl exit $rc on the slow VFD, expected 5 (fault)"
+grep "not reached" "$WORK/drive-bridge.log" >&2 || true
+grep -q "spindle: 6000 rpm not reached within 1.0 s (at [0-9]* rpm" "$WORK/drive-bridge.log" ||
+  fail "the bridge did not name the at-speed timeout"
+grep -q "not reached within 1.0 s" "$WORK/ctl.out" || fail "cnc-ctl's fault report does not name the reason"
+sleep 1
+grep -q "spindle: stop" "$WORK/servo-sim.log" || fail "the VFD was not told to stop after the fault"
+for s in interpolator program-server monitor drive-bridge servo-sim logger; do stop "$s" TERM; done
+/usr/bin/python3 - "$WORK/slow.lcmlog" "$TEST_PREFIX" <<'PY' || fail "X moved although the spindle never reached its speed"
+import struct, sys
+data = open(sys.argv[1], "rb").read()
+prefix, p, xs, stats = sys.argv[2], 0, [], []
+while p + 28 <= len(data):
+    sync, _, ts, clen, dlen = struct.unpack(">IqqII", data[p:p + 28])
+    if sync != 0xEDA1DA01: break
+    ch, b = data[p + 28:p + 28 + clen].decode(), data[p + 28 + clen:p + 28 + clen + dlen]
+    if ch == prefix + "SETPOINTS": xs.append(struct.unpack_from(">qqiqdid", b, 8)[6])
+    if ch == prefix + "SPINDLE_STATUS": stats.append(struct.unpack_from(">qqibqqbddd", b, 8))
+    p += 28 + clen + dlen
+faults = [s for s in stats if s[3] == 3]
+print(f"# X setpoints from {min(xs):.6f} to {max(xs):.6f} mm; speed at the fault {faults[0][8]:.0f} rpm" if faults else
+      "# no SPINDLE_STATUS in FAULT", file=sys.stderr)
+sys.exit(0 if faults and max(xs) - min(xs) < 1e-9 and faults[-1][7] == 0 else 1)
+PY
+echo "PASS"

@@ -1,0 +1,162 @@
+// The core's spindle: a spindle event (M3, M4, M5, S) is taken when the path
+// reaches it, in order with motion; on a machine with a spindle the path stands at a
+// change to a speed until the recorded at-speed input names that change (through
+// inputs.cc, as replay applies it); program end and STOP turn the spindle off; a
+// machine without one, and the dry run, never wait.
+#include <gtest/gtest.h>
+
+#include <string>
+
+#include "cnc/lcmt_interp_input.hpp"
+#include "common/config/machine_config.h"
+#include "common/motion/interpolator.h"
+#include "common/program/block.h"
+#include "services/interpolator/inputs.h"
+
+namespace cnc::interp {
+namespace {
+
+config::MachineConfig load(const char* name) {
+  return config::load_machine_config(std::string(CNC_SOURCE_DIR) + "/config/machines/" + name);
+}
+
+program::Block event_block(int64_t index, const std::vector<double>& at, int direction, double rpm) {
+  program::Block b;
+  b.index = index;
+  b.kind = program::BlockKind::kEvent;
+  b.start = b.end = at;
+  b.event.kind = program::EventKind::kSpindle;
+  b.event.number = direction;
+  b.event.value = rpm;
+  return b;
+}
+
+program::Block line_block(int64_t index, const std::vector<double>& from, double x) {
+  program::Block b;
+  b.index = index;
+  b.kind = program::BlockKind::kLine;
+  b.start = from;
+  b.end = from;
+  b.end[0] = x;
+  b.feed_mm_per_min = 3000;
+  return b;
+}
+
+// M3 S6000, G1 X10, M5, G1 X20, M30 (its own spindle stop is M5's), END.
+void load_program(Interpolator& core) {
+  core.apply_command({Command::Kind::kLoad, 1.0, {}});
+  const std::vector<double> o{0, 0, 0}, x10{10, 0, 0}, x20{20, 0, 0};
+  ASSERT_TRUE(core.apply_block(event_block(0, o, 1, 6000))) << core.last_refusal();
+  ASSERT_TRUE(core.apply_block(line_block(1, o, 10))) << core.last_refusal();
+  ASSERT_TRUE(core.apply_block(event_block(2, x10, 0, 0))) << core.last_refusal();
+  ASSERT_TRUE(core.apply_block(line_block(3, x10, 20))) << core.last_refusal();
+  program::Block end;
+  end.index = 4;
+  end.kind = program::BlockKind::kEnd;
+  end.start = end.end = x20;
+  ASSERT_TRUE(core.apply_block(end)) << core.last_refusal();
+  core.apply_command({Command::Kind::kStart, 1.0, {}});
+}
+
+cnc::lcmt_interp_input at_speed_input(int64_t seq) {
+  cnc::lcmt_interp_input in{};
+  in.kind = cnc::lcmt_interp_input::COMMAND;
+  in.command.command = cnc::lcmt_program_command::SPINDLE_AT_SPEED;
+  in.command.value = static_cast<double>(seq);
+  return in;
+}
+
+TEST(InterpolatorSpindle, ThePathStandsAtAChangeUntilItIsAtSpeed) {
+  const config::MachineConfig cfg = load("sim3_spindle.yaml");
+  ASSERT_TRUE(cfg.spindle.enabled);
+  Interpolator core(cfg);
+  load_program(core);
+  for (int i = 0; i < 500; ++i) core.step();
+  EXPECT_TRUE(core.spindle_waiting());
+  EXPECT_EQ(core.spindle().seq, 1);
+  EXPECT_EQ(core.spindle().direction, 1);
+  EXPECT_EQ(core.spindle().rpm, 6000);
+  EXPECT_EQ(core.state(), RunState::kRunning);
+  EXPECT_EQ(core.last().position_mm[0], 0.0) << "no feed move before the spindle is at speed";
+  // An at-speed input of an older change does not end the wait; the change's own does.
+  EXPECT_EQ(apply_recorded_input(core, at_speed_input(0), 3), "");
+  core.step();
+  EXPECT_TRUE(core.spindle_waiting());
+  EXPECT_EQ(apply_recorded_input(core, at_speed_input(1), 3), "");
+  EXPECT_FALSE(core.spindle_waiting());
+  bool moved = false;
+  int64_t m5_cycle = -1;
+  for (int i = 0; i < 100000 && core.state() != RunState::kDone; ++i) {
+    core.step();
+    moved = moved || core.last().position_mm[0] > 0;
+    if (m5_cycle < 0 && core.spindle().direction == 0) {
+      m5_cycle = core.cycle();
+      EXPECT_NEAR(core.last().position_mm[0], 10.0, 1e-9) << "M5 is taken where the path reaches it";
+    }
+    EXPECT_FALSE(core.spindle_waiting()) << "a stop is not waited for";
+  }
+  EXPECT_TRUE(moved);
+  EXPECT_EQ(core.state(), RunState::kDone);
+  EXPECT_EQ(core.spindle().seq, 2);
+  EXPECT_EQ(core.last().position_mm[0], 20.0);
+}
+
+TEST(InterpolatorSpindle, ProgramEndAndStopTurnItOff) {
+  const config::MachineConfig cfg = load("sim3_spindle.yaml");
+  Interpolator core(cfg);
+  core.apply_command({Command::Kind::kLoad, 1.0, {}});
+  const std::vector<double> o{0, 0, 0};
+  ASSERT_TRUE(core.apply_block(event_block(0, o, -1, 3000)));
+  ASSERT_TRUE(core.apply_block(line_block(1, o, 50)));
+  program::Block end;
+  end.index = 2;
+  end.kind = program::BlockKind::kEnd;
+  end.start = end.end = {50, 0, 0};
+  ASSERT_TRUE(core.apply_block(end));
+  core.apply_command({Command::Kind::kStart, 1.0, {}});
+  for (int i = 0; i < 10; ++i) core.step();
+  ASSERT_TRUE(core.spindle_waiting());
+  Command at;
+  at.kind = Command::Kind::kSpindleAtSpeed;
+  at.value = 1;
+  core.apply_command(at);
+  for (int i = 0; i < 50; ++i) core.step();
+  EXPECT_EQ(core.spindle().direction, -1);
+  core.apply_command({Command::Kind::kStop, 1.0, {}});
+  for (int i = 0; i < 10000 && core.state() != RunState::kIdle; ++i) core.step();
+  EXPECT_EQ(core.state(), RunState::kIdle);
+  EXPECT_EQ(core.spindle().direction, 0) << "STOP turns the spindle off";
+  EXPECT_EQ(core.spindle().seq, 2);
+  // Program end turns it off too (a program whose end comes without M5).
+  core.apply_command({Command::Kind::kLoad, 1.0, {}});
+  const std::vector<double> here{core.machine_position(0), 0, 0};
+  ASSERT_TRUE(core.apply_block(event_block(0, here, 1, 1000)));
+  end.index = 1;
+  end.start = end.end = here;
+  ASSERT_TRUE(core.apply_block(end));
+  core.apply_command({Command::Kind::kStart, 1.0, {}});
+  for (int i = 0; i < 5; ++i) core.step();
+  core.apply_command(Command{Command::Kind::kSpindleAtSpeed, 1.0, {}, -1, 3.0});
+  for (int i = 0; i < 100 && core.state() != RunState::kDone; ++i) core.step();
+  EXPECT_EQ(core.state(), RunState::kDone);
+  EXPECT_EQ(core.spindle().direction, 0);
+  EXPECT_EQ(core.spindle().seq, 4);
+}
+
+TEST(InterpolatorSpindle, NoSpindleOrADryRunNeverWaits) {
+  for (const char* name : {"sim3.yaml", "sim3_spindle.yaml"}) {
+    const config::MachineConfig cfg = load(name);
+    Interpolator core(cfg);
+    if (cfg.spindle.enabled) core.set_auto_resume_pauses(true);  // the dry run
+    load_program(core);
+    for (int i = 0; i < 100000 && core.state() != RunState::kDone; ++i) {
+      core.step();
+      EXPECT_FALSE(core.spindle_waiting()) << name;
+    }
+    EXPECT_EQ(core.state(), RunState::kDone) << name;
+    EXPECT_EQ(core.spindle().seq, 2) << name << ": the changes are taken all the same";
+  }
+}
+
+}  // namespace
+}  // namespace cnc::interp
