@@ -363,8 +363,6 @@ void read_spindle(MapReader r, MachineConfig& c) {
   s.enabled = true;
   if (!r.has("drive")) r.fail("drive", "is required: the spindle's VFD (transport, address, unit_id, profile)");
   s.drive = read_drive(r.map("drive", kDriveKeys));
-  if (drive::transport_named(s.drive.transport) == Transport::kLoopback)
-    r.fail("drive", "transport loopback has no spindle drive: modbus_tcp or modbus_rtu");
   for (const auto& a : c.axes) {
     if (a.drive.link_key() == s.drive.link_key() && a.drive.unit_id == s.drive.unit_id)
       r.fail("drive", "unit_id " + std::to_string(s.drive.unit_id) + " is axis " + a.name + "'s drive on the same link");

@@ -12,6 +12,15 @@ void LoopbackLink::add_drive(int unit, const DriveProfile& profile, double start
   drives_[unit] = std::make_unique<DriveEmulator>(profile, start_mm);
 }
 
+void LoopbackLink::add_vfd(int unit, const DriveProfile& profile, const config::SpindleSimConfig& sim, double max_hz) {
+  vfds_[unit] = std::make_unique<VfdEmulator>(profile, sim, max_hz);
+}
+
+VfdEmulator* LoopbackLink::vfd(int unit) {
+  auto it = vfds_.find(unit);
+  return it == vfds_.end() ? nullptr : it->second.get();
+}
+
 DriveEmulator* LoopbackLink::drive(int unit) {
   auto it = drives_.find(unit);
   return it == drives_.end() ? nullptr : it->second.get();
@@ -56,8 +65,16 @@ void LoopbackLink::move(DriveEmulator& d) {
   d.set_actual(d.follows() && !stalled_ ? d.target_mm() : f.decode(regs), 0.0);
 }
 
+void LoopbackLink::move(VfdEmulator& v) {
+  if (!stalled_) v.settle();
+}
+
 int LoopbackLink::do_read(int unit, int addr, int n, uint16_t* dest) {
   if (const int e = injected()) return e;
+  if (VfdEmulator* v = vfd(unit)) {
+    const int x = v->read(addr, n, dest);
+    return x ? MODBUS_ENOBASE + x : 0;
+  }
   DriveEmulator* d = drive(unit);
   if (d == nullptr) return ETIMEDOUT;
   const int x = d->read(addr, n, dest);
@@ -68,6 +85,11 @@ int LoopbackLink::do_write1(int unit, int addr, uint16_t value) { return do_writ
 
 int LoopbackLink::do_write(int unit, int addr, int n, const uint16_t* src) {
   if (const int e = injected()) return e;
+  if (VfdEmulator* v = vfd(unit)) {
+    move(*v);
+    const int x = v->write(addr, n, src);
+    return x ? MODBUS_ENOBASE + x : 0;
+  }
   DriveEmulator* d = drive(unit);
   if (d == nullptr) return ETIMEDOUT;
   move(*d);

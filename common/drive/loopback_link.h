@@ -1,12 +1,14 @@
 #pragma once
 // The in-process link: drives emulated by DriveEmulator with an ideal axis (the
-// actual position is the target once the drive follows). The whole bridge runs on
+// actual position is the target once the drive follows), and spindle VFDs emulated
+// by VfdEmulator with an ideal motor (at the commanded frequency by the next request). The whole bridge runs on
 // it without a simulator or a network, as ros2_control's mock hardware does; tests
 // inject link loss, exceptions and drive faults through it.
 #include <map>
 #include <memory>
 
 #include "common/drive/drive_emulator.h"
+#include "common/drive/vfd_emulator.h"
 #include "common/drive/link.h"
 
 namespace cnc::drive {
@@ -16,12 +18,15 @@ class LoopbackLink final : public Link {
   LoopbackLink();
   void add_drive(int unit, const DriveProfile& profile, double start_mm);
   DriveEmulator* drive(int unit);
+  // A spindle VFD (profile delta_vfd) under `unit`; `max_hz`: its frequency at max_rpm.
+  void add_vfd(int unit, const DriveProfile& profile, const config::SpindleSimConfig& sim, double max_hz);
+  VfdEmulator* vfd(int unit);
 
   // Fault injection.
   void set_reachable(bool reachable);          // false: the link breaks and cannot be opened
   void inject_exceptions(int count, int code);  // the next `count` transactions answer with `code`
   void inject_timeouts(int count);
-  void set_stalled(bool stalled);               // the axes stop moving (a blocked axis: following error)
+  void set_stalled(bool stalled);               // the axes and motors stop moving (a blocked axis: following error)
 
  private:
   int do_open(std::string& error) override;
@@ -32,8 +37,10 @@ class LoopbackLink final : public Link {
   int do_write_read(int unit, int waddr, int wn, const uint16_t* src, int raddr, int rn, uint16_t* dest) override;
   int injected();
   void move(DriveEmulator& d);
+  void move(VfdEmulator& v);
 
   std::map<int, std::unique_ptr<DriveEmulator>> drives_;
+  std::map<int, std::unique_ptr<VfdEmulator>> vfds_;
   bool reachable_ = true;
   int exceptions_left_ = 0;
   int exception_code_ = 0;

@@ -64,6 +64,12 @@ void VfdEmulator::step(double dt_s) {
   refresh();
 }
 
+void VfdEmulator::settle() {
+  hz_ = command_hz();
+  current_a_ = sim_.load_current_a * std::fabs(hz_) / max_hz_;
+  refresh();
+}
+
 void VfdEmulator::inject_fault(uint16_t code) {
   logic_.drive_fault(drive_, code);
   refresh();

@@ -31,6 +31,8 @@ class VfdEmulator {
   void after_write(int addr, int n);
   // The motor over dt_s seconds; refreshes the read registers.
   void step(double dt_s);
+  // An ideal motor (the loopback link): at the commanded frequency at once.
+  void settle();
   // A fault inside the drive: it coasts down and reports `code` until a fault reset.
   void inject_fault(uint16_t code);
 

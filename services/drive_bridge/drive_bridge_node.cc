@@ -92,6 +92,8 @@ DriveBridgeNode::DriveBridgeNode(const config::MachineConfig& cfg, bus::Bus& bus
       by_link[key] = workers_.back().get();
     }
     spindle_->worker = by_link[key];
+    if (auto* loopback = dynamic_cast<drive::LoopbackLink*>(&spindle_->worker->link()))
+      loopback->add_vfd(d.unit_id, *spindle_->profile, cfg.spindle.sim, cfg.spindle.max_rpm / cfg.spindle.rpm_per_hz);
     spindle_->worker->add_spindle(*spindle_->profile, d.unit_id);
     ch_spindle_status_ = cfg.channel(ch::kSpindleStatus);
     bus_.subscribe<cnc::lcmt_spindle_command>(cfg.channel(ch::kSpindleCmd), [this](const auto& m) {

@@ -3,7 +3,9 @@
 // setpoints, publish AXIS_STATUS; a lost link faults, is reconnected with the
 // reconnect counted and the drives kept disabled until ENABLE; a drive fault and a
 // following error fault; exceptions and timeouts are counted and not fatal;
-// DISABLE stops following. Each profile drives the same scenario.
+// DISABLE stops following. Each profile drives the same scenario. A spindle VFD on
+// the same loopback link: SPINDLE_CMD followed and at speed on SPINDLE_STATUS, its
+// at-speed timeout a fault of the bridge naming it, and still no allocation per tick.
 #include <gtest/gtest.h>
 #include <modbus.h>
 
@@ -15,6 +17,8 @@
 #include "cnc/lcmt_axis_status.hpp"
 #include "cnc/lcmt_drive_command.hpp"
 #include "cnc/lcmt_setpoint.hpp"
+#include "cnc/lcmt_spindle_command.hpp"
+#include "cnc/lcmt_spindle_status.hpp"
 #include "common/bus/bus.h"
 #include "common/config/machine_config.h"
 #include "common/config/yaml_reader.h"
@@ -47,12 +51,18 @@ std::string machine_yaml(const std::string& profile, bool enable_on_start) {
   return y;
 }
 
+// A VFD as unit 3 on the axes' loopback link.
+const std::string kSpindle =
+    "spindle: {drive: {transport: loopback, unit_id: 3, profile: delta_vfd}, at_speed_tolerance: 0.02,"
+    " at_speed_timeout_s: 0.2}\n";
+
 class Cell {
  public:
-  Cell(const std::string& profile, bool enable_on_start)
-      : cfg(config::parse_machine_config(machine_yaml(profile, enable_on_start), "lb.yaml")), bus("memq://"),
+  Cell(const std::string& profile, bool enable_on_start, const std::string& extra = "")
+      : cfg(config::parse_machine_config(machine_yaml(profile, enable_on_start) + extra, "lb.yaml")), bus("memq://"),
         node(cfg, bus, DriveBridgeNode::Options{false}) {
     bus.subscribe<cnc::lcmt_axis_status>("LB.AXIS_STATUS", [this](const auto& m) { status = m; });
+    bus.subscribe<cnc::lcmt_spindle_status>("LB.SPINDLE_STATUS", [this](const auto& m) { spindle = m; });
     bus.subscribe<cnc::lcmt_alarm>("LB.ALARM", [this](const auto& m) { alarms.push_back(m.code + ": " + m.text); });
     node.start();
   }
@@ -135,10 +145,19 @@ class Cell {
     return false;
   }
 
+  void spindle_command(int64_t seq, int8_t direction, double rpm) {
+    cnc::lcmt_spindle_command m{};
+    m.command_seq = seq;
+    m.direction = direction;
+    m.rpm = rpm;
+    bus.publish("LB.SPINDLE_CMD", m);
+  }
+
   config::MachineConfig cfg;
   bus::Bus bus;
   DriveBridgeNode node;
   cnc::lcmt_axis_status status{};
+  cnc::lcmt_spindle_status spindle{};
   std::vector<std::string> alarms;
   double t = 0;
   int64_t cycle = 0;
@@ -234,6 +253,97 @@ TEST(BridgeNode, ServoTickAndStatusPublishAllocateNothing) {
   c.count_allocations = false;
   EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
   EXPECT_NEAR(c.drive_mm(1), x, 0.2);
+  EXPECT_EQ(c.cyclic_allocations, 0);
+}
+
+TEST(BridgeNode, SpindleFollowsItsCommandsAndReportsAtSpeed) {
+  Cell c("sim", true, kSpindle);
+  c.ticks(40);
+  ASSERT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  ASSERT_NE(c.node.spindle(), nullptr);
+  c.spindle_command(101, 1, 6000);
+  c.hold_stream(10, 10, 5);
+  drive::VfdEmulator* vfd = c.link().vfd(3);
+  ASSERT_NE(vfd, nullptr);
+  EXPECT_TRUE(vfd->running());
+  EXPECT_NEAR(vfd->command_hz(), 100.0, 1e-9);  // 6000 rpm at 60 rpm/Hz
+  EXPECT_EQ(c.spindle.command_seq, 101);
+  EXPECT_EQ(c.spindle.at_speed_seq, 101);
+  EXPECT_EQ(int{c.spindle.state}, int{cnc::lcmt_spindle_status::RUNNING});
+  EXPECT_NEAR(c.spindle.actual_rpm, 6000, 1e-6);
+  EXPECT_GT(c.spindle.current_a, 0);
+  EXPECT_GT(c.spindle.transactions, 0);
+  // Counterclockwise, then a repeat of an older command changes nothing.
+  c.spindle_command(102, -1, 3000);
+  c.hold_stream(10, 10, 5);
+  EXPECT_NEAR(c.spindle.actual_rpm, -3000, 1e-6);
+  c.spindle_command(101, 1, 6000);
+  c.hold_stream(10, 10, 5);
+  EXPECT_NEAR(c.spindle.actual_rpm, -3000, 1e-6);
+  // DISABLE stops it; the command it had is not taken again after ENABLE.
+  c.command(cnc::lcmt_drive_command::DISABLE);
+  c.hold_stream(10, 10, 5);
+  EXPECT_FALSE(vfd->running());
+  c.command(cnc::lcmt_drive_command::ENABLE);
+  c.spindle_command(102, -1, 3000);
+  c.hold_stream(10, 10, 20);
+  EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  EXPECT_FALSE(vfd->running());
+  c.spindle_command(103, 1, 1000);
+  c.hold_stream(10, 10, 5);
+  EXPECT_TRUE(vfd->running());
+  EXPECT_EQ(c.spindle.at_speed_seq, 103);
+}
+
+TEST(BridgeNode, SpindleNotAtSpeedInTimeIsAFaultNamingIt) {
+  Cell c("sim", true, kSpindle);
+  c.ticks(40);
+  ASSERT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  c.link().set_stalled(true);  // the motor does not turn
+  c.spindle_command(7, 1, 6000);
+  c.hold_stream(10, 10, 40);  // 160 ms: within the 0.2 s timeout
+  EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  EXPECT_TRUE(c.link().vfd(3)->running());
+  c.hold_stream(10, 10, 20);
+  EXPECT_NE(c.node.detail().find("spindle: 6000 rpm not reached within 0.2 s (at 0 rpm"), std::string::npos)
+      << c.node.detail();
+  EXPECT_TRUE(c.alarmed("drive_fault: spindle: 6000 rpm not reached"));
+  EXPECT_EQ(int{c.status.drive_state[0]}, kFault);
+  EXPECT_FALSE(c.link().vfd(3)->running()) << "the fault stops the spindle";
+  EXPECT_EQ(int{c.spindle.state}, int{cnc::lcmt_spindle_status::FAULT});
+  EXPECT_NE(c.spindle.fault.find("not reached"), std::string::npos);
+}
+
+TEST(BridgeNode, SpindleDriveFaultIsAFault) {
+  Cell c("sim", true, kSpindle);
+  c.ticks(40);
+  c.spindle_command(7, 1, 6000);
+  c.hold_stream(10, 10, 5);
+  c.link().vfd(3)->inject_fault(0x0007);
+  c.hold_stream(10, 10, 5);
+  EXPECT_NE(c.node.detail().find("spindle: drive fault 0x0007"), std::string::npos) << c.node.detail();
+  // ENABLE resets the VFD's fault; the spindle stays stopped until a newer change.
+  c.command(cnc::lcmt_drive_command::ENABLE);
+  c.hold_stream(10, 10, 30);
+  EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  EXPECT_EQ(c.spindle.error_code, 0);
+  EXPECT_FALSE(c.link().vfd(3)->running());
+}
+
+TEST(BridgeNode, ServoTickAndStatusPublishAllocateNothingWithASpindle) {
+  Cell c("sim", true, kSpindle);
+  c.ticks(40);
+  ASSERT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  c.spindle_command(1, 1, 6000);
+  double x = c.move_x(10, 19.5);
+  c.hold_stream(x, 10, 20);
+  c.count_allocations = true;
+  c.spindle_command(2, 1, 8000);  // a change and its at-speed (no line of log when at speed at once)
+  x = c.move_x(x, 12);
+  c.hold_stream(x, 10, 50);
+  c.count_allocations = false;
+  EXPECT_EQ(c.spindle.at_speed_seq, 2);
+  EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
   EXPECT_EQ(c.cyclic_allocations, 0);
 }
 

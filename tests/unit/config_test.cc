@@ -172,8 +172,8 @@ TEST(MachineConfig, SpindleErrors) {
   expect_error_at(sim3_text() + "spindle: {max_rpm: 1000}\n", "spindle.drive", "is required");
   expect_error_at(replace_nth(with, "unit_id: 4", "unit_id: 2"), "spindle.drive", "axis Y's drive on the same link");
   expect_error_at(replace_nth(with, "transport: modbus_tcp, host: 127.0.0.1, port: 1502, unit_id: 4",
-                              "transport: loopback, unit_id: 4"),
-                  "spindle.drive", "transport loopback has no spindle drive");
+                              "transport: modbus_rtu, unit_id: 4"),
+                  "spindle.drive.device", "is required for transport modbus_rtu");
   expect_error_at(replace_nth(with, "at_speed_tolerance: 0.02", "at_speed_tolerance: 0.9"),
                   "spindle.at_speed_tolerance", "out of range");
   expect_error_at(replace_nth(with, "at_speed_timeout_s: 5", "at_speed_timeout_s: 0"),

@@ -397,7 +397,7 @@ Simulator::Simulator(const cnc::config::MachineConfig& cfg, const cnc::service::
       char_s_ = bits / static_cast<double>(baud_);
     }
   }
-  if (cfg.spindle.enabled) {
+  if (cfg.spindle.enabled && cnc::drive::transport_of(cfg.spindle.drive) != cnc::drive::Transport::kLoopback) {
     const auto& d = cfg.spindle.drive;
     const cnc::drive::Transport transport = cnc::drive::transport_of(d);
     const std::string file = cnc::drive::find_drive_profile(d.profile, cfg.source_file, cfg.drive_profile_dir);
