@@ -11,6 +11,8 @@
 #  2. The same program on a VFD too slow for spindle.at_speed_timeout_s (time constant
 #     5 s, timeout 1 s): a drive fault naming the reason, X never moves, the VFD is
 #     told to stop.
+#  3. The interpolator killed (SIGKILL) while the spindle turns in a dwell: the
+#     bridge's setpoint watchdog faults and the bridge stops the spindle itself.
 #   spindle_test.sh BUILD_DIR SOURCE_DIR
 source "$(dirname "$0")/lib.sh"
 enter_private_netns "$@"
@@ -137,4 +139,33 @@ print(f"# X setpoints from {min(xs):.6f} to {max(xs):.6f} mm; speed at the fault
       "# no SPINDLE_STATUS in FAULT", file=sys.stderr)
 sys.exit(0 if faults and max(xs) - min(xs) < 1e-9 and faults[-1][7] == 0 else 1)
 PY
+
+# ---- 3. the interpolator killed while the spindle turns ---------------------------
+M="$WORK/machine.yaml"
+CTL=("$BUILD/tools/cnc-ctl" --machine "$M")
+cat >"$WORK/dwell.ngc" <<'NGC'
+G21 G90
+M3 S6000
+G4 P30
+M5
+M30
+NGC
+start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M"
+start_cell
+"${CTL[@]}" --do run --program "$WORK/dwell.ngc" --timeout 60 >"$WORK/ctl3.out" 2>&1 &
+ctl_pid=$!
+for ((i = 0; i < 100; i++)); do
+  grep -q "spindle: at speed" "$WORK/drive-bridge.log" && break
+  sleep 0.1
+done
+grep -q "spindle: at speed" "$WORK/drive-bridge.log" || fail "the spindle did not reach its speed for the dwell"
+kill_hard interpolator
+sleep 1
+wait "$ctl_pid" 2>/dev/null || true
+grep -E "fault|spindle" "$WORK/drive-bridge.log" | tail -n 3 >&2
+grep -q "fault: .*setpoint" "$WORK/drive-bridge.log" || fail "the bridge did not fault on the lost setpoints"
+# This simulator's VFD started stopped: its one "stop" line is the bridge's stop.
+grep -q "cnc-servo-sim: spindle: stop" "$WORK/servo-sim.log" ||
+  fail "the bridge did not stop the spindle when its interpolator was lost"
+for s in program-server monitor drive-bridge servo-sim; do stop "$s" TERM; done
 echo "PASS"
