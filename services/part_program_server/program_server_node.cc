@@ -146,8 +146,11 @@ CellView ProgramServerNode::view(double now_s) const {
 void ProgramServerNode::refuse(const cnc::lcmt_program_command& m, const std::string& why) {
   static const char* const kNames[] = {"?",    "LOAD", "START",         "HOLD",      "RESUME", "STOP", "OVERRIDE",
                                        "RESET", "HOME", "JOG", "JOG_KEEPALIVE", "TOUCH_OFF", "MDI",    "HOMED",
-                                       "SINGLE_BLOCK", "OPTIONAL_STOP", "BLOCK_DELETE", "CONFIRM", "RAPID_OVERRIDE"};
-  const char* name = m.command >= 1 && m.command <= 18 ? kNames[m.command] : "?";
+                                       "SINGLE_BLOCK", "OPTIONAL_STOP", "BLOCK_DELETE", "CONFIRM", "RAPID_OVERRIDE",
+                                       "SPINDLE_AT_SPEED"};
+  constexpr int kLast = static_cast<int>(sizeof kNames / sizeof kNames[0]) - 1;
+  static_assert(kLast == cnc::lcmt_program_command::SPINDLE_AT_SPEED, "a command without its name");
+  const char* name = m.command >= 1 && m.command <= kLast ? kNames[m.command] : "?";
   refusal_ = std::string(name) + (m.command == cnc::lcmt_program_command::LOAD ? " " + m.program_path : "") +
              " refused: " + why;
   refused_sender_ = m.sender;
