@@ -156,27 +156,15 @@ stop monitor TERM
 stop drive-bridge TERM
 stop servo-sim TERM
 stop logger TERM
-/usr/bin/python3 - "$WORK/cell.lcmlog" "$TEST_PREFIX" "$DECEL" <<'PY' || fail "the recorded ALARMs are wrong"
-import struct, sys
+/usr/bin/python3 - "$WORK/cell.lcmlog" "$TEST_PREFIX" "$DECEL" "$HERE" <<'PY' || fail "the recorded ALARMs are wrong"
+import sys
 log, prefix, decel = sys.argv[1], sys.argv[2], float(sys.argv[3])
-data = open(log, "rb").read()
-events, p = [], 0
-while p + 28 <= len(data):
-    sync, _, ts, clen, dlen = struct.unpack(">IqqII", data[p:p + 28])
-    if sync != 0xEDA1DA01: break
-    ch = data[p + 28:p + 28 + clen].decode()
-    events.append((ts, ch, data[p + 28 + clen:p + 28 + clen + dlen]))
-    p += 28 + clen + dlen
-class R:
-    def __init__(s, b): s.b, s.p = b, 8
-    def get(s, f):
-        n = struct.calcsize(f); v = struct.unpack(">" + f, s.b[s.p:s.p + n]); s.p += n; return v[0]
-    def str(s):
-        n = s.get("i"); v = s.b[s.p:s.p + n - 1].decode(); s.p += n; return v
+sys.path.insert(0, sys.argv[4])
+from lcmlog import events, Fields
 alarms = []
-for ts, ch, b in events:
+for ts, ch, b in events(log):
     if ch == prefix + "ALARM":
-        r = R(b); r.get("q"); r.get("q"); r.get("i")
+        r = Fields(b); r.get("q"); r.get("q"); r.get("i")
         alarms.append((ts, r.str(), r.get("b"), r.str(), r.str()))
 ok = True
 for src in ("cnc-drive-bridge", "cnc-interpolator"):

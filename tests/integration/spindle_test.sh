@@ -41,20 +41,13 @@ start_cell
 sleep 3  # the spindle runs down after M30 (SPINDLE_STATUS in the log)
 for s in interpolator program-server monitor drive-bridge servo-sim logger; do stop "$s" TERM; done
 grep "spindle" "$WORK/drive-bridge.log" >&2 || true
-/usr/bin/python3 - "$WORK/cell.lcmlog" "$TEST_PREFIX" "$TOL" <<'PY' || fail "the spindle did not run as it should"
-import struct, sys
+/usr/bin/python3 - "$WORK/cell.lcmlog" "$TEST_PREFIX" "$TOL" "$(dirname "$0")" <<'PY' || fail "the spindle did not run as it should"
+import sys
 log, prefix, tol = sys.argv[1], sys.argv[2], float(sys.argv[3])
-data = open(log, "rb").read()
-events, p = [], 0
-while p + 28 <= len(data):
-    sync, _, ts, clen, dlen = struct.unpack(">IqqII", data[p:p + 28])
-    if sync != 0xEDA1DA01: break
-    events.append((ts, data[p + 28:p + 28 + clen].decode(), data[p + 28 + clen:p + 28 + clen + dlen]))
-    p += 28 + clen + dlen
-def fields(b, fmt):
-    return struct.unpack_from(">" + fmt, b, 8)
+sys.path.insert(0, sys.argv[4])
+from lcmlog import events, fields
 cmds, stats, xs = [], [], []
-for ts, ch, b in events:
+for ts, ch, b in events(log):
     if ch == prefix + "SPINDLE_CMD":
         _, _, _, seq, d, rpm, _ = fields(b, "qqiqbdq")
         cmds.append((ts, seq, d, rpm))

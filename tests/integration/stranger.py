@@ -34,6 +34,8 @@ import struct
 import sys
 import time
 
+import lcmlog
+
 TRAILER_MAGIC = b"CNM\x01"
 TRAILER = 4 + 32 + 4
 N = 10  # of each message and kind
@@ -175,24 +177,12 @@ def attack(a):
     print("stranger: sent %d datagrams: %s" % (total, json.dumps(sent, sort_keys=True)))
 
 
-def log_events(path):
-    data = open(path, "rb").read()
-    off = 0
-    while off + 28 <= len(data):
-        magic, _num, ts, clen, dlen = struct.unpack_from(">IqqII", data, off)
-        if magic != 0xEDA1DA01:
-            raise SystemExit("bad log event at %d" % off)
-        ch = data[off + 28:off + 28 + clen].decode()
-        yield ts, ch, data[off + 28 + clen:off + 28 + clen + dlen]
-        off += 28 + clen + dlen
-
-
 def check(a):
     sys.path.insert(0, a.py)
     from cnc import lcmt_heartbeat, lcmt_alarm, lcmt_interp_input, lcmt_program_state, lcmt_program_command  # noqa
     sent = json.load(open(a.sent))["sent"]
     hb, alarms, applied, states = {}, [], [], []
-    for _ts, ch, payload in log_events(a.log):
+    for _ts, ch, payload in lcmlog.events(a.log):
         base = ch[len(a.prefix):]
         if base == "HEARTBEAT":
             m = lcmt_heartbeat.decode(payload)

@@ -26,6 +26,7 @@ constexpr int kExitSendFailed = 1;
 constexpr int kExitRefused = 3;
 constexpr int kExitTimeout = 4;
 constexpr int kExitFault = 5;
+constexpr int kExitStopped = 6;
 
 }  // namespace
 
@@ -704,8 +705,13 @@ int Ctl::watch_to_end(int64_t token) {
     }
     return false;
   };
+  // Stopped (STOP from anywhere: another cnc-ctl, the page): the run ends there.
+  auto stopped = [&] {
+    return view_.have_program && view_.program.program_token == token &&
+           view_.program.state == cnc::lcmt_program_state::STOPPED;
+  };
   const bool done = wait(timeout_s_, [&] {
-    return bridge_fault() || block_refused() || cell_fault() || peer_lost() ||
+    return bridge_fault() || block_refused() || cell_fault() || peer_lost() || stopped() ||
            (view_.interp.program_token == token && view_.interp.state == 3 /* done */);
   });
   if (block_refused()) {
@@ -732,6 +738,10 @@ int Ctl::watch_to_end(int64_t token) {
   if (!lost.empty()) {
     std::fprintf(stderr, "cnc-ctl: the program did not reach its end: %s\n", lost.c_str());
     return kExitFault;
+  }
+  if (stopped() && !(view_.interp.program_token == token && view_.interp.state == 3)) {
+    std::fprintf(stderr, "cnc-ctl: the program was stopped (STOP) before its end\n");
+    return kExitStopped;
   }
   if (!done) {
     std::fprintf(stderr, "cnc-ctl: program did not finish within %.0f s\n", timeout_s_);

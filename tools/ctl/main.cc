@@ -28,7 +28,7 @@
 // A command the cell refuses in its state (LOAD or START while a program runs, ...)
 // ends cnc-ctl at once with the reason from PROGRAM_STATE and exit 3.
 // Exit codes: 0 done; 1 the command could not be sent; 2 bad flags or config;
-// 3 program or command refused; 4 timeout; 5 fault.
+// 3 program or command refused; 4 timeout; 5 fault; 6 run: the program was stopped (STOP).
 #include "common/service/service.h"
 #include "tools/ctl/ctl.h"
 

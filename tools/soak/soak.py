@@ -247,15 +247,13 @@ class Soak:
             out, _ = run.communicate()
         self.ctl("override", "--value", "1.0")
         rc = run.returncode
-        outcome = {0: "done", 5: "fault", 3: "refused", 4: "timeout"}.get(rc, f"exit {rc}")
-        if rc == 0 and re.search(r"stopped", out):
-            outcome = "stopped"
+        outcome = {0: "done", 5: "fault", 3: "refused", 4: "timeout", 6: "stopped"}.get(rc, f"exit {rc}")
         self.count("runs", outcome)
         with open(os.path.join(self.work, "runs.txt"), "a") as f:
             last = out.strip().splitlines()[-1] if out.strip() else ""
             f.write(f"epoch {self.fig['epochs']} {os.path.basename(prog)}{' ' + ' '.join(frm) if frm else ''}: "
                     f"{outcome} (exit {rc}); fault injected: {injected or 'none'}; {last}\n")
-        if rc != 0 or injected:
+        if rc not in (0, 6) or injected:
             if rc == 5:
                 self.fig["stops_controlled"] += 1
                 # Named: cnc-ctl's reason says what failed, after a colon.
