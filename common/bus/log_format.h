@@ -8,12 +8,14 @@
 // Formats (one golden log each in tests/golden/logs, replayed by the suite):
 //   1  no format event; SETPOINTS without stream and engagement (lcmt_setpoint_v1)
 //   2  the format event; SETPOINTS carry the stream and the bridge's engagement
+//   3  blocks (PROGRAM_BLOCKS, INTERP_INPUT) carry the path tolerance (lcmt_program_block_v2
+//      and lcmt_interp_input_v2 read formats 1 and 2)
 #include <cstddef>
 #include <string>
 
 namespace cnc::bus {
 
-inline constexpr int kLogFormat = 2;
+inline constexpr int kLogFormat = 3;
 inline constexpr int kOldestReadableLogFormat = 1;
 inline constexpr char kLogFormatChannel[] = "CNC_LOG_FORMAT";
 

@@ -4,6 +4,7 @@
 #include <Eigen/SparseCholesky>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "common/geometry/nurbs.h"
 
@@ -22,6 +23,8 @@ constexpr int kMaxRounds = 30;
 constexpr double kSmoothing = 1e-3;
 constexpr double kMidWeight = 0.25;
 constexpr int kMinInSpan = 1;
+constexpr double kMinSpanPerTol = 8;
+constexpr int kMaxSpansPerMove = 4;
 
 // Index k of the span [U[k], U[k+1]) holding u (clamped cubic; u_max in the last span).
 int span_of(const std::vector<double>& U, int n_ctrl, double u) {
@@ -78,6 +81,59 @@ double project(const NurbsCurve& c, const Eigen::Vector3d& q, double t, double l
   return t;
 }
 
+// The polyline's segments, for the distance bound below.
+struct Seg {
+  Eigen::Vector3d a, ab;
+  double ab2;
+};
+
+double seg_dist(const Eigen::Vector3d& p, const Seg& s) {
+  const double t = std::clamp((p - s.a).dot(s.ab) / s.ab2, 0.0, 1.0);
+  return (p - s.a - t * s.ab).norm();
+}
+
+// Subdivisions of a Bézier piece before it counts as outside: a piece within the
+// tolerance by a margin δ is proven once its control polygon lies within δ of the
+// curve, which halving reaches quadratically.
+constexpr int kMaxBezierDepth = 14;
+
+// An upper bound on the largest distance of the cubic Bézier piece b from the
+// segments [lo, hi): d(., S) is convex for a segment S and the piece is a convex
+// combination of its control points, so along the piece d(., S) stays below its
+// largest value at them; the least of that over S bounds the distance to the union.
+// Where the bound exceeds tol and the piece's ends (points of the curve) are within
+// it, the piece is halved (de Casteljau) and each half bounded on its own.
+double piece_bound(const Eigen::Vector3d b[4], const std::vector<Seg>& segs, size_t lo, size_t hi, double tol,
+                   int depth) {
+  double upper = std::numeric_limits<double>::infinity(), f0 = upper, f3 = upper;
+  for (size_t i = lo; i < hi; ++i) {
+    const double d0 = seg_dist(b[0], segs[i]), d3 = seg_dist(b[3], segs[i]);
+    f0 = std::min(f0, d0);
+    f3 = std::min(f3, d3);
+    upper = std::min(upper, std::max({d0, d3, seg_dist(b[1], segs[i]), seg_dist(b[2], segs[i])}));
+  }
+  if (upper <= tol || depth == 0 || std::max(f0, f3) > tol) return upper;
+  const Eigen::Vector3d b01 = 0.5 * (b[0] + b[1]), b12 = 0.5 * (b[1] + b[2]), b23 = 0.5 * (b[2] + b[3]);
+  const Eigen::Vector3d b012 = 0.5 * (b01 + b12), b123 = 0.5 * (b12 + b23), mid = 0.5 * (b012 + b123);
+  const Eigen::Vector3d left[4] = {b[0], b01, b012, mid}, right[4] = {mid, b123, b23, b[3]};
+  const double l = piece_bound(left, segs, lo, hi, tol, depth - 1);
+  if (l > tol) return l;
+  return std::max(l, piece_bound(right, segs, lo, hi, tol, depth - 1));
+}
+
+// The span [u0, u1] of the cubic as a Bézier piece: a polynomial span is fixed by its
+// ends' points and first derivatives (the fit's interior knots are simple: C2 there).
+void span_bezier(const NurbsCurve& c, double u0, double u1, Eigen::Vector3d b[4]) {
+  Vec3 d0[2], d1[2];
+  c.derivatives(u0, 1, d0);
+  c.derivatives(u1, 1, d1);
+  const double h = (u1 - u0) / 3.0;
+  b[0] = d0[0];
+  b[1] = d0[0] + h * d0[1];
+  b[2] = d1[0] - h * d1[1];
+  b[3] = d1[0];
+}
+
 }  // namespace
 
 Eigen::Vector3d cubic_point(const std::vector<double>& knots, const std::vector<Eigen::Vector3d>& ctrl, double u) {
@@ -109,6 +165,9 @@ CubicFit fit_cubic(const std::vector<Eigen::Vector3d>& pts, double tol) {
     tm[static_cast<size_t>(i)] = 0.5 * (t[static_cast<size_t>(i)] + t[static_cast<size_t>(i + 1)]);
   }
 
+  std::vector<Seg> segs(static_cast<size_t>(np - 1));
+  for (size_t i = 0; i + 1 < pts.size(); ++i) segs[i] = {pts[i], pts[i + 1] - pts[i], (pts[i + 1] - pts[i]).squaredNorm()};
+
   std::vector<double> breaks;
   const int spans0 = std::max(1, (np - 1) / kPointsPerSpan);
   for (int j = 0; j <= spans0; ++j) {
@@ -127,7 +186,7 @@ CubicFit fit_cubic(const std::vector<Eigen::Vector3d>& pts, double tol) {
     P.back() = pts.back();
     if (nu > 0) {
       std::vector<Eigen::Triplet<double>> trip;
-      trip.reserve(static_cast<size_t>(np) * 16 + static_cast<size_t>(nc) * 9);
+      trip.reserve(static_cast<size_t>(np) * 64 + static_cast<size_t>(nc) * 9);
       Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(nu, 3);
       auto add_row = [&](const int* idx, const double* w, int cnt, const Eigen::Vector3d& target, double weight) {
         // One squared residual weight·|Σ w_j P_idx_j - target|²: known ends move to the right-hand side.
@@ -157,6 +216,12 @@ CubicFit fit_cubic(const std::vector<Eigen::Vector3d>& pts, double tol) {
       };
       for (int i = 0; i < np; ++i) add_data(t[static_cast<size_t>(i)], pts[static_cast<size_t>(i)], 1.0);
       for (int i = 0; i + 1 < np; ++i) add_data(tm[static_cast<size_t>(i)], mids[static_cast<size_t>(i)], kMidWeight);
+      // Quarter points too: between its data the curve must stay on the polyline.
+      for (int i = 0; i + 1 < np; ++i)
+        for (double f : {0.25, 0.75}) {
+          const size_t k = static_cast<size_t>(i);
+          add_data((1 - f) * t[k] + f * t[k + 1], (1 - f) * pts[k] + f * pts[k + 1], kMidWeight);
+        }
       const double lambda = kSmoothing * static_cast<double>(np) / static_cast<double>(nc);
       for (int j = 1; j + 1 < nc; ++j) {
         const int idx[3] = {j - 1, j, j + 1};
@@ -198,6 +263,19 @@ CubicFit fit_cubic(const std::vector<Eigen::Vector3d>& pts, double tol) {
       worst = std::max(worst, dist);
       if (dist > tol) mark(u);
     }
+    // Every point of every span, not only the points above: the span's bound.
+    for (size_t sp = 0; sp + 1 < breaks.size(); ++sp) {
+      const double u0 = breaks[sp], u1 = breaks[sp + 1], reach = u1 - u0;
+      const size_t lo = static_cast<size_t>(
+          std::max<std::ptrdiff_t>(0, (std::lower_bound(t.begin(), t.end(), u0 - reach) - t.begin()) - 1));
+      const size_t hi = std::min(segs.size(), static_cast<size_t>(std::upper_bound(t.begin(), t.end(), u1 + reach) -
+                                                                  t.begin()));
+      Eigen::Vector3d b[4];
+      span_bezier(curve, u0, u1, b);
+      const double bound = piece_bound(b, segs, lo, hi, tol, kMaxBezierDepth);
+      worst = std::max(worst, bound);
+      if (bound > tol) bad[sp] = 1;
+    }
     out.max_error = worst;
     if (worst <= tol) {
       out.ok = true;
@@ -206,8 +284,10 @@ CubicFit fit_cubic(const std::vector<Eigen::Vector3d>& pts, double tol) {
       out.params = std::move(t);
       return out;
     }
-    // A span is halved only while it holds at least two of the fitted points
-    // (vertices and midpoints): an empty span would let the curve swing freely.
+    // A span is halved while it holds a fitted point (a vertex or a midpoint), or
+    // while it is long against the tolerance: rounding a vertex within tol takes
+    // spans shorter than the moves (the smoothing term keeps an empty span tame, and
+    // the bound above catches it if not).
     std::vector<int> inside(breaks.size(), 0);
     auto count = [&](double u) {
       const auto it = std::upper_bound(breaks.begin(), breaks.end(), u);
@@ -222,13 +302,14 @@ CubicFit fit_cubic(const std::vector<Eigen::Vector3d>& pts, double tol) {
     bool added = false;
     for (size_t s = 0; s + 1 < breaks.size(); ++s) {
       next.push_back(breaks[s]);
-      if (bad[s] && inside[s] >= kMinInSpan) {
+      if (bad[s] && (inside[s] >= kMinInSpan || breaks[s + 1] - breaks[s] > kMinSpanPerTol * tol)) {
         next.push_back(0.5 * (breaks[s] + breaks[s + 1]));
         added = true;
       }
     }
     next.push_back(breaks.back());
-    if (!added) return out;
+    // Far more spans than moves: the run is no smooth curve at this tolerance.
+    if (!added || next.size() > static_cast<size_t>(kMaxSpansPerMove * np)) return out;
     breaks = std::move(next);
   }
   return out;

@@ -3,9 +3,10 @@
 // G1 moves is a sampled surface curve; the interpolator runs it at the feed the
 // curve allows only when it sees the curve, not the segments.
 //
-// * fit_cubic: a clamped cubic B-spline through the run's first and last points and
-//   within `tol` of every vertex and of every segment's midpoint (the distance is
-//   measured to the curve, by projection). Least squares with a small penalty on
+// * fit_cubic: a clamped cubic B-spline through the run's first and last points,
+//   every point of it within `tol` of the polyline (bounded span by span on the
+//   spans' Bézier control points, halved until proven), and every vertex and
+//   segment midpoint within `tol` of it (by projection: a point of the curve). Least squares with a small penalty on
 //   the control polygon's second differences (a P-spline: smooth through the
 //   rounding noise of posted coordinates, solvable for any knot placement), knots
 //   refined where the tolerance is missed, the data's parameters corrected by
@@ -28,7 +29,7 @@ struct CubicFit {
   std::vector<double> knots;             // clamped: 4 equal at each end
   std::vector<Eigen::Vector3d> ctrl;     // ctrl.front() == pts.front(), ctrl.back() == pts.back()
   std::vector<double> params;            // each point's parameter on the curve (its projection)
-  double max_error = 0;                  // largest distance of a vertex or midpoint to the curve, mm
+  double max_error = 0;                  // an upper bound of the curve's distance from the polyline and back, mm
   int rounds = 0;
 };
 

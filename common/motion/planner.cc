@@ -270,7 +270,7 @@ void Planner::plan_block(Planned& p) {
   w.share = w.curved ? 1.0 - kCentripetalShare : 1.0 - kJunctionShare;
   // 1 % below the tolerance: the circle formula is exact for constant curvature;
   // where the curvature changes within a step the error runs up to ~0.5 % over it.
-  w.eps = 0.99 * cfg_.chord_tolerance_mm;
+  w.eps = 0.99 * program::chord_tolerance_mm(b.path_tolerance_mm, cfg_.chord_tolerance_mm);
   // The roughness law is for cutting moves; a rapid does not cut.
   w.rough = b.process.active() && b.spindle_rpm > 0 && b.kind != program::BlockKind::kRapid;
   w.law = process::RoughnessLaw{b.process.ball_radius_mm, b.process.flutes, b.process.pick_feed_mm,

@@ -1,5 +1,6 @@
 #pragma once
 // A program block as the interpolator core sees it: plain data, no LCM.
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <string>
@@ -88,9 +89,24 @@ struct Block {
   double dwell_s = 0;
   double spindle_rpm = 0;
   ProcessParams process;
+  // G64 P in effect, mm (0: G61, or G64 without P): the path keeps within it of the
+  // program's geometry at every point, fit, blend and chord error together.
+  double path_tolerance_mm = 0;
   ArcGeometry arc;      // kArcCw, kArcCcw
   NurbsGeometry nurbs;  // kNurbs
   Event event;          // kEvent
 };
+
+// How a path tolerance P (G64 P) is shared: the interpolation's chords take at most
+// a quarter of it (never more than the machine's chord tolerance), the fit and the
+// corner blends the rest, so their deviations add up to P at most.
+inline constexpr double kChordShareOfPathTolerance = 0.25;
+inline double chord_tolerance_mm(double path_tolerance_mm, double machine_chord_mm) {
+  return path_tolerance_mm > 0 ? std::min(machine_chord_mm, kChordShareOfPathTolerance * path_tolerance_mm)
+                               : machine_chord_mm;
+}
+inline double shape_tolerance_mm(double path_tolerance_mm, double machine_chord_mm) {
+  return path_tolerance_mm - chord_tolerance_mm(path_tolerance_mm, machine_chord_mm);
+}
 
 }  // namespace cnc::program

@@ -58,6 +58,7 @@ cnc::lcmt_program_block to_msg(const Block& b, int64_t program_token) {
   m.flutes = b.process.flutes;
   m.pick_feed_mm = b.process.pick_feed_mm;
   m.target_rmax_um = b.process.target_rmax_um;
+  m.path_tolerance_mm = b.path_tolerance_mm;
   m.event_kind = static_cast<int8_t>(b.event.kind);
   m.event_number = b.event.number;
   m.event_value = b.event.value;
@@ -80,6 +81,7 @@ std::string from_msg(const cnc::lcmt_program_block& m, int num_axes, Block* out)
   if (!std::isfinite(m.ball_radius_mm) || m.ball_radius_mm < 0 || m.flutes < 0 || m.flutes > kMaxFlutes || !std::isfinite(m.pick_feed_mm) ||
       m.pick_feed_mm < 0 || !std::isfinite(m.target_rmax_um) || m.target_rmax_um < 0)
     return "bad process parameters";
+  if (!std::isfinite(m.path_tolerance_mm) || m.path_tolerance_mm < 0) return "bad path tolerance";
   if (m.kind == static_cast<int8_t>(BlockKind::kEvent) &&
       (m.event_kind <= 0 || m.event_kind > static_cast<int8_t>(EventKind::kLast) || !std::isfinite(m.event_value)))
     return "bad event";
@@ -102,6 +104,7 @@ std::string from_msg(const cnc::lcmt_program_block& m, int num_axes, Block* out)
   b.dwell_s = m.dwell_s;
   b.spindle_rpm = m.spindle_rpm;
   b.process = ProcessParams{m.ball_radius_mm, m.flutes, m.pick_feed_mm, m.target_rmax_um};
+  b.path_tolerance_mm = m.path_tolerance_mm;
   const bool feed_move = b.kind == BlockKind::kLine || b.kind == BlockKind::kArcCw || b.kind == BlockKind::kArcCcw ||
                          b.kind == BlockKind::kNurbs;
   if (feed_move && !(b.feed_mm_per_min > 0)) return std::string(to_string(b.kind)) + " without a feed";
@@ -133,6 +136,44 @@ std::string from_msg(const cnc::lcmt_program_block& m, int num_axes, Block* out)
   }
   *out = std::move(b);
   return {};
+}
+
+cnc::lcmt_program_block from_v2(const cnc::lcmt_program_block_v2& v) {
+  cnc::lcmt_program_block m;
+  m.utime = v.utime;
+  m.seq = v.seq;
+  m.sender = v.sender;
+  m.program_token = v.program_token;
+  m.block_index = v.block_index;
+  m.source_line = v.source_line;
+  m.source_column = v.source_column;
+  m.source_file = v.source_file;
+  m.kind = v.kind;
+  m.num_axes = v.num_axes;
+  m.start = v.start;
+  m.end = v.end;
+  m.center = v.center;
+  m.plane = v.plane;
+  m.turns = v.turns;
+  m.order = v.order;
+  m.num_knots = v.num_knots;
+  m.knots = v.knots;
+  m.num_control_points = v.num_control_points;
+  m.control_points = v.control_points;
+  m.weights = v.weights;
+  m.feed_mm_per_min = v.feed_mm_per_min;
+  m.dwell_s = v.dwell_s;
+  m.spindle_rpm = v.spindle_rpm;
+  m.ball_radius_mm = v.ball_radius_mm;
+  m.flutes = v.flutes;
+  m.pick_feed_mm = v.pick_feed_mm;
+  m.target_rmax_um = v.target_rmax_um;
+  m.event_kind = v.event_kind;
+  m.event_number = v.event_number;
+  m.event_value = v.event_value;
+  m.event_text = v.event_text;
+  m.path_tolerance_mm = 0;
+  return m;
 }
 
 }  // namespace cnc::program

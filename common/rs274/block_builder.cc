@@ -81,6 +81,7 @@ program::Block& BlockBuilder::begin(const SourceRef& ref, program::BlockKind kin
   b.end = position_;
   b.spindle_rpm = spindle_dir_ != 0 ? speed_rpm_ : 0.0;
   b.process = process_;
+  b.path_tolerance_mm = path_tol_mm_;
   out_.push_back(std::move(b));
   return out_.back();
 }
@@ -179,8 +180,9 @@ program::Block& BlockBuilder::run_block(const SourceRef& ref, program::BlockKind
 }
 
 // A run of G1 moves under G64 P, as blocks: stretches of short, gently turning
-// moves fitted to cubic splines within P (cut into NURBS blocks), the remaining
-// lines with each corner between two of them rounded within P by a quartic blend.
+// moves fitted to cubic splines (cut into NURBS blocks), the remaining lines with
+// each corner between two of them rounded by a quartic blend, both within P less
+// the interpolation's chord share (program::shape_tolerance_mm) at every point.
 // The run's end is where the last move ends, exactly.
 void BlockBuilder::flush_run() {
   if (run_.size() < 2) {
@@ -188,7 +190,7 @@ void BlockBuilder::flush_run() {
     return;
   }
   flushing_ = true;
-  const double tol = path_tol_mm_;
+  const double tol = program::shape_tolerance_mm(path_tol_mm_, setup_.chord_tolerance_mm);
   const size_t n = run_.size() - 1;  // moves
   std::vector<Eigen::Vector3d> pts(run_.size());
   for (size_t i = 0; i < run_.size(); ++i) pts[i] = Eigen::Vector3d(run_[i].pos[0], run_[i].pos[1], run_[i].pos[2]);

@@ -36,6 +36,9 @@ struct BuilderSetup {
   // is run at a crawl by the jerk its curvature change asks.
   double ipo_period_s = 0.004;
   double corner_dv_mm_s = 0;
+  // The machine's chord tolerance: its share of P (program::chord_tolerance_mm) is
+  // not the fit's and the blends'.
+  double chord_tolerance_mm = 0.001;
 };
 
 class BlockBuilder : public Canon {

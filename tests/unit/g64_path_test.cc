@@ -170,9 +170,9 @@ TEST(G64Path, CornersBetweenLinesAreRoundedWithinP) {
 }
 
 TEST(G64Path, AKinkTheFitCannotHoldIsCutThereAndTheRestStaysWithinP) {
-  // 40 moves, a 25-degree turn in the middle (a run by the 30-degree rule), P = 1 um:
+  // 40 moves, a 25-degree turn in the middle (a run by the 30-degree rule), P = 0.1 um:
   // no cubic holds it, so the run is cut at the turn and each half fitted.
-  std::string s = "G21 G17 G90 G64 P0.001\nG0 X0 Y0 Z0\nF3000\n";
+  std::string s = "G21 G17 G90 G64 P0.0001\nG0 X0 Y0 Z0\nF3000\n";
   std::vector<P3> pts;
   char buf[128];
   const double c = std::cos(25 * M_PI / 180), sn = std::sin(25 * M_PI / 180);
@@ -186,7 +186,7 @@ TEST(G64Path, AKinkTheFitCannotHoldIsCutThereAndTheRestStaysWithinP) {
   EXPECT_GE(count(r.blocks, program::BlockKind::kNurbs), 2u);
   double worst = 0;
   for (const P3& q : pts) worst = std::max(worst, distance_to_path(r.path, q));
-  EXPECT_LE(worst, 0.001 + 0.001 + 1e-6);
+  EXPECT_LE(worst, 0.0001 * (1 + 1e-6));
   EXPECT_LE(r.a_use, 1.01);
   EXPECT_LE(r.j_use, 1.01);
 }

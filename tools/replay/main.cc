@@ -27,6 +27,7 @@
 #include "cnc/lcmt_config.hpp"
 #include "cnc/lcmt_interp_input.hpp"
 #include "cnc/lcmt_setpoint.hpp"
+#include "cnc/lcmt_interp_input_v2.hpp"
 #include "cnc/lcmt_setpoint_v1.hpp"
 #include "common/bus/log_format.h"
 #include "common/bus/bus.h"
@@ -72,6 +73,22 @@ bool decode_v1(const void* data, size_t size, cnc::lcmt_setpoint* out) {
   out->state = v.state;
   out->num_prev_values = v.num_prev_values;
   out->prev_position_mm = v.prev_position_mm;
+  return true;
+}
+
+// An input as logs of formats 1 and 2 hold it (blocks without the path tolerance).
+bool decode_v2(const void* data, size_t size, cnc::lcmt_interp_input* out) {
+  cnc::lcmt_interp_input_v2 v;
+  if (!decode(data, size, &v)) return false;
+  out->utime = v.utime;
+  out->seq = v.seq;
+  out->sender = v.sender;
+  out->index = v.index;
+  out->cycle = v.cycle;
+  out->kind = v.kind;
+  out->block = cnc::program::from_v2(v.block);
+  out->command = v.command;
+  out->plans = v.plans;
   return true;
 }
 
@@ -155,7 +172,7 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
     });
     bus.subscribe_raw(".*INTERP_INPUT", [&](const std::string&, const void* d, size_t n, int64_t) {
       cnc::lcmt_interp_input in;
-      if (decode(d, n, &in)) inputs_of[in.sender].push_back(std::move(in));
+      if (decode(d, n, &in) || decode_v2(d, n, &in)) inputs_of[in.sender].push_back(std::move(in));
     });
     bus.subscribe_raw(".*SETPOINTS", [&](const std::string&, const void* d, size_t n, int64_t) {
       cnc::lcmt_setpoint sp;
