@@ -7,7 +7,10 @@
 
 namespace cnc::bus {
 
-std::string log_format_record() { return "cnc-log-format " + std::to_string(kLogFormat) + " " + util::version(); }
+std::string log_format_record() {
+  return "cnc-log-format " + std::to_string(kLogFormat) + " " + util::version() + " motion " +
+         std::to_string(kMotionRevision);
+}
 
 bool parse_log_format(const void* data, size_t size, LogFormat* out) {
   static constexpr char kTag[] = "cnc-log-format ";
@@ -17,6 +20,16 @@ bool parse_log_format(const void* data, size_t size, LogFormat* out) {
   if (std::sscanf(text.c_str() + sizeof kTag - 1, "%d %n", &format, &used) != 1 || format < 1) return false;
   out->format = format;
   out->version = text.substr(sizeof kTag - 1 + static_cast<size_t>(used));
+  out->motion = 1;
+  static constexpr char kMotion[] = " motion ";
+  if (const size_t at = out->version.rfind(kMotion); at != std::string::npos) {
+    int motion = 0;
+    char extra = 0;
+    if (std::sscanf(out->version.c_str() + at + sizeof kMotion - 1, "%d%c", &motion, &extra) == 1 && motion >= 1) {
+      out->motion = motion;
+      out->version.resize(at);
+    }
+  }
   return true;
 }
 

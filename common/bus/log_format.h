@@ -16,6 +16,15 @@
 namespace cnc::bus {
 
 inline constexpr int kLogFormat = 3;
+
+// The interpolator's behaviour: the same inputs give the same setpoints within one
+// revision; a revision changes them by design (the format event carries it from
+// format 3 on, "cnc-log-format N VERSION motion R"; older logs are revision 1).
+// cnc-replay replays a log of another revision and, where it diverges, says so.
+//   1  up to format 3
+//   2  a stop where the path turns rests two cycles (the bridge's moving averages
+//      then never mix the two directions)
+inline constexpr int kMotionRevision = 2;
 inline constexpr int kOldestReadableLogFormat = 1;
 inline constexpr char kLogFormatChannel[] = "CNC_LOG_FORMAT";
 
@@ -25,6 +34,7 @@ std::string log_format_record();
 struct LogFormat {
   int format = 1;       // 1 when the log has no format event
   std::string version;  // the logger's version; empty for format 1
+  int motion = 1;       // the motion revision (kMotionRevision) of the cell that recorded it
 };
 // Parses a format event's data; false when it is not one.
 bool parse_log_format(const void* data, size_t size, LogFormat* out);

@@ -560,7 +560,7 @@ bool Interpolator::creep_to_stop() {
   const double moved = advance(d, &at_stop);
   out_.feed_mm_per_min = moved / T * 60.0;
   v_ = a_ = 0;
-  rest_next_ = moved > 0 && !blocks_.empty() && !blocks_.front().stop_block();  // a dwell or event rests anyway
+  rest_left_ = moved > 0 && !blocks_.empty() && !blocks_.front().stop_block() ? kRestCycles : 0;  // a dwell or event rests anyway
   return true;
 }
 
@@ -631,10 +631,10 @@ const Setpoint& Interpolator::step() {
       at_stop_block(pausing);
     } else if (blocks_.empty() || (stopping_ && v_ == 0 && a_ == 0)) {
       end_or_starve();
-    } else if (rest_next_) {
-      // One cycle at rest on the stop point the last cycle ended on (the start from
-      // rest assumes it: without it the axes' jerk ran up to 1.07x the limit there).
-      rest_next_ = false;
+    } else if (rest_left_ > 0) {
+      // At rest on the stop point the last cycle ended on (the start from rest assumes
+      // a cycle of it: without it the axes' jerk ran up to 1.07x the limit there).
+      --rest_left_;
       out_.limit = Limit::kLookahead;
     } else if (!pausing && creep_to_stop()) {
       // A discrete brake ended a hair short of a stop point: step onto it.
@@ -781,7 +781,7 @@ void Interpolator::move_along_path(bool pausing) {
   if (at_stop) {
     v_n = 0;
     a_n = 0;
-    rest_next_ = moved > 0 && !blocks_.empty() && !blocks_.front().stop_block();
+    rest_left_ = moved > 0 && !blocks_.empty() && !blocks_.front().stop_block() ? kRestCycles : 0;
   }
   out_.feed_mm_per_min = moved / T * 60.0;
   out_.path_accel_mm_s2 = a_n;

@@ -109,7 +109,7 @@ void Interpolator::clear_program() {
   starved_cycles_ = 0;
   u_ = s_ = v_ = a_ = 0;
   dwell_left_ = -1;
-  rest_next_ = false;
+  rest_left_ = 0;
   spindle_off();
 }
 

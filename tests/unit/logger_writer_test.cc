@@ -151,6 +151,7 @@ TEST_F(LoggerWriterTest, EveryFileBeginsWithTheFormatEvent) {
     ASSERT_TRUE(cnc::bus::parse_log_format(events[0].data.data(), events[0].data.size(), &fmt));
     EXPECT_EQ(fmt.format, cnc::bus::kLogFormat);
     EXPECT_EQ(fmt.version, cnc::util::version());
+    EXPECT_EQ(fmt.motion, cnc::bus::kMotionRevision);
     EXPECT_EQ(cnc::bus::unreadable_log_format(fmt), "");
     for (size_t k = 1; k < events.size(); ++k) EXPECT_EQ(index_of(events[k]), next++);
   }
@@ -170,6 +171,23 @@ TEST(LogFormat, FormatsThisBuildCannotReadAreRefusedWithTheVersionAndWhatToDo) {
   EXPECT_EQ(cnc::bus::unreadable_log_format(old), "");
   const std::string junk = "cnc-log-format x";
   EXPECT_FALSE(cnc::bus::parse_log_format(junk.data(), junk.size(), &f));
+}
+
+TEST(LogFormat, TheMotionRevisionIsReadAfterTheVersionAndIsOneWhereNoneIsNamed) {
+  cnc::bus::LogFormat f;
+  const std::string text = "cnc-log-format 3 0.1.0+380.gabc motion 7";
+  ASSERT_TRUE(cnc::bus::parse_log_format(text.data(), text.size(), &f));
+  EXPECT_EQ(f.format, 3);
+  EXPECT_EQ(f.version, "0.1.0+380.gabc");
+  EXPECT_EQ(f.motion, 7);
+  const std::string before = "cnc-log-format 2 0.1.0+306.ga886325";
+  ASSERT_TRUE(cnc::bus::parse_log_format(before.data(), before.size(), &f));
+  EXPECT_EQ(f.version, "0.1.0+306.ga886325");
+  EXPECT_EQ(f.motion, 1);
+  const std::string odd = "cnc-log-format 3 v motion 2x";  // not a revision: part of the version
+  ASSERT_TRUE(cnc::bus::parse_log_format(odd.data(), odd.size(), &f));
+  EXPECT_EQ(f.version, "v motion 2x");
+  EXPECT_EQ(f.motion, 1);
 }
 
 TEST_F(LoggerWriterTest, AnEventLargerThanTheRotateSizeGetsAFileOfItsOwn) {

@@ -2,7 +2,8 @@
 // their stamped cycles, with no socket and no clock, and compares every setpoint
 // with the logged one bit for bit. Exit 0 when identical; 1 at the first
 // divergence, which it names (cycle, time, block, line, field, both values); 2 when
-// the log cannot be replayed (no config, inputs lost).
+// the log cannot be replayed here (no config, inputs lost; or it diverges and was
+// recorded by another motion revision, common/bus/log_format.h, which it names).
 //
 //   cnc-replay --log LOG [--machine FILE] [--program FILE] [--key KEYFILE]
 //
@@ -206,8 +207,18 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
     std::fprintf(stderr, "cnc-replay: %s: %s\n", log.c_str(), why.c_str());
     return kExitUnreplayable;
   }
-  std::printf("log format %d%s\n", format.format,
-              format.version.empty() ? " (before format records)" : (" recorded by cnc " + format.version).c_str());
+  std::printf("log format %d%s, motion revision %d\n", format.format,
+              format.version.empty() ? " (before format records)" : (" recorded by cnc " + format.version).c_str(),
+              format.motion);
+  // A log of another motion revision replays, and where it diverges that is by design.
+  const auto diverged = [&]() {
+    if (format.motion == cnc::bus::kMotionRevision) return kExitDiverged;
+    std::printf("expected: the log's motion revision %d is not this cnc's %d (the same inputs make other setpoints by "
+                "design); replay it with the version that recorded it%s\n",
+                format.motion, cnc::bus::kMotionRevision,
+                format.version.empty() ? "" : (" (cnc " + format.version + ")").c_str());
+    return kExitUnreplayable;
+  };
   if (runs.empty()) {
     std::fprintf(stderr, "cnc-replay: %s holds no interpolator config (INTERP_CONFIG): not a cell log?\n", log.c_str());
     return kExitUnreplayable;
@@ -300,7 +311,7 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
         if (b == nullptr) {
           std::printf("diverges at cycle %lld: the recorded block %lld is not in %s\n", static_cast<long long>(cycle),
                       static_cast<long long>(in.block.block_index), args.option("program").c_str());
-          return kExitDiverged;
+          return diverged();
         }
         in.block = cnc::program::to_msg(*b, in.block.program_token);
       }
@@ -308,7 +319,7 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
       if (!why.empty()) {
         std::printf("diverges at cycle %lld: input %lld was applied live but is refused now: %s\n",
                     static_cast<long long>(cycle), static_cast<long long>(in.index), why.c_str());
-        return kExitDiverged;
+        return diverged();
       }
     }
     if (next_input < mine.size() && mine[next_input].cycle < cycle) {
@@ -325,7 +336,7 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
                   static_cast<double>(cycle) * cfg.ipo_period_s, static_cast<long long>(it->second.block_index),
                   it->second.source_line, diff.c_str());
       std::printf("%lld setpoints identical before it\n", static_cast<long long>(compared));
-      return kExitDiverged;
+      return diverged();
     }
     ++compared;
   }

@@ -1,7 +1,10 @@
 #!/usr/bin/env bash
-# Records the golden log of this build's log format (common/bus/log_format.h):
+# Records the golden log of this build's log format and motion revision
+# (common/bus/log_format.h; name it format-N.lcmlog, or format-N-motion-R.lcmlog
+# from motion revision 2 on):
 # the live cell (logger, simulator, bridge, program server, interpolator; no
-# monitor, to keep it small) runs golden.ngc once. Run it once per format change,
+# monitor, to keep it small) runs golden.ngc once. Run it once per format change
+# and per motion revision,
 # by hand, and commit the file it names; the suite replays every golden log
 # (tests/golden/logs/replay_golden.sh), so a later version that can no longer
 # read a recorded format fails there.

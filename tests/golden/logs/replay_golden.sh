@@ -1,20 +1,35 @@
 #!/usr/bin/env bash
-# Every golden log (one per log format, recorded by record.sh with the version of
-# its time) replays in this build bit for bit, and names its format.
+# Every golden log (one per log format or motion revision, recorded by record.sh
+# with the version of its time) is read in this build, names its format, and
+# replays bit for bit, or (an older motion revision, common/bus/log_format.h) up to
+# where it diverges by design, which the replay says; one of this build's motion
+# revision replays bit for bit.
 #   replay_golden.sh BUILD_DIR SOURCE_DIR
 set -euo pipefail
 BUILD="$1"; SRC="$2"
-n=0
+n=0; same=0
+# This build's motion revision: its own golden log (the newest) must replay identically.
+motion="$(sed -n 's/^inline constexpr int kMotionRevision = \([0-9]*\);/\1/p' "$SRC/common/bus/log_format.h")"
+[ -n "$motion" ] || { echo "FAIL: no kMotionRevision in common/bus/log_format.h" >&2; exit 1; }
 for log in "$SRC"/tests/golden/logs/format-*.lcmlog; do
   [ -e "$log" ] || continue
-  want="${log##*/format-}"; want="${want%%.*}"
-  out="$("$BUILD/tools/cnc-replay" --log "$log" 2>&1)" || { echo "$out" >&2; echo "FAIL: $log does not replay" >&2; exit 1; }
+  want="${log##*/format-}"; want="${want%%[.-]*}"  # format-N.lcmlog, format-N-motion-R.lcmlog
+  rc=0; out="$("$BUILD/tools/cnc-replay" --log "$log" 2>&1)" || rc=$?
   echo "$out" | grep -q "^log format $want\b" || { echo "$out" >&2; echo "FAIL: $log is not read as format $want" >&2; exit 1; }
-  echo "$out" | grep -q "^identical: " || { echo "$out" >&2; echo "FAIL: $log: no verdict" >&2; exit 1; }
-  echo "$(basename "$log"): $(echo "$out" | grep -E '^(log format|identical)' | tr '\n' ' ')"
+  # Every input decoded and applied up to the verdict: identical, or (a log of an
+  # older motion revision) diverging by design, which the replay names.
+  if [ "$rc" -eq 0 ]; then
+    echo "$out" | grep -q "^identical: " || { echo "$out" >&2; echo "FAIL: $log: no verdict" >&2; exit 1; }
+    echo "$out" | grep -q "^log format .*, motion revision $motion\$" && same=$((same + 1))
+  else
+    [ "$rc" -eq 2 ] && echo "$out" | grep -q "^expected: the log's motion revision [0-9]* is not this cnc's" \
+      || { echo "$out" >&2; echo "FAIL: $log does not replay (exit $rc)" >&2; exit 1; }
+  fi
+  echo "$(basename "$log"): $(echo "$out" | grep -E '^(log format|identical|diverges|expected)' | tr '\n' ' ')"
   n=$((n + 1))
 done
 [ "$n" -ge 2 ] || { echo "FAIL: only $n golden logs" >&2; exit 1; }
+[ "$same" -ge 1 ] || { echo "FAIL: no golden log of motion revision $motion replays identically (record one: record.sh)" >&2; exit 1; }
 # A format this build does not know (the newest golden log's format event made
 # 9): refused (exit 2), naming the format, the version that recorded it and what to do.
 newest="$(ls "$SRC"/tests/golden/logs/format-*.lcmlog | sort -V | tail -n 1)"
