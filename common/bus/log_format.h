@@ -22,7 +22,7 @@ inline constexpr int kLogFormat = 3;
 // format 3 on, "cnc-log-format N VERSION motion R"; older logs are revision 1).
 // cnc-replay replays a log of another revision and, where it diverges, says so.
 //   1  up to format 3
-//   2  a stop where the path turns rests two cycles (the bridge's moving averages
+//   2  a stop point reached with motion rests two cycles (the bridge's moving averages
 //      then never mix the two directions)
 inline constexpr int kMotionRevision = 2;
 inline constexpr int kOldestReadableLogFormat = 1;
