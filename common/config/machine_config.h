@@ -184,6 +184,9 @@ struct ProgramConfig {
   bool g64_fit = true;
   double g64_fit_max_segment_mm = 2.0;  // longer moves are not part of a fitted run
   double g64_fit_max_turn_deg = 30.0;   // a sharper turn between two moves ends a run
+  // The path tolerance of G64 without P (and of a program with no G64 word, which
+  // starts in G64): 0 keeps the programmed lines exactly, as G61 does; never unbounded.
+  double default_path_tolerance_mm = 0.0;
 };
 
 // Signed channels (section `security:`): see common/bus/auth.h.

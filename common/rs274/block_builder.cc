@@ -20,6 +20,7 @@ bool linear(size_t i) { return i < 3 || i >= 6; }
 
 BlockBuilder::BlockBuilder(BuilderSetup setup, std::function<const std::string&(int32_t)> file_name)
     : setup_(std::move(setup)), file_name_(std::move(file_name)) {
+  path_tol_mm_ = setup_.default_path_tolerance_mm;  // a program starts in G64
   axis_of_pose_.assign(kNumAxes, -1);
   for (size_t a = 0; a < setup_.axis_names.size(); ++a) {
     const std::string& n = setup_.axis_names[a];
@@ -126,7 +127,10 @@ void BlockBuilder::straight_traverse(const SourceRef& ref, const Pose& end) {
 void BlockBuilder::set_motion_control_mode(const SourceRef&, PathMode mode, double tolerance) {
   if (!run_.empty()) flush_run();
   path_mode_ = mode;
-  path_tol_mm_ = mode == PathMode::kContinuous && tolerance > 0 && std::isfinite(tolerance) ? tolerance * scale_ : 0.0;
+  if (mode != PathMode::kContinuous)
+    path_tol_mm_ = 0;
+  else
+    path_tol_mm_ = tolerance > 0 && std::isfinite(tolerance) ? tolerance * scale_ : setup_.default_path_tolerance_mm;
 }
 
 bool BlockBuilder::blending() const {

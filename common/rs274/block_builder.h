@@ -39,6 +39,8 @@ struct BuilderSetup {
   // The machine's chord tolerance: its share of P (program::chord_tolerance_mm) is
   // not the fit's and the blends'.
   double chord_tolerance_mm = 0.001;
+  // G64 without P (and the start, in G64): this P, mm; 0 keeps the lines exactly.
+  double default_path_tolerance_mm = 0;
 };
 
 class BlockBuilder : public Canon {
@@ -124,7 +126,7 @@ class BlockBuilder : public Canon {
   program::ProcessParams process_;
 
   PathMode path_mode_ = PathMode::kContinuous;
-  double path_tol_mm_ = 0;  // G64 P in mm; 0: no blending
+  double path_tol_mm_ = 0;  // G64 P in mm (or the default); 0: no blending
   struct RunPoint {
     std::vector<double> pos;  // machine mm, every axis
     SourceRef ref;            // the move that ends here (the first: the run's first move)

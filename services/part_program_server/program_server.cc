@@ -209,6 +209,7 @@ ProgramSetup program_setup(const config::MachineConfig& cfg) {
   s.builder.fit_max_turn_deg = cfg.program.g64_fit_max_turn_deg;
   s.builder.ipo_period_s = cfg.ipo_period_s;
   s.builder.chord_tolerance_mm = cfg.chord_tolerance_mm;
+  s.builder.default_path_tolerance_mm = cfg.program.default_path_tolerance_mm;
   {
     // The planner's corner step (common/motion/corner.h) with the path's and every axis's limits.
     const double T = cfg.ipo_period_s;

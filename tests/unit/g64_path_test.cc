@@ -29,12 +29,13 @@ struct PlanRun {
   double a_use = 0, j_use = 0;
 };
 
-PlanRun run(const std::string& text, bool fit = true) {
+PlanRun run(const std::string& text, bool fit = true, double default_tol_mm = 0) {
   test::TempDir dir;
   const std::string file = (dir.path() / "p.ngc").string();
   test::write_file(file, text);
   pps::ProgramSetup setup = test::xyz_setup();
   setup.builder.fit_runs = fit;
+  setup.builder.default_path_tolerance_mm = default_tol_mm;
   PlanRun r;
   r.blocks = test::run_program(file, setup);
   const config::MachineConfig cfg =
@@ -197,6 +198,34 @@ TEST(G64Path, G61AndG64WithoutPKeepTheProgrammedLines) {
     const PlanRun r = run(raster(mode, &pts, 2, 20));
     EXPECT_EQ(count(r.blocks, program::BlockKind::kNurbs), 0u) << mode;
     EXPECT_EQ(count(r.blocks, program::BlockKind::kLine), 42u) << mode;
+  }
+}
+
+TEST(G64Path, AMachineDefaultToleranceAppliesToG64WithoutPAndToNoG64Word) {
+  // program.default_path_tolerance_mm 0.01: G64, G64 P0 and a program without a G64
+  // word are fitted within 0.01 mm; G61 and G61.1 keep the lines; a P of the
+  // program's own wins. Every block names the tolerance it was made under.
+  std::vector<P3> pts;
+  for (const char* mode : {"G64", "G64 P0", "", "G61", "G61.1", "G64 P0.05"}) {
+    pts.clear();
+    const PlanRun r = run(raster(mode, &pts, 2, 20), true, 0.01);
+    const std::string m(mode);
+    const bool exact = m.rfind("G61", 0) == 0;
+    const double p = m == "G64 P0.05" ? 0.05 : 0.01;
+    if (exact) {
+      EXPECT_EQ(count(r.blocks, program::BlockKind::kNurbs), 0u) << mode;
+      EXPECT_EQ(count(r.blocks, program::BlockKind::kLine), 42u) << mode;
+    } else {
+      EXPECT_GT(count(r.blocks, program::BlockKind::kNurbs), 0u) << mode;
+    }
+    for (const auto& b : r.blocks) {
+      if (b.kind == program::BlockKind::kNurbs || b.kind == program::BlockKind::kLine) {
+        EXPECT_EQ(b.path_tolerance_mm, exact ? 0.0 : p) << mode << " line " << b.source_line;
+      }
+    }
+    double worst = 0;
+    for (const P3& q : pts) worst = std::max(worst, distance_to_path(r.path, q));
+    EXPECT_LE(worst, (exact ? 0.001 : p) * (1 + 1e-6)) << mode;
   }
 }
 
