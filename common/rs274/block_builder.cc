@@ -30,7 +30,7 @@ BlockBuilder::BlockBuilder(BuilderSetup setup, std::function<const std::string&(
   position_ = setup_.start_position_mm;
   position_.resize(setup_.axis_names.size(), 0.0);
   speed_rpm_ = setup_.spindle_rpm;
-  process_ = setup_.process;
+  // No process law until the program describes its cut (set_process).
 }
 
 // Program coordinates (program units) → machine coordinates (mm), LinuxCNC's order:
@@ -692,6 +692,10 @@ void BlockBuilder::analog_output(const SourceRef& ref, int index, double value, 
   event(ref, program::EventKind::kAnalogOutput, index, value);
 }
 void BlockBuilder::set_process(const SourceRef&, const ProcessSettings& p) {
+  // The program's first directive describes its cut: the keys it leaves out come
+  // from the machine's process: section.
+  if (!process_declared_) process_ = setup_.process;
+  process_declared_ = true;
   if (p.has_ball_radius) process_.ball_radius_mm = p.ball_radius_mm;
   if (p.has_flutes) process_.flutes = p.flutes;
   if (p.has_pick_feed) process_.pick_feed_mm = p.pick_feed_mm;

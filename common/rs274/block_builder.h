@@ -20,7 +20,7 @@ struct BuilderSetup {
   std::vector<std::string> axis_names;     // machine axes in order, e.g. X Y Z
   std::vector<double> start_position_mm;   // where the machine stands
   double spindle_rpm = 0;                  // speed before any S word
-  program::ProcessParams process;          // before any PROCESS directive
+  program::ProcessParams process;          // what a PROCESS directive leaves out
   // G64 P (path blending within P): runs of short G1 moves are fitted to cubic
   // splines within P (fit_runs), other corners between G1 lines are rounded within
   // P by a quartic blend. A run: consecutive G1 moves of one feed, each at most
@@ -123,7 +123,12 @@ class BlockBuilder : public Canon {
   int spindle_dir_ = 0;
   int coolant_ = 0;
   int overrides_ = 0xF;
+  // The roughness law's parameters: none (the law off) until the program's first
+  // (PROCESS, ...) says which cut its moves are; a machine's process: section only
+  // fills in what the directive leaves out (an engraving or a drilling program
+  // is not cut by the machine file's ball end mill).
   program::ProcessParams process_;
+  bool process_declared_ = false;
 
   PathMode path_mode_ = PathMode::kContinuous;
   double path_tol_mm_ = 0;  // G64 P in mm (or the default); 0: no blending

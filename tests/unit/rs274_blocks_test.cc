@@ -718,14 +718,16 @@ TEST(Rs274BlocksNurbsError, AtMostTenThousandControlPoints) {
 
 // ---- process directive -------------------------------------------------------------
 
-TEST(Rs274BlocksProcess, DirectiveAppliesFromItsLineOn) {
+TEST(Rs274BlocksProcess, DirectiveAppliesFromItsLineOnAndTheMachineSectionFillsInWhatItLeavesOut) {
   pps::ProgramSetup s = test::xyz_setup();
   s.builder.process = ProcessParams{3, 4, 0.2, 5};  // from the machine config
   const std::vector<Block> p =
       run("F100\nG1 X1\n(process, pick_feed=0.7, Flutes=2) G1 X2\nX3\n(PROCESS,RMAX_UM=0)\nX4\nM2\n", s);
   ASSERT_EQ(p.size(), 5u);
-  EXPECT_DOUBLE_EQ(p[0].process.pick_feed_mm, 0.2);
-  EXPECT_EQ(p[0].process.flutes, 4);
+  // Before the program describes its cut, no law: not the machine file's tool.
+  EXPECT_FALSE(p[0].process.active());
+  EXPECT_DOUBLE_EQ(p[0].process.ball_radius_mm, 0);
+  EXPECT_DOUBLE_EQ(p[0].process.target_rmax_um, 0);
   for (int i : {1, 2}) {
     EXPECT_DOUBLE_EQ(p[i].process.ball_radius_mm, 3);  // not in the directive: kept
     EXPECT_EQ(p[i].process.flutes, 2);
@@ -735,6 +737,10 @@ TEST(Rs274BlocksProcess, DirectiveAppliesFromItsLineOn) {
   }
   EXPECT_DOUBLE_EQ(p[3].process.target_rmax_um, 0);
   EXPECT_FALSE(p[3].process.active());  // RMAX_UM=0: the roughness law is off
+  // A program that never says PROCESS runs without the law, spindle on or not.
+  const std::vector<Block> q = run("S12000 M3\nF100\nG1 X1\nM2\n", s);
+  ASSERT_GE(q.size(), 1u);
+  for (const Block& b : q) EXPECT_FALSE(b.process.active()) << b.source_line;
 }
 
 TEST(Rs274BlocksProcess, DirectiveIsInMillimetresUnderG20) {
