@@ -20,6 +20,7 @@ command -v chromium >/dev/null || fail "chromium is not installed (./cnc install
 
 cat >"$WORK/part.ngc" <<'NGC'
 ( report test: lines, arcs - the small one chord-limited - a ramp, with the spindle on )
+(PROCESS, BALL_RADIUS=5, FLUTES=2, PICK_FEED=0.5, RMAX_UM=10.67)
 G21 G90 G17
 S8000 M3
 G0 X10 Y10 Z1
