@@ -18,6 +18,9 @@
 #                                                  offline CAM: z-level roughing, cusp-limited levels (Shin et al.)
 #   ./cnc conformance [conformance.py options]     our interpreter against LinuxCNC's rs274
 #   ./cnc bench latency [--load N] [--out DIR]     cycle timing of the demo, idle and with N busy loops
+#   ./cnc bench machining-time [--modes main,asis] [--only NAMES] [--out DIR] [--no-linuxcnc] [--reuse]
+#                                                  CAM programs on our planner and LinuxCNC 2.9's: times, stops,
+#                                                  path deviation, jerk (tools/bench/machining_time.py)
 #   ./cnc soak --minutes M [--seed S] [--out DIR]  programs back to back with operator actions and injected
 #                                                  faults, every log replayed (tools/soak/soak.py)
 #   ./cnc key gen|rotate|show [--machine FILE] [--grace S] [--activate-in S]  the cell's signing key
@@ -356,12 +359,17 @@ cmd_conformance() {
 }
 
 # bench latency [latency_bench.sh options]: see tools/bench/latency_bench.sh.
+# bench machining-time [machining_time.py options]: see tools/bench/machining_time.py.
 cmd_bench() {
   local what="${1:-}"
   [ $# -gt 0 ] && shift
   case "$what" in
     latency) build; run_child "$ROOT/tools/bench/latency_bench.sh" "$@" ;;
-    *) die "bench: expected 'latency' (bench latency [--machine F] [--program P] [--out DIR] [--load N])" ;;
+    machining-time)
+      [ "$INSTALLED" -eq 0 ] || die "bench machining-time: runs from the source tree (it needs the build's cnc-path-deviation)"
+      build
+      run_child /usr/bin/python3 "$ROOT/tools/bench/machining_time.py" --build "$BUILD" "$@" ;;
+    *) die "bench: expected 'latency' or 'machining-time' (bench latency [--machine F] [--program P] [--out DIR] [--load N]; bench machining-time [--modes main,asis] [--only NAMES] [--out DIR] [--no-linuxcnc] [--reuse])" ;;
   esac
 }
 
