@@ -209,11 +209,51 @@ def kv(line):
 
 
 def geometry(dev, program, machine):
-    rc, out, err = run([dev, "--program", program, "--machine", machine])
+    dump = os.path.splitext(program)[0] + ".moves.csv"
+    rc, out, err = run([dev, "--program", program, "--machine", machine, "--dump", dump])
     if rc != 0:
         raise RuntimeError("cnc-path-deviation refused %s: %s" % (program, err.strip()))
     g = kv(out.splitlines()[0])
-    return {k: float(v) for k, v in g.items()}
+    g = {k: float(v) for k, v in g.items()}
+    g.update(against_rs274(program, dump, os.path.join(os.path.dirname(machine), "tools.tbl")))
+    return g
+
+
+def against_rs274(program, dump, tools):
+    """The moves the geometry is made of (the project's interpreter) against LinuxCNC's
+    own interpreter, rs274 (with the bench's tool table: rs274's own has lengths): the same
+    count of moves and their end points (rs274 prints 4 decimals of the program's units:
+    0.00005 in = 0.0013 mm)."""
+    if not shutil.which("rs274"):
+        return {}
+    out = program + ".rs274"
+    with open(os.devnull) as null:
+        subprocess.run(["rs274", "-t", tools, "-g", program, out], stdin=null, capture_output=True, timeout=600)
+    if not os.path.exists(out):
+        return {"rs274_moves": -1}
+    theirs, scale, plane = [], 1.0, "XY"
+    for line in open(out):
+        m = re.search(r"([A-Z_]+)\((.*)\)\s*$", line)
+        if not m:
+            continue
+        call, a = m.group(1), m.group(2)
+        if call == "USE_LENGTH_UNITS":
+            scale = 25.4 if "INCHES" in a else 1.0
+        elif call == "SELECT_PLANE":
+            plane = a.split("_")[-1]
+        elif call in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED"):
+            v = [float(x) for x in a.split(",")[:3]]
+            theirs.append([x * scale for x in v])
+        elif call == "ARC_FEED":
+            v = [float(x) for x in a.split(",")]
+            first, second, axis = v[0], v[1], v[5]
+            xyz = {"XY": (first, second, axis), "XZ": (second, axis, first), "YZ": (axis, first, second)}[plane]
+            theirs.append([x * scale for x in xyz])
+    ours = np.loadtxt(dump, delimiter=",", skiprows=1, usecols=(5, 6, 7), ndmin=2)
+    r = {"rs274_moves": len(theirs), "moves_dumped": len(ours)}
+    if len(theirs) == len(ours) and len(ours):
+        r["rs274_max_mm"] = float(np.abs(np.array(theirs) - ours).max())
+    return r
 
 
 def deviation(dev, program, machine, csv):
@@ -388,6 +428,14 @@ def table(rows, mode, law_on):
         out.append("geometric mean of ours/LinuxCNC over %d programs: %.3f (goal <= %.2f: %s); largest %.3f "
                    "(goal <= %.2f: %s)" % (len(ratios), gm, GOAL_GEOMEAN, "met" if gm <= GOAL_GEOMEAN else "NOT met",
                                            worst, GOAL_MAX, "met" if worst <= GOAL_MAX else "NOT met"))
+    chk = [(r["name"], r["geo"].get("rs274_moves"), r["geo"].get("moves_dumped"), r["geo"].get("rs274_max_mm"))
+           for r in rows]
+    bad = [c for c in chk if c[1] is not None and (c[1] != c[2] or c[3] is None or c[3] > 0.0015)]
+    if any(c[1] is not None for c in chk):
+        out.append("geometry against LinuxCNC's rs274: %s" % (
+            "every move's end point within %.4f mm (%d moves)" % (max(c[3] for c in chk if c[3] is not None),
+                                                                 sum(c[2] for c in chk if c[2]))
+            if not bad else "DIFFERS: " + ", ".join("%s %s/%s moves, %s mm" % c for c in bad)))
     out.append("st.o/st.l: stops, the dwells' own (%s) taken off; jerk: the project's largest per-axis jerk "
                "(finite differences of its 4 ms setpoints) / that axis's limit; sp/s: the dry run's setpoints per "
                "second (no CSV); law on: the project's time with the machine file's roughness law (process:)"
