@@ -356,7 +356,7 @@ def lcnc(args, name, program, machine, lim, work, dev, timeout):
         return {"error": "LinuxCNC: " + (lines[0] if lines else "no result (tty.log in %s)" % d)}
     head = lines[0].split()
     r = {"wall_s": float(head[1])}
-    r.update({k: v for k, v in kv(lines[0]).items() if k in ("overruns", "span_min", "span_max", "err")})
+    r.update({k: v for k, v in kv(lines[0]).items() if k in ("overruns", "span_min", "span_max", "err", "stalled")})
     r["load"] = open(os.path.join(d, "load.txt")).read().split() if os.path.exists(os.path.join(d, "load.txt")) else []
     samples = os.path.join(d, kv(lines[0])["samples"])
     raw = [l for l in open(samples) if l.strip()]
@@ -454,7 +454,9 @@ def clock_table(rows):
                    "wall %8.3f s  load %s  gaps in the record %d" % (
                        r["name"], l["servo_s"], l["servo_wall_s"], l["servo_wall_s"] / l["servo_s"],
                        float(l.get("span_min", "nan")), float(l.get("span_max", "nan")), l["servo_max_gap_ms"],
-                       l["wall_s"], "/".join(l["load"]), l["gaps"] + int(l.get("overruns", "0") or 0)))
+                       l["wall_s"], "/".join(l["load"]), l["gaps"] + int(l.get("overruns", "0") or 0))
+                   + ("  (its interpreter stayed out of idle after the last motion: %s)" % l["stalled"]
+                      if l.get("stalled") else ""))
     return "\n".join(out)
 
 
