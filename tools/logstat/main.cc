@@ -98,10 +98,14 @@ int compare_monitor(const std::string& log, const std::string& other) {
     auto it = m.find(c);
     return it != m.end() && it->second.size() == 1;
   };
-  size_t compared = 0, unique = 0;
+  size_t compared = 0, unique = 0, missing = 0;
   for (const auto& [cycle, ra] : ka) {
     if (ra.size() != 1) continue;
     ++unique;
+    if (kb.find(cycle) == kb.end()) {
+      ++missing;
+      continue;
+    }
     if (!single(kb, cycle) || !single(ka, cycle - 1) || !single(kb, cycle - 1)) continue;
     const std::string diff = report_diff(*ra.front(), *kb.at(cycle).front());
     if (!diff.empty()) {
@@ -112,10 +116,13 @@ int compare_monitor(const std::string& log, const std::string& other) {
     ++compared;
   }
   std::printf("monitor reports identical: %zu compared (of %zu cycles with one report in %s; %zu reports there, "
-              "%zu in %s)\n",
-              compared, unique, log.c_str(), a.size(), b.size(), other.c_str());
-  // Nearly every report must have been compared.
-  return compared > 0 && compared >= unique * 9 / 10 ? 0 : 1;
+              "%zu in %s); %zu of those cycles without a report in the other, the rest reported twice there or "
+              "next to a cycle reported twice\n",
+              compared, unique, log.c_str(), a.size(), b.size(), other.c_str(), missing);
+  // Every cycle reported must be reported in the other log too. A cycle reported twice
+  // (the bridge's status after a late setpoint; more of them the more the machine is
+  // loaded) cannot be compared one to one: most cycles must still be.
+  return missing == 0 && compared > 0 && compared >= unique / 2 ? 0 : 1;
 }
 
 int run_logstat(const cnc::config::MachineConfig& cfg, const cnc::service::Args& args) {
