@@ -6,12 +6,13 @@
 // * fit_cubic: a clamped cubic B-spline through the run's first and last points,
 //   every point of it within `tol` of the polyline (bounded span by span on the
 //   spans' Bézier control points, halved until proven), and every vertex and
-//   segment midpoint within `tol` of it (by projection: a point of the curve). Least squares with a small penalty on
+//   segment midpoint within `tol` of it (by projection: a point of the curve).
+//   Least squares (vertices, midpoints and quarter points) with a small penalty on
 //   the control polygon's second differences (a P-spline: smooth through the
 //   rounding noise of posted coordinates, solvable for any knot placement), knots
-//   refined where the tolerance is missed, the data's parameters corrected by
-//   projection between rounds. The parameter is the run's chord length (mm). Cost:
-//   O(n) per round (banded sparse Cholesky), a few rounds.
+//   refined where the tolerance is missed; the data keep their chord-length
+//   parameters (mm) in every round. Cost: O(n) per round (banded sparse
+//   Cholesky), at most 30 rounds and 4 spans per move, else no fit.
 // * split_cubic: the fitted spline cut at knots into clamped pieces of at most
 //   `max_spans` spans (knot insertion, so the pieces are the same curve: C2 where
 //   they join).
