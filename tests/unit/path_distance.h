@@ -27,6 +27,12 @@ using V3 = std::array<double, 3>;
 inline V3 sub(const V3& a, const V3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
 inline double dot(const V3& a, const V3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 inline double norm(const V3& a) { return std::sqrt(dot(a, a)); }
+// Pieces of an arc (sweep in rad, largest radius r) whose chords leave it by at most
+// `sagitta`: a piece of angle a leaves the circle by r (1 - cos(a/2)) <= r a^2 / 8,
+// and a spiral's radius changes by a few um over the arc: 1.5x for it.
+inline int arc_pieces(double sweep_rad, double r, double sagitta) {
+  return std::max(1, static_cast<int>(std::ceil(1.5 * std::fabs(sweep_rad) * std::sqrt(r / (8 * sagitta)))));
+}
 inline V3 lerp(const V3& a, const V3& b, double t) {
   return {a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t, a[2] + (b[2] - a[2]) * t};
 }

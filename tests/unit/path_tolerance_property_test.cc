@@ -521,10 +521,7 @@ SegmentSet geometry_of(const std::vector<program::Block>& blocks, std::vector<V3
         const auto sa1 = static_cast<size_t>(a1), sa2 = static_cast<size_t>(a2);
         const double r = std::max(std::hypot(s[sa1] - b.arc.center[sa1], s[sa2] - b.arc.center[sa2]),
                                   std::hypot(e[sa1] - b.arc.center[sa1], e[sa2] - b.arc.center[sa2]));
-        // A piece of angle a leaves the circle by r (1 - cos(a/2)) <= r a^2 / 8; a
-        // spiral's radius changes by a few um over the arc: 1.5x for it.
-        const int n = std::max(
-            1, static_cast<int>(std::ceil(1.5 * seg.arc_sweep_rad() * std::sqrt(r / (8 * kSagitta)))));
+        const int n = pathdist::arc_pieces(seg.arc_sweep_rad(), r, kSagitta);
         V3 prev = s;
         for (int k = 1; k <= n; ++k) {
           const motion::AxisVec p = seg.point(seg.u_begin() + (seg.u_end() - seg.u_begin()) * k / n);

@@ -27,12 +27,13 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
-#include <numbers>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "common/config/machine_config.h"
+#include "common/motion/path_segment.h"
+#include "common/program/block.h"
 #include "common/rs274/canon.h"
 #include "common/rs274/interpreter.h"
 #include "common/util/cli.h"
@@ -134,47 +135,28 @@ class Recorder : public cnc::rs274::Canon {
   V3 g5x_{}, g92_{}, tool_{}, pos_{};
 };
 
-// An arc's point at fraction t of its sweep (radius and the normal axis linear in the angle).
-struct ArcShape {
-  int a1 = 0, a2 = 1, a3 = 2;
-  double theta0 = 0, sweep = 0, r0 = 0, r1 = 0;
-  V3 start{}, end{}, center{};
+// An arc as the motion core runs it (motion::PathSegment: radius and the normal axis
+// linear in the angle, LinuxCNC's spiral), from the recorder's move.
+cnc::motion::PathSegment arc_segment(const Move& m) {
+  cnc::program::Block b;
+  b.kind = m.rotation > 0 ? cnc::program::BlockKind::kArcCcw : cnc::program::BlockKind::kArcCw;
+  b.start.assign(m.start.begin(), m.start.end());
+  b.end.assign(m.end.begin(), m.end.end());
+  b.arc.center.assign(m.center.begin(), m.center.end());
+  b.arc.plane = m.plane;
+  b.arc.turns = std::abs(m.rotation) - 1;
+  b.feed_mm_per_min = m.feed_mm_min;
+  return cnc::motion::PathSegment(b, 3);
+}
 
-  explicit ArcShape(const Move& m) : start(m.start), end(m.end), center(m.center) {
-    if (m.plane == 18) a1 = 2, a2 = 0, a3 = 1;
-    if (m.plane == 19) a1 = 1, a2 = 2, a3 = 0;
-    const double s1 = m.start[a(a1)] - m.center[a(a1)], s2 = m.start[a(a2)] - m.center[a(a2)];
-    const double e1 = m.end[a(a1)] - m.center[a(a1)], e2 = m.end[a(a2)] - m.center[a(a2)];
-    theta0 = std::atan2(s2, s1);
-    r0 = std::hypot(s1, s2);
-    r1 = std::hypot(e1, e2);
-    const double two_pi = 2 * std::numbers::pi;
-    double d = std::atan2(e2, e1) - theta0;  // (-2 pi, 2 pi)
-    const int extra = std::abs(m.rotation) - 1;
-    if (m.rotation > 0) {
-      while (d <= 1e-12) d += two_pi;  // (0, 2 pi]: the same point is a full circle
-      sweep = d + extra * two_pi;
-    } else {
-      while (d >= -1e-12) d -= two_pi;
-      sweep = d - extra * two_pi;
-    }
-  }
-  static size_t a(int i) { return static_cast<size_t>(i); }
-  V3 at(double t) const {
-    if (t >= 1) return end;
-    const double th = theta0 + t * sweep, r = r0 + t * (r1 - r0);
-    V3 p{};
-    p[a(a1)] = center[a(a1)] + r * std::cos(th);
-    p[a(a2)] = center[a(a2)] + r * std::sin(th);
-    p[a(a3)] = start[a(a3)] + t * (end[a(a3)] - start[a(a3)]);
-    return p;
-  }
-  // Pieces so that each leaves the arc by at most kSagittaMm (r a^2 / 8, 1.5x for a spiral).
-  int pieces() const {
-    const double r = std::max(r0, r1);
-    return std::max(1, static_cast<int>(std::ceil(1.5 * std::fabs(sweep) * std::sqrt(r / (8 * kSagittaMm)))));
-  }
-};
+// The larger of the arc's start and end radius in its plane.
+double arc_radius(const Move& m) {
+  size_t a1 = 0, a2 = 1;
+  if (m.plane == 18) a1 = 2, a2 = 0;
+  if (m.plane == 19) a1 = 1, a2 = 2;
+  return std::max(std::hypot(m.start[a1] - m.center[a1], m.start[a2] - m.center[a2]),
+                  std::hypot(m.end[a1] - m.center[a1], m.end[a2] - m.center[a2]));
+}
 
 // The highest speed along unit direction d that every axis's velocity limit allows.
 double cap_along(const V3& d, const std::vector<double>& vmax) {
@@ -288,11 +270,12 @@ int main(int argc, char** argv) {
     const double f = m.kind == Move::kRapid ? 0.0 : m.feed_mm_min / 60.0;
     if (m.kind == Move::kArc) {
       ++arcs;
-      const ArcShape arc(m);
-      const int n = arc.pieces();
+      const cnc::motion::PathSegment arc = arc_segment(m);
+      const int n = cnc::pathdist::arc_pieces(arc.arc_sweep_rad(), arc_radius(m), kSagittaMm);
       V3 prev = m.start;
       for (int k = 1; k <= n; ++k) {
-        const V3 x = arc.at(static_cast<double>(k) / n);
+        const cnc::motion::AxisVec p = arc.point(arc.u_begin() + (arc.u_end() - arc.u_begin()) * k / n);
+        const V3 x = k == n ? m.end : V3{p[0], p[1], p[2]};
         feed_mm += cnc::pathdist::norm(cnc::pathdist::sub(x, prev));
         bound_s += piece_time(prev, x, f, vmax);
         if (x != prev) {
