@@ -149,6 +149,13 @@ cleanup() {
     rm -rf "$WORK" 2>/dev/null || true
   else
     note "the test's files are kept in $WORK"
+    # A watchdog that tripped cannot tell a stalled publisher from a stalled
+    # delivery; the run's log can (cnc-logstat --delivery).
+    local log
+    for log in "$WORK"/*.lcmlog; do
+      [ -f "$log" ] && [ -x "${BUILD:-}/tools/cnc-logstat" ] || continue
+      "$BUILD/tools/cnc-logstat" --log "$log" --delivery 2>&1 | grep -E "^delivery stalls|^  at .*delivery stalled" | sed "s|^|# $(basename "$log"): |" >&2 || true
+    done
   fi
 }
 

@@ -5,6 +5,7 @@
 //
 //   cnc-logstat --log FILE [--summary] [--require-no-gaps CHANNEL] [--key KEYFILE | --machine FILE]
 //   cnc-logstat --log FILE --compare-monitor OTHER_LOG
+//   cnc-logstat --log FILE --delivery [--stall-ms MS]
 //
 // --key (or the key file of --machine's config, when it signs) verifies the MAC of
 // every logged message (the logger keeps them) and prints, per channel, how many
@@ -15,14 +16,22 @@
 // driven by lcm-logplayer playing FILE) equal FILE's, field by field, cycle by
 // cycle (see compare_monitor for which cycles).
 //
+// --delivery tells a stalled publisher from a stalled delivery (common/bus/delivery.h):
+// per channel, the time from each message's stamp to the logger's kernel receive
+// stamp, and every silence of the receive side over --stall-ms (default 20) with
+// what was published inside it. The live tests print it when they fail.
+//
 // Exit codes: 0 fine; 1 a required channel is empty or has gaps, the monitor
 // reports differ, or a message fails verification; 2 bad flags or key file.
 #include <cmath>
+#include <cstdlib>
 #include <cstdio>
 #include <map>
 #include <optional>
 #include <set>
 #include <vector>
+
+#include <lcm/lcm-cpp.hpp>
 
 #include "cnc/lcmt_axis_status.hpp"
 #include "cnc/lcmt_heartbeat.hpp"
@@ -30,6 +39,7 @@
 #include "cnc/lcmt_monitor_report.hpp"
 #include "cnc/lcmt_program_state.hpp"
 #include "common/bus/bus.h"
+#include "common/bus/delivery.h"
 #include "common/bus/log_format.h"
 #include "common/service/service.h"
 #include "common/util/signals.h"
@@ -125,6 +135,30 @@ int compare_monitor(const std::string& log, const std::string& other) {
   return missing == 0 && compared > 0 && compared >= unique / 2 ? 0 : 1;
 }
 
+int delivery(const std::string& log, double stall_ms) {
+  // The log's own receive stamps (LCM's file provider hands the time of reading).
+  std::vector<cnc::bus::DeliveryEvent> events;
+  lcm::LogFile file(log, "r");
+  if (!file.good()) {
+    std::fprintf(stderr, "cnc-logstat: cannot read %s\n", log.c_str());
+    return 1;
+  }
+  while (const lcm::LogEvent* e = file.readNextEvent()) {
+    if (e->channel == cnc::bus::kLogFormatChannel) continue;  // the logger's own record
+    const auto h = cnc::bus::peek_header(e->data, static_cast<size_t>(e->datalen));
+    if (!h) continue;
+    events.push_back({e->channel, h->sender, h->utime, e->timestamp});
+  }
+  if (events.empty()) {
+    std::fprintf(stderr, "cnc-logstat: %s holds no cell messages\n", log.c_str());
+    return 1;
+  }
+  const int64_t t0 = events.front().received_us;
+  std::fputs(cnc::bus::format_delivery(cnc::bus::analyse_delivery(std::move(events), stall_ms), t0, stall_ms).c_str(),
+             stdout);
+  return 0;
+}
+
 int run_logstat(const cnc::config::MachineConfig& cfg, const cnc::service::Args& args) {
   cnc::util::end_at_once_on_stop_signals();  // no loop here polls the stop flag
   const std::string log = args.option("log");
@@ -133,6 +167,16 @@ int run_logstat(const cnc::config::MachineConfig& cfg, const cnc::service::Args&
     return cnc::service::kExitBadInput;
   }
   if (!args.option("compare-monitor").empty()) return compare_monitor(log, args.option("compare-monitor"));
+  if (args.flags.count("delivery")) {
+    const std::string ms = args.option("stall-ms");
+    char* end = nullptr;
+    const double stall_ms = ms.empty() ? 20.0 : std::strtod(ms.c_str(), &end);
+    if (!ms.empty() && (end == ms.c_str() || *end != '\0' || !(stall_ms > 0) || !std::isfinite(stall_ms))) {
+      std::fprintf(stderr, "cnc-logstat: --stall-ms %s: a positive number of milliseconds is expected\n", ms.c_str());
+      return cnc::service::kExitBadInput;
+    }
+    return delivery(log, stall_ms);
+  }
   std::string key_file = args.option("key");
   if (key_file.empty() && cfg.security.signing) key_file = cfg.security.key_file;
   std::optional<cnc::bus::LogVerifier> verifier;
@@ -295,8 +339,10 @@ int main(int argc, char** argv) {
                           {{"log", "FILE", "the cell's log"},
                            {"require-no-gaps", "CHANNEL", "exit 1 when CHANNEL is empty or has sequence gaps"},
                            {"compare-monitor", "OTHER_LOG", "check that OTHER_LOG's monitor reports equal the log's"},
-                           {"key", "KEYFILE", "verify every message's MAC (or the key of --machine's config)"}},
-                          {{"summary", "", "the run's summary: program time, blocks, setpoints, gaps, versions"}},
+                           {"key", "KEYFILE", "verify every message's MAC (or the key of --machine's config)"},
+                           {"stall-ms", "MS", "with --delivery: the receive-side silence that counts as a stall (default 20)"}},
+                          {{"summary", "", "the run's summary: program time, blocks, setpoints, gaps, versions"},
+                           {"delivery", "", "publish-to-receive times per channel, and who stalled: publishers or the delivery"}},
                           false};
   return cnc::service::run(spec, argc, argv, run_logstat);
 }
