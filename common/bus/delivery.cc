@@ -105,7 +105,7 @@ DeliveryReport analyse_delivery(std::vector<DeliveryEvent> events, double stall_
 
 std::string format_delivery(const DeliveryReport& r, int64_t t0_us, double stall_ms) {
   std::string out;
-  char b[512];
+  char b[2048];
   std::snprintf(b, sizeof b, "delivery: publisher's stamp to the logger's receive stamp, ms\n%-28s %10s %8s %8s %8s %s\n",
                 "channel", "events", "p50", "p99.9", "max", "longest publish gap (periodic channels)");
   out += b;
@@ -123,12 +123,17 @@ std::string format_delivery(const DeliveryReport& r, int64_t t0_us, double stall
   std::snprintf(b, sizeof b, "delivery stalls (nothing received for over %.0f ms): %zu\n", stall_ms, r.stalls.size());
   out += b;
   for (const DeliveryStall& s : r.stalls) {
-    std::snprintf(b, sizeof b, "  at %.3f s: nothing received for %.1f ms; %lld message(s) from %d sender(s) "
-                  "published meanwhile arrived after it%s%s -> %s\n",
-                  static_cast<double>(s.from_us - t0_us) / 1e6, s.length_ms, static_cast<long long>(s.published_in),
-                  s.senders_in, s.publisher_gaps.empty() ? "" : "; publishers' longest gaps in it: ",
-                  s.publisher_gaps.c_str(),
-                  s.delivery ? "the delivery stalled, not (only) the publishers" : "nothing was published: a pause of the publishers");
+    const std::string gaps = s.publisher_gaps.empty() ? "" : "; publishers' longest gaps in it: " + s.publisher_gaps;
+    if (s.delivery) {
+      std::snprintf(b, sizeof b, "  at %.3f s: nothing received for %.1f ms; %lld message(s) from %d sender(s) "
+                    "published meanwhile arrived after it%s -> the delivery stalled, not (only) the publishers\n",
+                    static_cast<double>(s.from_us - t0_us) / 1e6, s.length_ms, static_cast<long long>(s.published_in),
+                    s.senders_in, gaps.c_str());
+    } else {
+      std::snprintf(b, sizeof b, "  at %.3f s: nothing received for %.1f ms, nothing published in it%s -> a pause of "
+                    "the publishers\n",
+                    static_cast<double>(s.from_us - t0_us) / 1e6, s.length_ms, gaps.c_str());
+    }
     out += b;
   }
   return out;

@@ -159,6 +159,17 @@ int delivery(const std::string& log, double stall_ms) {
   return 0;
 }
 
+// --delivery [--stall-ms MS]
+int delivery_cmd(const std::string& log, const std::string& ms) {
+  char* end = nullptr;
+  const double stall_ms = ms.empty() ? 20.0 : std::strtod(ms.c_str(), &end);
+  if (!ms.empty() && (end == ms.c_str() || *end != '\0' || !(stall_ms > 0) || !std::isfinite(stall_ms))) {
+    std::fprintf(stderr, "cnc-logstat: --stall-ms %s: a positive number of milliseconds is expected\n", ms.c_str());
+    return cnc::service::kExitBadInput;
+  }
+  return delivery(log, stall_ms);
+}
+
 int run_logstat(const cnc::config::MachineConfig& cfg, const cnc::service::Args& args) {
   cnc::util::end_at_once_on_stop_signals();  // no loop here polls the stop flag
   const std::string log = args.option("log");
@@ -167,16 +178,7 @@ int run_logstat(const cnc::config::MachineConfig& cfg, const cnc::service::Args&
     return cnc::service::kExitBadInput;
   }
   if (!args.option("compare-monitor").empty()) return compare_monitor(log, args.option("compare-monitor"));
-  if (args.flags.count("delivery")) {
-    const std::string ms = args.option("stall-ms");
-    char* end = nullptr;
-    const double stall_ms = ms.empty() ? 20.0 : std::strtod(ms.c_str(), &end);
-    if (!ms.empty() && (end == ms.c_str() || *end != '\0' || !(stall_ms > 0) || !std::isfinite(stall_ms))) {
-      std::fprintf(stderr, "cnc-logstat: --stall-ms %s: a positive number of milliseconds is expected\n", ms.c_str());
-      return cnc::service::kExitBadInput;
-    }
-    return delivery(log, stall_ms);
-  }
+  if (args.flags.count("delivery")) return delivery_cmd(log, args.option("stall-ms"));
   std::string key_file = args.option("key");
   if (key_file.empty() && cfg.security.signing) key_file = cfg.security.key_file;
   std::optional<cnc::bus::LogVerifier> verifier;
