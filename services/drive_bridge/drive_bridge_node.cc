@@ -142,7 +142,32 @@ drive::Link& DriveBridgeNode::link_of(size_t axis) { return axes_[axis].worker->
 
 void DriveBridgeNode::command(int8_t c) { pending_command_ = c; }
 
+void DriveBridgeNode::explain_trip(const cnc::lcmt_setpoint& m) {
+  if (tick_s_ - trip_.at_s > 10.0) {  // nothing came back: the interpolator is gone (peer_lost says so)
+    trip_.open = false;
+    return;
+  }
+  if (m.stream != core_.stream() || m.engagement != core_.engagement() || m.cycle <= trip_.cycle) return;
+  trip_.open = false;
+  const double published_ms = static_cast<double>(m.utime - trip_.utime) * 1e-3;
+  const double arrived_ms = (tick_s_ - trip_.arrived_s) * 1e3;
+  const double due_ms = static_cast<double>(m.cycle - trip_.cycle) * cfg_.ipo_period_s * 1e3;
+  // Published within half the timeout of when it was due: the interpolator kept its cycle.
+  const bool delivery = published_ms <= due_ms + 0.5 * cfg_.setpoint_timeout_s * 1e3;
+  char b[320];
+  std::snprintf(b, sizeof b,
+                "the setpoint watchdog's trip after cycle %lld: cycle %lld was published %.1f ms after it (due after "
+                "%.0f ms) and arrived %.1f ms after it: %s",
+                static_cast<long long>(trip_.cycle), static_cast<long long>(m.cycle), published_ms, due_ms, arrived_ms,
+                delivery ? "the delivery between the processes stalled, not the interpolator"
+                         : "the interpolator (or its host) stalled");
+  const std::string text(b);
+  spdlog::warn("{}", text);
+  alarm(cnc::lcmt_alarm::WARNING, "watchdog_cause", text);
+}
+
 void DriveBridgeNode::on_setpoint(const cnc::lcmt_setpoint& m) {
+  if (trip_.open) explain_trip(m);
   if (core_.mode() != BridgeCore::Mode::kFollowing) return;
   if (m.num_axes != static_cast<int32_t>(axes_.size())) {
     fault(0, "setpoint seq " + std::to_string(m.seq) + " has " + std::to_string(m.num_axes) + " axes, the machine " +
@@ -159,6 +184,7 @@ void DriveBridgeNode::on_setpoint(const cnc::lcmt_setpoint& m) {
                  (now - last_setpoint_s_) * 1e3, static_cast<double>(m.utime - last_setpoint_utime_) * 1e-3);
   last_setpoint_s_ = now;
   last_setpoint_utime_ = m.utime;
+  last_setpoint_tick_s_ = tick_s_;
   // Setpoints lost on the way (up to the history this one carries) come back
   // exactly, oldest first, before it: the path through a burst of loss is the
   // programmed one, not a line bridging it.
@@ -294,6 +320,7 @@ void DriveBridgeNode::publish_status(int64_t overruns) {
 }
 
 void DriveBridgeNode::servo_tick_inner(double now_s) {
+  tick_s_ = now_s;
   bus_.drain();
   ++tick_;
   for (auto& a : axes_) a.rep = a.worker->report(a.slot);
@@ -487,6 +514,8 @@ void DriveBridgeNode::follow_core_state() {
     fault_text_ = core_.fault_reason();
     spdlog::error("fault: {}", fault_text_);
     alarm(cnc::lcmt_alarm::FAULT, "drive_fault", fault_text_);
+    if (fault_text_.rfind("no setpoint for", 0) == 0)
+      trip_ = Trip{true, core_.last_cycle(), last_setpoint_utime_, last_setpoint_tick_s_, tick_s_};
   }
   if (core_.faulted()) {
     if (state_ == State::kEnabled) state_ = State::kStopping;

@@ -95,6 +95,9 @@ class DriveBridgeNode {
   void publish_status_inner(int64_t overruns);
   void on_exception(const char* where, const char* what);
   void on_setpoint(const cnc::lcmt_setpoint& m);
+  // After a setpoint watchdog trip: the stream's next setpoint tells whose stall it
+  // was (its publish stamp against its arrival), as an ALARM `watchdog_cause`.
+  void explain_trip(const cnc::lcmt_setpoint& m);
   // The spindle's share of a servo tick and of a status publish.
   void spindle_tick(double now_s);
   void publish_spindle_status();
@@ -157,6 +160,16 @@ class DriveBridgeNode {
   bool waiting_reported_ = false;
   double last_setpoint_s_ = 0;
   int64_t last_setpoint_utime_ = 0;
+  double tick_s_ = 0;               // the servo tick's time (setpoints are taken inside it)
+  double last_setpoint_tick_s_ = 0;  // ... when the newest setpoint arrived
+  struct Trip {                      // the setpoint watchdog's last trip, until explained
+    bool open = false;
+    int64_t cycle = -1;     // the newest setpoint before it
+    int64_t utime = 0;      // that setpoint's publish stamp
+    double arrived_s = 0;   // and its arrival (tick time)
+    double at_s = 0;        // the trip (tick time)
+  };
+  Trip trip_;
   std::string detail_ = "starting";
   State detail_state_ = State::kStarting;
   service::BusHealth health_;

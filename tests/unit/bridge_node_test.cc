@@ -9,9 +9,11 @@
 #include <gtest/gtest.h>
 #include <modbus.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <string>
+#include <vector>
 
 #include "cnc/lcmt_alarm.hpp"
 #include "cnc/lcmt_axis_status.hpp"
@@ -453,6 +455,46 @@ TEST(BridgeNode, SetpointTimeoutIsAControlledStopThenFault) {
   c.command(cnc::lcmt_drive_command::ENABLE);
   c.hold_stream(10, 10, 10);
   EXPECT_EQ(c.node.state(), State::kEnabled);
+}
+
+// After a watchdog trip the stream's next setpoint names whose stall it was, by its
+// publish stamp (set here) against its arrival (the ticks' simulated time).
+std::string trip_cause(int64_t publish_delay_us) {
+  Cell c("sim", true);
+  cnc::lcmt_setpoint last{};
+  c.bus.subscribe<cnc::lcmt_setpoint>("LB.SETPOINTS", [&](const auto& m) { last = m; });
+  c.ticks(40);
+  c.hold_stream(10, 10, 5);
+  c.ticks(100);  // nothing arrives for 100 ms
+  EXPECT_EQ(c.node.state(), State::kFault);
+  cnc::lcmt_setpoint m = last;  // the stream's next cycle, stamped publish_delay_us after the last
+  m.utime = last.utime + publish_delay_us;
+  m.seq = last.seq + 1;
+  m.cycle = last.cycle + 1;
+  m.prev_position_mm.clear();
+  m.num_prev_values = 0;
+  std::vector<uint8_t> buf(static_cast<size_t>(m.getEncodedSize()));
+  m.encode(buf.data(), 0, static_cast<int>(buf.size()));
+  c.bus.publish_raw("LB.SETPOINTS", buf.data(), buf.size());
+  c.ticks(8);
+  std::string cause;
+  int n = 0;
+  for (const auto& a : c.alarms)
+    if (a.rfind("watchdog_cause: ", 0) == 0) cause = a, ++n;
+  EXPECT_EQ(n, 1);
+  return cause;
+}
+
+TEST(BridgeNode, AWatchdogTripIsExplainedByTheNextSetpointAsADeliveryStall) {
+  const std::string cause = trip_cause(4000);  // stamped on time, arrived ~100 ms later
+  EXPECT_NE(cause.find("published 4.0 ms after it (due after 4 ms) and arrived 10"), std::string::npos) << cause;
+  EXPECT_NE(cause.find("the delivery between the processes stalled, not the interpolator"), std::string::npos) << cause;
+}
+
+TEST(BridgeNode, AWatchdogTripIsExplainedByTheNextSetpointAsAPublisherStall) {
+  const std::string cause = trip_cause(104000);
+  EXPECT_NE(cause.find("published 104.0 ms after it"), std::string::npos) << cause;
+  EXPECT_NE(cause.find("the interpolator (or its host) stalled"), std::string::npos) << cause;
 }
 
 TEST(BridgeNode, MissingProfileIsAConfigErrorNamingTheKey) {
