@@ -210,8 +210,19 @@ cmd_up() {
   # the cell with SIGINT/SIGTERM. When the last one has ended, exit 1.
   while [ ${#pids[@]} -gt 0 ]; do
     local code=0 ended=""
-    wait -n -p ended "${pids[@]}" || code=$?
-    [ -n "$ended" ] || continue
+    wait -n -p ended "${pids[@]}" 2>/dev/null || code=$?
+    if [ -z "$ended" ]; then
+      # A child that ended between two waits can be reaped by bash already: `wait -n`
+      # then says "no such job" for it (a killed monitor went unnoticed so, 1 of 3
+      # suite runs). Find it by its pid; wait on a pid still gives its saved status.
+      for s in "${!pids[@]}"; do
+        if ! kill -0 "${pids[$s]}" 2>/dev/null; then
+          ended="${pids[$s]}"; code=0; wait "$ended" 2>/dev/null || code=$?
+          break
+        fi
+      done
+      [ -n "$ended" ] || { sleep 0.1; continue; }
+    fi
     for s in "${!pids[@]}"; do
       if [ "${pids[$s]}" = "$ended" ]; then
         unset "pids[$s]"
