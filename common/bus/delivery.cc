@@ -42,7 +42,6 @@ DeliveryReport analyse_delivery(std::vector<DeliveryEvent> events, double stall_
     latency[e.channel].push_back(static_cast<double>(e.received_us - e.published_us) / 1e3);
     stamps[e.channel][e.sender].push_back(e.published_us);
   }
-  std::map<std::string, bool> periodic;
   for (auto& [ch, lat] : latency) {
     std::sort(lat.begin(), lat.end());
     ChannelDelivery c;
@@ -67,7 +66,6 @@ DeliveryReport analyse_delivery(std::vector<DeliveryEvent> events, double stall_
                        intervals.end());
       c.periodic = intervals[intervals.size() / 2] * 4 < threshold_us;
     }
-    periodic[ch] = c.periodic;
     out.channels.push_back(c);
   }
 
@@ -89,13 +87,13 @@ DeliveryReport analyse_delivery(std::vector<DeliveryEvent> events, double stall_
     }
     st.senders_in = static_cast<int>(senders.size());
     st.delivery = st.published_in > 0;
-    for (const auto& [ch, by_sender] : stamps) {
-      if (!periodic[ch]) continue;
+    for (const ChannelDelivery& c : out.channels) {
+      if (!c.periodic) continue;
       double longest = 0;
-      for (const auto& [sender, s] : by_sender) longest = std::max(longest, longest_gap_within(s, from, to));
+      for (const auto& [sender, s] : stamps[c.channel]) longest = std::max(longest, longest_gap_within(s, from, to));
       if (longest <= 0) continue;
       char b[160];
-      std::snprintf(b, sizeof b, "%s%s %.1f ms", st.publisher_gaps.empty() ? "" : ", ", ch.c_str(), longest);
+      std::snprintf(b, sizeof b, "%s%s %.1f ms", st.publisher_gaps.empty() ? "" : ", ", c.channel.c_str(), longest);
       st.publisher_gaps += b;
     }
     out.stalls.push_back(std::move(st));

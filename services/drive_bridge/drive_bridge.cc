@@ -66,6 +66,7 @@ void BridgeCore::engage(const AxisArray& hold_mm, int64_t engagement) {
   restart_stream();
   ticks_since_setpoint_ = 0;
   fault_reason_.clear();
+  watchdog_tripped_ = false;
   waiting_reason_.clear();
 }
 
@@ -385,6 +386,7 @@ const AxisArray& BridgeCore::tick() {
     return cmd_;
   }
   if (static_cast<double>(ticks_since_setpoint_) * servo_s_ > cfg_.setpoint_timeout_s) {
+    watchdog_tripped_ = !faulted();
     fault(fmt("no setpoint for %.0f ms after cycle %lld: controlled stop",
               static_cast<double>(ticks_since_setpoint_) * servo_s_ * 1e3, static_cast<long long>(last_cycle_)));
     --ticks_since_setpoint_;

@@ -95,6 +95,8 @@ class BridgeCore {
   // Engaged, but the stream does not start where the axes stand (yet).
   bool waiting() const { return mode_ == Mode::kFollowing && last_cycle_ < 0 && !waiting_reason_.empty(); }
   const std::string& fault_reason() const { return fault_reason_; }
+  // The fault is the setpoint watchdog's (no setpoint for setpoint_timeout_s).
+  bool watchdog_tripped() const { return watchdog_tripped_; }
   const std::string& waiting_reason() const { return waiting_reason_; }
   const AxisArray& commanded() const { return cmd_; }
   // Finite differences of the commanded positions over the last servo tick.
@@ -192,6 +194,7 @@ class BridgeCore {
   int64_t starved_ticks_ = 0;
   int64_t ticks_since_setpoint_ = 0;
   std::string fault_reason_;
+  bool watchdog_tripped_ = false;
   std::string waiting_reason_;
 };
 

@@ -143,10 +143,7 @@ drive::Link& DriveBridgeNode::link_of(size_t axis) { return axes_[axis].worker->
 void DriveBridgeNode::command(int8_t c) { pending_command_ = c; }
 
 void DriveBridgeNode::explain_trip(const cnc::lcmt_setpoint& m) {
-  if (tick_s_ - trip_.at_s > 10.0) {  // nothing came back: the interpolator is gone (peer_lost says so)
-    trip_.open = false;
-    return;
-  }
+  // A restarted interpolator (another stream) or a new engagement explains nothing.
   if (m.stream != core_.stream() || m.engagement != core_.engagement() || m.cycle <= trip_.cycle) return;
   trip_.open = false;
   const double published_ms = static_cast<double>(m.utime - trip_.utime) * 1e-3;
@@ -177,14 +174,13 @@ void DriveBridgeNode::on_setpoint(const cnc::lcmt_setpoint& m) {
   AxisArray p{};
   for (size_t i = 0; i < axes_.size(); ++i) p[i] = m.position_mm[i];
   // A late arrival is worth a line in the log: it explains a later watchdog stop.
-  const double now = util::monotonic_s();
+  const double now = tick_s_;
   if (!dbg_file_.empty() && dbg_sp_.size() < dbg_sp_.capacity()) dbg_sp_.push_back({now, m.cycle});
   if (last_setpoint_s_ > 0 && now - last_setpoint_s_ > 3 * cfg_.ipo_period_s)
     spdlog::warn("setpoint cycle {} arrived {:.1f} ms after the one before (published {:.1f} ms after it)", m.cycle,
                  (now - last_setpoint_s_) * 1e3, static_cast<double>(m.utime - last_setpoint_utime_) * 1e-3);
   last_setpoint_s_ = now;
   last_setpoint_utime_ = m.utime;
-  last_setpoint_tick_s_ = tick_s_;
   // Setpoints lost on the way (up to the history this one carries) come back
   // exactly, oldest first, before it: the path through a burst of loss is the
   // programmed one, not a line bridging it.
@@ -514,8 +510,7 @@ void DriveBridgeNode::follow_core_state() {
     fault_text_ = core_.fault_reason();
     spdlog::error("fault: {}", fault_text_);
     alarm(cnc::lcmt_alarm::FAULT, "drive_fault", fault_text_);
-    if (fault_text_.rfind("no setpoint for", 0) == 0)
-      trip_ = Trip{true, core_.last_cycle(), last_setpoint_utime_, last_setpoint_tick_s_, tick_s_};
+    if (core_.watchdog_tripped()) trip_ = Trip{true, core_.last_cycle(), last_setpoint_utime_, last_setpoint_s_};
   }
   if (core_.faulted()) {
     if (state_ == State::kEnabled) state_ = State::kStopping;

@@ -160,14 +160,12 @@ class DriveBridgeNode {
   bool waiting_reported_ = false;
   double last_setpoint_s_ = 0;
   int64_t last_setpoint_utime_ = 0;
-  double tick_s_ = 0;               // the servo tick's time (setpoints are taken inside it)
-  double last_setpoint_tick_s_ = 0;  // ... when the newest setpoint arrived
-  struct Trip {                      // the setpoint watchdog's last trip, until explained
+  double tick_s_ = 0;  // the servo tick's time: setpoints are taken inside it
+  struct Trip {         // the setpoint watchdog's last trip, until explained
     bool open = false;
-    int64_t cycle = -1;     // the newest setpoint before it
-    int64_t utime = 0;      // that setpoint's publish stamp
-    double arrived_s = 0;   // and its arrival (tick time)
-    double at_s = 0;        // the trip (tick time)
+    int64_t cycle = -1;    // the newest setpoint before it
+    int64_t utime = 0;     // that setpoint's publish stamp
+    double arrived_s = 0;  // and its arrival
   };
   Trip trip_;
   std::string detail_ = "starting";

@@ -24,7 +24,6 @@
 // Exit codes: 0 fine; 1 a required channel is empty or has gaps, the monitor
 // reports differ, or a message fails verification; 2 bad flags or key file.
 #include <cmath>
-#include <cstdlib>
 #include <cstdio>
 #include <map>
 #include <optional>
@@ -159,17 +158,6 @@ int delivery(const std::string& log, double stall_ms) {
   return 0;
 }
 
-// --delivery [--stall-ms MS]
-int delivery_cmd(const std::string& log, const std::string& ms) {
-  char* end = nullptr;
-  const double stall_ms = ms.empty() ? 20.0 : std::strtod(ms.c_str(), &end);
-  if (!ms.empty() && (end == ms.c_str() || *end != '\0' || !(stall_ms > 0) || !std::isfinite(stall_ms))) {
-    std::fprintf(stderr, "cnc-logstat: --stall-ms %s: a positive number of milliseconds is expected\n", ms.c_str());
-    return cnc::service::kExitBadInput;
-  }
-  return delivery(log, stall_ms);
-}
-
 int run_logstat(const cnc::config::MachineConfig& cfg, const cnc::service::Args& args) {
   cnc::util::end_at_once_on_stop_signals();  // no loop here polls the stop flag
   const std::string log = args.option("log");
@@ -178,7 +166,11 @@ int run_logstat(const cnc::config::MachineConfig& cfg, const cnc::service::Args&
     return cnc::service::kExitBadInput;
   }
   if (!args.option("compare-monitor").empty()) return compare_monitor(log, args.option("compare-monitor"));
-  if (args.flags.count("delivery")) return delivery_cmd(log, args.option("stall-ms"));
+  if (args.flags.count("delivery")) {
+    const double stall_ms = args.number("stall-ms", 20.0);
+    if (!(stall_ms > 0)) throw cnc::service::FlagError("--stall-ms: " + args.option("stall-ms") + " is not above 0");
+    return delivery(log, stall_ms);
+  }
   std::string key_file = args.option("key");
   if (key_file.empty() && cfg.security.signing) key_file = cfg.security.key_file;
   std::optional<cnc::bus::LogVerifier> verifier;
@@ -342,7 +334,7 @@ int main(int argc, char** argv) {
                            {"require-no-gaps", "CHANNEL", "exit 1 when CHANNEL is empty or has sequence gaps"},
                            {"compare-monitor", "OTHER_LOG", "check that OTHER_LOG's monitor reports equal the log's"},
                            {"key", "KEYFILE", "verify every message's MAC (or the key of --machine's config)"},
-                           {"stall-ms", "MS", "with --delivery: the receive-side silence that counts as a stall (default 20)"}},
+                           {"stall-ms", "MS", "with --delivery: the receive-side silence that counts as a stall (default 20)", true}},
                           {{"summary", "", "the run's summary: program time, blocks, setpoints, gaps, versions"},
                            {"delivery", "", "publish-to-receive times per channel, and who stalled: publishers or the delivery"}},
                           false};
