@@ -24,7 +24,9 @@ inline constexpr int kLogFormat = 3;
 //   1  up to format 3
 //   2  a stop point reached with motion rests two cycles (the bridge's moving averages
 //      then never mix the two directions)
-inline constexpr int kMotionRevision = 2;
+//   3  the look-ahead brakes for a block's entry with the limits of the blocks before
+//      it, not with the entered block's lower ones
+inline constexpr int kMotionRevision = 3;
 inline constexpr int kOldestReadableLogFormat = 1;
 inline constexpr char kLogFormatChannel[] = "CNC_LOG_FORMAT";
 

@@ -372,6 +372,22 @@ bool Interpolator::safe_cached(double v_n, double a_n, double s_n, double* v_tar
   return r;
 }
 
+bool Interpolator::brake_misses(double v_n, double a_n, double vt, double d, double A, double J, bool entry,
+                                double A_before, double J_before, double T) {
+  const double margin = 0.5 * std::max(0.0, v_n - vt) * T;
+  if (brake_distance(v_n, a_n, vt, A, J) + margin <= d + 1e-9) return false;
+  if (!entry) return true;
+  // A block's entry is met by a brake with the limits of the blocks before it, if
+  // the acceleration is also down to zero there: within this block's lower limits
+  // a ramp-down still under way would carry the speed over the entry's.
+  double s = brake_distance(v_n, a_n, vt, A_before, J_before);
+  if (s == 0 && a_n > 0) {
+    const double t = a_n / J_before;
+    s = v_n * t + 0.5 * a_n * t * t - J_before * t * t * t / 6.0;
+  }
+  return s + margin > d + 1e-9;
+}
+
 bool Interpolator::safe_scan(double v_n, double a_n, double s_n, double* v_target) const {
   double A = kInf, J = kInf;
   // The brake is continuous-time; executed in whole cycles it needs about half a
@@ -383,11 +399,13 @@ bool Interpolator::safe_scan(double v_n, double a_n, double s_n, double* v_targe
   ++work_.safe_calls;
   for (size_t b = 0; b < blocks_.size(); ++b) {
     const Planned& p = blocks_[b];
+    // A brake that ends where block b begins runs in the blocks before it only.
+    const double A_before = b > 0 ? A : p.live_accel, J_before = b > 0 ? J : p.live_jerk;
     A = std::min(A, p.live_accel);
     J = std::min(J, p.live_jerk);
     if (p.stop_block() || (p.live_entry == 0 && offset > 0)) {
       if (v_target != nullptr) *v_target = 0;
-      return brake_distance(v_n, a_n, 0.0, A, J) + 0.5 * v_n * T <= offset - s_n + 1e-9;
+      return brake_distance(v_n, a_n, 0.0, A_before, J_before) + 0.5 * v_n * T <= offset - s_n + 1e-9;
     }
     // The samples behind s_n do not count: skip them by bisection (the same test as
     // the scan's, so the result is the same bit for bit), not one by one (the scan
@@ -395,6 +413,7 @@ bool Interpolator::safe_scan(double v_n, double a_n, double s_n, double* v_targe
     const size_t n = p.samples.size();
     const auto first = std::partition_point(p.samples.begin(), p.samples.end(),
                                             [&](const Sample& x) { return offset + x.s - s_n < 0; });
+    const bool entry = b > 0 && first == p.samples.begin() && n > 0 && own_limit(p, 0);
     // No sample from i on with a limit under v_n + a_n²/(2J) (v_min: the least limit
     // from i to the block's end): none of them can be missed, so the scan would only
     // return at the first of them beyond the horizon; the last one tells whether there is one.
@@ -409,8 +428,9 @@ bool Interpolator::safe_scan(double v_n, double a_n, double s_n, double* v_targe
       ++work_.safe_samples;
       if (d > horizon) return true;
       const double vt = p.v_bw[i];
+      if (entry && i > 0 && vt >= p.v_bw[0]) continue;  // met by meeting the entry's
       if (vt < v_reach && own_limit(p, i) && ++work_.brake_evals > 0 &&
-          brake_distance(v_n, a_n, vt, A, J) + 0.5 * std::max(0.0, v_n - vt) * T > d + 1e-9) {
+          brake_misses(v_n, a_n, vt, d, A, J, entry && i == 0, A_before, J_before, T)) {
         if (v_target != nullptr) *v_target = vt;
         return false;
       }
@@ -449,19 +469,26 @@ void Interpolator::build_look(double vn_lo, double a_lo, double sn_lo, double vn
   double offset = 0;
   for (size_t b = 0; b < blocks_.size(); ++b) {
     const Planned& p = blocks_[b];
+    const double A_before = b > 0 ? A : p.live_accel, J_before = b > 0 ? J : p.live_jerk;
     A = std::min(A, p.live_accel);
     J = std::min(J, p.live_jerk);
     if (p.stop_block() || (p.live_entry == 0 && offset > 0)) {
       look_term_ = true;
       look_term_off_ = offset;
-      look_term_A_ = A;
-      look_term_J_ = J;
+      look_term_A_ = A_before;
+      look_term_J_ = J_before;
       break;
     }
     const double theta = look_vn_hi_ + look_m2_ / (2 * J);
     const size_t n = p.samples.size();
     const auto first = std::partition_point(p.samples.begin(), p.samples.end(),
                                             [&](const Sample& x) { return offset + x.s - sn_lo < 0; });
+    // The entry sample ahead of some tries and behind others: safe_scan answers those.
+    bool entry = false;
+    if (b > 0 && first == p.samples.begin() && n > 0 && own_limit(p, 0)) {
+      if (offset + p.samples[0].s - sn_hi < 0) return;
+      entry = true;
+    }
     for (size_t i = static_cast<size_t>(first - p.samples.begin()); i < n; ++i) {
       if (offset + p.samples[i].s - sn_hi > look_H_) {
         // Beyond every try's horizon: each returns true by here.
@@ -469,9 +496,10 @@ void Interpolator::build_look(double vn_lo, double a_lo, double sn_lo, double vn
         return;
       }
       if (p.v_min[i] >= theta) break;  // nothing under it to the block's end
+      if (entry && i > 0 && p.v_bw[i] >= p.v_bw[0]) continue;  // met by meeting the entry's
       if (p.v_bw[i] < theta && own_limit(p, i)) {
         if (look_n_ == look_.size()) return;  // too many: full checks
-        look_[look_n_++] = LookCand{offset, p.samples[i].s, p.v_bw[i], A, J};
+        look_[look_n_++] = LookCand{offset, p.samples[i].s, p.v_bw[i], A, J, A_before, J_before, entry && i == 0};
       }
     }
     if (n > 0) {
@@ -497,7 +525,7 @@ bool Interpolator::safe_gathered(double v_n, double a_n, double s_n, double* v_t
     ++work_.safe_samples;
     const double vt = c.vt;
     return vt < v_n + a_n * a_n / (2 * c.J) && ++work_.brake_evals > 0 &&
-           brake_distance(v_n, a_n, vt, c.A, c.J) + 0.5 * std::max(0.0, v_n - vt) * T > d + 1e-9;
+           brake_misses(v_n, a_n, vt, d, c.A, c.J, c.entry, c.A_before, c.J_before, T);
   };
   // Reached only when no sample before it is beyond the horizon.
   auto term_reached = [&] { return !(look_last_ && look_last_off_ + look_last_s_ - s_n > horizon); };

@@ -265,6 +265,11 @@ class Interpolator {
   void build_look(double vn_lo, double a_lo, double sn_lo, double vn_hi, double a_hi, double sn_hi);
   bool safe_cached(double v_n, double a_n, double s_n, double* v_target = nullptr);
   bool safe_scan(double v_n, double a_n, double s_n, double* v_target) const;
+  // Whether a brake from (v_n, a_n) misses the limit vt at distance d ahead, with the
+  // least limits A, J of the blocks up to it; a block's entry sample (entry) is met
+  // also by a brake with the limits of the blocks before it (A_before, J_before).
+  static bool brake_misses(double v_n, double a_n, double vt, double d, double A, double J, bool entry,
+                           double A_before, double J_before, double T);
   // Whether sample i's look-ahead limit is its own (its cap, the entry, a stop) rather
   // than only the backward pass's acceleration ramp up from a later one, which the
   // brake check meets by meeting that later limit.
@@ -373,7 +378,8 @@ class Interpolator {
 
   // build_look's samples, in path order: where (block offset, s), limit, brake limits.
   struct LookCand {
-    double offset, s, vt, A, J;
+    double offset, s, vt, A, J, A_before, J_before;
+    bool entry;
   };
   static constexpr size_t kLookCapacity = 1024;  // more: that search checks in full
   std::vector<LookCand> look_;

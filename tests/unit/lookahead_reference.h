@@ -35,20 +35,23 @@ class LookaheadReference : public Interpolator::LookaheadCheck {
     const double horizon = brake_distance(v_n, a_n, 0.0, A_h, J_h) + v_n * T + 1e-9;
     for (size_t b = 0; b < ip.blocks_.size(); ++b) {
       const Planned& p = ip.blocks_[b];
+      const double A_before = b > 0 ? A : p.live_accel, J_before = b > 0 ? J : p.live_jerk;
       A = std::min(A, p.live_accel);
       J = std::min(J, p.live_jerk);
       if (p.stop_block() || (p.live_entry == 0 && offset > 0)) {
         *v_target = 0;
-        return brake_distance(v_n, a_n, 0.0, A, J) + 0.5 * v_n * T <= offset - s_n + 1e-9;
+        return brake_distance(v_n, a_n, 0.0, A_before, J_before) + 0.5 * v_n * T <= offset - s_n + 1e-9;
       }
+      const bool entry = b > 0 && !p.samples.empty() && offset + p.samples[0].s - s_n >= 0 && ip.own_limit(p, 0);
       for (size_t i = 0; i < p.samples.size(); ++i) {
         const double d = offset + p.samples[i].s - s_n;
         if (d < 0) continue;
         if (d > horizon) return true;
         const double vt = p.v_bw[i];
         if (!ip.own_limit(p, i)) continue;
+        if (entry && i > 0 && vt >= p.v_bw[0]) continue;
         if (vt < v_n + a_n * a_n / (2 * J) &&
-            brake_distance(v_n, a_n, vt, A, J) + 0.5 * std::max(0.0, v_n - vt) * T > d + 1e-9) {
+            Interpolator::brake_misses(v_n, a_n, vt, d, A, J, entry && i == 0, A_before, J_before, T)) {
           *v_target = vt;
           return false;
         }
