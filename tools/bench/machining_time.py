@@ -19,6 +19,9 @@ Per program it prints:
             setpoints, as a share of that axis's limit (cnc-plan's own figure)
   sp/s      the dry run's setpoints per second (cnc-plan without --csv; interpolator core
             with the G64 P fit, planner inline)
+  j*100     the project's program time with every jerk limit (axes', path's) 100 times
+            as high, and its ratio to LinuxCNC's: what the jerk limit costs on the same
+            path, which LinuxCNC 2.9 (no jerk limit) does not pay
 and the geometric mean of the ratio ours/LinuxCNC, against the goal (<= 1.0, no program
 above 1.10). Also: the project's time with the roughness law of the machine file on
 (its process: section; the main table is with it off, as LinuxCNC has none), LinuxCNC's
@@ -46,6 +49,7 @@ j = |(60000, 60000, 40000)| mm/s^3, 0.25 mm/s). V_STOP = 0.5 mm/s.
                     [--reuse] [--plan PATH] [--deviation PATH] [--machine FILE]
 """
 import argparse
+import copy
 import json
 import math
 import os
@@ -64,6 +68,7 @@ import microseg_programs  # noqa: E402
 
 TOL_MM = 0.0254
 TRAVEL_MM = 2000
+JERK_FREE = 100  # the j*100 column: every jerk limit this many times as high
 V_STOP = 0.5  # mm/s
 LCNC_T = 0.001
 GOAL_GEOMEAN, GOAL_MAX = 1.0, 1.10
@@ -173,14 +178,21 @@ def machines(base, out_dir):
         a["min_mm"], a["max_mm"] = -TRAVEL_MM, TRAVEL_MM
     cfg.setdefault("program", {})["tool_table"] = "tools.tbl"
     out = {}
-    for law in ("law_on", "law_off"):
-        c = dict(cfg)
-        if law == "law_off":
+    for law in ("law_on", "law_off", "jerk_free"):
+        c = copy.deepcopy(cfg)
+        if law != "law_on":
             c.pop("process", None)
+        note = {"law_on": "", "law_off": ", no process: section",
+                "jerk_free": ", no process: section, every jerk limit x%g" % JERK_FREE}[law]
+        if law == "jerk_free":
+            for a in c["axes"]:
+                a["max_jerk_mm_s3"] *= JERK_FREE
+            if "path_jerk_mm_s3" in c.get("motion", {}):
+                c["motion"]["path_jerk_mm_s3"] *= JERK_FREE
         path = os.path.join(d, "wide_%s.yaml" % law)
         with open(path, "w") as f:
             f.write("# %s with every axis's travel at +-%d mm%s (machining_time.py)\n"
-                    % (os.path.relpath(base, ROOT), TRAVEL_MM, "" if law == "law_on" else ", no process: section"))
+                    % (os.path.relpath(base, ROOT), TRAVEL_MM, note))
             yaml.safe_dump(c, f, sort_keys=False)
         out[law] = path
     return out
@@ -400,9 +412,9 @@ def table(rows, mode, law_on):
     out = []
     out.append("mode %s: G64 P %s; times in s (motion: first to last moving sample), dev in mm" %
                (mode, "0.0254 where the program gives none" if mode == "main" else "as the program gives"))
-    hdr = ("%-16s %6s %7s | %8s %5s | %8s %5s | %5s | %5s %5s | %7s %7s | %5s | %9s | %8s"
+    hdr = ("%-16s %6s %7s | %8s %5s | %8s %5s | %5s | %5s %5s | %7s %7s | %5s | %9s | %8s | %8s %5s"
            % ("program", "P mm", "bound", "ours", "/bnd", "lcnc", "/bnd", "o/l", "st.o", "st.l", "dev.o", "dev.l",
-              "jerk", "sp/s", "law on"))
+              "jerk", "sp/s", "law on", "j*100", "/l"))
     out.append(hdr)
     out.append("-" * len(hdr))
     for r in rows:
@@ -412,22 +424,29 @@ def table(rows, mode, law_on):
             continue
         lt = l.get("time_s") if l and "error" not in l else None
         dw = int(g["dwell_stops"])
-        out.append("%-16s %6s %7.2f | %8.2f %5.2f | %8s %5s | %5s | %5d %5s | %7.4f %7s | %5.2f | %9.0f | %8s" % (
+        jf = r.get("jerk_free_s")
+        out.append("%-16s %6s %7.2f | %8.2f %5.2f | %8s %5s | %5s | %5d %5s | %7.4f %7s | %5.2f | %9.0f | %8s | %8s %5s" % (
             r["name"], fmt(r["tol_mm"], "%.4f"), g["bound_s"], o["time_s"], o["time_s"] / g["bound_s"],
             fmt(lt), fmt(lt / g["bound_s"] if lt else None), fmt(o["time_s"] / lt if lt else None),
             max(0, o["stops_raw"] - dw), "-" if lt is None else "%d" % max(0, l["stops_raw"] - dw),
             o["dev"]["max_mm"], fmt(l["dev"]["max_mm"], "%.4f") if lt else "-", o["jerk_use"],
-            r.get("sps", float("nan")), fmt(law_on.get(r["name"]), "%.2f")))
+            r.get("sps", float("nan")), fmt(law_on.get(r["name"]), "%.2f"), fmt(jf),
+            fmt(jf / lt if jf and lt else None)))
         if l and "error" in l:
             out.append("%-16s lcnc: %s" % ("", l["error"]))
     ratios = [r["ours"]["time_s"] / r["lcnc"]["time_s"] for r in rows
               if "error" not in r["ours"] and r.get("lcnc") and "error" not in r["lcnc"]]
+    free = [r["jerk_free_s"] / r["lcnc"]["time_s"] for r in rows
+            if r.get("jerk_free_s") and r.get("lcnc") and "error" not in r["lcnc"]]
     if ratios:
         gm = geomean(ratios)
         worst = max(ratios)
         out.append("geometric mean of ours/LinuxCNC over %d programs: %.3f (goal <= %.2f: %s); largest %.3f "
                    "(goal <= %.2f: %s)" % (len(ratios), gm, GOAL_GEOMEAN, "met" if gm <= GOAL_GEOMEAN else "NOT met",
                                            worst, GOAL_MAX, "met" if worst <= GOAL_MAX else "NOT met"))
+    if free:
+        out.append("the same with every jerk limit x%g (j*100/l): geometric mean %.3f, largest %.3f"
+                   % (JERK_FREE, geomean(free), max(free)))
     chk = [(r["name"], r["geo"].get("rs274_moves"), r["geo"].get("moves_dumped"), r["geo"].get("rs274_max_mm"))
            for r in rows]
     bad = [c for c in chk if c[1] is not None and (c[1] != c[2] or c[3] is None or c[3] > 0.0015)]
@@ -541,6 +560,7 @@ def main():
                 row["sps"] = sps.get("setpoints_per_s", float("nan"))
                 on = plan(args.plan, program, mach["law_on"], None)
                 law_on[name] = on.get("program_time_s", float("nan"))
+                row["jerk_free_s"] = plan(args.plan, program, mach["jerk_free"], None).get("program_time_s")
                 row["law_on_program_time_s"] = law_on[name]
             if not args.no_linuxcnc:
                 row["lcnc"] = lcnc(args, name, program, mach["law_off"], lim, work, args.deviation,
