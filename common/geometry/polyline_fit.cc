@@ -146,7 +146,7 @@ Eigen::Vector3d cubic_point(const std::vector<double>& knots, const std::vector<
   return p;
 }
 
-CubicFit fit_cubic(const std::vector<Eigen::Vector3d>& pts, double tol) {
+CubicFit fit_cubic(const std::vector<Eigen::Vector3d>& pts, double tol, const FitEnds& ends) {
   CubicFit out;
   const int np = static_cast<int>(pts.size());
   if (np < 2 || !(tol > 0)) return out;
@@ -168,8 +168,12 @@ CubicFit fit_cubic(const std::vector<Eigen::Vector3d>& pts, double tol) {
   std::vector<Seg> segs(static_cast<size_t>(np - 1));
   for (size_t i = 0; i + 1 < pts.size(); ++i) segs[i] = {pts[i], pts[i + 1] - pts[i], (pts[i + 1] - pts[i]).squaredNorm()};
 
+  // An end whose tangent is given leaves the curve along it with zero curvature: its
+  // next two control points are fixed, so a straight end needs a span of its own.
+  const bool t0 = ends.start.has_value(), t1 = ends.end.has_value();
+  const int fixed0 = t0 ? 3 : 1, fixed1 = t1 ? 3 : 1;
   std::vector<double> breaks;
-  const int spans0 = std::max(1, (np - 1) / kPointsPerSpan);
+  const int spans0 = std::max({1, (np - 1) / kPointsPerSpan, fixed0 + fixed1 - 3});
   for (int j = 0; j <= spans0; ++j) {
     const int i = static_cast<int>(std::lround(static_cast<double>(j) * (np - 1) / spans0));
     breaks.push_back(j == spans0 ? L : t[static_cast<size_t>(i)]);
@@ -180,10 +184,22 @@ CubicFit fit_cubic(const std::vector<Eigen::Vector3d>& pts, double tol) {
     out.rounds = round;
     const std::vector<double> U = clamped_knots(breaks);
     const int nc = static_cast<int>(U.size()) - kDegree - 1;  // control points
-    const int nu = nc - 2;                                     // unknowns: all but the two ends
+    const int nu = nc - fixed0 - fixed1;                       // unknowns: all but the fixed ends
     std::vector<Eigen::Vector3d> P(static_cast<size_t>(nc), Eigen::Vector3d::Zero());
     P.front() = pts.front();
     P.back() = pts.back();
+    // Unit speed along the given tangent and no second derivative at the end: the
+    // control points of the line u·t there (Greville abscissae), as C'(0) = 3(P1-P0)/u4
+    // and C''(0) = 0 ask.
+    if (t0) {
+      P[1] = P[0] + (U[4] - U[3]) / 3.0 * *ends.start;
+      P[2] = P[1] + (U[5] - U[3]) / 3.0 * *ends.start;
+    }
+    if (t1) {
+      const size_t m = static_cast<size_t>(nc - 1);
+      P[m - 1] = P[m] - (U[m + 1] - U[m]) / 3.0 * *ends.end;
+      P[m - 2] = P[m - 1] - (U[m + 1] - U[m - 1]) / 3.0 * *ends.end;
+    }
     if (nu > 0) {
       std::vector<Eigen::Triplet<double>> trip;
       trip.reserve(static_cast<size_t>(np) * 64 + static_cast<size_t>(nc) * 9);
@@ -192,13 +208,13 @@ CubicFit fit_cubic(const std::vector<Eigen::Vector3d>& pts, double tol) {
         // One squared residual weight·|Σ w_j P_idx_j - target|²: known ends move to the right-hand side.
         Eigen::Vector3d known = target;
         for (int a = 0; a < cnt; ++a)
-          if (idx[a] == 0 || idx[a] == nc - 1) known -= w[a] * P[static_cast<size_t>(idx[a])];
+          if (idx[a] < fixed0 || idx[a] >= nc - fixed1) known -= w[a] * P[static_cast<size_t>(idx[a])];
         for (int a = 0; a < cnt; ++a) {
-          const int ia = idx[a] - 1;
+          const int ia = idx[a] - fixed0;
           if (ia < 0 || ia >= nu) continue;
           rhs.row(ia) += weight * w[a] * known.transpose();
           for (int b = 0; b < cnt; ++b) {
-            const int ib = idx[b] - 1;
+            const int ib = idx[b] - fixed0;
             if (ib < 0 || ib >= nu) continue;
             trip.emplace_back(ia, ib, weight * w[a] * w[b]);
           }
@@ -234,7 +250,7 @@ CubicFit fit_cubic(const std::vector<Eigen::Vector3d>& pts, double tol) {
       if (solver.info() != Eigen::Success) return out;
       const Eigen::MatrixXd X = solver.solve(rhs);
       if (solver.info() != Eigen::Success) return out;
-      for (int j = 0; j < nu; ++j) P[static_cast<size_t>(j + 1)] = X.row(j).transpose();
+      for (int j = 0; j < nu; ++j) P[static_cast<size_t>(j + fixed0)] = X.row(j).transpose();
     }
     for (const auto& p : P)
       if (!p.allFinite()) return out;

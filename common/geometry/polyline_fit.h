@@ -19,6 +19,7 @@
 // * corner_blend: the quartic Bézier that rounds the corner between two lines
 //   within `tol` (zero curvature at both ends, so a line, the blend and the next
 //   line join with continuous curvature).
+#include <optional>
 #include <vector>
 
 #include <Eigen/Core>
@@ -34,8 +35,14 @@ struct CubicFit {
   int rounds = 0;
 };
 
+// Unit tangents the curve must start and end along (with zero curvature there), so it
+// joins a line or a corner blend along that direction with continuous curvature.
+struct FitEnds {
+  std::optional<Eigen::Vector3d> start, end;
+};
+
 // pts: at least 2 points, consecutive points distinct. tol > 0 (mm).
-CubicFit fit_cubic(const std::vector<Eigen::Vector3d>& pts, double tol);
+CubicFit fit_cubic(const std::vector<Eigen::Vector3d>& pts, double tol, const FitEnds& ends = {});
 
 struct CubicPiece {
   std::vector<double> knots;

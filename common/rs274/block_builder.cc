@@ -183,6 +183,22 @@ program::Block& BlockBuilder::run_block(const SourceRef& ref, program::BlockKind
   return b;
 }
 
+bool BlockBuilder::resolvable_blend(double d, const Eigen::Vector3d& u_in, const Eigen::Vector3d& u_out,
+                                    double feed_mm_s) const {
+  if (!(d > 0)) return false;
+  const double T = setup_.ipo_period_s;
+  // The quartic blend's curvature at its middle (its largest): 3·sin(θ/2) / (4·d·cos²(θ/2))
+  // for a turn θ; there its speed is at most sqrt((A/2)/κ).
+  const double half = 0.5 * std::acos(std::clamp(u_in.dot(u_out), -1.0, 1.0));
+  const double c = std::cos(half);
+  const double kappa = 3.0 * std::sin(half) / (4.0 * d * c * c);
+  double v = feed_mm_s;
+  if (setup_.accel_mm_s2 > 0 && kappa > 0) v = std::min(v, std::sqrt(0.5 * setup_.accel_mm_s2 / kappa));
+  const double step = std::max(v * T, setup_.jerk_mm_s3 * T * T * T / 6.0);
+  // 1.5 steps: a 1 um blend the interpolation crossed in about one made 1.21x an axis's jerk.
+  return 4.0 * d >= 1.5 * step;
+}
+
 // A run of G1 moves under G64 P, as blocks: stretches of short, gently turning
 // moves fitted to cubic splines (cut into NURBS blocks), the remaining lines with
 // each corner between two of them rounded by a quartic blend, both within P less
@@ -206,8 +222,21 @@ void BlockBuilder::flush_run() {
     dir[i] = d / len[i];
   }
   const double cos_turn = std::cos(setup_.fit_max_turn_deg * M_PI / 180.0);
-  // fitted[i]: move i belongs to a fitted stretch; stretches as [first, last) moves.
-  std::vector<char> fitted(n, 0);
+  // Blend legs at the vertices (vertex j joins move j-1 and move j), used where the
+  // vertex is not inside a fitted stretch: between two lines, or where a stretch ends.
+  std::vector<double> leg(n + 1, 0.0);
+  for (size_t j = 1; j < n; ++j) {
+    leg[j] = geometry::corner_blend_leg(dir[j - 1], dir[j], tol, 0.5 * std::min(len[j - 1], len[j]));
+    const double v = run_feed_ / 60.0;
+    if (setup_.corner_dv_mm_s >= v * (dir[j] - dir[j - 1]).norm() || !resolvable_blend(leg[j], dir[j - 1], dir[j], v))
+      leg[j] = 0;
+  }
+  // A stretch's ends: where it begins and ends, moved back along its end moves by the
+  // blends there.
+  auto stretch_start = [&](size_t a) { return Eigen::Vector3d(pts[a] + 2.0 * leg[a] * dir[a]); };
+  auto stretch_end = [&](size_t b) { return Eigen::Vector3d(pts[b] - 2.0 * leg[b] * dir[b - 1]); };
+  // fitted[i]: the stretch (from 1) move i belongs to; 0: a line. Stretches as [first, last) moves.
+  std::vector<size_t> fitted(n, 0);
   struct Stretch {
     size_t a, b;
     geometry::CubicFit fit;
@@ -215,14 +244,16 @@ void BlockBuilder::flush_run() {
   std::vector<Stretch> stretches;
   constexpr size_t kMinMoves = 4;
   // A stretch the fit cannot hold within P (a sharp turn that is no corner by the
-  // run's rule) is cut at its sharpest turn and each part tried again.
+  // run's rule) is cut at its sharpest turn and each part tried again. It leaves and
+  // ends along its end moves, so the blends or lines there join it smoothly.
   std::function<void(size_t, size_t)> fit_range = [&](size_t a, size_t b) {
     if (b - a < kMinMoves) return;
     std::vector<Eigen::Vector3d> sub(pts.begin() + static_cast<std::ptrdiff_t>(a),
                                      pts.begin() + static_cast<std::ptrdiff_t>(b + 1));
-    geometry::CubicFit fit = geometry::fit_cubic(sub, tol);
+    sub.front() = stretch_start(a);
+    sub.back() = stretch_end(b);
+    geometry::CubicFit fit = geometry::fit_cubic(sub, tol, {dir[a], dir[b - 1]});
     if (fit.ok) {
-      for (size_t i = a; i < b; ++i) fitted[i] = 1;
       stretches.push_back({a, b, std::move(fit)});
       return;
     }
@@ -245,15 +276,10 @@ void BlockBuilder::flush_run() {
     }
   }
   std::sort(stretches.begin(), stretches.end(), [](const Stretch& x, const Stretch& y) { return x.a < y.a; });
-  // Blend legs at the vertices between two lines (vertex j joins move j-1 and move j).
-  std::vector<double> leg(n + 1, 0.0);
-  for (size_t j = 1; j < n; ++j) {
-    if (fitted[j - 1] || fitted[j]) continue;
-    leg[j] = geometry::corner_blend_leg(dir[j - 1], dir[j], tol, 0.5 * std::min(len[j - 1], len[j]));
-    const double v = run_feed_ / 60.0;
-    if (4.0 * leg[j] < v * setup_.ipo_period_s || setup_.corner_dv_mm_s >= v * (dir[j] - dir[j - 1]).norm())
-      leg[j] = 0;
-  }
+  for (size_t k = 0; k < stretches.size(); ++k)
+    for (size_t i = stretches[k].a; i < stretches[k].b; ++i) fitted[i] = k + 1;
+  for (size_t j = 1; j < n; ++j)
+    if (fitted[j - 1] != 0 && fitted[j - 1] == fitted[j]) leg[j] = 0;  // inside a stretch
   std::vector<double> cursor = run_[0].pos;
   auto at = [&](const Eigen::Vector3d& p) {
     std::vector<double> v = run_[0].pos;
@@ -273,6 +299,16 @@ void BlockBuilder::flush_run() {
       throw Error(file_name_(ref.file), ref, "G64 P: the fitted curve is not a valid NURBS (" + why + ")");
     cursor = end;
   };
+  // The blend at vertex j, from the cursor (where the move before it was cut short).
+  auto blend = [&](size_t j) {
+    const double d = leg[j];
+    const Eigen::Vector3d v = pts[j];
+    const std::vector<Eigen::Vector3d> q = {v - 2 * d * dir[j - 1], v - d * dir[j - 1], v, v + d * dir[j],
+                                            v + 2 * d * dir[j]};
+    // Knots spanning the blend's approximate length, as the parameter of a G5.2 curve would.
+    const double s = 4.0 * d;
+    nurbs_block(run_[j].ref, 5, {0, 0, 0, 0, 0, s, s, s, s, s}, q, at(q.back()));
+  };
   size_t next_stretch = 0;
   for (size_t i = 0; i < n;) {
     if (next_stretch < stretches.size() && stretches[next_stretch].a == i) {
@@ -286,11 +322,13 @@ void BlockBuilder::flush_run() {
         const auto it = std::upper_bound(st.fit.params.begin(), st.fit.params.end(), u0);
         size_t move = st.a + static_cast<size_t>(std::max<std::ptrdiff_t>(1, it - st.fit.params.begin()));
         move = std::min(move, st.b);
-        // The last piece ends exactly where the stretch's last move ends.
-        const std::vector<double> end = k + 1 == pieces.size() ? run_[st.b].pos : at(pc.ctrl.back());
+        // The last piece ends exactly where the stretch's last move ends, or its blend begins.
+        const std::vector<double> end =
+            k + 1 < pieces.size() ? at(pc.ctrl.back()) : leg[st.b] > 0 ? at(stretch_end(st.b)) : run_[st.b].pos;
         nurbs_block(run_[move].ref, 4, pc.knots, pc.ctrl, end);
       }
       i = st.b;
+      if (leg[i] > 0) blend(i);
       continue;
     }
     // A line, shortened by the blends at its ends, and the blend at its end.
@@ -302,15 +340,7 @@ void BlockBuilder::flush_run() {
       run_block(run_[i + 1].ref, program::BlockKind::kLine, cursor, line_end);
       cursor = line_end;
     }
-    if (leg[i + 1] > 0) {
-      const double d = leg[i + 1];
-      const Eigen::Vector3d v = pts[i + 1];
-      const std::vector<Eigen::Vector3d> q = {v - 2 * d * dir[i], v - d * dir[i], v, v + d * dir[i + 1],
-                                              v + 2 * d * dir[i + 1]};
-      // Knots spanning the blend's approximate length, as the parameter of a G5.2 curve would.
-      const double s = 4.0 * d;
-      nurbs_block(run_[i + 1].ref, 5, {0, 0, 0, 0, 0, s, s, s, s, s}, q, at(q.back()));
-    }
+    if (leg[i + 1] > 0) blend(i + 1);
     ++i;
   }
   run_.clear();

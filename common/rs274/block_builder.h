@@ -6,6 +6,7 @@
 // The checks of block geometry that the interpolator relies on (arc radii, NURBS
 // knots and weights, axes the machine has) are made here, at the source line of the
 // call, so a program that would be refused on the network is refused at its place.
+#include <Eigen/Core>
 #include <deque>
 #include <functional>
 #include <string>
@@ -32,10 +33,13 @@ struct BuilderSetup {
   // No corner blend where the interpolator's corner rule passes the kink at the
   // run's feed anyway (its velocity step |Δt|·v within corner_dv_mm_s, the least of
   // one cycle's acceleration and half a cycle's jerk), nor where the blend would be
-  // shorter than one interpolation cycle's travel at that feed: a blend that short
-  // is run at a crawl by the jerk its curvature change asks.
+  // crossed in fewer than 1.5 cycles at the speed its curvature allows with half of
+  // accel_mm_s2, or is shorter than 1.5 of the smallest steps from rest (jerk_mm_s3·T³/6):
+  // the interpolation cannot resolve it, and would turn within a step (the corner stops).
   double ipo_period_s = 0.004;
   double corner_dv_mm_s = 0;
+  double accel_mm_s2 = 0;  // the least of the path's and the axes' limits
+  double jerk_mm_s3 = 0;
   // The machine's chord tolerance: its share of P (program::chord_tolerance_mm) is
   // not the fit's and the blends'.
   double chord_tolerance_mm = 0.001;
@@ -101,6 +105,9 @@ class BlockBuilder : public Canon {
   // G64 P: the G1 moves held back to be blended or fitted, and their emission.
   bool blending() const;
   void flush_run();
+  // Whether a corner blend of leg d between the unit directions u_in and u_out is long
+  // enough for the interpolation to resolve it (BuilderSetup: accel_mm_s2).
+  bool resolvable_blend(double d, const Eigen::Vector3d& u_in, const Eigen::Vector3d& u_out, double feed_mm_s) const;
   // A block of the run being flushed: its feed, spindle and process, from `from` to `to`.
   program::Block& run_block(const SourceRef& ref, program::BlockKind kind, const std::vector<double>& from,
                             const std::vector<double>& to);

@@ -214,8 +214,13 @@ ProgramSetup program_setup(const config::MachineConfig& cfg) {
     // The planner's corner step (common/motion/corner.h) with the path's and every axis's limits.
     const double T = cfg.ipo_period_s;
     s.builder.corner_dv_mm_s = motion::corner_step_mm_s(cfg.path_accel_mm_s2, cfg.path_jerk_mm_s3, T);
-    for (const auto& a : cfg.axes)
+    s.builder.accel_mm_s2 = cfg.path_accel_mm_s2;
+    s.builder.jerk_mm_s3 = cfg.path_jerk_mm_s3;
+    for (const auto& a : cfg.axes) {
       s.builder.corner_dv_mm_s = std::min(s.builder.corner_dv_mm_s, motion::corner_step_mm_s(a.max_accel_mm_s2, a.max_jerk_mm_s3, T));
+      s.builder.accel_mm_s2 = std::min(s.builder.accel_mm_s2, a.max_accel_mm_s2);
+      s.builder.jerk_mm_s3 = std::min(s.builder.jerk_mm_s3, a.max_jerk_mm_s3);
+    }
   }
   for (const auto& a : cfg.axes) s.travel_mm.emplace_back(a.min_mm, a.max_mm);
   s.safe_z_mm = cfg.operator_.safe_z_mm;
