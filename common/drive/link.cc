@@ -102,4 +102,34 @@ TxResult Link::write_and_read(int unit, int write_addr, int write_n, const uint1
   return finish(do_write_read(unit, write_addr, write_n, src, read_addr, read_n, dest), c);
 }
 
+TxResult Link::read_coils(int unit, int addr, int n, uint8_t* dest, LinkCounters& c) {
+  if (!open_) return TxResult::kLinkLost;
+  return finish(do_read_bits(unit, addr, n, dest, false), c);
+}
+
+TxResult Link::read_discrete_inputs(int unit, int addr, int n, uint8_t* dest, LinkCounters& c) {
+  if (!open_) return TxResult::kLinkLost;
+  return finish(do_read_bits(unit, addr, n, dest, true), c);
+}
+
+TxResult Link::write_coil(int unit, int addr, bool on, LinkCounters& c) {
+  if (!open_) return TxResult::kLinkLost;
+  return finish(do_write_bit(unit, addr, on), c);
+}
+
+TxResult Link::write_coils(int unit, int addr, int n, const uint8_t* src, LinkCounters& c) {
+  if (!open_) return TxResult::kLinkLost;
+  return finish(do_write_bits(unit, addr, n, src), c);
+}
+
+TxResult Link::read_input_registers(int unit, int addr, int n, uint16_t* dest, LinkCounters& c) {
+  if (!open_) return TxResult::kLinkLost;
+  return finish(do_read_input_registers(unit, addr, n, dest), c);
+}
+
+int Link::do_read_bits(int, int, int, uint8_t*, bool) { return EMBXILFUN; }
+int Link::do_write_bit(int, int, bool) { return EMBXILFUN; }
+int Link::do_write_bits(int, int, int, const uint8_t*) { return EMBXILFUN; }
+int Link::do_read_input_registers(int, int, int, uint16_t*) { return EMBXILFUN; }
+
 }  // namespace cnc::drive

@@ -43,6 +43,13 @@ class Link {
   // Function 23: the write happens before the read.
   TxResult write_and_read(int unit, int write_addr, int write_n, const uint16_t* src, int read_addr, int read_n,
                           uint16_t* dest, LinkCounters& c);
+  // The I/O modules' tables: coils (function 1 read, 5 write one, 15 write many),
+  // discrete inputs (2) and input registers (4). Bits are one byte each, 0 or 1.
+  TxResult read_coils(int unit, int addr, int n, uint8_t* dest, LinkCounters& c);
+  TxResult read_discrete_inputs(int unit, int addr, int n, uint8_t* dest, LinkCounters& c);
+  TxResult write_coil(int unit, int addr, bool on, LinkCounters& c);
+  TxResult write_coils(int unit, int addr, int n, const uint8_t* src, LinkCounters& c);
+  TxResult read_input_registers(int unit, int addr, int n, uint16_t* dest, LinkCounters& c);
 
  protected:
   // Each returns 0 on success or the errno of the failure (libmodbus codes for
@@ -53,6 +60,12 @@ class Link {
   virtual int do_write1(int unit, int addr, uint16_t value) = 0;
   virtual int do_write(int unit, int addr, int n, const uint16_t* src) = 0;
   virtual int do_write_read(int unit, int waddr, int wn, const uint16_t* src, int raddr, int rn, uint16_t* dest) = 0;
+  // A link without the bit tables or input registers answers as a drive does that
+  // has none: an exception (illegal function).
+  virtual int do_read_bits(int unit, int addr, int n, uint8_t* dest, bool discrete_inputs);
+  virtual int do_write_bit(int unit, int addr, bool on);
+  virtual int do_write_bits(int unit, int addr, int n, const uint8_t* src);
+  virtual int do_read_input_registers(int unit, int addr, int n, uint16_t* dest);
   // After a failed transaction that may leave bytes in flight (timeouts, garbage):
   // a serial line is flushed, a TCP connection made afresh.
   virtual void discard_input() {}

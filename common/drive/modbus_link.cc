@@ -97,4 +97,28 @@ int ModbusLink::do_write_read(int unit, int waddr, int wn, const uint16_t* src, 
   return rc_to_err(modbus_write_and_read_registers(ctx_, waddr, wn, src, raddr, rn, dest));
 }
 
+int ModbusLink::do_read_bits(int unit, int addr, int n, uint8_t* dest, bool discrete_inputs) {
+  modbus_set_slave(ctx_, unit);
+  errno = 0;
+  return rc_to_err(discrete_inputs ? modbus_read_input_bits(ctx_, addr, n, dest) : modbus_read_bits(ctx_, addr, n, dest));
+}
+
+int ModbusLink::do_write_bit(int unit, int addr, bool on) {
+  modbus_set_slave(ctx_, unit);
+  errno = 0;
+  return rc_to_err(modbus_write_bit(ctx_, addr, on ? 1 : 0));
+}
+
+int ModbusLink::do_write_bits(int unit, int addr, int n, const uint8_t* src) {
+  modbus_set_slave(ctx_, unit);
+  errno = 0;
+  return rc_to_err(modbus_write_bits(ctx_, addr, n, src));
+}
+
+int ModbusLink::do_read_input_registers(int unit, int addr, int n, uint16_t* dest) {
+  modbus_set_slave(ctx_, unit);
+  errno = 0;
+  return rc_to_err(modbus_read_input_registers(ctx_, addr, n, dest));
+}
+
 }  // namespace cnc::drive

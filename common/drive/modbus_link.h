@@ -26,6 +26,10 @@ class ModbusLink final : public Link {
   int do_write1(int unit, int addr, uint16_t value) override;
   int do_write(int unit, int addr, int n, const uint16_t* src) override;
   int do_write_read(int unit, int waddr, int wn, const uint16_t* src, int raddr, int rn, uint16_t* dest) override;
+  int do_read_bits(int unit, int addr, int n, uint8_t* dest, bool discrete_inputs) override;
+  int do_write_bit(int unit, int addr, bool on) override;
+  int do_write_bits(int unit, int addr, int n, const uint8_t* src) override;
+  int do_read_input_registers(int unit, int addr, int n, uint16_t* dest) override;
   void discard_input() override;
 
   modbus_t* ctx_;
