@@ -27,7 +27,7 @@ std::set<std::string> transport_names() {
 // given its table: it may read no other key, and the table rejects every other key.
 constexpr std::string_view kTopKeys[] = {"cell",    "timing", "motion", "operator",     "hmi",    "process",
                                          "cutting", "program", "axes",  "drive_bridge", "logger", "security",
-                                         "monitor", "spindle"};
+                                         "monitor", "spindle", "io"};
 constexpr std::string_view kCellKeys[] = {"name", "channel_prefix", "lcm_url"};
 constexpr std::string_view kTimingKeys[] = {"ipo_period_s",       "servo_period_s",      "setpoint_timeout_s",
                                             "stop_decel_mm_s2",   "heartbeat_period_s",  "heartbeat_timeout_s",
@@ -64,6 +64,13 @@ constexpr std::string_view kHomeKeys[] = {"method",      "search_velocity_mm_s",
 constexpr std::string_view kSpindleKeys[] = {"drive", "max_rpm", "rpm_per_hz", "at_speed_tolerance",
                                              "at_speed_timeout_s", "sim"};
 constexpr std::string_view kSpindleSimKeys[] = {"time_constant_s", "load_current_a", "inertia_current_a"};
+constexpr std::string_view kIoKeys[] = {"modules",        "points",        "coolant",       "digital_outputs",
+                                        "digital_inputs", "analog_inputs", "analog_outputs"};
+constexpr std::string_view kIoModuleKeys[] = {"name",   "transport", "host",    "port",
+                                              "device", "baud",      "parity",  "stop_bits",
+                                              "unit_id", "response_timeout_s"};
+constexpr std::string_view kIoPointKeys[] = {"name", "module", "kind", "address", "scale", "signed"};
+constexpr std::string_view kIoCoolantKeys[] = {"mist", "flood"};
 constexpr std::string_view kDriveBridgeKeys[] = {"enable_on_start", "profile_dir",     "enable_timeout_s",
                                                  "link_loss_timeout_s", "reconnect_min_s", "reconnect_max_s",
                                                  "lead_cycles"};
@@ -90,6 +97,10 @@ constexpr KeySection kSections[] = {
     {"spindle", kSpindleKeys},
     {"spindle.drive", kDriveKeys},
     {"spindle.sim", kSpindleSimKeys},
+    {"io", kIoKeys},
+    {"io.modules[]", kIoModuleKeys},
+    {"io.points[]", kIoPointKeys},
+    {"io.coolant", kIoCoolantKeys},
     {"logger", kLoggerKeys},
     {"security", kSecurityKeys},
     {"monitor", kMonitorKeys},
@@ -386,6 +397,134 @@ void read_spindle(MapReader r, MachineConfig& c) {
   r.finish();
 }
 
+bool plain_name(const std::string& s) {
+  if (s.empty() || !(std::isalpha(static_cast<unsigned char>(s[0])) || s[0] == '_')) return false;
+  return std::all_of(s.begin(), s.end(), [](char ch) { return std::isalnum(static_cast<unsigned char>(ch)) || ch == '_'; });
+}
+
+IoModuleConfig read_io_module(MapReader r) {
+  IoModuleConfig m;
+  DriveConfig& d = m.link;
+  m.name = r.require_string("name");
+  if (!plain_name(m.name)) r.fail("name", "'" + m.name + "' is no name: letters, digits and _");
+  d.transport = r.get_choice("transport", d.transport, transport_names());
+  d.host = r.get_string("host", d.host);
+  d.port = static_cast<int>(r.get_int("port", d.port, 1, 65535));
+  d.device = r.get_string("device", d.device);
+  d.baud = static_cast<int>(r.get_int("baud", d.baud, 1200, 4'000'000));
+  d.parity = r.get_choice("parity", d.parity, {"none", "even", "odd"});
+  d.stop_bits = static_cast<int>(r.get_int("stop_bits", d.stop_bits, 1, 2));
+  d.unit_id = static_cast<int>(r.require_int("unit_id", 1, 247));
+  d.response_timeout_s = r.get_double("response_timeout_s", d.response_timeout_s, 0.001, 5.0);
+  if (drive::transport_named(d.transport) == Transport::kModbusRtu && d.device.empty())
+    r.fail("device", "is required for transport modbus_rtu");
+  d.profile = "";
+  r.finish();
+  return m;
+}
+
+// The unit ids and line settings an I/O module shares with the drives on its link.
+void check_io_module_link(const MapReader& r, const MachineConfig& c, const IoModuleConfig& m) {
+  const DriveConfig& d = m.link;
+  auto clash = [&](const DriveConfig& o, const std::string& who) {
+    if (o.link_key() != d.link_key()) return;
+    if (o.unit_id == d.unit_id) r.fail("unit_id", "unit_id " + std::to_string(d.unit_id) + " is " + who + " on the same link");
+    if (o.baud != d.baud || o.parity != d.parity || o.stop_bits != d.stop_bits)
+      r.fail("baud", who + " is on the same serial line with other line settings");
+  };
+  for (const auto& a : c.axes) clash(a.drive, "axis " + a.name + "'s drive");
+  if (c.spindle.enabled) clash(c.spindle.drive, "the spindle's drive");
+  for (const auto& o : c.io.modules) clash(o.link, "module " + o.name);
+}
+
+IoPointConfig read_io_point(MapReader r, const IoConfig& io) {
+  IoPointConfig p;
+  p.name = r.require_string("name");
+  if (!plain_name(p.name)) r.fail("name", "'" + p.name + "' is no name: letters, digits and _");
+  if (io.point_index(p.name) >= 0) r.fail("name", "duplicate point '" + p.name + "'");
+  const std::string module = io.modules.size() == 1 ? r.get_string("module", io.modules[0].name) : r.require_string("module");
+  p.module = -1;
+  for (size_t i = 0; i < io.modules.size(); ++i)
+    if (io.modules[i].name == module) p.module = static_cast<int>(i);
+  if (p.module < 0) r.fail("module", "no module '" + module + "' in io.modules");
+  const std::string kind = r.require_string("kind");
+  if (kind == "coil") p.kind = IoKind::kCoil;
+  else if (kind == "discrete_input") p.kind = IoKind::kDiscreteInput;
+  else if (kind == "input_register") p.kind = IoKind::kInputRegister;
+  else if (kind == "holding_register") p.kind = IoKind::kHoldingRegister;
+  else r.fail("kind", "'" + kind + "' is not one of: coil, discrete_input, input_register, holding_register");
+  p.address = static_cast<int>(r.require_int("address", 0, 65535));
+  const bool reg = p.kind == IoKind::kInputRegister || p.kind == IoKind::kHoldingRegister;
+  if (!reg && (r.has("scale") || r.has("signed"))) r.fail(r.has("scale") ? "scale" : "signed", "only a register has one");
+  p.scale = r.get_double("scale", p.scale, -1e9, 1e9);
+  if (p.scale == 0) r.fail("scale", "must not be 0");
+  p.is_signed = r.get_bool("signed", p.is_signed);
+  for (const auto& o : io.points)
+    if (o.module == p.module && o.kind == p.kind && o.address == p.address)
+      r.fail("address", std::string(to_string(p.kind)) + " " + std::to_string(p.address) + " of module " + module +
+                            " is point " + o.name + " already");
+  r.finish();
+  return p;
+}
+
+// A point named by a role (io.coolant.*, io.digital_outputs[n], ...): its index, of one of `kinds`.
+int io_role(const MapReader& r, const std::string& path, const std::string& name, const IoConfig& io,
+            std::initializer_list<IoKind> kinds, std::set<int>& taken) {
+  const int i = io.point_index(name);
+  if (i < 0) throw ConfigError(r.file(), path, "no point '" + name + "' in io.points");
+  const IoKind k = io.points[static_cast<size_t>(i)].kind;
+  if (std::find(kinds.begin(), kinds.end(), k) == kinds.end()) {
+    std::string want;
+    for (IoKind w : kinds) want += (want.empty() ? "" : " or ") + std::string(to_string(w));
+    throw ConfigError(r.file(), path, "point '" + name + "' is of kind " + to_string(k) + ", not " + want);
+  }
+  if (!taken.insert(i).second) throw ConfigError(r.file(), path, "point '" + name + "' has a role already");
+  return i;
+}
+
+void read_io(MapReader r, MachineConfig& c) {
+  IoConfig& io = c.io;
+  io.enabled = true;
+  YAML::Node modules = r.sequence("modules");
+  if (modules.size() == 0) r.fail("modules", "at least one module is required");
+  for (size_t i = 0; i < modules.size(); ++i) {
+    MapReader m(modules[i], r.item_path("modules", i), r.file(), kIoModuleKeys);
+    IoModuleConfig mod = read_io_module(m);
+    for (const auto& o : io.modules)
+      if (o.name == mod.name) m.fail("name", "duplicate module '" + mod.name + "'");
+    check_io_module_link(m, c, mod);
+    if (c.drive_bridge.link_loss_timeout_s < mod.link.response_timeout_s)
+      m.fail("response_timeout_s", "must not exceed drive_bridge.link_loss_timeout_s");
+    io.modules.push_back(std::move(mod));
+  }
+  YAML::Node points = r.sequence("points");
+  for (size_t i = 0; i < points.size(); ++i)
+    io.points.push_back(read_io_point(MapReader(points[i], r.item_path("points", i), r.file(), kIoPointKeys), io));
+  std::set<int> taken;
+  MapReader cool = r.map("coolant", kIoCoolantKeys);
+  if (cool.has("mist"))
+    io.coolant_mist = io_role(cool, cool.child_path("mist"), cool.require_string("mist"), io, {IoKind::kCoil}, taken);
+  if (cool.has("flood"))
+    io.coolant_flood = io_role(cool, cool.child_path("flood"), cool.require_string("flood"), io, {IoKind::kCoil}, taken);
+  cool.finish();
+  auto list = [&](const std::string& key, std::initializer_list<IoKind> kinds, std::vector<int>& out, size_t max) {
+    YAML::Node seq = r.sequence(key);
+    if (seq.size() > max) r.fail(key, "at most " + std::to_string(max) + " points");
+    for (size_t i = 0; i < seq.size(); ++i) {
+      const std::string path = r.item_path(key, i);
+      if (!seq[i].IsScalar()) throw ConfigError(r.file(), path, "expected a point's name");
+      out.push_back(io_role(r, path, seq[i].Scalar(), io, kinds, taken));
+    }
+  };
+  list("digital_outputs", {IoKind::kCoil}, io.digital_outputs, 64);
+  list("digital_inputs", {IoKind::kDiscreteInput}, io.digital_inputs, 64);
+  list("analog_inputs", {IoKind::kInputRegister, IoKind::kHoldingRegister}, io.analog_inputs, 64);
+  list("analog_outputs", {IoKind::kHoldingRegister}, io.analog_outputs, 64);
+  // M62-M65 address exactly the listed outputs.
+  c.program.digital_outputs = static_cast<int>(io.digital_outputs.size());
+  r.finish();
+}
+
 void read_logger(MapReader r, MachineConfig& c) {
   c.log_directory = r.get_string("directory", c.log_directory);
   c.log_rotate_mb = r.get_double("rotate_mb", c.log_rotate_mb, 1.0, 1e6);
@@ -420,6 +559,7 @@ MachineConfig read_machine(MapReader top) {
   read_axes(top, c);
   read_drive_bridge(top.map("drive_bridge", kDriveBridgeKeys), c);
   if (top.has("spindle")) read_spindle(top.map("spindle", kSpindleKeys), c);
+  if (top.has("io")) read_io(top.map("io", kIoKeys), c);
   read_logger(top.map("logger", kLoggerKeys), c);
   read_security(top.map("security", kSecurityKeys), c.security);
   read_monitor(top.map("monitor", kMonitorKeys), c);
@@ -438,6 +578,22 @@ std::string DriveConfig::link_key() const {
 }
 
 std::span<const KeySection> machine_config_keys() { return kSections; }
+
+const char* to_string(IoKind k) {
+  switch (k) {
+    case IoKind::kCoil: return "coil";
+    case IoKind::kDiscreteInput: return "discrete_input";
+    case IoKind::kInputRegister: return "input_register";
+    case IoKind::kHoldingRegister: return "holding_register";
+  }
+  return "?";
+}
+
+int IoConfig::point_index(const std::string& name) const {
+  for (size_t i = 0; i < points.size(); ++i)
+    if (points[i].name == name) return static_cast<int>(i);
+  return -1;
+}
 
 int MachineConfig::axis_index(const std::string& axis_name) const {
   for (size_t i = 0; i < axes.size(); ++i)

@@ -110,6 +110,41 @@ struct SpindleConfig {
   SpindleSimConfig sim;
 };
 
+// An I/O module on the bus (io.modules[]): its link as a drive's (transport, address,
+// line settings, unit id), no profile: its points say what it holds.
+struct IoModuleConfig {
+  std::string name;
+  DriveConfig link;  // `profile` unused
+};
+
+// A named point of an I/O module (io.points[]): one coil, discrete input, input
+// register or holding register. A register's value is its raw count times `scale`.
+enum class IoKind : int8_t { kCoil, kDiscreteInput, kInputRegister, kHoldingRegister };
+const char* to_string(IoKind k);
+struct IoPointConfig {
+  std::string name;
+  int module = 0;  // index into IoConfig::modules
+  IoKind kind = IoKind::kCoil;
+  int address = 0;      // 0 .. 65535 in the kind's table
+  double scale = 1.0;   // registers: value = raw x scale
+  bool is_signed = false;  // registers: the raw count is two's complement
+};
+
+// I/O modules and what the program's codes switch (section `io:`, optional). Without
+// it M7/M8/M9 and M62-M65 stay events in the log, as before.
+struct IoConfig {
+  bool enabled = false;  // the section is present
+  std::vector<IoModuleConfig> modules;
+  std::vector<IoPointConfig> points;
+  int coolant_mist = -1;   // the coil point M7 switches (index into points), -1: none
+  int coolant_flood = -1;  // the coil point M8 switches
+  std::vector<int> digital_outputs;  // M62-M65 P n: the coil point points[digital_outputs[n]]
+  std::vector<int> digital_inputs;   // discrete inputs (M66 P, later), shown on IO_STATUS
+  std::vector<int> analog_inputs;    // input or holding registers (M66 E, later)
+  std::vector<int> analog_outputs;   // holding registers (M67/M68 E, later)
+  int point_index(const std::string& name) const;
+};
+
 // Operator functions (section `operator:`).
 struct OperatorConfig {
   // No program, MDI or homing-free motion other than jogging until every axis with
@@ -221,6 +256,7 @@ struct MachineConfig {
 
   std::vector<AxisConfig> axes;
   SpindleConfig spindle;
+  IoConfig io;
 
   // motion
   double default_feed_mm_per_min = 1000.0;
@@ -294,6 +330,8 @@ inline constexpr const char* kHeartbeat = "HEARTBEAT";
 inline constexpr const char* kDriveCmd = "DRIVE_CMD";
 inline constexpr const char* kSpindleCmd = "SPINDLE_CMD";
 inline constexpr const char* kSpindleStatus = "SPINDLE_STATUS";
+inline constexpr const char* kIoCmd = "IO_CMD";
+inline constexpr const char* kIoStatus = "IO_STATUS";
 }  // namespace channels
 
 }  // namespace cnc::config

@@ -21,6 +21,15 @@ VfdEmulator* LoopbackLink::vfd(int unit) {
   return it == vfds_.end() ? nullptr : it->second.get();
 }
 
+void LoopbackLink::add_io_module(int unit, const config::IoConfig& io, int module) {
+  ios_[unit] = std::make_unique<IoEmulator>(io, module);
+}
+
+IoEmulator* LoopbackLink::io_module(int unit) {
+  auto it = ios_.find(unit);
+  return it == ios_.end() ? nullptr : it->second.get();
+}
+
 DriveEmulator* LoopbackLink::drive(int unit) {
   auto it = drives_.find(unit);
   return it == drives_.end() ? nullptr : it->second.get();
@@ -71,6 +80,10 @@ void LoopbackLink::move(VfdEmulator& v) {
 
 int LoopbackLink::do_read(int unit, int addr, int n, uint16_t* dest) {
   if (const int e = injected()) return e;
+  if (IoEmulator* m = io_module(unit)) {
+    const int x = m->read_registers(addr, n, dest, false);
+    return x ? MODBUS_ENOBASE + x : 0;
+  }
   if (VfdEmulator* v = vfd(unit)) {
     const int x = v->read(addr, n, dest);
     return x ? MODBUS_ENOBASE + x : 0;
@@ -85,6 +98,10 @@ int LoopbackLink::do_write1(int unit, int addr, uint16_t value) { return do_writ
 
 int LoopbackLink::do_write(int unit, int addr, int n, const uint16_t* src) {
   if (const int e = injected()) return e;
+  if (IoEmulator* m = io_module(unit)) {
+    const int x = m->write_registers(addr, n, src);
+    return x ? MODBUS_ENOBASE + x : 0;
+  }
   if (VfdEmulator* v = vfd(unit)) {
     move(*v);
     const int x = v->write(addr, n, src);
@@ -104,6 +121,35 @@ int LoopbackLink::do_write_read(int unit, int waddr, int wn, const uint16_t* src
   move(*d);
   int x = d->write(waddr, wn, src);
   if (x == 0) x = d->read(raddr, rn, dest);
+  return x ? MODBUS_ENOBASE + x : 0;
+}
+
+int LoopbackLink::do_read_bits(int unit, int addr, int n, uint8_t* dest, bool discrete_inputs) {
+  if (const int e = injected()) return e;
+  IoEmulator* m = io_module(unit);
+  if (m == nullptr) return drive(unit) || vfd(unit) ? MODBUS_ENOBASE + MODBUS_EXCEPTION_ILLEGAL_FUNCTION : ETIMEDOUT;
+  const int x = m->read_bits(addr, n, dest, discrete_inputs);
+  return x ? MODBUS_ENOBASE + x : 0;
+}
+
+int LoopbackLink::do_write_bit(int unit, int addr, bool on) {
+  const uint8_t v = on ? 1 : 0;
+  return do_write_bits(unit, addr, 1, &v);
+}
+
+int LoopbackLink::do_write_bits(int unit, int addr, int n, const uint8_t* src) {
+  if (const int e = injected()) return e;
+  IoEmulator* m = io_module(unit);
+  if (m == nullptr) return drive(unit) || vfd(unit) ? MODBUS_ENOBASE + MODBUS_EXCEPTION_ILLEGAL_FUNCTION : ETIMEDOUT;
+  const int x = m->write_bits(addr, n, src);
+  return x ? MODBUS_ENOBASE + x : 0;
+}
+
+int LoopbackLink::do_read_input_registers(int unit, int addr, int n, uint16_t* dest) {
+  if (const int e = injected()) return e;
+  IoEmulator* m = io_module(unit);
+  if (m == nullptr) return drive(unit) || vfd(unit) ? MODBUS_ENOBASE + MODBUS_EXCEPTION_ILLEGAL_FUNCTION : ETIMEDOUT;
+  const int x = m->read_registers(addr, n, dest, true);
   return x ? MODBUS_ENOBASE + x : 0;
 }
 

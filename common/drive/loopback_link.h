@@ -8,6 +8,7 @@
 #include <memory>
 
 #include "common/drive/drive_emulator.h"
+#include "common/drive/io_emulator.h"
 #include "common/drive/vfd_emulator.h"
 #include "common/drive/link.h"
 
@@ -21,6 +22,9 @@ class LoopbackLink final : public Link {
   // A spindle VFD (profile delta_vfd) under `unit`; `max_hz`: its frequency at max_rpm.
   void add_vfd(int unit, const DriveProfile& profile, const config::SpindleSimConfig& sim, double max_hz);
   VfdEmulator* vfd(int unit);
+  // An I/O module (io.modules[module] with its points) under `unit`.
+  void add_io_module(int unit, const config::IoConfig& io, int module);
+  IoEmulator* io_module(int unit);
 
   // Fault injection.
   void set_reachable(bool reachable);          // false: the link breaks and cannot be opened
@@ -35,12 +39,17 @@ class LoopbackLink final : public Link {
   int do_write1(int unit, int addr, uint16_t value) override;
   int do_write(int unit, int addr, int n, const uint16_t* src) override;
   int do_write_read(int unit, int waddr, int wn, const uint16_t* src, int raddr, int rn, uint16_t* dest) override;
+  int do_read_bits(int unit, int addr, int n, uint8_t* dest, bool discrete_inputs) override;
+  int do_write_bit(int unit, int addr, bool on) override;
+  int do_write_bits(int unit, int addr, int n, const uint8_t* src) override;
+  int do_read_input_registers(int unit, int addr, int n, uint16_t* dest) override;
   int injected();
   void move(DriveEmulator& d);
   void move(VfdEmulator& v);
 
   std::map<int, std::unique_ptr<DriveEmulator>> drives_;
   std::map<int, std::unique_ptr<VfdEmulator>> vfds_;
+  std::map<int, std::unique_ptr<IoEmulator>> ios_;
   bool reachable_ = true;
   int exceptions_left_ = 0;
   int exception_code_ = 0;

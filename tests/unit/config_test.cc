@@ -187,6 +187,78 @@ TEST(MachineConfig, SpindleErrors) {
                   "spindle.drive", "must not exceed drive_bridge.link_loss_timeout_s");
 }
 
+const char* const kIo =
+    "io:\n"
+    "  modules:\n"
+    "    - {name: io1, transport: modbus_tcp, host: 127.0.0.1, port: 1502, unit_id: 5}\n"
+    "  points:\n"
+    "    - {name: coolant_mist, kind: coil, address: 0}\n"
+    "    - {name: coolant_flood, kind: coil, address: 1}\n"
+    "    - {name: clamp, kind: coil, address: 4}\n"
+    "    - {name: air, kind: coil, address: 5}\n"
+    "    - {name: door_closed, kind: discrete_input, address: 0}\n"
+    "    - {name: pressure, kind: input_register, address: 2, scale: 0.01}\n"
+    "    - {name: valve, kind: holding_register, address: 0, scale: 0.1, signed: true}\n"
+    "  coolant: {mist: coolant_mist, flood: coolant_flood}\n"
+    "  digital_outputs: [clamp, air]\n"
+    "  digital_inputs: [door_closed]\n"
+    "  analog_inputs: [pressure]\n"
+    "  analog_outputs: [valve]\n";
+
+TEST(MachineConfig, IoSection) {
+  EXPECT_FALSE(parse_machine_config(sim3_text(), kLabel).io.enabled) << "no section, no I/O";
+  EXPECT_EQ(parse_machine_config(sim3_text(), kLabel).program.digital_outputs, 8) << "as before without io:";
+  const MachineConfig c = parse_machine_config(sim3_text() + kIo, kLabel);
+  ASSERT_TRUE(c.io.enabled);
+  ASSERT_EQ(c.io.modules.size(), 1u);
+  EXPECT_EQ(c.io.modules[0].link.unit_id, 5);
+  EXPECT_EQ(c.io.modules[0].link.link_key(), c.axes[0].drive.link_key());
+  ASSERT_EQ(c.io.points.size(), 7u);
+  EXPECT_EQ(c.io.points[c.io.coolant_flood].name, "coolant_flood");
+  EXPECT_EQ(c.io.points[c.io.coolant_mist].address, 0);
+  ASSERT_EQ(c.io.digital_outputs.size(), 2u);
+  EXPECT_EQ(c.io.points[c.io.digital_outputs[1]].name, "air");
+  EXPECT_EQ(c.program.digital_outputs, 2) << "M62-M65 P: the listed outputs";
+  const IoPointConfig& valve = c.io.points[c.io.analog_outputs[0]];
+  EXPECT_EQ(valve.kind, IoKind::kHoldingRegister);
+  EXPECT_DOUBLE_EQ(valve.scale, 0.1);
+  EXPECT_TRUE(valve.is_signed);
+  EXPECT_EQ(c.io.points[c.io.digital_inputs[0]].kind, IoKind::kDiscreteInput);
+  EXPECT_EQ(c.io.points[c.io.analog_inputs[0]].kind, IoKind::kInputRegister);
+  EXPECT_TRUE(load_machine_config(std::string(CNC_SOURCE_DIR) + "/config/machines/sim3_io.yaml").io.enabled);
+}
+
+TEST(MachineConfig, IoErrors) {
+  const std::string with = sim3_text() + kIo;
+  expect_error_at(sim3_text() + "io: {coolant: {flood: x}}\n", "io.modules", "at least one module");
+  expect_error_at(replace_nth(with, "unit_id: 5", "unit_id: 2"), "io.modules[0].unit_id", "axis Y's drive on the same link");
+  expect_error_at(replace_nth(with, "unit_id: 5}", "}"), "io.modules[0].unit_id", "required");
+  expect_error_at(replace_nth(with, "name: io1, transport: modbus_tcp", "name: io1, transport: modbus_rtu"),
+                  "io.modules[0].device", "is required for transport modbus_rtu");
+  expect_error_at(replace_nth(with, "kind: coil, address: 4", "kind: relay, address: 4"), "io.points[2].kind",
+                  "is not one of");
+  expect_error_at(replace_nth(with, "kind: coil, address: 4", "kind: coil, address: 1"), "io.points[2].address",
+                  "is point coolant_flood already");
+  expect_error_at(replace_nth(with, "{name: air,", "{name: clamp,"), "io.points[3].name", "duplicate point");
+  expect_error_at(replace_nth(with, "{name: air, kind: coil,", "{name: air, module: io2, kind: coil,"),
+                  "io.points[3].module", "no module 'io2'");
+  expect_error_at(replace_nth(with, "address: 5}", "address: 70000}"), "io.points[3].address", "out of range");
+  expect_error_at(replace_nth(with, "address: 5}", "address: 5, scale: 2}"), "io.points[3].scale", "only a register");
+  expect_error_at(replace_nth(with, "scale: 0.01}", "scale: 0}"), "io.points[5].scale", "must not be 0");
+  expect_error_at(replace_nth(with, "flood: coolant_flood}", "flood: pressure}"), "io.coolant.flood",
+                  "is of kind input_register, not coil");
+  expect_error_at(replace_nth(with, "flood: coolant_flood}", "flood: nothing}"), "io.coolant.flood",
+                  "no point 'nothing'");
+  expect_error_at(replace_nth(with, "[clamp, air]", "[clamp, coolant_mist]"), "io.digital_outputs[1]",
+                  "has a role already");
+  expect_error_at(replace_nth(with, "[door_closed]", "[clamp]"), "io.digital_inputs[0]", "not discrete_input");
+  expect_error_at(replace_nth(with, "analog_outputs: [valve]", "analog_outputs: [pressure]"), "io.analog_outputs[0]",
+                  "not holding_register");
+  expect_error_at(with + "  colour: red\n", "io.colour", "unknown key");
+  expect_error_at(replace_nth(with, "unit_id: 5}", "unit_id: 5, response_timeout_s: 1}"),
+                  "io.modules[0].response_timeout_s", "must not exceed drive_bridge.link_loss_timeout_s");
+}
+
 TEST(MachineConfig, DuplicateKey) {
   expect_error_at(replace_nth(sim3_text(), "timing:\n", "timing:\n  stop_decel_mm_s2: 100\n"),
                   "timing.stop_decel_mm_s2", "duplicate key");
