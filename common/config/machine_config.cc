@@ -500,6 +500,15 @@ void read_io(MapReader r, MachineConfig& c) {
   YAML::Node points = r.sequence("points");
   for (size_t i = 0; i < points.size(); ++i)
     io.points.push_back(read_io_point(MapReader(points[i], r.item_path("points", i), r.file(), kIoPointKeys), io));
+  for (size_t m = 0; m < io.modules.size(); ++m)
+    for (IoKind k : {IoKind::kCoil, IoKind::kDiscreteInput, IoKind::kInputRegister, IoKind::kHoldingRegister}) {
+      // Each kind's points are a bit (or a slot) of the module's process data.
+      const auto n = std::count_if(io.points.begin(), io.points.end(),
+                                   [&](const IoPointConfig& p) { return p.module == static_cast<int>(m) && p.kind == k; });
+      if (n > 64)
+        r.fail("points", "module " + io.modules[m].name + " has " + std::to_string(n) + " " + to_string(k) +
+                             " points, at most 64");
+    }
   std::set<int> taken;
   MapReader cool = r.map("coolant", kIoCoolantKeys);
   if (cool.has("mist"))

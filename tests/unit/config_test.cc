@@ -255,6 +255,11 @@ TEST(MachineConfig, IoErrors) {
   expect_error_at(replace_nth(with, "analog_outputs: [valve]", "analog_outputs: [pressure]"), "io.analog_outputs[0]",
                   "not holding_register");
   expect_error_at(with + "  colour: red\n", "io.colour", "unknown key");
+  std::string many = with;
+  for (int a = 100; a < 165; ++a)
+    many = replace_nth(many, "  coolant: {", "    - {name: c" + std::to_string(a) + ", kind: coil, address: " +
+                                                 std::to_string(a) + "}\n  coolant: {");
+  expect_error_at(many, "io.points", "module io1 has 69 coil points, at most 64");
   expect_error_at(replace_nth(with, "unit_id: 5}", "unit_id: 5, response_timeout_s: 1}"),
                   "io.modules[0].response_timeout_s", "must not exceed drive_bridge.link_loss_timeout_s");
 }

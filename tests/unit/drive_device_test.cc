@@ -16,8 +16,10 @@
 #include "common/drive/delta_vfd_profile.h"
 #include "common/drive/device.h"
 #include "common/drive/drive_io.h"
+#include "common/drive/io_module_device.h"
 #include "common/drive/loopback_io_device.h"
 #include "common/drive/loopback_link.h"
+#include "common/config/machine_config.h"
 #include "common/drive/spindle_device.h"
 #include "common/drive/vfd_emulator.h"
 
@@ -307,6 +309,73 @@ TEST(SpindleDevice, AFaultStopsTheDriveUntilItsResetAndALostLinkIsForgotten) {
   EXPECT_TRUE(get_pdo<SpindleInputs>(image.inputs(s)).valid);
   spindle.forget(image.inputs(s));
   EXPECT_FALSE(get_pdo<SpindleInputs>(image.inputs(s)).valid);
+}
+
+// An I/O module: three coils (a run of two and a lone one), a discrete input and an
+// input register. The first exchange after (re)opening only reads; a coil is written
+// only when its read-back differs, a run in one transaction; a coil changed behind
+// the master's back is written again.
+TEST(IoModuleDevice, WritesOnlyTheCoilsThatDifferAndReadsEachTableOnce) {
+  config::IoConfig io;
+  io.enabled = true;
+  io.modules.push_back({"m", config::DriveConfig{}});
+  io.modules[0].link.unit_id = 5;
+  auto point = [&](const char* name, config::IoKind k, int addr, double scale = 1) {
+    config::IoPointConfig p;
+    p.name = name;
+    p.kind = k;
+    p.address = addr;
+    p.scale = scale;
+    io.points.push_back(p);
+  };
+  point("a", config::IoKind::kCoil, 4);
+  point("b", config::IoKind::kCoil, 3);
+  point("c", config::IoKind::kCoil, 9);
+  point("in", config::IoKind::kDiscreteInput, 2);
+  point("level", config::IoKind::kInputRegister, 7);
+  LoopbackLink link;
+  link.add_io_module(5, io, 0);
+  ASSERT_TRUE(link.ensure_open(0.0));
+  IoModuleDevice dev(io, 0, link);
+  ProcessImage image;
+  const size_t s = image.add(dev.layout());
+  LinkCounters c;
+  IoEmulator& m = *link.io_module(5);
+  m.set_point("in", 1);
+  m.set_point("level", 1234);
+  IoModuleOutputs out;
+  out.coils = 0b111;
+  put_pdo(image.outputs(s), out);  // write false: only reads
+  ASSERT_EQ(dev.exchange(image.outputs(s), image.inputs(s), c), TxResult::kOk);
+  EXPECT_EQ(dev.last_transactions(), 3) << "coils, discrete inputs, input registers";
+  IoModuleInputs in = get_pdo<IoModuleInputs>(image.inputs(s));
+  EXPECT_TRUE(in.valid);
+  EXPECT_EQ(in.coils, 0u);
+  EXPECT_EQ(in.discrete, 1u);
+  EXPECT_EQ(in.input_registers[0], 1234);
+  out.write = true;
+  put_pdo(image.outputs(s), out);
+  ASSERT_EQ(dev.exchange(image.outputs(s), image.inputs(s), c), TxResult::kOk);
+  EXPECT_EQ(dev.last_transactions(), 5) << "the run 3-4 in one write, coil 9 in another, three reads";
+  EXPECT_EQ(m.coil(3), 1);
+  EXPECT_EQ(m.coil(4), 1);
+  EXPECT_EQ(m.coil(9), 1);
+  EXPECT_EQ(get_pdo<IoModuleInputs>(image.inputs(s)).coils, 0b111u) << "read back in the same exchange";
+  ASSERT_EQ(dev.exchange(image.outputs(s), image.inputs(s), c), TxResult::kOk);
+  EXPECT_EQ(dev.last_transactions(), 3) << "nothing differs: no write";
+  m.set_point("c", 0);  // behind the master's back
+  ASSERT_EQ(dev.exchange(image.outputs(s), image.inputs(s), c), TxResult::kOk);
+  ASSERT_EQ(dev.exchange(image.outputs(s), image.inputs(s), c), TxResult::kOk);
+  EXPECT_EQ(m.coil(9), 1) << "written again";
+  out.coils = 0b001;  // b (address 3) off: the run 3-4 written
+  put_pdo(image.outputs(s), out);
+  ASSERT_EQ(dev.exchange(image.outputs(s), image.inputs(s), c), TxResult::kOk);
+  EXPECT_EQ(m.coil(3), 0);
+  EXPECT_EQ(m.coil(4), 1);
+  EXPECT_EQ(m.coil(9), 0);
+  EXPECT_EQ(c.exceptions + c.timeouts + c.other_errors, 0);
+  dev.forget(image.inputs(s));
+  EXPECT_FALSE(get_pdo<IoModuleInputs>(image.inputs(s)).valid);
 }
 
 }  // namespace
