@@ -1,5 +1,7 @@
 #include "common/rs274/block_builder.h"
 
+#include "common/motion/path_segment.h"
+
 #include <algorithm>
 #include <cmath>
 #include <functional>
@@ -141,6 +143,14 @@ bool BlockBuilder::blending() const {
 void BlockBuilder::straight_feed(const SourceRef& ref, const Pose& end) {
   std::vector<double> e = to_machine(ref, end);
   const double f = feed_mm_per_min(ref);
+  if (hold_move(ref, e, f)) return;
+  program::Block& b = begin(ref, program::BlockKind::kLine);
+  b.end = e;
+  b.feed_mm_per_min = f;
+  position_ = std::move(e);
+}
+
+bool BlockBuilder::hold_move(const SourceRef& ref, std::vector<double>& e, double f) {
   if (blending()) {
     const double rpm = spindle_dir_ != 0 ? speed_rpm_ : 0.0;
     bool same = !run_.empty() && f == run_feed_ && rpm == run_rpm_ &&
@@ -154,22 +164,71 @@ void BlockBuilder::straight_feed(const SourceRef& ref, const Pose& end) {
     if (xyz) {
       double len2 = 0;
       for (size_t a = 0; a < 3; ++a) len2 += (e[a] - position_[a]) * (e[a] - position_[a]);
-      if (len2 == 0) return;  // a move to where the tool stands: nothing to blend
+      if (len2 == 0) return true;  // a move to where the tool stands: nothing to blend
       if (run_.empty()) {
-        run_.push_back({position_, ref});
+        run_.push_back({position_, ref, {}, {}});
         run_feed_ = f;
         run_rpm_ = rpm;
         run_process_ = process_;
+        run_sagitta_mm_ = 0;
       }
-      run_.push_back({e, ref});
+      run_.push_back({e, ref, {}, {}});
       position_ = std::move(e);
-      return;
+      return true;
     }
   }
-  program::Block& b = begin(ref, program::BlockKind::kLine);
-  b.end = e;
-  b.feed_mm_per_min = f;
-  position_ = std::move(e);
+  return false;
+}
+
+bool BlockBuilder::hold_arc(const SourceRef& ref, const program::Block& arc) {
+  if (!blending() || !setup_.fit_runs) return false;
+  for (size_t a = 3; a < arc.end.size(); ++a)
+    if (arc.end[a] != position_[a]) return false;
+  const double tol = program::shape_tolerance_mm(path_tol_mm_, setup_.chord_tolerance_mm);
+  const motion::PathSegment seg(arc, static_cast<int>(setup_.axis_names.size()));
+  if (seg.degenerate()) return false;
+  // Chords with a sagitta of a tenth of the shape tolerance (L = sqrt(8·r·s)), each
+  // short enough and turning little enough to stay in a fitted run; the run's fit and
+  // blends then keep within the rest of it, so the path stays within P of the arc.
+  const program::ArcGeometry& g = arc.arc;
+  int a1 = 0, a2 = 1;
+  if (g.plane == 18) a1 = 2, a2 = 0;
+  if (g.plane == 19) a1 = 1, a2 = 2;
+  const size_t i1 = static_cast<size_t>(a1), i2 = static_cast<size_t>(a2);
+  const double r0 = std::hypot(arc.start[i1] - g.center[i1], arc.start[i2] - g.center[i2]);
+  const double r1 = std::hypot(arc.end[i1] - g.center[i1], arc.end[i2] - g.center[i2]);
+  const double r = std::min(r0, r1);
+  const double sag = 0.1 * tol;
+  if (!(r > 0) || !(sag > 0)) return false;
+  const double max_turn = 0.9 * setup_.fit_max_turn_deg * M_PI / 180.0;
+  const double chord = std::min({std::sqrt(8.0 * r * sag), r * max_turn, setup_.fit_max_segment_mm});
+  // A full circle or more (a helical bore) is left exact: it has no junction to smooth
+  // but its two ends, and its chords' fit would turn at every one of them.
+  const double sweep = seg.arc_sweep_rad();
+  if (sweep >= 2.0 * M_PI * (1 - 1e-9)) return false;
+  const size_t n = static_cast<size_t>(std::ceil(sweep * std::max(r0, r1) / chord));
+  if (n == 0 || n > 100000) return false;
+  auto tangent = [&](double u) {
+    motion::AxisVec p{}, d1{}, d2{};
+    seg.eval(u, &p, &d1, &d2);
+    const Eigen::Vector3d t(d1[0], d1[1], d1[2]);
+    return Eigen::Vector3d(t / t.norm());
+  };
+  const Eigen::Vector3d t_start = tangent(seg.u_begin()), t_end = tangent(seg.u_end());
+  if (!t_start.allFinite() || !t_end.allFinite()) return false;
+  for (size_t k = 1; k <= n; ++k) {
+    std::vector<double> e = arc.end;
+    if (k < n) {
+      const double u = seg.u_begin() + (seg.u_end() - seg.u_begin()) * static_cast<double>(k) / static_cast<double>(n);
+      const motion::AxisVec p = seg.point(u);
+      for (size_t a = 0; a < e.size(); ++a) e[a] = p[a];
+    }
+    if (!hold_move(ref, e, arc.feed_mm_per_min)) return false;  // not for the first chord: the run takes all
+    run_sagitta_mm_ = std::max(run_sagitta_mm_, sag);
+    if (k == 1 && run_.size() >= 2) run_[run_.size() - 2].leave = t_start;
+    if (k == n) run_.back().arrive = t_end;
+  }
+  return true;
 }
 
 program::Block& BlockBuilder::run_block(const SourceRef& ref, program::BlockKind kind, const std::vector<double>& from,
@@ -210,7 +269,8 @@ void BlockBuilder::flush_run() {
     return;
   }
   flushing_ = true;
-  const double tol = program::shape_tolerance_mm(path_tol_mm_, setup_.chord_tolerance_mm);
+  // Less the chords' sagitta where the run holds arcs.
+  const double tol = program::shape_tolerance_mm(path_tol_mm_, setup_.chord_tolerance_mm) - run_sagitta_mm_;
   const size_t n = run_.size() - 1;  // moves
   std::vector<Eigen::Vector3d> pts(run_.size());
   for (size_t i = 0; i < run_.size(); ++i) pts[i] = Eigen::Vector3d(run_[i].pos[0], run_[i].pos[1], run_[i].pos[2]);
@@ -222,13 +282,23 @@ void BlockBuilder::flush_run() {
     dir[i] = d / len[i];
   }
   const double cos_turn = std::cos(setup_.fit_max_turn_deg * M_PI / 180.0);
+  // Each move's tangent where it leaves and arrives: its direction, or an arc's own
+  // tangent at the arc's first and last chord (a stretch then leaves and ends along the
+  // arc, not its chord).
+  std::vector<Eigen::Vector3d> t_leave(dir), t_arrive(dir);
+  for (size_t i = 0; i < n; ++i) {
+    if (run_[i].leave) t_leave[i] = *run_[i].leave;
+    if (run_[i + 1].arrive) t_arrive[i] = *run_[i + 1].arrive;
+  }
   // Blend legs at the vertices (vertex j joins move j-1 and move j), used where the
   // vertex is not inside a fitted stretch: between two lines, or where a stretch ends.
   std::vector<double> leg(n + 1, 0.0);
   for (size_t j = 1; j < n; ++j) {
     leg[j] = geometry::corner_blend_leg(dir[j - 1], dir[j], tol, 0.5 * std::min(len[j - 1], len[j]));
     const double v = run_feed_ / 60.0;
-    if (setup_.corner_dv_mm_s >= v * (dir[j] - dir[j - 1]).norm() || !resolvable_blend(leg[j], dir[j - 1], dir[j], v))
+    // (At an arc's end the kink is the one between the arc's tangent and the move's.)
+    if (setup_.corner_dv_mm_s >= v * (t_leave[j] - t_arrive[j - 1]).norm() ||
+        !resolvable_blend(leg[j], dir[j - 1], dir[j], v))
       leg[j] = 0;
   }
   // A stretch's ends: where it begins and ends, moved back along its end moves by the
@@ -252,7 +322,8 @@ void BlockBuilder::flush_run() {
                                      pts.begin() + static_cast<std::ptrdiff_t>(b + 1));
     sub.front() = stretch_start(a);
     sub.back() = stretch_end(b);
-    geometry::CubicFit fit = geometry::fit_cubic(sub, tol, {dir[a], dir[b - 1]});
+    geometry::CubicFit fit = geometry::fit_cubic(sub, tol, {leg[a] > 0 ? dir[a] : t_leave[a],
+                                                             leg[b] > 0 ? dir[b - 1] : t_arrive[b - 1]});
     if (fit.ok) {
       stretches.push_back({a, b, std::move(fit)});
       return;
@@ -365,6 +436,18 @@ void BlockBuilder::arc_feed(const SourceRef& ref, double, double, double first_a
   c[static_cast<size_t>(a2)] = second_axis;
   const std::vector<double> center = to_machine(ref, c);
   const double f = feed_mm_per_min(ref);
+  {
+    // Under G64 P an arc joins the run of G1 moves as chords, to be fitted with them.
+    program::Block arc;
+    arc.kind = rotation < 0 ? program::BlockKind::kArcCw : program::BlockKind::kArcCcw;
+    arc.start = position_;
+    arc.end = e;
+    arc.feed_mm_per_min = f;
+    arc.arc.center = center;
+    arc.arc.plane = pl;
+    arc.arc.turns = std::abs(rotation) - 1;
+    if (program::check_arc_block(arc).empty() && hold_arc(ref, arc)) return;
+  }
   program::Block& b = begin(ref, rotation < 0 ? program::BlockKind::kArcCw : program::BlockKind::kArcCcw);
   b.end = e;
   b.feed_mm_per_min = f;

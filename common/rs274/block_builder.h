@@ -9,6 +9,7 @@
 #include <Eigen/Core>
 #include <deque>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -104,6 +105,11 @@ class BlockBuilder : public Canon {
   double feed_mm_per_min(const SourceRef& ref) const;
   // G64 P: the G1 moves held back to be blended or fitted, and their emission.
   bool blending() const;
+  // Holds a G1 move (e, machine mm; moved from) in the run; false: not blending, or
+  // other axes move too (the run was ended).
+  bool hold_move(const SourceRef& ref, std::vector<double>& e, double f);
+  // Holds an arc in the run as chords (G64 P, fit on); false: not, it runs as an arc.
+  bool hold_arc(const SourceRef& ref, const program::Block& arc);
   void flush_run();
   // Whether a corner blend of leg d between the unit directions u_in and u_out is long
   // enough for the interpolation to resolve it (BuilderSetup: accel_mm_s2).
@@ -142,9 +148,13 @@ class BlockBuilder : public Canon {
   struct RunPoint {
     std::vector<double> pos;  // machine mm, every axis
     SourceRef ref;            // the move that ends here (the first: the run's first move)
+    // Where an arc's chords begin or end here: the arc's own tangent (unit) as the move
+    // after this point leaves it, and as the move before it arrives; else empty.
+    std::optional<Eigen::Vector3d> leave, arrive;
   };
   std::vector<RunPoint> run_;  // run_[0]: where the run starts
   double run_feed_ = 0;
+  double run_sagitta_mm_ = 0;  // the largest sagitta of the arcs' chords in the run
   double run_rpm_ = 0;
   program::ProcessParams run_process_;
   bool flushing_ = false;
