@@ -70,7 +70,7 @@ PACKAGES=(
   systemd                                # systemd-analyze verify of the packages' units (package test)
   socat                                  # pseudo-terminal pairs standing in for RS-485 (Modbus RTU tests)
   python3-pymodbus python3-serial python3-serial-asyncio python3-yaml  # drive emulated with pymodbus (interop test)
-  mbpoll                                 # reads the simulator's registers (interop test)
+  mbpoll                                 # reads the simulator's registers and I/O module coils (interop and io tests)
   linuxcnc-uspace                        # rs274: LinuxCNC's interpreter, the conformance oracle (tools/conformance)
   libcli11-dev                           # command-line flags (CLI11): every service, cnc-ctl, cnc-cam, ...
   libpolyclipping-dev                    # Clipper: polygon offsets of cnc-cam rough's levels

@@ -672,6 +672,7 @@ const Setpoint& Interpolator::step() {
     }
   }
   output_position();
+  if (out_.feed_mm_per_min > 0) outputs_.motion();
   out_.state = state_;
   ++cycle_;
   if (retire_pending_) {
@@ -730,6 +731,10 @@ void Interpolator::at_stop_block(bool pausing) {
     if (p.block.kind == program::BlockKind::kEvent && p.block.event.kind == program::EventKind::kSpindle &&
         spindle_taken_ != p.serial)
       take_spindle_event(p);
+    if (p.block.kind == program::BlockKind::kEvent && outputs_taken_ != p.serial) {
+      outputs_taken_ = p.serial;
+      outputs_.take(p.block.event);
+    }
     if (spindle_wait_) {
       state_ = RunState::kRunning;  // at rest until the spindle is at speed
       return;
@@ -761,6 +766,7 @@ void Interpolator::take_spindle_event(const Planned& p) {
 }
 
 void Interpolator::spindle_off() {
+  outputs_.end();  // the coolant stops with the spindle
   spindle_wait_ = false;
   if (spindle_.direction == 0 && spindle_.rpm == 0) return;
   ++spindle_.seq;

@@ -33,6 +33,7 @@
 #include <vector>
 
 #include "common/config/machine_config.h"
+#include "common/motion/machine_outputs.h"
 #include "common/motion/path_segment.h"
 #include "common/motion/planner.h"
 #include "common/program/block.h"
@@ -195,6 +196,8 @@ class Interpolator {
   double drive_offset(int axis) const { return drive_offset_[static_cast<size_t>(axis)]; }
   const WorkCounters& work() const { return work_; }
   const SpindleState& spindle() const { return spindle_; }
+  // Coolant and digital outputs where the path stands (machine_outputs.h).
+  const MachineOutputs& outputs() const { return outputs_; }
   // At rest at a spindle change until kSpindleAtSpeed (a machine with a spindle:
   // spindle.enabled; a change to a speed > 0, turning).
   bool spindle_waiting() const { return spindle_wait_; }
@@ -399,6 +402,8 @@ class Interpolator {
   } last_eval_;
 
   SpindleState spindle_;
+  MachineOutputs outputs_;
+  uint64_t outputs_taken_ = UINT64_MAX;  // serial of the coolant or output event last taken
   uint64_t spindle_taken_ = UINT64_MAX;  // serial of the spindle event last taken
   bool spindle_wait_ = false;
   bool wait_for_spindle_ = false;  // cfg.spindle.enabled

@@ -798,8 +798,8 @@ void BlockBuilder::enable_feed_hold(const SourceRef& ref, bool on) {
   overrides_ = on ? overrides_ | 8 : overrides_ & ~8;
   event(ref, program::EventKind::kOverrides, overrides_, 0);
 }
-void BlockBuilder::digital_output(const SourceRef& ref, int index, bool on, bool) {
-  event(ref, program::EventKind::kDigitalOutput, index, on ? 1 : 0);
+void BlockBuilder::digital_output(const SourceRef& ref, int index, bool on, bool synchronised) {
+  event(ref, program::EventKind::kDigitalOutput, index, (on ? 1 : 0) + (synchronised ? 2 : 0));
 }
 void BlockBuilder::analog_output(const SourceRef& ref, int index, double value, bool) {
   event(ref, program::EventKind::kAnalogOutput, index, value);

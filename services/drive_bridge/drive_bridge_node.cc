@@ -105,6 +105,62 @@ DriveBridgeNode::DriveBridgeNode(const config::MachineConfig& cfg, bus::Bus& bus
       sp.pending_rpm = m.rpm;
     });
   }
+  if (cfg_.io.enabled) {
+    std::vector<IoModule> modules(cfg_.io.modules.size());
+    std::vector<std::vector<int>> coils;
+    for (size_t m = 0; m < cfg_.io.modules.size(); ++m) {
+      const config::DriveConfig& d = cfg_.io.modules[m].link;
+      const std::string key = d.link_key();
+      if (!by_link.count(key)) {
+        links_.push_back(drive::make_link(d));
+        workers_.push_back(std::make_unique<LinkWorker>(*links_.back(), cfg.drive_bridge));
+        by_link[key] = workers_.back().get();
+      }
+      IoModule& mod = modules[m];
+      mod.worker = by_link[key];
+      if (auto* loopback = dynamic_cast<drive::LoopbackLink*>(&mod.worker->link()))
+        loopback->add_io_module(d.unit_id, cfg_.io, static_cast<int>(m));
+      try {
+        mod.slot = mod.worker->add_io_module(cfg_.io, static_cast<int>(m));
+      } catch (const std::invalid_argument& e) {
+        throw config::ConfigError(cfg.source_file, "io.points", e.what());
+      }
+      for (size_t k = 0; k < 4; ++k)
+        mod.points[k] = mod.worker->io_module(mod.slot).points(static_cast<config::IoKind>(k));
+      coils.push_back(mod.points[static_cast<size_t>(config::IoKind::kCoil)]);
+    }
+    io_ = std::make_unique<Io>(cfg_.io, coils);
+    io_->modules = std::move(modules);
+    ch_io_status_ = cfg.channel(ch::kIoStatus);
+    cnc::lcmt_io_status& m = io_msg_;
+    m.num_points = static_cast<int32_t>(cfg_.io.points.size());
+    m.name.resize(cfg_.io.points.size());
+    m.kind.resize(cfg_.io.points.size());
+    m.value.assign(cfg_.io.points.size(), 0.0);
+    m.valid.assign(cfg_.io.points.size(), false);
+    for (size_t i = 0; i < cfg_.io.points.size(); ++i) {
+      m.name[i] = cfg_.io.points[i].name;
+      m.kind[i] = static_cast<int8_t>(cfg_.io.points[i].kind);
+    }
+    const size_t nm = cfg_.io.modules.size();
+    m.num_modules = static_cast<int32_t>(nm);
+    m.module.resize(nm);
+    for (size_t i = 0; i < nm; ++i) m.module[i] = cfg_.io.modules[i].name;
+    m.answering.assign(nm, false);
+    m.transactions.assign(nm, 0);
+    m.timeouts.assign(nm, 0);
+    m.exceptions.assign(nm, 0);
+    m.last_error.assign(nm, std::string());
+    for (auto& e : m.last_error) e.reserve(96);
+    bus_.subscribe<cnc::lcmt_io_command>(cfg.channel(ch::kIoCmd), [this](const auto& c) {
+      Io& io = *io_;
+      if (c.command_seq <= io.pending_seq) return;  // the newest change wins; a repeat changes nothing
+      io.pending = true;
+      io.pending_seq = c.command_seq;
+      io.pending_coolant = c.coolant;
+      io.pending_outputs = static_cast<uint64_t>(c.outputs);
+    });
+  }
   pace_.assign(workers_.size(), LinkPace{});
   if (const char* f = std::getenv("CNC_BRIDGE_DEBUG_TRACE")) {
     dbg_file_ = f;
@@ -133,6 +189,12 @@ void DriveBridgeNode::start() {
   if (spindle_)
     spdlog::info("spindle: profile {} ({}), unit {} on {}", spindle_->profile->name, spindle_->profile->file,
                  cfg_.spindle.drive.unit_id, spindle_->worker->link().name());
+  if (io_)
+    for (size_t m = 0; m < io_->modules.size(); ++m)
+      spdlog::info("io: module {} unit {} on {}: {} coil(s), {} discrete input(s), {} input and {} holding register(s)",
+                   cfg_.io.modules[m].name, cfg_.io.modules[m].link.unit_id, io_->modules[m].worker->link().name(),
+                   io_->modules[m].points[0].size(), io_->modules[m].points[1].size(),
+                   io_->modules[m].points[2].size(), io_->modules[m].points[3].size());
   if (opt_.threaded)
     for (auto& w : workers_) w->start();
   started_ = true;
@@ -324,6 +386,7 @@ void DriveBridgeNode::servo_tick_inner(double now_s) {
   advance_state(now_s);
   report_reconnects();
   spindle_tick(now_s);
+  io_tick();
 
   // A link that has not finished the round of the last tick's command is stalled
   // (the drive, its network or this process's worker did not get to run): the
@@ -380,6 +443,76 @@ void DriveBridgeNode::spindle_tick(double now_s) {
   sp.cmd.direction = static_cast<int8_t>(sp.ctl.direction());
   sp.cmd.hz = sp.ctl.commanded_hz();
   sp.worker->set_spindle_command(sp.cmd);
+}
+
+void DriveBridgeNode::io_tick() {
+  if (!io_) return;
+  Io& io = *io_;
+  // The coolant runs only while the bridge follows setpoints (as the spindle turns).
+  const bool following = state_ == State::kEnabled && !core_.faulted();
+  if (io.pending) {
+    io.pending = false;
+    if (io.ctl.on_command(io.pending_seq, io.pending_coolant, io.pending_outputs, following))
+      spdlog::info("io: change {}: coolant {}{}, outputs 0x{:x}{}", io.ctl.command_seq(),
+                   (io.pending_coolant & 1) ? "mist " : "", (io.pending_coolant & 2) ? "flood" : (io.pending_coolant & 1) ? "" : "off",
+                   io.ctl.outputs(), following || io.pending_coolant == 0 ? "" : " (coolant not followed: the drives do not follow setpoints)");
+  }
+  if (!following && io.ctl.coolant() != 0) {
+    io.ctl.stop();
+    spdlog::info("io: coolant off: the drives do not follow setpoints");
+  }
+  for (size_t m = 0; m < io.modules.size(); ++m) {
+    IoModule& mod = io.modules[m];
+    mod.rep = mod.worker->io_report(mod.slot);
+    IoCommand c;
+    c.coils = io.ctl.module_coils(m);
+    mod.worker->set_io_command(mod.slot, c);
+    // A line per change of a coil as read back from the module (events, not every tick).
+    if (mod.rep.in.valid && (!mod.logged_valid || mod.rep.in.coils != mod.logged_coils)) {
+      const uint64_t changed = mod.logged_valid ? mod.rep.in.coils ^ mod.logged_coils : ~uint64_t{0};
+      const auto& coils = mod.points[static_cast<size_t>(config::IoKind::kCoil)];
+      for (size_t i = 0; i < coils.size(); ++i) {
+        if (((changed >> i) & 1) == 0) continue;
+        spdlog::info("io: {} {}", cfg_.io.points[static_cast<size_t>(coils[i])].name,
+                     ((mod.rep.in.coils >> i) & 1) ? "on" : "off");
+      }
+      mod.logged_coils = mod.rep.in.coils;
+    }
+    mod.logged_valid = mod.rep.in.valid;
+  }
+}
+
+void DriveBridgeNode::publish_io_status() {
+  Io& io = *io_;
+  cnc::lcmt_io_status& m = io_msg_;
+  m.command_seq = io.ctl.command_seq();
+  m.coolant = static_cast<int8_t>(io.ctl.coolant());
+  m.outputs = static_cast<int64_t>(io.ctl.outputs());
+  for (size_t mi = 0; mi < io.modules.size(); ++mi) {
+    const IoModule& mod = io.modules[mi];
+    const drive::IoModuleInputs& in = mod.rep.in;
+    for (size_t k = 0; k < 4; ++k) {
+      const std::vector<int>& pts = mod.points[k];
+      for (size_t i = 0; i < pts.size(); ++i) {
+        const auto p = static_cast<size_t>(pts[i]);
+        uint16_t raw = 0;
+        switch (static_cast<config::IoKind>(k)) {
+          case config::IoKind::kCoil: raw = (in.coils >> i) & 1; break;
+          case config::IoKind::kDiscreteInput: raw = (in.discrete >> i) & 1; break;
+          case config::IoKind::kInputRegister: raw = in.input_registers[i]; break;
+          case config::IoKind::kHoldingRegister: raw = in.holding_registers[i]; break;
+        }
+        m.value[p] = IoControl::value(cfg_.io.points[p], raw);
+        m.valid[p] = in.valid;
+      }
+    }
+    m.answering[mi] = mod.rep.answering;
+    m.transactions[mi] = mod.rep.counters.transactions;
+    m.timeouts[mi] = mod.rep.counters.timeouts;
+    m.exceptions[mi] = mod.rep.counters.exceptions;
+    m.last_error[mi].assign(mod.rep.last_error.data());
+  }
+  bus_.publish(ch_io_status_, m);
 }
 
 void DriveBridgeNode::publish_spindle_status() {
@@ -675,6 +808,7 @@ void DriveBridgeNode::publish_status_inner(int64_t overruns) {
   s.servo_overruns = overruns;
   bus_.publish(ch_status_, s);
   if (spindle_) publish_spindle_status();
+  if (io_) publish_io_status();
 }
 
 void DriveBridgeNode::shut_down() {
@@ -694,6 +828,11 @@ void DriveBridgeNode::shut_down() {
     spindle_->cmd.direction = 0;
     spindle_->cmd.hz = 0;
     spindle_->worker->set_spindle_command(spindle_->cmd);
+  }
+  if (io_) {
+    io_->ctl.stop();  // the coolant off; the digital outputs keep their state
+    for (size_t m = 0; m < io_->modules.size(); ++m)
+      io_->modules[m].worker->set_io_command(io_->modules[m].slot, IoCommand{io_->ctl.module_coils(m)});
   }
   // Disable whatever answers: a few rounds, each at most one step of a state machine.
   for (int round = 0; round < 10; ++round) {

@@ -20,6 +20,8 @@
 #include "cnc/lcmt_axis_status.hpp"
 #include "cnc/lcmt_drive_command.hpp"
 #include "cnc/lcmt_setpoint.hpp"
+#include "cnc/lcmt_io_command.hpp"
+#include "cnc/lcmt_io_status.hpp"
 #include "cnc/lcmt_spindle_command.hpp"
 #include "cnc/lcmt_spindle_status.hpp"
 #include "common/bus/bus.h"
@@ -27,6 +29,7 @@
 #include "common/drive/link.h"
 #include "common/service/bus_health.h"
 #include "services/drive_bridge/drive_bridge.h"
+#include "services/drive_bridge/io_control.h"
 #include "services/drive_bridge/link_worker.h"
 #include "services/drive_bridge/spindle_control.h"
 
@@ -66,6 +69,8 @@ class DriveBridgeNode {
   int64_t tick_count() const { return tick_; }
   // The spindle (spindle: in the config), else nullptr.
   const SpindleControl* spindle() const { return spindle_ ? &spindle_->ctl : nullptr; }
+  // The I/O logic (io: in the config), else nullptr.
+  const IoControl* io() const { return io_ ? &io_->ctl : nullptr; }
   // Setpoints lost on the way and taken from a later one's history.
   int64_t recovered_setpoints() const { return recovered_setpoints_; }
 
@@ -101,6 +106,9 @@ class DriveBridgeNode {
   // The spindle's share of a servo tick and of a status publish.
   void spindle_tick(double now_s);
   void publish_spindle_status();
+  // The I/O modules' share (io: in the config).
+  void io_tick();
+  void publish_io_status();
   void fault(size_t axis, const std::string& why, bool disable_axis);
   void begin_enable(double now_s);
   void check_drives();
@@ -146,6 +154,27 @@ class DriveBridgeNode {
   std::unique_ptr<Spindle> spindle_;
   std::string ch_spindle_status_;
   cnc::lcmt_spindle_status spindle_msg_{};  // reused by every status publish
+  // The I/O modules (cfg.io.enabled), each on a link worker like a drive.
+  struct IoModule {
+    LinkWorker* worker = nullptr;
+    size_t slot = 0;
+    std::vector<int> points[4];  // its points by kind (config::IoKind), as its device orders them
+    IoReport rep;
+    uint64_t logged_coils = 0;   // the read-back coils last logged
+    bool logged_valid = false;
+  };
+  struct Io {
+    Io(const config::IoConfig& c, const std::vector<std::vector<int>>& coils) : ctl(c, coils) {}
+    IoControl ctl;
+    std::vector<IoModule> modules;
+    bool pending = false;  // an IO_CMD arrived since the last tick (the newest kept)
+    int64_t pending_seq = 0;
+    int8_t pending_coolant = 0;
+    uint64_t pending_outputs = 0;
+  };
+  std::unique_ptr<Io> io_;
+  std::string ch_io_status_;
+  cnc::lcmt_io_status io_msg_{};  // reused by every status publish
   std::string ch_status_;
   cnc::lcmt_axis_status status_msg_{};  // reused by every status publish
   std::string ch_alarm_;

@@ -38,6 +38,16 @@ void LinkWorker::add_spindle(const drive::DriveProfile& profile, int unit) {
   spindle_->pdo = image_.add(spindle_->dev->layout());
 }
 
+size_t LinkWorker::add_io_module(const config::IoConfig& io, int module) {
+  auto s = std::make_unique<IoSlot>();
+  auto dev = std::make_unique<drive::IoModuleDevice>(io, module, link_);
+  s->device = dev.get();
+  s->dev = std::move(dev);
+  s->pdo = image_.add(s->dev->layout());
+  ios_.push_back(std::move(s));
+  return ios_.size() - 1;
+}
+
 void LinkWorker::start() {
   stopping_.store(false, std::memory_order_release);
   thread_ = std::thread([this] { run(); });
@@ -105,9 +115,39 @@ void LinkWorker::mark_spindle_lost() {
   w.in = drive::SpindleInputs{};
 }
 
+void LinkWorker::mark_io_lost(IoSlot& io) {
+  if (io.work.answering) ++io.work.lost_events;
+  io.work.answering = false;
+  io.dev->forget(image_.inputs(io.pdo));
+  io.work.in = drive::IoModuleInputs{};
+}
+
 void LinkWorker::mark_all_lost() {
   for (auto& other : slots_) mark_lost(*other);
   mark_spindle_lost();
+  for (auto& io : ios_) mark_io_lost(*io);
+}
+
+void LinkWorker::io_round(IoSlot& io, double now_s) {
+  const IoCommand c = io.cmd.read();
+  drive::IoModuleOutputs out;
+  out.write = io.work.in.valid;  // the first exchange after (re)opening only reads
+  out.coils = c.coils;
+  drive::put_pdo(image_.outputs(io.pdo), out);
+  const drive::TxResult r = io.dev->exchange(image_.outputs(io.pdo), image_.inputs(io.pdo), io.work.counters);
+  if (r == drive::TxResult::kOk) {
+    io.work.in = drive::get_pdo<drive::IoModuleInputs>(image_.inputs(io.pdo));
+    io.work.answering = true;
+    io.last_answer_s = now_s;
+    return;
+  }
+  std::snprintf(io.work.last_error.data(), io.work.last_error.size(), "%s: %s", drive::tx_result_name(r),
+                link_.last_error().c_str());
+  if (r == drive::TxResult::kLinkLost) {
+    mark_all_lost();
+  } else if (io.work.answering && now_s - io.last_answer_s > cfg_.link_loss_timeout_s) {
+    mark_io_lost(io);
+  }
 }
 
 void LinkWorker::spindle_round(double now_s) {
@@ -143,6 +183,7 @@ void LinkWorker::round(double now_s) {
     if (link_.ensure_open(now_s)) {
       for (size_t i = 0; i < n; ++i) forget(*slots_[i]);
       if (spindle_) mark_spindle_lost();
+      for (auto& io : ios_) mark_io_lost(*io);
     } else {
       for (size_t i = 0; i < n; ++i) {
         Slot& s = *slots_[i];
@@ -153,6 +194,10 @@ void LinkWorker::round(double now_s) {
         mark_spindle_lost();
         std::snprintf(spindle_->work.last_error.data(), spindle_->work.last_error.size(), "%s",
                       link_.last_error().c_str());
+      }
+      for (auto& io : ios_) {
+        mark_io_lost(*io);
+        std::snprintf(io->work.last_error.data(), io->work.last_error.size(), "%s", link_.last_error().c_str());
       }
     }
   }
@@ -229,6 +274,7 @@ void LinkWorker::round(double now_s) {
       // When no drive on the link answers, reopen it, which drops stale replies.
       mark_lost(s);
       bool any = spindle_ && spindle_->work.answering;
+      for (const auto& io : ios_) any = any || io->work.answering;
       for (const auto& other : slots_) any = any || other->work.answering;
       if (!any) {
         link_.close(now_s);
@@ -237,8 +283,11 @@ void LinkWorker::round(double now_s) {
     }
   }
   if (spindle_ && link_.is_open()) spindle_round(now_s);
+  for (auto& io : ios_)
+    if (link_.is_open()) io_round(*io, now_s);
   for (size_t i = 0; i < n; ++i) slots_[i]->rep.write(slots_[i]->work);
   if (spindle_) spindle_->rep.write(spindle_->work);
+  for (auto& io : ios_) io->rep.write(io->work);
   ++rounds_;
 }
 

@@ -33,6 +33,7 @@
 #include "common/config/machine_config.h"
 #include "common/drive/axis_drive.h"
 #include "common/drive/device.h"
+#include "common/drive/io_module_device.h"
 #include "common/drive/link.h"
 #include "common/drive/spindle_device.h"
 #include "common/util/triple_buffer.h"
@@ -82,6 +83,19 @@ struct SpindleReport {
   std::array<char, 96> last_error{};
 };
 
+// What the servo loop and a worker exchange for an I/O module.
+struct IoCommand {
+  uint64_t coils = 0;  // bit i: the module's i-th coil point (IoModuleDevice::points)
+};
+
+struct IoReport {
+  bool answering = false;
+  int64_t lost_events = 0;
+  drive::IoModuleInputs in;  // in.valid: an answer since the link was (re)opened
+  drive::LinkCounters counters;
+  std::array<char, 96> last_error{};
+};
+
 class LinkWorker {
  public:
   // Called on the worker's thread for every target write while following.
@@ -96,6 +110,12 @@ class LinkWorker {
   bool has_spindle() const { return spindle_ != nullptr; }
   void set_spindle_command(const SpindleCommand& c) { spindle_->cmd.write(c); }
   const SpindleReport& spindle_report() { return spindle_->rep.read(); }
+  // An I/O module on this link (io.modules[module]); its exchange follows the spindle's
+  // in a round. Returns its slot for the two calls below.
+  size_t add_io_module(const config::IoConfig& io, int module);
+  const drive::IoModuleDevice& io_module(size_t slot) const { return *ios_[slot]->device; }
+  void set_io_command(size_t slot, const IoCommand& c) { ios_[slot]->cmd.write(c); }
+  const IoReport& io_report(size_t slot) { return ios_[slot]->rep.read(); }
   drive::Link& link() { return link_; }
   void set_probe(WriteProbe p) { probe_ = std::move(p); }
 
@@ -134,7 +154,18 @@ class LinkWorker {
     SpindleReport work;
     double last_answer_s = -1;
   };
+  struct IoSlot {
+    std::unique_ptr<drive::Device> dev;
+    const drive::IoModuleDevice* device = nullptr;  // dev, typed
+    size_t pdo = 0;
+    util::TripleBuffer<IoCommand> cmd;
+    util::TripleBuffer<IoReport> rep;
+    IoReport work;
+    double last_answer_s = -1;
+  };
   void run();
+  void io_round(IoSlot& io, double now_s);
+  void mark_io_lost(IoSlot& io);
   void mark_lost(Slot& s);
   void mark_spindle_lost();
   void mark_all_lost();
@@ -148,6 +179,7 @@ class LinkWorker {
   drive::ProcessImage image_;  // the cyclic process data of the drives on this link
   std::vector<int> axis_index_;
   std::unique_ptr<SpindleSlot> spindle_;
+  std::vector<std::unique_ptr<IoSlot>> ios_;
   WriteProbe probe_;
   sem_t wake_;
   std::atomic<bool> stopping_{false};

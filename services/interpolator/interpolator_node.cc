@@ -59,7 +59,8 @@ InterpolatorNode::InterpolatorNode(const config::MachineConfig& cfg, bus::Bus& b
       health_(bus, cfg.channel(ch::kAlarm), "cnc-interpolator", cnc::lcmt_alarm::FAULT),
       inputs_(kMaxPendingInputs),
       peers_(bus, cfg, "cnc-interpolator", {"cnc-drive-bridge", "cnc-program-server"}),
-      stream_(util::next_token(0)), spindle_seq_base_(stream_), ch_spindle_cmd_(cfg.channel(ch::kSpindleCmd)) {
+      stream_(util::next_token(0)), spindle_seq_base_(stream_), ch_spindle_cmd_(cfg.channel(ch::kSpindleCmd)),
+      io_seq_base_(stream_), ch_io_cmd_(cfg.channel(ch::kIoCmd)) {
   bus_.subscribe<cnc::lcmt_program_command>(cfg.channel(ch::kProgramCmd),
                                             [this](const auto& m) { on_command(m); });
   bus_.subscribe<cnc::lcmt_program_state>(cfg.channel(ch::kProgramState),
@@ -333,6 +334,7 @@ void InterpolatorNode::run_cycle() {
   if (sp.state == RunState::kDone) done_token_ = token_;
   publish_setpoint(sp);
   publish_spindle(cyc);
+  publish_io(cyc);
   publish_state(false);
 }
 
@@ -363,6 +365,23 @@ void InterpolatorNode::publish_spindle(int64_t cyc) {
   if (bus_.publish(ch_spindle_cmd_, spindle_msg_)) {
     spindle_sent_seq_ = seq;
     spindle_sent_cycle_ = cyc;
+  }
+}
+
+void InterpolatorNode::publish_io(int64_t cyc) {
+  // As the spindle's: with every change, and again every 0.1 s.
+  if (!cfg_.io.enabled) return;
+  const MachineOutputs& o = core_.outputs();
+  const int64_t seq = io_seq_base_ + o.seq;
+  const int64_t repeat = std::max<int64_t>(1, std::llround(0.1 / cfg_.ipo_period_s));
+  if (seq == io_sent_seq_ && cyc - io_sent_cycle_ < repeat) return;
+  io_msg_.command_seq = seq;
+  io_msg_.coolant = static_cast<int8_t>(o.coolant);
+  io_msg_.outputs = static_cast<int64_t>(o.outputs);
+  io_msg_.stream = stream_;
+  if (bus_.publish(ch_io_cmd_, io_msg_)) {
+    io_sent_seq_ = seq;
+    io_sent_cycle_ = cyc;
   }
 }
 

@@ -31,6 +31,7 @@
 #include "cnc/lcmt_program_command.hpp"
 #include "cnc/lcmt_program_state.hpp"
 #include "cnc/lcmt_setpoint.hpp"
+#include "cnc/lcmt_io_command.hpp"
 #include "cnc/lcmt_spindle_command.hpp"
 #include "common/bus/bus.h"
 #include "common/config/machine_config.h"
@@ -89,6 +90,8 @@ class InterpolatorNode {
   // (a recorded SPINDLE_AT_SPEED input), and the core's spindle sent on SPINDLE_CMD.
   void take_spindle_at_speed();
   void publish_spindle(int64_t cyc);
+  // The core's coolant and digital outputs sent on IO_CMD (io: in the config).
+  void publish_io(int64_t cyc);
 
   // Operator motion (interpolator_node_manual.cc): jogs and the homing
   // sequence are moves the node makes itself, as a program of a line and an END
@@ -217,6 +220,11 @@ class InterpolatorNode {
   int64_t spindle_sent_cycle_ = 0;
   std::string ch_spindle_cmd_;
   cnc::lcmt_spindle_command spindle_msg_{};
+  int64_t io_seq_base_;
+  int64_t io_sent_seq_ = -1;
+  int64_t io_sent_cycle_ = 0;
+  std::string ch_io_cmd_;
+  cnc::lcmt_io_command io_msg_{};
 };
 
 }  // namespace cnc::interp

@@ -20,6 +20,7 @@
 #include "cnc/lcmt_drive_command.hpp"
 #include "cnc/lcmt_setpoint.hpp"
 #include "cnc/lcmt_spindle_command.hpp"
+#include "cnc/lcmt_io_status.hpp"
 #include "cnc/lcmt_spindle_status.hpp"
 #include "common/bus/bus.h"
 #include "common/config/machine_config.h"
@@ -58,6 +59,24 @@ const std::string kSpindle =
     "spindle: {drive: {transport: loopback, unit_id: 3, profile: delta_vfd}, at_speed_tolerance: 0.02,"
     " at_speed_timeout_s: 0.2}\n";
 
+// An I/O module as unit 4 on the axes' loopback link: coolant, two outputs, an input, two registers.
+const std::string kIo =
+    "io:\n"
+    "  modules: [{name: io1, transport: loopback, unit_id: 4}]\n"
+    "  points:\n"
+    "    - {name: mist, kind: coil, address: 0}\n"
+    "    - {name: flood, kind: coil, address: 1}\n"
+    "    - {name: clamp, kind: coil, address: 8}\n"
+    "    - {name: lamp, kind: coil, address: 9}\n"
+    "    - {name: door, kind: discrete_input, address: 2}\n"
+    "    - {name: pressure, kind: input_register, address: 1, scale: 0.01}\n"
+    "    - {name: valve, kind: holding_register, address: 0, scale: 0.5, signed: true}\n"
+    "  coolant: {mist: mist, flood: flood}\n"
+    "  digital_outputs: [clamp, lamp]\n"
+    "  digital_inputs: [door]\n"
+    "  analog_inputs: [pressure]\n"
+    "  analog_outputs: [valve]\n";
+
 class Cell {
  public:
   Cell(const std::string& profile, bool enable_on_start, const std::string& extra = "")
@@ -65,6 +84,7 @@ class Cell {
         node(cfg, bus, DriveBridgeNode::Options{false}) {
     bus.subscribe<cnc::lcmt_axis_status>("LB.AXIS_STATUS", [this](const auto& m) { status = m; });
     bus.subscribe<cnc::lcmt_spindle_status>("LB.SPINDLE_STATUS", [this](const auto& m) { spindle = m; });
+    bus.subscribe<cnc::lcmt_io_status>("LB.IO_STATUS", [this](const auto& m) { io = m; });
     bus.subscribe<cnc::lcmt_alarm>("LB.ALARM", [this](const auto& m) { alarms.push_back(m.code + ": " + m.text); });
     node.start();
   }
@@ -155,9 +175,24 @@ class Cell {
     bus.publish("LB.SPINDLE_CMD", m);
   }
 
+  void io_command(int64_t seq, int8_t coolant, int64_t outputs) {
+    cnc::lcmt_io_command m{};
+    m.command_seq = seq;
+    m.coolant = coolant;
+    m.outputs = outputs;
+    bus.publish("LB.IO_CMD", m);
+  }
+  int coil(int addr) { return link().io_module(4)->coil(addr); }
+  double io_value(const std::string& name) const {
+    for (int i = 0; i < io.num_points; ++i)
+      if (io.name[static_cast<size_t>(i)] == name) return io.value[static_cast<size_t>(i)];
+    return -1e9;
+  }
+
   config::MachineConfig cfg;
   bus::Bus bus;
   DriveBridgeNode node;
+  cnc::lcmt_io_status io{};
   cnc::lcmt_axis_status status{};
   cnc::lcmt_spindle_status spindle{};
   std::vector<std::string> alarms;
@@ -295,6 +330,88 @@ TEST(BridgeNode, SpindleFollowsItsCommandsAndReportsAtSpeed) {
   c.hold_stream(10, 10, 5);
   EXPECT_TRUE(vfd->running());
   EXPECT_EQ(c.spindle.at_speed_seq, 103);
+}
+
+TEST(BridgeNode, IoModuleFollowsItsCommandsAndReportsItsPoints) {
+  Cell c("sim", true, kIo);
+  c.ticks(40);
+  ASSERT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  ASSERT_NE(c.node.io(), nullptr);
+  drive::IoEmulator* m = c.link().io_module(4);
+  ASSERT_NE(m, nullptr);
+  m->set_point("door", 1);
+  m->set_point("pressure", 612);
+  m->set_point("valve", 0xFFF6);  // -10 counts
+  c.io_command(11, 2, 0b10);  // flood, P1 (lamp)
+  c.hold_stream(10, 10, 5);
+  EXPECT_EQ(c.coil(1), 1);
+  EXPECT_EQ(c.coil(0), 0);
+  EXPECT_EQ(c.coil(8), 0);
+  EXPECT_EQ(c.coil(9), 1);
+  EXPECT_EQ(c.io.command_seq, 11);
+  EXPECT_EQ(c.io.coolant, 2);
+  EXPECT_EQ(c.io_value("flood"), 1.0) << "as read back";
+  EXPECT_EQ(c.io_value("lamp"), 1.0);
+  EXPECT_EQ(c.io_value("door"), 1.0);
+  EXPECT_DOUBLE_EQ(c.io_value("pressure"), 6.12);
+  EXPECT_DOUBLE_EQ(c.io_value("valve"), -5.0);
+  ASSERT_EQ(c.io.num_modules, 1);
+  EXPECT_TRUE(c.io.answering[0]);
+  EXPECT_GT(c.io.transactions[0], 0);
+  // An older command changes nothing; a coil changed behind the bridge's back is set again.
+  c.io_command(10, 1, 0b01);
+  m->set_point("lamp", 0);
+  c.hold_stream(10, 10, 5);
+  EXPECT_EQ(c.coil(1), 1);
+  EXPECT_EQ(c.coil(9), 1);
+  // DISABLE turns the coolant off, the outputs stay; ENABLE does not turn it on again.
+  c.command(cnc::lcmt_drive_command::DISABLE);
+  c.hold_stream(10, 10, 5);
+  EXPECT_EQ(c.coil(1), 0);
+  EXPECT_EQ(c.coil(9), 1);
+  c.command(cnc::lcmt_drive_command::ENABLE);
+  c.io_command(11, 2, 0b10);
+  c.hold_stream(10, 10, 20);
+  EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  EXPECT_EQ(c.coil(1), 0);
+  c.io_command(12, 1, 0b01);  // mist, P0 (clamp)
+  c.hold_stream(10, 10, 5);
+  EXPECT_EQ(c.coil(0), 1);
+  EXPECT_EQ(c.coil(1), 0);
+  EXPECT_EQ(c.coil(8), 1);
+  EXPECT_EQ(c.coil(9), 0);
+}
+
+TEST(BridgeNode, IoServoTickAllocatesNothing) {
+  Cell c("sim", true, kIo);
+  c.ticks(40);
+  ASSERT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  c.io_command(1, 2, 1);
+  double x = c.move_x(10, 15);
+  c.hold_stream(x, 10, 20);
+  c.count_allocations = true;
+  c.io_command(2, 0, 3);
+  x = c.move_x(x, 12);
+  c.io_command(3, 1, 0);
+  c.hold_stream(x, 10, 20);
+  c.count_allocations = false;
+  EXPECT_EQ(c.coil(0), 1);
+  EXPECT_EQ(c.cyclic_allocations, 0);
+}
+
+TEST(BridgeNode, IoCoolantStopsAtAFault) {
+  Cell c("sim", true, kIo);
+  c.ticks(40);
+  c.io_command(5, 3, 1);
+  c.hold_stream(10, 10, 5);
+  EXPECT_EQ(c.coil(0), 1);
+  EXPECT_EQ(c.coil(1), 1);
+  // No setpoints: the watchdog faults the bridge, the coolant goes off, the output stays.
+  c.ticks(200);
+  EXPECT_EQ(c.node.state(), State::kFault) << c.node.detail();
+  EXPECT_EQ(c.coil(0), 0);
+  EXPECT_EQ(c.coil(1), 0);
+  EXPECT_EQ(c.coil(8), 1);
 }
 
 TEST(BridgeNode, SpindleNotAtSpeedInTimeIsAFaultNamingIt) {

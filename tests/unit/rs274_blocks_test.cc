@@ -884,7 +884,8 @@ TEST(Rs274BlocksEvents, Outputs) {
   const std::vector<Block> e = events(run("M62 P3\nM65 P3\nM64 P0\nM67 E2 Q5.5\nM68 E1 Q-2\nM2\n"));
   std::vector<std::tuple<EventKind, int, double>> got;
   for (const Block& b : e) got.emplace_back(b.event.kind, b.event.number, b.event.value);
-  const std::vector<std::tuple<EventKind, int, double>> want = {{EventKind::kDigitalOutput, 3, 1},
+  // M62 on with the next motion (1 + 2), M65 off at once (0), M64 on at once (1).
+  const std::vector<std::tuple<EventKind, int, double>> want = {{EventKind::kDigitalOutput, 3, 3},
                                                                 {EventKind::kDigitalOutput, 3, 0},
                                                                 {EventKind::kDigitalOutput, 0, 1},
                                                                 {EventKind::kAnalogOutput, 2, 5.5},

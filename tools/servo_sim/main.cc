@@ -2,7 +2,10 @@
 // one unit id per axis, each axis with the drive profile its machine config names
 // (config/drives/*.yaml) and the servo dynamics of its `sim:` section; and the
 // spindle's VFD when the config has one (spindle:, its unit id on the same port or
-// line; a first-order speed response and a load figure, spindle.sim).
+// line; a first-order speed response and a load figure, spindle.sim); and the I/O
+// modules of io: (coils, discrete inputs, input and holding registers) on the same
+// port or line, each coil's change logged with where the axes stand. The control
+// FIFO's "input NAME VALUE" sets a point (a switch or sensor of the module).
 //
 //   cnc-servo-sim --machine M [--port P] [--bind ADDR]      TCP axes: one port
 //                 [--device PTY] [--rtu-timing real|none]   RTU axes: the simulator's end of the line
@@ -50,6 +53,7 @@
 #include "common/config/yaml_reader.h"
 #include "common/drive/delta_vfd_profile.h"
 #include "common/drive/drive_profile.h"
+#include "common/drive/io_emulator.h"
 #include "common/drive/vfd_emulator.h"
 #include "common/drive/link_factory.h"
 #include "common/service/service.h"
@@ -297,6 +301,16 @@ class Simulator {
   void read_control();
   void housekeeping(double now);
   void reply_vfd(modbus_t* ctx, const uint8_t* query, int len, int header);
+  // The I/O module of `unit` on TCP (tcp) or on the RTU line, else nullptr.
+  struct IoSim {
+    std::unique_ptr<cnc::drive::IoEmulator> emu;
+    int unit = 0;
+    bool tcp = true;
+    std::vector<uint8_t> coils;  // as last logged
+  };
+  IoSim* io_for(int unit, bool tcp);
+  void reply_io(IoSim& io, modbus_t* ctx, const uint8_t* query, int len);
+  bool set_io_point(const std::string& line);
 
   const cnc::config::MachineConfig& cfg_;
   const cnc::service::Args& args_;
@@ -311,6 +325,7 @@ class Simulator {
   double vfd_t_ = -1;
   double vfd_logged_hz_ = 0;
   bool vfd_logged_run_ = false;
+  std::vector<IoSim> ios_;
   cnc::servo_sim::FaultInjector injector_;
   // TCP
   std::string bind_;
@@ -421,7 +436,24 @@ Simulator::Simulator(const cnc::config::MachineConfig& cfg, const cnc::service::
       throw std::runtime_error("the spindle's VFD on RTU is served only on the axes' line");
     }
   }
-  if (all_.empty() && !vfd_) throw std::runtime_error("no axis uses transport modbus_tcp or modbus_rtu");
+  for (size_t m = 0; cfg.io.enabled && m < cfg.io.modules.size(); ++m) {
+    const auto& d = cfg.io.modules[m].link;
+    IoSim io;
+    io.emu = std::make_unique<cnc::drive::IoEmulator>(cfg.io, static_cast<int>(m));
+    io.unit = d.unit_id;
+    io.tcp = cnc::drive::transport_of(d) == cnc::drive::Transport::kModbusTcp;
+    io.coils.assign(static_cast<size_t>(io.emu->mapping()->nb_bits), 0);
+    if (io.tcp) {
+      if (port_ < 0) port_ = d.port;
+      if (d.port != port_)
+        throw std::runtime_error("I/O module " + cfg.io.modules[m].name + ": the simulator serves one TCP port; " +
+                                 std::to_string(port_) + " is in use, the module has " + std::to_string(d.port));
+    } else if (rtu_.empty()) {
+      throw std::runtime_error("I/O module " + cfg.io.modules[m].name + " on RTU is served only on the axes' line");
+    }
+    ios_.push_back(std::move(io));
+  }
+  if (all_.empty() && !vfd_ && ios_.empty()) throw std::runtime_error("no axis uses transport modbus_tcp or modbus_rtu");
   {
     // How long a stalled master's dry stream stops the simulated world (SimWorld).
     const std::string p = args.option("master-stall-pause-s");
@@ -494,6 +526,49 @@ void Simulator::reply_vfd(modbus_t* ctx, const uint8_t* query, int len, int head
   if (n > 0 && addr >= first && addr + n <= end) vfd_->after_write(addr, n);
 }
 
+Simulator::IoSim* Simulator::io_for(int unit, bool tcp) {
+  for (IoSim& io : ios_)
+    if (io.unit == unit && io.tcp == tcp) return &io;
+  return nullptr;
+}
+
+void Simulator::reply_io(IoSim& io, modbus_t* ctx, const uint8_t* query, int len) {
+  modbus_reply(ctx, query, len, io.emu->mapping());
+  // Each coil's change, with where the axes stand when the module takes it.
+  for (size_t a = 0; a < io.coils.size(); ++a) {
+    const uint8_t now = io.emu->coil(static_cast<int>(a));
+    if (now == io.coils[a]) continue;
+    io.coils[a] = now;
+    std::string name = "coil " + std::to_string(a);
+    for (const auto& p : cfg_.io.points)
+      if (p.kind == cnc::config::IoKind::kCoil && p.address == static_cast<int>(a) &&
+          cfg_.io.modules[static_cast<size_t>(p.module)].name == io.emu->name())
+        name = p.name;
+    std::string where;
+    for (const SimDrive* d : all_) where += fmt::format(" {} {:.4f}", d->name(), d->position_mm());
+    spdlog::info("cnc-servo-sim: io {}: {} {} at{}", io.emu->name(), name, now ? "on" : "off", where);
+  }
+}
+
+bool Simulator::set_io_point(const std::string& line) {
+  // "input NAME VALUE": a point's raw value (a bit 0/1, a register's count).
+  std::istringstream in(line);
+  std::string what, name;
+  long value = 0;
+  if (!(in >> what) || what != "input") return false;
+  if (!(in >> name >> value)) {
+    spdlog::error("cnc-servo-sim: control command '{}': input needs a point's name and a value", line);
+    return true;
+  }
+  for (IoSim& io : ios_)
+    if (io.emu->set_point(name, static_cast<int>(value))) {
+      spdlog::warn("cnc-servo-sim: io {}: {} set to {}", io.emu->name(), name, value);
+      return true;
+    }
+  spdlog::error("cnc-servo-sim: control command '{}': no I/O point '{}'", line, name);
+  return true;
+}
+
 void Simulator::open_listener() {
   listen_fd_ = modbus_tcp_listen(tcp_ctx_, 8);
   if (listen_fd_ < 0)
@@ -562,6 +637,14 @@ void Simulator::serve_tcp_client(int fd, std::vector<int>& closed) {
     return;
   }
   const int header = modbus_get_header_length(tcp_ctx_);
+  if (IoSim* io = io_for(query[header - 1], true)) {
+    if (const int code = injector_.take_exception()) {
+      modbus_reply_exception(tcp_ctx_, query, static_cast<unsigned>(code));
+    } else {
+      reply_io(*io, tcp_ctx_, query, len);
+    }
+    return;
+  }
   if (vfd_ && vfd_tcp_ && query[header - 1] == vfd_unit_) {
     if (const int code = injector_.take_exception()) {
       modbus_reply_exception(tcp_ctx_, query, static_cast<unsigned>(code));
@@ -589,13 +672,16 @@ void Simulator::serve_tcp_client(int fd, std::vector<int>& closed) {
 void Simulator::answer_rtu(const uint8_t* frame, int len, double rx_end_s) {
   SimDrive* d = drive_for(rtu_, frame[0]);
   const bool vfd = vfd_ && !vfd_tcp_ && frame[0] == vfd_unit_;
-  if (d == nullptr && !vfd) return;  // another unit's request: on a real line nobody here answers
+  IoSim* io = io_for(frame[0], false);
+  if (d == nullptr && !vfd && io == nullptr) return;  // another unit's request: on a real line nobody here answers
   // The reply is built into a socket pair first: its length sets the line time,
   // and a CRC injection corrupts it before it goes out.
   modbus_set_slave(rtu_ctx_, frame[0]);
   modbus_set_socket(rtu_ctx_, capture_[0]);
   if (const int code = injector_.take_exception()) {
     modbus_reply_exception(rtu_ctx_, frame, static_cast<unsigned>(code));
+  } else if (io) {
+    reply_io(*io, rtu_ctx_, frame, len);
   } else if (vfd) {
     reply_vfd(rtu_ctx_, frame, len, 1);
   } else {
@@ -657,6 +743,7 @@ void Simulator::read_control() {
   while ((nl = control_buf_.find('\n')) != std::string::npos) {
     const std::string line = control_buf_.substr(0, nl);
     control_buf_.erase(0, nl + 1);
+    if (set_io_point(line)) continue;
     const std::string why = injector_.apply(line, cnc::util::monotonic_s());
     if (why.empty()) {
       spdlog::warn("cnc-servo-sim: injected '{}'", line);
@@ -719,7 +806,8 @@ void Simulator::housekeeping(double now) {
 }
 
 int Simulator::run() {
-  if (!tcp_.empty() || (vfd_ && vfd_tcp_)) {
+  const bool io_tcp = std::any_of(ios_.begin(), ios_.end(), [](const IoSim& io) { return io.tcp; });
+  if (!tcp_.empty() || (vfd_ && vfd_tcp_) || io_tcp) {
     tcp_ctx_ = modbus_new_tcp(bind_.c_str(), port_);
     if (tcp_ctx_ == nullptr) throw std::runtime_error("cannot create a Modbus TCP context");
     open_listener();
@@ -740,6 +828,10 @@ int Simulator::run() {
   if (vfd_)
     spdlog::info("cnc-servo-sim: spindle unit {} profile {}: time constant {:g} s", vfd_unit_, vfd_->profile().name,
                  cfg_.spindle.sim.time_constant_s);
+  for (const IoSim& io : ios_)
+    spdlog::info("cnc-servo-sim: io {} unit {}: {} coils, {} discrete inputs, {} input and {} holding registers",
+                 io.emu->name(), io.unit, io.emu->mapping()->nb_bits, io.emu->mapping()->nb_input_bits,
+                 io.emu->mapping()->nb_input_registers, io.emu->mapping()->nb_registers);
   if (!args_.option("control").empty()) {
     const std::string path = args_.option("control");
     if (!std::filesystem::exists(path) && mkfifo(path.c_str(), 0600) != 0)
