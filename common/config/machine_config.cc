@@ -27,7 +27,7 @@ std::set<std::string> transport_names() {
 // given its table: it may read no other key, and the table rejects every other key.
 constexpr std::string_view kTopKeys[] = {"cell",    "timing", "motion", "operator",     "hmi",    "process",
                                          "cutting", "program", "axes",  "drive_bridge", "logger", "security",
-                                         "monitor", "spindle", "io"};
+                                         "monitor", "spindle", "io",  "safety"};
 constexpr std::string_view kCellKeys[] = {"name", "channel_prefix", "lcm_url"};
 constexpr std::string_view kTimingKeys[] = {"ipo_period_s",       "servo_period_s",      "setpoint_timeout_s",
                                             "stop_decel_mm_s2",   "heartbeat_period_s",  "heartbeat_timeout_s",
@@ -71,6 +71,8 @@ constexpr std::string_view kIoModuleKeys[] = {"name",   "transport", "host",    
                                               "unit_id", "response_timeout_s"};
 constexpr std::string_view kIoPointKeys[] = {"name", "module", "kind", "address", "scale", "signed"};
 constexpr std::string_view kIoCoolantKeys[] = {"mist", "flood"};
+constexpr std::string_view kSafetyKeys[] = {"estop"};
+constexpr std::string_view kSafetyEstopKeys[] = {"input"};
 constexpr std::string_view kDriveBridgeKeys[] = {"enable_on_start", "profile_dir",     "enable_timeout_s",
                                                  "link_loss_timeout_s", "reconnect_min_s", "reconnect_max_s",
                                                  "lead_cycles"};
@@ -101,6 +103,8 @@ constexpr KeySection kSections[] = {
     {"io.modules[]", kIoModuleKeys},
     {"io.points[]", kIoPointKeys},
     {"io.coolant", kIoCoolantKeys},
+    {"safety", kSafetyKeys},
+    {"safety.estop", kSafetyEstopKeys},
     {"logger", kLoggerKeys},
     {"security", kSecurityKeys},
     {"monitor", kMonitorKeys},
@@ -534,6 +538,20 @@ void read_io(MapReader r, MachineConfig& c) {
   r.finish();
 }
 
+void read_safety(MapReader r, MachineConfig& c) {
+  MapReader estop = r.map("estop", kSafetyEstopKeys);
+  const std::string path = estop.child_path("input");
+  const std::string name = r.has("estop") ? estop.require_string("input") : estop.get_string("input", "");
+  if (!name.empty()) {
+    if (!c.io.enabled) throw ConfigError(r.file(), path, "needs an io: section with the point '" + name + "'");
+    // A point used by a role of io: may not be the E-stop too (an M66 or M62 on it).
+    std::set<int> taken(c.io.digital_inputs.begin(), c.io.digital_inputs.end());
+    c.safety.estop_input = io_role(estop, path, name, c.io, {IoKind::kDiscreteInput}, taken);
+  }
+  estop.finish();
+  r.finish();
+}
+
 void read_logger(MapReader r, MachineConfig& c) {
   c.log_directory = r.get_string("directory", c.log_directory);
   c.log_rotate_mb = r.get_double("rotate_mb", c.log_rotate_mb, 1.0, 1e6);
@@ -569,6 +587,7 @@ MachineConfig read_machine(MapReader top) {
   read_drive_bridge(top.map("drive_bridge", kDriveBridgeKeys), c);
   if (top.has("spindle")) read_spindle(top.map("spindle", kSpindleKeys), c);
   if (top.has("io")) read_io(top.map("io", kIoKeys), c);
+  if (top.has("safety")) read_safety(top.map("safety", kSafetyKeys), c);
   read_logger(top.map("logger", kLoggerKeys), c);
   read_security(top.map("security", kSecurityKeys), c.security);
   read_monitor(top.map("monitor", kMonitorKeys), c);

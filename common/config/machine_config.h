@@ -145,6 +145,14 @@ struct IoConfig {
   int point_index(const std::string& name) const;
 };
 
+// The hardware safety chain (section `safety:`, optional; needs io:). Inputs are
+// normally closed: 1 while all is well, so 0 (pressed, a broken wire) or a module that
+// does not answer is the condition.
+struct SafetyConfig {
+  int estop_input = -1;  // safety.estop.input: the discrete-input point (index into io.points), -1: none
+  bool enabled() const { return estop_input >= 0; }
+};
+
 // Operator functions (section `operator:`).
 struct OperatorConfig {
   // No program, MDI or homing-free motion other than jogging until every axis with
@@ -257,6 +265,7 @@ struct MachineConfig {
   std::vector<AxisConfig> axes;
   SpindleConfig spindle;
   IoConfig io;
+  SafetyConfig safety;
 
   // motion
   double default_feed_mm_per_min = 1000.0;

@@ -19,6 +19,8 @@
 namespace cnc::bridge {
 
 namespace ch = config::channels;
+// An E-stop disables the drives once they stand on the stopped command, at most this long after it.
+constexpr double kStandstillWaitS = 0.2;
 using cnc::lcmt_axis_status;
 
 const char* state_name(DriveBridgeNode::State s) {
@@ -152,6 +154,16 @@ DriveBridgeNode::DriveBridgeNode(const config::MachineConfig& cfg, bus::Bus& bus
     m.exceptions.assign(nm, 0);
     m.last_error.assign(nm, std::string());
     for (auto& e : m.last_error) e.reserve(96);
+    m.estop = cnc::lcmt_io_status::ESTOP_NONE;
+    m.estop_stop_ms = -1;
+    if (cfg_.safety.estop_input >= 0) {
+      const config::IoPointConfig& p = cfg_.io.points[static_cast<size_t>(cfg_.safety.estop_input)];
+      const auto& di = io_->modules[static_cast<size_t>(p.module)].points[static_cast<size_t>(config::IoKind::kDiscreteInput)];
+      for (size_t i = 0; i < di.size(); ++i)
+        if (di[i] == cfg_.safety.estop_input) estop_.bit = i;
+      estop_.module = p.module;
+      m.estop_input = p.name;
+    }
     bus_.subscribe<cnc::lcmt_io_command>(cfg.channel(ch::kIoCmd), [this](const auto& c) {
       Io& io = *io_;
       if (c.command_seq <= io.pending_seq) return;  // the newest change wins; a repeat changes nothing
@@ -382,6 +394,9 @@ void DriveBridgeNode::servo_tick_inner(double now_s) {
   bus_.drain();
   ++tick_;
   for (auto& a : axes_) a.rep = a.worker->report(a.slot);
+  if (io_)
+    for (auto& m : io_->modules) m.rep = m.worker->io_report(m.slot);
+  safety_tick(now_s);
   take_operator_command(now_s);
   advance_state(now_s);
   report_reconnects();
@@ -445,6 +460,59 @@ void DriveBridgeNode::spindle_tick(double now_s) {
   sp.worker->set_spindle_command(sp.cmd);
 }
 
+void DriveBridgeNode::safety_tick(double now_s) {
+  if (estop_.module < 0) return;
+  const IoModule& mod = io_->modules[static_cast<size_t>(estop_.module)];
+  const bool answering = mod.rep.answering && mod.rep.in.valid;
+  const bool ok = answering && ((mod.rep.in.discrete >> estop_.bit) & 1) != 0;
+  const std::string& name = cfg_.io.points[static_cast<size_t>(cfg_.safety.estop_input)].name;
+  if (ok && !estop_.ok && estop_.latched) {
+    spdlog::warn("E-stop: input {} reads 1 again; the drives stay disabled until FAULT_RESET and ENABLE", name);
+    alarm(cnc::lcmt_alarm::INFO, "estop_released",
+          "E-stop input " + name + " reads 1 again: FAULT_RESET, then ENABLE (cnc-ctl --do fault-reset, --do reset)");
+  }
+  estop_.ok = ok;
+  // Before the start-up ends (the module not read yet) there is nothing to stop.
+  if (!ok && !estop_.latched && state_ != State::kStarting) {
+    estop_.latched = true;
+    estop_.stood = false;
+    estop_.utime = util::wall_utime();
+    estop_.at_s = now_s;
+    estop_.stop_ms = -1;
+    estop_.command_stood_s = -1;
+    const std::string text =
+        answering ? "E-stop: input " + name + " reads 0 (pressed, or its wire cut): controlled stop, drives disabled"
+                  : "E-stop: module " + cfg_.io.modules[static_cast<size_t>(estop_.module)].name + " of input " + name +
+                        " does not answer (" + mod.rep.last_error.data() + "): controlled stop, drives disabled";
+    spdlog::error("{}", text);
+    alarm(cnc::lcmt_alarm::FAULT, "estop", text);
+    fault(0, text, false);  // brakes in this tick's core step; the spindle and coolant stop in this tick
+  }
+  if (estop_.latched && !estop_.stood && core_.mode() != BridgeCore::Mode::kStopping) {
+    // The command stands (or was never engaged): the drives' power off once they have
+    // settled on it (following error within 1 um), or kStandstillWaitS after it at most.
+    if (estop_.command_stood_s < 0) estop_.command_stood_s = now_s;
+    bool settled = true;
+    for (const auto& a : axes_) settled = settled && (!a.rep.have_status || std::fabs(a.rep.fe_mm) <= 1e-3);
+    if (!settled && now_s - estop_.command_stood_s < kStandstillWaitS) return;
+    estop_.stood = true;
+    estop_.stop_ms = (now_s - estop_.at_s) * 1e3;
+    for (auto& a : axes_) a.cmd.goal = drive::Goal::kDisable;
+    spdlog::info("E-stop: the axes stand {:.1f} ms after the E-stop (input {}); drives disabled", estop_.stop_ms, name);
+  }
+}
+
+bool DriveBridgeNode::estop_refuses_enable() {
+  if (estop_.module < 0 || (estop_.ok && !estop_.latched)) return false;
+  const std::string& name = cfg_.io.points[static_cast<size_t>(cfg_.safety.estop_input)].name;
+  const std::string text = !estop_.ok ? "ENABLE refused: E-stop input " + name + " reads 0 (or its module does not answer)"
+                                      : "ENABLE refused: the E-stop (input " + name +
+                                            ") is latched: FAULT_RESET first (cnc-ctl --do fault-reset)";
+  spdlog::warn("{}", text);
+  alarm(cnc::lcmt_alarm::WARNING, "enable_refused", text);
+  return true;
+}
+
 void DriveBridgeNode::io_tick() {
   if (!io_) return;
   Io& io = *io_;
@@ -463,7 +531,6 @@ void DriveBridgeNode::io_tick() {
   }
   for (size_t m = 0; m < io.modules.size(); ++m) {
     IoModule& mod = io.modules[m];
-    mod.rep = mod.worker->io_report(mod.slot);
     IoCommand c;
     c.coils = io.ctl.module_coils(m);
     mod.worker->set_io_command(mod.slot, c);
@@ -512,6 +579,16 @@ void DriveBridgeNode::publish_io_status() {
     m.exceptions[mi] = mod.rep.counters.exceptions;
     m.last_error[mi].assign(mod.rep.last_error.data());
   }
+  if (estop_.module >= 0) {
+    bool disabled = true;
+    for (const auto& a : axes_) disabled = disabled && !(a.rep.answering && a.rep.status.enabled);
+    m.estop = !estop_.latched      ? (estop_.ok ? cnc::lcmt_io_status::ESTOP_OK : cnc::lcmt_io_status::ESTOP_TRIPPED)
+              : !estop_.stood || !disabled ? cnc::lcmt_io_status::ESTOP_TRIPPED
+              : estop_.ok                   ? cnc::lcmt_io_status::ESTOP_RELEASED
+                                            : cnc::lcmt_io_status::ESTOP_DISABLED;
+    m.estop_utime = estop_.utime;
+    m.estop_stop_ms = estop_.stop_ms;
+  }
   bus_.publish(ch_io_status_, m);
 }
 
@@ -548,7 +625,7 @@ void DriveBridgeNode::take_operator_command(double now_s) {
   pending_command_ = 0;
   if (c == cnc::lcmt_drive_command::ENABLE) {
     if (state_ == State::kDisabled || state_ == State::kFault) {
-      begin_enable(now_s);
+      if (!estop_refuses_enable()) begin_enable(now_s);
     } else if (state_ == State::kStarting) {
       pending_command_ = c;
     } else if (state_ == State::kStopping) {
@@ -556,7 +633,17 @@ void DriveBridgeNode::take_operator_command(double now_s) {
       alarm(cnc::lcmt_alarm::WARNING, "enable_ignored",
             "ENABLE ignored: a controlled stop is running; send it again when the axes stand");
     }
+  } else if (c == cnc::lcmt_drive_command::FAULT_RESET && estop_.latched && (!estop_.ok || !estop_.stood)) {
+    const std::string& name = cfg_.io.points[static_cast<size_t>(cfg_.safety.estop_input)].name;
+    const std::string text = !estop_.ok ? "FAULT_RESET refused: E-stop input " + name + " still reads 0"
+                                        : "FAULT_RESET refused: the axes still brake for the E-stop";
+    spdlog::warn("{}", text);
+    alarm(cnc::lcmt_alarm::WARNING, "estop_reset_refused", text);
   } else if (c == cnc::lcmt_drive_command::DISABLE || c == cnc::lcmt_drive_command::FAULT_RESET) {
+    if (c == cnc::lcmt_drive_command::FAULT_RESET && estop_.latched) {
+      estop_.latched = false;
+      spdlog::info("E-stop reset by the operator");
+    }
     for (auto& a : axes_) {
       a.cmd.goal = c == cnc::lcmt_drive_command::DISABLE ? drive::Goal::kDisable : drive::Goal::kFaultReset;
       if (c == cnc::lcmt_drive_command::FAULT_RESET) a.link_down = false;
@@ -577,10 +664,12 @@ void DriveBridgeNode::advance_state(double now_s) {
     case State::kStarting: {
       bool all = true;
       for (const auto& a : axes_) all = all && a.rep.answering && a.rep.have_status;
+      // And the E-stop's module: its input decides whether anything may be enabled.
+      if (estop_.module >= 0) all = all && io_->modules[static_cast<size_t>(estop_.module)].rep.in.valid;
       if (all) {
         state_ = State::kDisabled;
         spdlog::info("every drive answers");
-        if (cfg_.drive_bridge.enable_on_start) {
+        if (cfg_.drive_bridge.enable_on_start && !estop_refuses_enable()) {
           begin_enable(now_s);
         } else {
           ready_ = true;

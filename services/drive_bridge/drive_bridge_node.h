@@ -9,6 +9,13 @@
 // state machines run) -> enabled (following setpoints) -> stopping -> fault.
 // After any fault nothing moves until an ENABLE on DRIVE_CMD (or cnc-ctl --do enable).
 //
+// The E-stop (safety.estop.input, a normally closed discrete input of an I/O module):
+// when it reads 0 or its module stops answering, a category 1 stop (IEC 60204-1): the
+// axes brake as at any fault, at timing.stop_decel_mm_s2 within their jerk limits,
+// the spindle and the coolant stop at once, and once the axes stand the drives are
+// disabled. The E-stop stays latched: ENABLE is refused until the input reads 1 again
+// and the operator's FAULT_RESET has cleared it (refused while it reads 0).
+//
 // servo_tick and publish_status never throw: an exception inside, and a failed
 // publish (the bus counts them; service::BusHealth), are faults like any other: the
 // axes brake to a controlled stop at timing.stop_decel_mm_s2 and the bridge stays in
@@ -108,6 +115,10 @@ class DriveBridgeNode {
   void publish_spindle_status();
   // The I/O modules' share (io: in the config).
   void io_tick();
+  // The E-stop's share: its input, read first in every tick (safety: in the config).
+  void safety_tick(double now_s);
+  // An ENABLE the E-stop forbids: ALARM enable_refused naming the input; true.
+  bool estop_refuses_enable();
   void publish_io_status();
   void fault(size_t axis, const std::string& why, bool disable_axis);
   void begin_enable(double now_s);
@@ -173,6 +184,18 @@ class DriveBridgeNode {
     uint64_t pending_outputs = 0;
   };
   std::unique_ptr<Io> io_;
+  struct Estop {
+    int module = -1;      // index into io_->modules; -1: no E-stop configured
+    size_t bit = 0;       // its bit among the module's discrete inputs
+    bool ok = false;      // the input reads 1 and its module answers
+    bool latched = false; // tripped; until a FAULT_RESET with the input at 1
+    bool stood = false;   // the axes stood after the trip: drives disabled
+    int64_t utime = 0;    // the trip, wall clock
+    double at_s = 0;      // and on the servo clock
+    double stop_ms = -1;  // from the trip until the axes stood
+    double command_stood_s = -1;  // when the stop's command came to rest
+  };
+  Estop estop_;
   std::string ch_io_status_;
   cnc::lcmt_io_status io_msg_{};  // reused by every status publish
   std::string ch_status_;

@@ -626,5 +626,169 @@ TEST(BridgeNode, MissingProfileIsAConfigErrorNamingTheKey) {
   }
 }
 
+
+// The E-stop: a normally closed discrete input of the I/O module (kIo's module, unit 4).
+std::string with_estop() {
+  std::string y = kIo;
+  y.insert(y.find("    - {name: door"), "    - {name: estop_ok, kind: discrete_input, address: 3}\n");
+  return y + "safety: {estop: {input: estop_ok}}\n";
+}
+const std::string kEstop = with_estop();
+
+// Commanded X per servo tick, with its differences (velocity, acceleration, jerk).
+struct Motion {
+  std::vector<double> x;
+  double v(size_t i) const { return (x[i] - x[i - 1]) / 0.001; }
+  double a(size_t i) const { return (v(i) - v(i - 1)) / 0.001; }
+  double j(size_t i) const { return (a(i) - a(i - 1)) / 0.001; }
+};
+
+TEST(BridgeNode, EstopBrakesThenDisablesAndStaysLatchedUntilResetAndEnable) {
+  Cell c("sim", true, kSpindle + kEstop);
+  drive::IoEmulator* m = c.link().io_module(4);
+  ASSERT_NE(m, nullptr);
+  ASSERT_TRUE(m->set_point("estop_ok", 1));  // released, the wire whole
+  c.ticks(40);
+  ASSERT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  EXPECT_EQ(int{c.io.estop}, int{cnc::lcmt_io_status::ESTOP_OK});
+  EXPECT_EQ(c.io.estop_input, "estop_ok");
+  c.spindle_command(1, 1, 6000);
+  c.hold_stream(10, 10, 5);
+  ASSERT_TRUE(c.link().vfd(3)->running());
+  // X up to 25 mm/s (0.1 mm per cycle) and cruising; the steady servo tick allocates nothing.
+  Motion mo;
+  double x = 10, v = 0;
+  for (int i = 0; i < 60; ++i) {
+    v = std::min(0.1, v + 0.01);
+    x += v;
+    c.setpoint(x, 10);
+    c.count_allocations = i >= 30;
+    for (int k = 0; k < 4; ++k) {
+      c.tick();
+      mo.x.push_back(c.node.core().commanded()[0]);
+    }
+  }
+  c.count_allocations = false;
+  EXPECT_EQ(c.cyclic_allocations, 0);
+  const size_t edge = mo.x.size();
+  const double v0 = mo.v(edge - 1);
+  EXPECT_NEAR(v0, 25.0, 0.5);
+  // Pressed. The interpolator streams on for a few cycles until it sees the stop.
+  ASSERT_TRUE(m->set_point("estop_ok", 0));
+  size_t braking = 0;
+  for (int i = 0; i < 100; ++i) {
+    if (i < 5) {
+      x += v;
+      c.setpoint(x, 10);
+    }
+    for (int k = 0; k < 4; ++k) {
+      c.tick();
+      mo.x.push_back(c.node.core().commanded()[0]);
+      if (braking == 0 && c.node.core().faulted()) braking = mo.x.size() - 1;
+    }
+  }
+  ASSERT_GT(braking, 0u);
+  EXPECT_LE(braking - edge, 2u) << "the input is read in the link's round and acted on in the next tick";
+  EXPECT_TRUE(c.alarmed("estop: E-stop: input estop_ok reads 0")) << ::testing::PrintToString(c.alarms);
+  EXPECT_FALSE(c.link().vfd(3)->running()) << "the spindle stops with the E-stop";
+  // A controlled stop within the stop deceleration and the jerk limit, never reversing.
+  double vmax_after = 0;
+  for (size_t i = braking + 1; i < mo.x.size(); ++i) {
+    EXPECT_GE(mo.v(i), -1e-9) << "tick " << i;
+    EXPECT_LE(mo.v(i), mo.v(i - 1) + 1e-6) << "tick " << i;
+    EXPECT_LE(std::fabs(mo.a(i)), 2000 * 1.0001) << "tick " << i;
+    if (i > braking + 2) {
+      EXPECT_LE(std::fabs(mo.j(i)), 60000 * 1.0001) << "tick " << i;
+    }
+    vmax_after = std::max(vmax_after, mo.v(i));
+  }
+  EXPECT_LE(vmax_after, v0 + 1e-6);
+  const double dist = mo.x.back() - mo.x[edge - 1];
+  const double bound = v0 * v0 / (2 * 2000) + v0 * 2000 / (2 * 60000) + v0 * 0.002;
+  EXPECT_LE(dist, bound) << "stop distance against v^2/(2a) + v*a/(2j) + 2 ticks";
+  EXPECT_GT(dist, v0 * v0 / (2 * 2000)) << "no harder than the stop deceleration";
+  // Standing: the drives disabled, the state published, nothing follows the setpoints.
+  EXPECT_EQ(c.node.state(), State::kFault) << c.node.detail();
+  EXPECT_NE(c.node.detail().find("E-stop: input estop_ok reads 0"), std::string::npos) << c.node.detail();
+  EXPECT_FALSE(c.link().drive(1)->follows());
+  EXPECT_FALSE(c.link().drive(2)->follows());
+  EXPECT_EQ(int{c.status.drive_state[0]}, kFault);
+  EXPECT_EQ(int{c.io.estop}, int{cnc::lcmt_io_status::ESTOP_DISABLED});
+  EXPECT_GT(c.io.estop_utime, 0);
+  EXPECT_GT(c.io.estop_stop_ms, 0);
+  EXPECT_LT(c.io.estop_stop_ms, 200) << "the command at rest (the limiter's last creep under 0.1 um/s included)";
+  std::printf("E-stop at %.2f mm/s: braking %zu tick(s) after the edge, stop distance %.4f mm (bound %.4f), drives "
+              "disabled %.0f ms after the trip\n",
+              v0, braking - edge, dist, bound, c.io.estop_stop_ms);
+  const double rest = c.drive_mm(1);
+  // ENABLE and FAULT_RESET are refused while the input reads 0.
+  c.command(cnc::lcmt_drive_command::ENABLE);
+  c.hold_stream(rest, 10, 20);
+  EXPECT_TRUE(c.alarmed("enable_refused: ENABLE refused: E-stop input estop_ok reads 0"));
+  c.command(cnc::lcmt_drive_command::FAULT_RESET);
+  c.hold_stream(rest, 10, 5);
+  EXPECT_TRUE(c.alarmed("estop_reset_refused: FAULT_RESET refused: E-stop input estop_ok still reads 0"));
+  EXPECT_EQ(c.node.state(), State::kFault);
+  EXPECT_FALSE(c.link().drive(1)->follows());
+  // Released: still latched until the operator resets; ENABLE alone is refused.
+  ASSERT_TRUE(m->set_point("estop_ok", 1));
+  c.alarms.clear();
+  c.hold_stream(rest, 10, 5);
+  EXPECT_TRUE(c.alarmed("estop_released"));
+  EXPECT_EQ(int{c.io.estop}, int{cnc::lcmt_io_status::ESTOP_RELEASED});
+  c.command(cnc::lcmt_drive_command::ENABLE);
+  c.hold_stream(rest, 10, 20);
+  EXPECT_TRUE(c.alarmed("enable_refused: ENABLE refused: the E-stop (input estop_ok) is latched"));
+  EXPECT_EQ(c.node.state(), State::kFault);
+  EXPECT_FALSE(c.link().drive(1)->follows());
+  EXPECT_NEAR(c.drive_mm(1), rest, 1e-9) << "nothing moved";
+  // Reset, then enable: following again, from where the axes stand.
+  c.command(cnc::lcmt_drive_command::FAULT_RESET);
+  c.hold_stream(rest, 10, 5);
+  EXPECT_EQ(c.node.state(), State::kDisabled) << c.node.detail();
+  c.command(cnc::lcmt_drive_command::ENABLE);
+  c.hold_stream(rest, 10, 20);
+  EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  EXPECT_TRUE(c.link().drive(1)->follows());
+  EXPECT_EQ(int{c.io.estop}, int{cnc::lcmt_io_status::ESTOP_OK});
+}
+
+TEST(BridgeNode, EstopWireCutAtStartUpEnablesNothing) {
+  // The input reads 0 from the start (a wire cut, or the button pressed at power-on).
+  Cell c("sim", true, kEstop);
+  c.ticks(40);
+  EXPECT_EQ(c.node.state(), State::kFault) << c.node.detail();
+  EXPECT_TRUE(c.node.ready());
+  EXPECT_TRUE(c.alarmed("enable_refused: ENABLE refused: E-stop input estop_ok reads 0"));
+  EXPECT_TRUE(c.alarmed("estop: E-stop: input estop_ok reads 0"));
+  EXPECT_FALSE(c.link().drive(1)->follows());
+  EXPECT_EQ(int{c.io.estop}, int{cnc::lcmt_io_status::ESTOP_DISABLED});
+  c.command(cnc::lcmt_drive_command::ENABLE);
+  c.ticks(40);
+  EXPECT_FALSE(c.link().drive(1)->follows());
+  // Mended: reset and enable.
+  ASSERT_TRUE(c.link().io_module(4)->set_point("estop_ok", 1));
+  c.ticks(5);
+  c.command(cnc::lcmt_drive_command::FAULT_RESET);
+  c.ticks(5);
+  c.command(cnc::lcmt_drive_command::ENABLE);
+  c.ticks(40);
+  EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  EXPECT_TRUE(c.link().drive(1)->follows());
+}
+
+TEST(BridgeNode, EstopModuleThatStopsAnsweringIsAnEstop) {
+  Cell c("sim", true, kEstop);
+  ASSERT_TRUE(c.link().io_module(4)->set_point("estop_ok", 1));
+  c.ticks(40);
+  c.hold_stream(10, 10, 5);
+  ASSERT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  // Every transaction times out: the module (and the drives) stop answering.
+  c.link().inject_timeouts(1000000);
+  c.hold_stream(10, 10, 30);
+  EXPECT_TRUE(c.alarmed("estop: E-stop: module io1 of input estop_ok does not answer")) << ::testing::PrintToString(c.alarms);
+  c.link().inject_timeouts(0);
+}
+
 }  // namespace
 }  // namespace cnc::bridge

@@ -264,6 +264,33 @@ TEST(MachineConfig, IoErrors) {
                   "io.modules[0].response_timeout_s", "must not exceed drive_bridge.link_loss_timeout_s");
 }
 
+// The E-stop: a normally closed discrete input of an I/O module.
+TEST(MachineConfig, SafetySection) {
+  const std::string io = replace_nth(std::string(kIo), "  coolant: {",
+                                     "    - {name: estop_ok, kind: discrete_input, address: 3}\n  coolant: {");
+  EXPECT_FALSE(parse_machine_config(sim3_text() + io, kLabel).safety.enabled()) << "no section, no E-stop";
+  const MachineConfig c = parse_machine_config(sim3_text() + io + "safety: {estop: {input: estop_ok}}\n", kLabel);
+  ASSERT_TRUE(c.safety.enabled());
+  EXPECT_EQ(c.io.points[static_cast<size_t>(c.safety.estop_input)].name, "estop_ok");
+  EXPECT_FALSE(parse_machine_config(sim3_text() + io + "safety: {}\n", kLabel).safety.enabled());
+  EXPECT_TRUE(load_machine_config(std::string(CNC_SOURCE_DIR) + "/config/machines/sim3_safety.yaml").safety.enabled());
+}
+
+TEST(MachineConfig, SafetyErrors) {
+  const std::string io = replace_nth(std::string(kIo), "  coolant: {",
+                                     "    - {name: estop_ok, kind: discrete_input, address: 3}\n  coolant: {");
+  const std::string with = sim3_text() + io;
+  expect_error_at(sim3_text() + "safety: {estop: {input: estop_ok}}\n", "safety.estop.input",
+                  "needs an io: section with the point 'estop_ok'");
+  expect_error_at(with + "safety: {estop: {input: nothing}}\n", "safety.estop.input", "no point 'nothing'");
+  expect_error_at(with + "safety: {estop: {input: clamp}}\n", "safety.estop.input",
+                  "is of kind coil, not discrete_input");
+  expect_error_at(with + "safety: {estop: {input: door_closed}}\n", "safety.estop.input", "has a role already");
+  expect_error_at(with + "safety: {estop: {}}\n", "safety.estop.input", "required");
+  expect_error_at(with + "safety: {estop: {input: estop_ok, delay: 1}}\n", "safety.estop.delay", "unknown key");
+  expect_error_at(with + "safety: {door: x}\n", "safety.door", "unknown key");
+}
+
 TEST(MachineConfig, DuplicateKey) {
   expect_error_at(replace_nth(sim3_text(), "timing:\n", "timing:\n  stop_decel_mm_s2: 100\n"),
                   "timing.stop_decel_mm_s2", "duplicate key");

@@ -137,7 +137,13 @@ bool Ctl::all_in(int8_t state) const {
 int Ctl::enable_drives(double limit_s) {
   const double end = cnc::util::monotonic_s() + limit_s;
   double next_send = 0;
+  const size_t from = view_.alarms.size();
   while (!all_in(cnc::lcmt_axis_status::ENABLED)) {
+    // Refused (the E-stop): no use sending it again.
+    if (const std::string why = bridge_alarm_since(from, "enable_refused"); !why.empty()) {
+      std::fprintf(stderr, "cnc-ctl: %s\n", why.c_str());
+      return kExitRefused;
+    }
     if (cnc::util::stop_requested() || cnc::util::monotonic_s() > end) {
       std::fprintf(stderr, "cnc-ctl: the drives did not enable: %s\n",
                    view_.have_axes && !view_.axes.fault.empty() ? view_.axes.fault[0].c_str() : "no axis status");
@@ -261,7 +267,24 @@ int Ctl::status() {
 
 int Ctl::disable() { return drive_command(cnc::lcmt_drive_command::DISABLE), 0; }
 
-int Ctl::fault_reset() { return drive_command(cnc::lcmt_drive_command::FAULT_RESET), 0; }
+int Ctl::fault_reset() {
+  // The bridge refuses it while the E-stop's input reads 0 (an ALARM says so): exit 3 with it.
+  const size_t from = view_.alarms.size();
+  drive_command(cnc::lcmt_drive_command::FAULT_RESET);
+  std::string why;
+  wait(0.3, [&] { return !(why = bridge_alarm_since(from, "estop_reset_refused")).empty(); });
+  if (!why.empty()) {
+    std::fprintf(stderr, "cnc-ctl: %s\n", why.c_str());
+    return kExitRefused;
+  }
+  return 0;
+}
+
+std::string Ctl::bridge_alarm_since(size_t from, const char* code) const {
+  for (size_t i = from; i < view_.alarms.size(); ++i)
+    if (view_.alarms[i].source == "cnc-drive-bridge" && view_.alarms[i].code == code) return view_.alarms[i].text;
+  return "";
+}
 
 int Ctl::reset() {
   // 1. The drives: enabled through their profiles' state machines (a drive fault is

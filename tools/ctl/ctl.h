@@ -48,6 +48,8 @@ class Ctl {
   int status();
   int disable();
   int fault_reset();
+  // An ALARM of the drive bridge with `code` since index `from`: its text, else "".
+  std::string bridge_alarm_since(size_t from, const char* code) const;
   int reset();
   int enable();
   int confirm();

@@ -5,7 +5,10 @@
 // line; a first-order speed response and a load figure, spindle.sim); and the I/O
 // modules of io: (coils, discrete inputs, input and holding registers) on the same
 // port or line, each coil's change logged with where the axes stand. The control
-// FIFO's "input NAME VALUE" sets a point (a switch or sensor of the module).
+// FIFO's "input NAME VALUE" sets a point (a switch or sensor of the module) now, and
+// "at AXIS MM input NAME VALUE" when AXIS next passes MM (a switch the axis runs
+// into, or a test pressing the E-stop mid-move); each change is logged with the wall
+// clock and where and how fast the axes go, and each drive's enable and disable too.
 //
 //   cnc-servo-sim --machine M [--port P] [--bind ADDR]      TCP axes: one port
 //                 [--device PTY] [--rtu-timing real|none]   RTU axes: the simulator's end of the line
@@ -311,6 +314,16 @@ class Simulator {
   IoSim* io_for(int unit, bool tcp);
   void reply_io(IoSim& io, modbus_t* ctx, const uint8_t* query, int len);
   bool set_io_point(const std::string& line);
+  // "at AXIS MM input NAME VALUE": armed now, applied when AXIS passes MM (poll_triggers).
+  bool arm_trigger(const std::string& line);
+  void poll_triggers();
+  struct Trigger {
+    size_t drive;
+    double at_mm;
+    bool below;           // the axis was below at_mm when armed
+    std::string command;  // "input NAME VALUE"
+  };
+  std::vector<Trigger> triggers_;
 
   const cnc::config::MachineConfig& cfg_;
   const cnc::service::Args& args_;
@@ -352,6 +365,7 @@ class Simulator {
   double next_trace_s_ = 0;
   double next_persist_s_ = 0;
   double dt_;
+  std::vector<bool> follows_seen_;  // per drive: enabled as last logged
   std::vector<std::pair<int64_t, bool>> comm_seen_;  // per drive: watchdog trips and faults logged
   int64_t stalls_ = 0;     // process stalls the simulated world paused for
   double stalled_s_ = 0;
@@ -451,6 +465,8 @@ Simulator::Simulator(const cnc::config::MachineConfig& cfg, const cnc::service::
     } else if (rtu_.empty()) {
       throw std::runtime_error("I/O module " + cfg.io.modules[m].name + " on RTU is served only on the axes' line");
     }
+    // The E-stop button (safety.estop.input, normally closed) starts released, its wire whole.
+    if (cfg.safety.estop_input >= 0) io.emu->set_point(cfg.io.points[static_cast<size_t>(cfg.safety.estop_input)].name, 1);
     ios_.push_back(std::move(io));
   }
   if (all_.empty() && !vfd_ && ios_.empty()) throw std::runtime_error("no axis uses transport modbus_tcp or modbus_rtu");
@@ -562,11 +578,49 @@ bool Simulator::set_io_point(const std::string& line) {
   }
   for (IoSim& io : ios_)
     if (io.emu->set_point(name, static_cast<int>(value))) {
-      spdlog::warn("cnc-servo-sim: io {}: {} set to {}", io.emu->name(), name, value);
+      // The wall clock of the edge, and where and how fast the axes go then: a reaction
+      // (the E-stop's) is measured from here.
+      std::string where;
+      for (const SimDrive* d : all_)
+        where += fmt::format(" {} {:.4f} mm {:.3f} mm/s", d->name(), d->position_mm(), d->velocity_mm_s());
+      spdlog::warn("cnc-servo-sim: io {}: {} set to {} at utime {} with{}", io.emu->name(), name, value,
+                   cnc::util::wall_utime(), where);
       return true;
     }
   spdlog::error("cnc-servo-sim: control command '{}': no I/O point '{}'", line, name);
   return true;
+}
+
+bool Simulator::arm_trigger(const std::string& line) {
+  std::istringstream in(line);
+  std::string what, axis;
+  double at = 0;
+  if (!(in >> what) || what != "at") return false;
+  std::string rest;
+  if (!(in >> axis >> at) || !std::getline(in, rest) || rest.find("input") == std::string::npos) {
+    spdlog::error("cnc-servo-sim: control command '{}': at needs AXIS MM input NAME VALUE", line);
+    return true;
+  }
+  for (size_t i = 0; i < all_.size(); ++i)
+    if (all_[i]->name() == axis) {
+      triggers_.push_back(Trigger{i, at, all_[i]->position_mm() < at, rest.substr(rest.find("input"))});
+      spdlog::info("cnc-servo-sim: armed: '{}' when {} passes {:.4f} mm", triggers_.back().command, axis, at);
+      return true;
+    }
+  spdlog::error("cnc-servo-sim: control command '{}': no simulated axis {}", line, axis);
+  return true;
+}
+
+void Simulator::poll_triggers() {
+  for (size_t k = 0; k < triggers_.size();) {
+    const Trigger& t = triggers_[k];
+    if ((all_[t.drive]->position_mm() < t.at_mm) == t.below) {
+      ++k;
+      continue;
+    }
+    set_io_point(t.command);
+    triggers_.erase(triggers_.begin() + static_cast<std::ptrdiff_t>(k));
+  }
 }
 
 void Simulator::open_listener() {
@@ -743,7 +797,7 @@ void Simulator::read_control() {
   while ((nl = control_buf_.find('\n')) != std::string::npos) {
     const std::string line = control_buf_.substr(0, nl);
     control_buf_.erase(0, nl + 1);
-    if (set_io_point(line)) continue;
+    if (arm_trigger(line) || set_io_point(line)) continue;
     const std::string why = injector_.apply(line, cnc::util::monotonic_s());
     if (why.empty()) {
       spdlog::warn("cnc-servo-sim: injected '{}'", line);
@@ -755,6 +809,7 @@ void Simulator::read_control() {
 
 void Simulator::housekeeping(double now) {
   injector_.poll(now);
+  poll_triggers();
   comm_seen_.resize(all_.size());
   for (size_t i = 0; i < all_.size(); ++i) {
     const SimDrive& d = *all_[i];
@@ -783,6 +838,15 @@ void Simulator::housekeeping(double now) {
     }
   }
   if (!rtu_.empty() && serial_fd_ < 0) serial_fd_ = open_serial(device_, baud_);
+  follows_seen_.resize(all_.size(), false);
+  for (size_t i = 0; i < all_.size(); ++i) {
+    // Each drive's power stage: following (enabled) or not, with where it stands then.
+    const bool f = all_[i]->follows();
+    if (f == follows_seen_[i]) continue;
+    follows_seen_[i] = f;
+    spdlog::info("cnc-servo-sim: axis {}: {} at {:.4f} mm, {:.3f} mm/s, utime {}", all_[i]->name(),
+                 f ? "enabled" : "disabled", all_[i]->position_mm(), all_[i]->velocity_mm_s(), cnc::util::wall_utime());
+  }
   if (vfd_ && (vfd_->running() != vfd_logged_run_ || std::fabs(vfd_->command_hz() - vfd_logged_hz_) > 1e-9)) {
     vfd_logged_run_ = vfd_->running();
     vfd_logged_hz_ = vfd_->command_hz();
