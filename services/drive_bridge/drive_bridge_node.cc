@@ -640,9 +640,13 @@ void DriveBridgeNode::take_operator_command(double now_s) {
     spdlog::warn("{}", text);
     alarm(cnc::lcmt_alarm::WARNING, "estop_reset_refused", text);
   } else if (c == cnc::lcmt_drive_command::DISABLE || c == cnc::lcmt_drive_command::FAULT_RESET) {
-    if (c == cnc::lcmt_drive_command::FAULT_RESET && estop_.latched) {
+    if (c == cnc::lcmt_drive_command::FAULT_RESET && estop_.module >= 0) {
+      // With an E-stop every FAULT_RESET is answered (cnc-ctl waits for it or the refusal).
+      alarm(cnc::lcmt_alarm::INFO, "fault_reset_done",
+            estop_.latched ? "FAULT_RESET: the E-stop reset, the drives disabled: ENABLE to move again"
+                           : "FAULT_RESET: the drives reset and disabled");
+      if (estop_.latched) spdlog::info("E-stop reset by the operator");
       estop_.latched = false;
-      spdlog::info("E-stop reset by the operator");
     }
     for (auto& a : axes_) {
       a.cmd.goal = c == cnc::lcmt_drive_command::DISABLE ? drive::Goal::kDisable : drive::Goal::kFaultReset;

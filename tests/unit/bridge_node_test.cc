@@ -745,6 +745,7 @@ TEST(BridgeNode, EstopBrakesThenDisablesAndStaysLatchedUntilResetAndEnable) {
   // Reset, then enable: following again, from where the axes stand.
   c.command(cnc::lcmt_drive_command::FAULT_RESET);
   c.hold_stream(rest, 10, 5);
+  EXPECT_TRUE(c.alarmed("fault_reset_done: FAULT_RESET: the E-stop reset"));
   EXPECT_EQ(c.node.state(), State::kDisabled) << c.node.detail();
   c.command(cnc::lcmt_drive_command::ENABLE);
   c.hold_stream(rest, 10, 20);

@@ -268,15 +268,26 @@ int Ctl::status() {
 int Ctl::disable() { return drive_command(cnc::lcmt_drive_command::DISABLE), 0; }
 
 int Ctl::fault_reset() {
-  // The bridge refuses it while the E-stop's input reads 0 (an ALARM says so): exit 3 with it.
+  if (!cfg_.safety.enabled()) return drive_command(cnc::lcmt_drive_command::FAULT_RESET), 0;
+  // With an E-stop the bridge answers: done (fault_reset_done), or refused while the
+  // input reads 0 (estop_reset_refused): exit 3 with its text.
   const size_t from = view_.alarms.size();
   drive_command(cnc::lcmt_drive_command::FAULT_RESET);
-  std::string why;
-  wait(0.3, [&] { return !(why = bridge_alarm_since(from, "estop_reset_refused")).empty(); });
+  std::string why, done;
+  wait(std::min(timeout_s_, 5.0), [&] {
+    why = bridge_alarm_since(from, "estop_reset_refused");
+    done = bridge_alarm_since(from, "fault_reset_done");
+    return !why.empty() || !done.empty();
+  });
   if (!why.empty()) {
     std::fprintf(stderr, "cnc-ctl: %s\n", why.c_str());
     return kExitRefused;
   }
+  if (done.empty()) {
+    std::fprintf(stderr, "cnc-ctl: the drive bridge did not answer the FAULT_RESET\n");
+    return kExitTimeout;
+  }
+  std::printf("%s\n", done.c_str());
   return 0;
 }
 
