@@ -116,8 +116,8 @@ std::string beside(const MapReader& r, const std::string& v) {
   return (std::filesystem::path(r.file()).parent_path() / v).lexically_normal().string();
 }
 
-DriveConfig read_drive(MapReader r) {
-  DriveConfig d;
+// The Modbus link's keys a drive and an I/O module share (the unit id is each one's own).
+void read_link(MapReader& r, DriveConfig& d) {
   d.transport = r.get_choice("transport", d.transport, transport_names());
   d.host = r.get_string("host", d.host);
   d.port = static_cast<int>(r.get_int("port", d.port, 1, 65535));
@@ -125,12 +125,17 @@ DriveConfig read_drive(MapReader r) {
   d.baud = static_cast<int>(r.get_int("baud", d.baud, 1200, 4'000'000));
   d.parity = r.get_choice("parity", d.parity, {"none", "even", "odd"});
   d.stop_bits = static_cast<int>(r.get_int("stop_bits", d.stop_bits, 1, 2));
-  d.unit_id = static_cast<int>(r.get_int("unit_id", d.unit_id, 1, 247));
-  d.profile = r.get_string("profile", d.profile);
   d.response_timeout_s = r.get_double("response_timeout_s", d.response_timeout_s, 0.001, 5.0);
-  if (d.profile.empty()) r.fail("profile", "must not be empty");
   if (drive::transport_named(d.transport) == Transport::kModbusRtu && d.device.empty())
     r.fail("device", "is required for transport modbus_rtu");
+}
+
+DriveConfig read_drive(MapReader r) {
+  DriveConfig d;
+  read_link(r, d);
+  d.unit_id = static_cast<int>(r.get_int("unit_id", d.unit_id, 1, 247));
+  d.profile = r.get_string("profile", d.profile);
+  if (d.profile.empty()) r.fail("profile", "must not be empty");
   r.finish();
   return d;
 }
@@ -411,17 +416,8 @@ IoModuleConfig read_io_module(MapReader r) {
   DriveConfig& d = m.link;
   m.name = r.require_string("name");
   if (!plain_name(m.name)) r.fail("name", "'" + m.name + "' is no name: letters, digits and _");
-  d.transport = r.get_choice("transport", d.transport, transport_names());
-  d.host = r.get_string("host", d.host);
-  d.port = static_cast<int>(r.get_int("port", d.port, 1, 65535));
-  d.device = r.get_string("device", d.device);
-  d.baud = static_cast<int>(r.get_int("baud", d.baud, 1200, 4'000'000));
-  d.parity = r.get_choice("parity", d.parity, {"none", "even", "odd"});
-  d.stop_bits = static_cast<int>(r.get_int("stop_bits", d.stop_bits, 1, 2));
+  read_link(r, d);
   d.unit_id = static_cast<int>(r.require_int("unit_id", 1, 247));
-  d.response_timeout_s = r.get_double("response_timeout_s", d.response_timeout_s, 0.001, 5.0);
-  if (drive::transport_named(d.transport) == Transport::kModbusRtu && d.device.empty())
-    r.fail("device", "is required for transport modbus_rtu");
   d.profile = "";
   r.finish();
   return m;
