@@ -180,7 +180,7 @@ bool BlockBuilder::hold_move(const SourceRef& ref, std::vector<double>& e, doubl
   return false;
 }
 
-bool BlockBuilder::hold_arc(const SourceRef& ref, const program::Block& arc) {
+bool BlockBuilder::hold_arc(const SourceRef& ref, const program::Block& arc, int a1, int a2) {
   if (!blending() || !setup_.fit_runs) return false;
   for (size_t a = 3; a < arc.end.size(); ++a)
     if (arc.end[a] != position_[a]) return false;
@@ -191,9 +191,6 @@ bool BlockBuilder::hold_arc(const SourceRef& ref, const program::Block& arc) {
   // short enough and turning little enough to stay in a fitted run; the run's fit and
   // blends then keep within the rest of it, so the path stays within P of the arc.
   const program::ArcGeometry& g = arc.arc;
-  int a1 = 0, a2 = 1;
-  if (g.plane == 18) a1 = 2, a2 = 0;
-  if (g.plane == 19) a1 = 1, a2 = 2;
   const size_t i1 = static_cast<size_t>(a1), i2 = static_cast<size_t>(a2);
   const double r0 = std::hypot(arc.start[i1] - g.center[i1], arc.start[i2] - g.center[i2]);
   const double r1 = std::hypot(arc.end[i1] - g.center[i1], arc.end[i2] - g.center[i2]);
@@ -446,7 +443,7 @@ void BlockBuilder::arc_feed(const SourceRef& ref, double, double, double first_a
     arc.arc.center = center;
     arc.arc.plane = pl;
     arc.arc.turns = std::abs(rotation) - 1;
-    if (program::check_arc_block(arc).empty() && hold_arc(ref, arc)) return;
+    if (program::check_arc_block(arc).empty() && hold_arc(ref, arc, a1, a2)) return;
   }
   program::Block& b = begin(ref, rotation < 0 ? program::BlockKind::kArcCw : program::BlockKind::kArcCcw);
   b.end = e;

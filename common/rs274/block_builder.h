@@ -109,7 +109,8 @@ class BlockBuilder : public Canon {
   // other axes move too (the run was ended).
   bool hold_move(const SourceRef& ref, std::vector<double>& e, double f);
   // Holds an arc in the run as chords (G64 P, fit on); false: not, it runs as an arc.
-  bool hold_arc(const SourceRef& ref, const program::Block& arc);
+  // a1, a2: its plane's two axes, as arc_feed found them.
+  bool hold_arc(const SourceRef& ref, const program::Block& arc, int a1, int a2);
   void flush_run();
   // Whether a corner blend of leg d between the unit directions u_in and u_out is long
   // enough for the interpolation to resolve it (BuilderSetup: accel_mm_s2).
