@@ -134,6 +134,204 @@ void span_bezier(const NurbsCurve& c, double u0, double u1, Eigen::Vector3d b[4]
   b[3] = d1[0];
 }
 
+// The run as the fit sees it: vertices with their chord-length parameters, the
+// segments' midpoints (checked, not fitted), and the segments for the distance bound.
+struct FitData {
+  const std::vector<Eigen::Vector3d>& pts;
+  int np;
+  std::vector<double> t, tm;
+  std::vector<Eigen::Vector3d> mids;
+  std::vector<Seg> segs;
+};
+
+// False where two consecutive points coincide.
+bool make_fit_data(FitData& d) {
+  const auto& pts = d.pts;
+  const int np = d.np;
+  d.t.assign(static_cast<size_t>(np), 0.0);
+  for (int i = 1; i < np; ++i) {
+    const double l = (pts[static_cast<size_t>(i)] - pts[static_cast<size_t>(i - 1)]).norm();
+    if (!(l > 0)) return false;
+    d.t[static_cast<size_t>(i)] = d.t[static_cast<size_t>(i - 1)] + l;
+  }
+  d.mids.resize(static_cast<size_t>(np - 1));
+  d.tm.resize(static_cast<size_t>(np - 1));
+  for (int i = 0; i + 1 < np; ++i) {
+    d.mids[static_cast<size_t>(i)] = 0.5 * (pts[static_cast<size_t>(i)] + pts[static_cast<size_t>(i + 1)]);
+    d.tm[static_cast<size_t>(i)] = 0.5 * (d.t[static_cast<size_t>(i)] + d.t[static_cast<size_t>(i + 1)]);
+  }
+  d.segs.resize(static_cast<size_t>(np - 1));
+  for (size_t i = 0; i + 1 < pts.size(); ++i)
+    d.segs[i] = {pts[i], pts[i + 1] - pts[i], (pts[i + 1] - pts[i]).squaredNorm()};
+  return true;
+}
+
+// Evenly spread over the vertices, kPointsPerSpan a span; a fixed end takes a span of its own.
+std::vector<double> first_breaks(const FitData& d, int fixed0, int fixed1) {
+  const int np = d.np;
+  std::vector<double> breaks;
+  const int spans0 = std::max({1, (np - 1) / kPointsPerSpan, fixed0 + fixed1 - 3});
+  for (int j = 0; j <= spans0; ++j) {
+    const int i = static_cast<int>(std::lround(static_cast<double>(j) * (np - 1) / spans0));
+    breaks.push_back(j == spans0 ? d.t.back() : d.t[static_cast<size_t>(i)]);
+  }
+  breaks.erase(std::unique(breaks.begin(), breaks.end()), breaks.end());
+  return breaks;
+}
+
+// The control points on knots U: the ends (and the given tangents' points) fixed, the
+// rest by least squares on the data with a smoothing term. False where it cannot solve.
+bool solve_ctrl(const FitData& d, const std::vector<double>& U, const FitEnds& ends, int fixed0, int fixed1,
+                std::vector<Eigen::Vector3d>& P) {
+  const auto& pts = d.pts;
+  const auto& t = d.t;
+  const int np = d.np;
+  const int nc = static_cast<int>(U.size()) - kDegree - 1;  // control points
+  const int nu = nc - fixed0 - fixed1;                       // unknowns: all but the fixed ends
+  P.assign(static_cast<size_t>(nc), Eigen::Vector3d::Zero());
+  P.front() = pts.front();
+  P.back() = pts.back();
+  // Unit speed along the given tangent and no second derivative at the end: the
+  // control points of the line u·t there (Greville abscissae), as C'(0) = 3(P1-P0)/u4
+  // and C''(0) = 0 ask.
+  if (ends.start) {
+    P[1] = P[0] + (U[4] - U[3]) / 3.0 * *ends.start;
+    P[2] = P[1] + (U[5] - U[3]) / 3.0 * *ends.start;
+  }
+  if (ends.end) {
+    const size_t m = static_cast<size_t>(nc - 1);
+    P[m - 1] = P[m] - (U[m + 1] - U[m]) / 3.0 * *ends.end;
+    P[m - 2] = P[m - 1] - (U[m + 1] - U[m - 1]) / 3.0 * *ends.end;
+  }
+  if (nu <= 0) return true;
+  std::vector<Eigen::Triplet<double>> trip;
+  trip.reserve(static_cast<size_t>(np) * 64 + static_cast<size_t>(nc) * 9);
+  Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(nu, 3);
+  auto add_row = [&](const int* idx, const double* w, int cnt, const Eigen::Vector3d& target, double weight) {
+    // One squared residual weight·|Σ w_j P_idx_j - target|²: known ends move to the right-hand side.
+    Eigen::Vector3d known = target;
+    for (int a = 0; a < cnt; ++a)
+      if (idx[a] < fixed0 || idx[a] >= nc - fixed1) known -= w[a] * P[static_cast<size_t>(idx[a])];
+    for (int a = 0; a < cnt; ++a) {
+      const int ia = idx[a] - fixed0;
+      if (ia < 0 || ia >= nu) continue;
+      rhs.row(ia) += weight * w[a] * known.transpose();
+      for (int b = 0; b < cnt; ++b) {
+        const int ib = idx[b] - fixed0;
+        if (ib < 0 || ib >= nu) continue;
+        trip.emplace_back(ia, ib, weight * w[a] * w[b]);
+      }
+    }
+  };
+  // The vertices, and the segments' midpoints with a lower weight: the run is a
+  // polyline, and the curve must not swing away from it between its vertices.
+  auto add_data = [&](double u, const Eigen::Vector3d& q, double weight) {
+    const int k = span_of(U, nc, u);
+    double N[4];
+    basis(U, k, u, N);
+    int idx[4];
+    for (int j = 0; j < 4; ++j) idx[j] = k - kDegree + j;
+    add_row(idx, N, 4, q, weight);
+  };
+  for (int i = 0; i < np; ++i) add_data(t[static_cast<size_t>(i)], pts[static_cast<size_t>(i)], 1.0);
+  for (int i = 0; i + 1 < np; ++i) add_data(d.tm[static_cast<size_t>(i)], d.mids[static_cast<size_t>(i)], kMidWeight);
+  // Quarter points too: between its data the curve must stay on the polyline.
+  for (int i = 0; i + 1 < np; ++i)
+    for (double f : {0.25, 0.75}) {
+      const size_t k = static_cast<size_t>(i);
+      add_data((1 - f) * t[k] + f * t[k + 1], (1 - f) * pts[k] + f * pts[k + 1], kMidWeight);
+    }
+  const double lambda = kSmoothing * static_cast<double>(np) / static_cast<double>(nc);
+  for (int j = 1; j + 1 < nc; ++j) {
+    const int idx[3] = {j - 1, j, j + 1};
+    const double w[3] = {1.0, -2.0, 1.0};
+    add_row(idx, w, 3, Eigen::Vector3d::Zero(), lambda);
+  }
+  Eigen::SparseMatrix<double> A(nu, nu);
+  A.setFromTriplets(trip.begin(), trip.end());
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(A);
+  if (solver.info() != Eigen::Success) return false;
+  const Eigen::MatrixXd X = solver.solve(rhs);
+  if (solver.info() != Eigen::Success) return false;
+  for (int j = 0; j < nu; ++j) P[static_cast<size_t>(j + fixed0)] = X.row(j).transpose();
+  return true;
+}
+
+// The span of breaks holding u (the last span for u at the end).
+size_t break_span(const std::vector<double>& breaks, double u) {
+  const auto it = std::upper_bound(breaks.begin(), breaks.end(), u);
+  return std::min(static_cast<size_t>(std::max<std::ptrdiff_t>(0, (it - breaks.begin()) - 1)), breaks.size() - 2);
+}
+
+// The fit's largest distance from the polyline: projections of the vertices and
+// midpoints, then every point of every span by the spans' bound. Spans out of
+// tolerance are marked in bad.
+double fit_error(const NurbsCurve& curve, const FitData& d, const std::vector<double>& breaks, double tol,
+                 std::vector<char>& bad) {
+  const auto& t = d.t;
+  const int np = d.np;
+  double worst = 0;
+  bad.assign(breaks.size(), 0);
+  for (int i = 1; i + 1 < np; ++i) {
+    double dist = 0;
+    const double lo = t[static_cast<size_t>(i - 1)], hi = t[static_cast<size_t>(i + 1)];
+    const double u = project(curve, d.pts[static_cast<size_t>(i)], t[static_cast<size_t>(i)], lo, hi, &dist);
+    worst = std::max(worst, dist);
+    if (dist > tol) bad[break_span(breaks, u)] = 1;
+  }
+  for (int i = 0; i + 1 < np; ++i) {
+    double dist = 0;
+    const double u = project(curve, d.mids[static_cast<size_t>(i)], d.tm[static_cast<size_t>(i)],
+                             t[static_cast<size_t>(i)], t[static_cast<size_t>(i + 1)], &dist);
+    worst = std::max(worst, dist);
+    if (dist > tol) bad[break_span(breaks, u)] = 1;
+  }
+  for (size_t sp = 0; sp + 1 < breaks.size(); ++sp) {
+    const double u0 = breaks[sp], u1 = breaks[sp + 1], reach = u1 - u0;
+    const size_t lo = static_cast<size_t>(
+        std::max<std::ptrdiff_t>(0, (std::lower_bound(t.begin(), t.end(), u0 - reach) - t.begin()) - 1));
+    const size_t hi = std::min(d.segs.size(), static_cast<size_t>(std::upper_bound(t.begin(), t.end(), u1 + reach) -
+                                                                    t.begin()));
+    Eigen::Vector3d b[4];
+    span_bezier(curve, u0, u1, b);
+    const double bound = piece_bound(b, d.segs, lo, hi, tol, kMaxBezierDepth);
+    worst = std::max(worst, bound);
+    if (bound > tol) bad[sp] = 1;
+  }
+  return worst;
+}
+
+// Halves the bad spans. A span is halved while it holds a fitted point (a vertex or a
+// midpoint), or while it is long against the tolerance: rounding a vertex within tol
+// takes spans shorter than the moves (the smoothing term keeps an empty span tame, and
+// the bound above catches it if not). False where nothing can be halved, or where the
+// spans would far outnumber the moves: the run is no smooth curve at this tolerance.
+bool refine_breaks(const FitData& d, const std::vector<char>& bad, double tol, std::vector<double>& breaks) {
+  const auto& t = d.t;
+  const int np = d.np;
+  std::vector<int> inside(breaks.size(), 0);
+  auto count = [&](double u) {
+    const size_t sp = break_span(breaks, u);
+    if (u > breaks[sp] && u < breaks[sp + 1]) ++inside[sp];
+  };
+  for (int i = 1; i + 1 < np; ++i) count(t[static_cast<size_t>(i)]);
+  for (int i = 0; i + 1 < np; ++i) count(d.tm[static_cast<size_t>(i)]);
+  std::vector<double> next;
+  next.reserve(breaks.size() * 2);
+  bool added = false;
+  for (size_t s = 0; s + 1 < breaks.size(); ++s) {
+    next.push_back(breaks[s]);
+    if (bad[s] && (inside[s] >= kMinInSpan || breaks[s + 1] - breaks[s] > kMinSpanPerTol * tol)) {
+      next.push_back(0.5 * (breaks[s] + breaks[s + 1]));
+      added = true;
+    }
+  }
+  next.push_back(breaks.back());
+  if (!added || next.size() > static_cast<size_t>(kMaxSpansPerMove * np)) return false;
+  breaks = std::move(next);
+  return true;
+}
+
 }  // namespace
 
 Eigen::Vector3d cubic_point(const std::vector<double>& knots, const std::vector<Eigen::Vector3d>& ctrl, double u) {
@@ -150,183 +348,30 @@ CubicFit fit_cubic(const std::vector<Eigen::Vector3d>& pts, double tol, const Fi
   CubicFit out;
   const int np = static_cast<int>(pts.size());
   if (np < 2 || !(tol > 0)) return out;
-  std::vector<double> t(static_cast<size_t>(np), 0.0);
-  for (int i = 1; i < np; ++i) {
-    const double l = (pts[static_cast<size_t>(i)] - pts[static_cast<size_t>(i - 1)]).norm();
-    if (!(l > 0)) return out;
-    t[static_cast<size_t>(i)] = t[static_cast<size_t>(i - 1)] + l;
-  }
-  const double L = t.back();
-  // Segment midpoints and their parameters (checked, not fitted).
-  std::vector<Eigen::Vector3d> mids(static_cast<size_t>(np - 1));
-  std::vector<double> tm(static_cast<size_t>(np - 1));
-  for (int i = 0; i + 1 < np; ++i) {
-    mids[static_cast<size_t>(i)] = 0.5 * (pts[static_cast<size_t>(i)] + pts[static_cast<size_t>(i + 1)]);
-    tm[static_cast<size_t>(i)] = 0.5 * (t[static_cast<size_t>(i)] + t[static_cast<size_t>(i + 1)]);
-  }
-
-  std::vector<Seg> segs(static_cast<size_t>(np - 1));
-  for (size_t i = 0; i + 1 < pts.size(); ++i) segs[i] = {pts[i], pts[i + 1] - pts[i], (pts[i + 1] - pts[i]).squaredNorm()};
-
+  FitData d{pts, np, {}, {}, {}, {}};
+  if (!make_fit_data(d)) return out;
   // An end whose tangent is given leaves the curve along it with zero curvature: its
   // next two control points are fixed, so a straight end needs a span of its own.
-  const bool t0 = ends.start.has_value(), t1 = ends.end.has_value();
-  const int fixed0 = t0 ? 3 : 1, fixed1 = t1 ? 3 : 1;
-  std::vector<double> breaks;
-  const int spans0 = std::max({1, (np - 1) / kPointsPerSpan, fixed0 + fixed1 - 3});
-  for (int j = 0; j <= spans0; ++j) {
-    const int i = static_cast<int>(std::lround(static_cast<double>(j) * (np - 1) / spans0));
-    breaks.push_back(j == spans0 ? L : t[static_cast<size_t>(i)]);
-  }
-  breaks.erase(std::unique(breaks.begin(), breaks.end()), breaks.end());
-
+  const int fixed0 = ends.start ? 3 : 1, fixed1 = ends.end ? 3 : 1;
+  std::vector<double> breaks = first_breaks(d, fixed0, fixed1);
+  std::vector<Eigen::Vector3d> P;
+  std::vector<char> bad;
   for (int round = 1; round <= kMaxRounds; ++round) {
     out.rounds = round;
     const std::vector<double> U = clamped_knots(breaks);
-    const int nc = static_cast<int>(U.size()) - kDegree - 1;  // control points
-    const int nu = nc - fixed0 - fixed1;                       // unknowns: all but the fixed ends
-    std::vector<Eigen::Vector3d> P(static_cast<size_t>(nc), Eigen::Vector3d::Zero());
-    P.front() = pts.front();
-    P.back() = pts.back();
-    // Unit speed along the given tangent and no second derivative at the end: the
-    // control points of the line u·t there (Greville abscissae), as C'(0) = 3(P1-P0)/u4
-    // and C''(0) = 0 ask.
-    if (t0) {
-      P[1] = P[0] + (U[4] - U[3]) / 3.0 * *ends.start;
-      P[2] = P[1] + (U[5] - U[3]) / 3.0 * *ends.start;
-    }
-    if (t1) {
-      const size_t m = static_cast<size_t>(nc - 1);
-      P[m - 1] = P[m] - (U[m + 1] - U[m]) / 3.0 * *ends.end;
-      P[m - 2] = P[m - 1] - (U[m + 1] - U[m - 1]) / 3.0 * *ends.end;
-    }
-    if (nu > 0) {
-      std::vector<Eigen::Triplet<double>> trip;
-      trip.reserve(static_cast<size_t>(np) * 64 + static_cast<size_t>(nc) * 9);
-      Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(nu, 3);
-      auto add_row = [&](const int* idx, const double* w, int cnt, const Eigen::Vector3d& target, double weight) {
-        // One squared residual weight·|Σ w_j P_idx_j - target|²: known ends move to the right-hand side.
-        Eigen::Vector3d known = target;
-        for (int a = 0; a < cnt; ++a)
-          if (idx[a] < fixed0 || idx[a] >= nc - fixed1) known -= w[a] * P[static_cast<size_t>(idx[a])];
-        for (int a = 0; a < cnt; ++a) {
-          const int ia = idx[a] - fixed0;
-          if (ia < 0 || ia >= nu) continue;
-          rhs.row(ia) += weight * w[a] * known.transpose();
-          for (int b = 0; b < cnt; ++b) {
-            const int ib = idx[b] - fixed0;
-            if (ib < 0 || ib >= nu) continue;
-            trip.emplace_back(ia, ib, weight * w[a] * w[b]);
-          }
-        }
-      };
-      // The vertices, and the segments' midpoints with a lower weight: the run is a
-      // polyline, and the curve must not swing away from it between its vertices.
-      auto add_data = [&](double u, const Eigen::Vector3d& q, double weight) {
-        const int k = span_of(U, nc, u);
-        double N[4];
-        basis(U, k, u, N);
-        int idx[4];
-        for (int j = 0; j < 4; ++j) idx[j] = k - kDegree + j;
-        add_row(idx, N, 4, q, weight);
-      };
-      for (int i = 0; i < np; ++i) add_data(t[static_cast<size_t>(i)], pts[static_cast<size_t>(i)], 1.0);
-      for (int i = 0; i + 1 < np; ++i) add_data(tm[static_cast<size_t>(i)], mids[static_cast<size_t>(i)], kMidWeight);
-      // Quarter points too: between its data the curve must stay on the polyline.
-      for (int i = 0; i + 1 < np; ++i)
-        for (double f : {0.25, 0.75}) {
-          const size_t k = static_cast<size_t>(i);
-          add_data((1 - f) * t[k] + f * t[k + 1], (1 - f) * pts[k] + f * pts[k + 1], kMidWeight);
-        }
-      const double lambda = kSmoothing * static_cast<double>(np) / static_cast<double>(nc);
-      for (int j = 1; j + 1 < nc; ++j) {
-        const int idx[3] = {j - 1, j, j + 1};
-        const double w[3] = {1.0, -2.0, 1.0};
-        add_row(idx, w, 3, Eigen::Vector3d::Zero(), lambda);
-      }
-      Eigen::SparseMatrix<double> A(nu, nu);
-      A.setFromTriplets(trip.begin(), trip.end());
-      Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(A);
-      if (solver.info() != Eigen::Success) return out;
-      const Eigen::MatrixXd X = solver.solve(rhs);
-      if (solver.info() != Eigen::Success) return out;
-      for (int j = 0; j < nu; ++j) P[static_cast<size_t>(j + fixed0)] = X.row(j).transpose();
-    }
+    if (!solve_ctrl(d, U, ends, fixed0, fixed1, P)) return out;
     for (const auto& p : P)
       if (!p.allFinite()) return out;
-
     const NurbsCurve curve(kDegree + 1, U, P, std::vector<double>(P.size(), 1.0));
-    // Projections: vertices (their parameters are corrected for the next round) and midpoints.
-    double worst = 0;
-    std::vector<char> bad(breaks.size(), 0);
-    auto mark = [&](double u) {
-      const auto it = std::upper_bound(breaks.begin(), breaks.end(), u);
-      size_t s = static_cast<size_t>(std::max<std::ptrdiff_t>(0, (it - breaks.begin()) - 1));
-      s = std::min(s, breaks.size() - 2);
-      bad[s] = 1;
-    };
-    for (int i = 1; i + 1 < np; ++i) {
-      double dist = 0;
-      const double lo = t[static_cast<size_t>(i - 1)], hi = t[static_cast<size_t>(i + 1)];
-      const double u = project(curve, pts[static_cast<size_t>(i)], t[static_cast<size_t>(i)], lo, hi, &dist);
-      worst = std::max(worst, dist);
-      if (dist > tol) mark(u);
-    }
-    for (int i = 0; i + 1 < np; ++i) {
-      double dist = 0;
-      const double u = project(curve, mids[static_cast<size_t>(i)], tm[static_cast<size_t>(i)],
-                               t[static_cast<size_t>(i)], t[static_cast<size_t>(i + 1)], &dist);
-      worst = std::max(worst, dist);
-      if (dist > tol) mark(u);
-    }
-    // Every point of every span, not only the points above: the span's bound.
-    for (size_t sp = 0; sp + 1 < breaks.size(); ++sp) {
-      const double u0 = breaks[sp], u1 = breaks[sp + 1], reach = u1 - u0;
-      const size_t lo = static_cast<size_t>(
-          std::max<std::ptrdiff_t>(0, (std::lower_bound(t.begin(), t.end(), u0 - reach) - t.begin()) - 1));
-      const size_t hi = std::min(segs.size(), static_cast<size_t>(std::upper_bound(t.begin(), t.end(), u1 + reach) -
-                                                                  t.begin()));
-      Eigen::Vector3d b[4];
-      span_bezier(curve, u0, u1, b);
-      const double bound = piece_bound(b, segs, lo, hi, tol, kMaxBezierDepth);
-      worst = std::max(worst, bound);
-      if (bound > tol) bad[sp] = 1;
-    }
-    out.max_error = worst;
-    if (worst <= tol) {
+    out.max_error = fit_error(curve, d, breaks, tol, bad);
+    if (out.max_error <= tol) {
       out.ok = true;
       out.knots = U;
       out.ctrl = std::move(P);
-      out.params = std::move(t);
+      out.params = std::move(d.t);
       return out;
     }
-    // A span is halved while it holds a fitted point (a vertex or a midpoint), or
-    // while it is long against the tolerance: rounding a vertex within tol takes
-    // spans shorter than the moves (the smoothing term keeps an empty span tame, and
-    // the bound above catches it if not).
-    std::vector<int> inside(breaks.size(), 0);
-    auto count = [&](double u) {
-      const auto it = std::upper_bound(breaks.begin(), breaks.end(), u);
-      const size_t sp = std::min(static_cast<size_t>(std::max<std::ptrdiff_t>(0, (it - breaks.begin()) - 1)),
-                                 breaks.size() - 2);
-      if (u > breaks[sp] && u < breaks[sp + 1]) ++inside[sp];
-    };
-    for (int i = 1; i + 1 < np; ++i) count(t[static_cast<size_t>(i)]);
-    for (int i = 0; i + 1 < np; ++i) count(tm[static_cast<size_t>(i)]);
-    std::vector<double> next;
-    next.reserve(breaks.size() * 2);
-    bool added = false;
-    for (size_t s = 0; s + 1 < breaks.size(); ++s) {
-      next.push_back(breaks[s]);
-      if (bad[s] && (inside[s] >= kMinInSpan || breaks[s + 1] - breaks[s] > kMinSpanPerTol * tol)) {
-        next.push_back(0.5 * (breaks[s] + breaks[s + 1]));
-        added = true;
-      }
-    }
-    next.push_back(breaks.back());
-    // Far more spans than moves: the run is no smooth curve at this tolerance.
-    if (!added || next.size() > static_cast<size_t>(kMaxSpansPerMove * np)) return out;
-    breaks = std::move(next);
+    if (!refine_breaks(d, bad, tol, breaks)) return out;
   }
   return out;
 }
