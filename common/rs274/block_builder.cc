@@ -255,99 +255,117 @@ bool BlockBuilder::resolvable_blend(double d, const Eigen::Vector3d& u_in, const
   return 4.0 * d >= 1.5 * step;
 }
 
-// A run of G1 moves under G64 P, as blocks: stretches of short, gently turning
-// moves fitted to cubic splines (cut into NURBS blocks), the remaining lines with
-// each corner between two of them rounded by a quartic blend, both within P less
-// the interpolation's chord share (program::shape_tolerance_mm) at every point.
-// The run's end is where the last move ends, exactly.
-void BlockBuilder::flush_run() {
-  if (run_.size() < 2) {
-    run_.clear();
-    return;
-  }
-  flushing_ = true;
-  // Less the chords' sagitta where the run holds arcs.
-  const double tol = program::shape_tolerance_mm(path_tol_mm_, setup_.chord_tolerance_mm) - run_sagitta_mm_;
-  const size_t n = run_.size() - 1;  // moves
-  std::vector<Eigen::Vector3d> pts(run_.size());
-  for (size_t i = 0; i < run_.size(); ++i) pts[i] = Eigen::Vector3d(run_[i].pos[0], run_[i].pos[1], run_[i].pos[2]);
-  std::vector<double> len(n);
-  std::vector<Eigen::Vector3d> dir(n);
+// The run's moves as the flush sees them: vertices, each move's length, direction and
+// end tangents, and the blend leg at each vertex (vertex j joins move j-1 and move j;
+// 0: no blend there).
+struct BlockBuilder::RunShape {
+  double tol = 0;
+  size_t n = 0;  // moves
+  std::vector<Eigen::Vector3d> pts, dir, t_leave, t_arrive;
+  std::vector<double> len, leg;
+  // A stretch's ends: where it begins and ends, moved back along its end moves by the
+  // blends there.
+  Eigen::Vector3d stretch_start(size_t a) const { return pts[a] + 2.0 * leg[a] * dir[a]; }
+  Eigen::Vector3d stretch_end(size_t b) const { return pts[b] - 2.0 * leg[b] * dir[b - 1]; }
+};
+
+// Moves [a, b) of the run fitted as one cubic spline.
+struct BlockBuilder::Stretch {
+  size_t a, b;
+  geometry::CubicFit fit;
+};
+
+BlockBuilder::RunShape BlockBuilder::run_shape(double tol) const {
+  RunShape r;
+  r.tol = tol;
+  r.n = run_.size() - 1;
+  const size_t n = r.n;
+  r.pts.resize(run_.size());
+  for (size_t i = 0; i < run_.size(); ++i) r.pts[i] = Eigen::Vector3d(run_[i].pos[0], run_[i].pos[1], run_[i].pos[2]);
+  r.len.resize(n);
+  r.dir.resize(n);
   for (size_t i = 0; i < n; ++i) {
-    const Eigen::Vector3d d = pts[i + 1] - pts[i];
-    len[i] = d.norm();
-    dir[i] = d / len[i];
+    const Eigen::Vector3d d = r.pts[i + 1] - r.pts[i];
+    r.len[i] = d.norm();
+    r.dir[i] = d / r.len[i];
   }
-  const double cos_turn = std::cos(setup_.fit_max_turn_deg * M_PI / 180.0);
   // Each move's tangent where it leaves and arrives: its direction, or an arc's own
   // tangent at the arc's first and last chord (a stretch then leaves and ends along the
   // arc, not its chord).
-  std::vector<Eigen::Vector3d> t_leave(dir), t_arrive(dir);
+  r.t_leave = r.dir;
+  r.t_arrive = r.dir;
   for (size_t i = 0; i < n; ++i) {
-    if (run_[i].leave) t_leave[i] = *run_[i].leave;
-    if (run_[i + 1].arrive) t_arrive[i] = *run_[i + 1].arrive;
+    if (run_[i].leave) r.t_leave[i] = *run_[i].leave;
+    if (run_[i + 1].arrive) r.t_arrive[i] = *run_[i + 1].arrive;
   }
-  // Blend legs at the vertices (vertex j joins move j-1 and move j), used where the
-  // vertex is not inside a fitted stretch: between two lines, or where a stretch ends.
-  std::vector<double> leg(n + 1, 0.0);
+  // Blend legs, used where the vertex is not inside a fitted stretch: between two
+  // lines, or where a stretch ends.
+  r.leg.assign(n + 1, 0.0);
   for (size_t j = 1; j < n; ++j) {
-    leg[j] = geometry::corner_blend_leg(dir[j - 1], dir[j], tol, 0.5 * std::min(len[j - 1], len[j]));
+    r.leg[j] = geometry::corner_blend_leg(r.dir[j - 1], r.dir[j], tol, 0.5 * std::min(r.len[j - 1], r.len[j]));
     const double v = run_feed_ / 60.0;
     // (At an arc's end the kink is the one between the arc's tangent and the move's.)
-    if (setup_.corner_dv_mm_s >= v * (t_leave[j] - t_arrive[j - 1]).norm() ||
-        !resolvable_blend(leg[j], dir[j - 1], dir[j], v))
-      leg[j] = 0;
+    if (setup_.corner_dv_mm_s >= v * (r.t_leave[j] - r.t_arrive[j - 1]).norm() ||
+        !resolvable_blend(r.leg[j], r.dir[j - 1], r.dir[j], v))
+      r.leg[j] = 0;
   }
-  // A stretch's ends: where it begins and ends, moved back along its end moves by the
-  // blends there.
-  auto stretch_start = [&](size_t a) { return Eigen::Vector3d(pts[a] + 2.0 * leg[a] * dir[a]); };
-  auto stretch_end = [&](size_t b) { return Eigen::Vector3d(pts[b] - 2.0 * leg[b] * dir[b - 1]); };
-  // fitted[i]: the stretch (from 1) move i belongs to; 0: a line. Stretches as [first, last) moves.
-  std::vector<size_t> fitted(n, 0);
-  struct Stretch {
-    size_t a, b;
-    geometry::CubicFit fit;
-  };
+  return r;
+}
+
+// Stretches of short, gently turning moves that the fit holds within tol, in order;
+// the legs inside a stretch become 0 (no blend there).
+std::vector<BlockBuilder::Stretch> BlockBuilder::fit_stretches(RunShape& r) const {
   std::vector<Stretch> stretches;
+  const size_t n = r.n;
   constexpr size_t kMinMoves = 4;
   // A stretch the fit cannot hold within P (a sharp turn that is no corner by the
   // run's rule) is cut at its sharpest turn and each part tried again. It leaves and
   // ends along its end moves, so the blends or lines there join it smoothly.
   std::function<void(size_t, size_t)> fit_range = [&](size_t a, size_t b) {
     if (b - a < kMinMoves) return;
-    std::vector<Eigen::Vector3d> sub(pts.begin() + static_cast<std::ptrdiff_t>(a),
-                                     pts.begin() + static_cast<std::ptrdiff_t>(b + 1));
-    sub.front() = stretch_start(a);
-    sub.back() = stretch_end(b);
-    geometry::CubicFit fit = geometry::fit_cubic(sub, tol, {leg[a] > 0 ? dir[a] : t_leave[a],
-                                                             leg[b] > 0 ? dir[b - 1] : t_arrive[b - 1]});
+    std::vector<Eigen::Vector3d> sub(r.pts.begin() + static_cast<std::ptrdiff_t>(a),
+                                     r.pts.begin() + static_cast<std::ptrdiff_t>(b + 1));
+    sub.front() = r.stretch_start(a);
+    sub.back() = r.stretch_end(b);
+    geometry::CubicFit fit = geometry::fit_cubic(
+        sub, r.tol, {r.leg[a] > 0 ? r.dir[a] : r.t_leave[a], r.leg[b] > 0 ? r.dir[b - 1] : r.t_arrive[b - 1]});
     if (fit.ok) {
       stretches.push_back({a, b, std::move(fit)});
       return;
     }
     size_t cut = a + 1;
     for (size_t j = a + 1; j < b; ++j)
-      if (dir[j - 1].dot(dir[j]) < dir[cut - 1].dot(dir[cut])) cut = j;
+      if (r.dir[j - 1].dot(r.dir[j]) < r.dir[cut - 1].dot(r.dir[cut])) cut = j;
     fit_range(a, cut);
     fit_range(cut, b);
   };
   if (setup_.fit_runs) {
+    const double cos_turn = std::cos(setup_.fit_max_turn_deg * M_PI / 180.0);
     for (size_t a = 0; a < n;) {
-      if (len[a] > setup_.fit_max_segment_mm) {
+      if (r.len[a] > setup_.fit_max_segment_mm) {
         ++a;
         continue;
       }
       size_t b = a + 1;
-      while (b < n && len[b] <= setup_.fit_max_segment_mm && dir[b - 1].dot(dir[b]) >= cos_turn) ++b;
+      while (b < n && r.len[b] <= setup_.fit_max_segment_mm && r.dir[b - 1].dot(r.dir[b]) >= cos_turn) ++b;
       fit_range(a, b);
       a = b;
     }
   }
   std::sort(stretches.begin(), stretches.end(), [](const Stretch& x, const Stretch& y) { return x.a < y.a; });
+  // fitted[i]: the stretch (from 1) move i belongs to; 0: a line.
+  std::vector<size_t> fitted(n, 0);
   for (size_t k = 0; k < stretches.size(); ++k)
     for (size_t i = stretches[k].a; i < stretches[k].b; ++i) fitted[i] = k + 1;
   for (size_t j = 1; j < n; ++j)
-    if (fitted[j - 1] != 0 && fitted[j - 1] == fitted[j]) leg[j] = 0;  // inside a stretch
+    if (fitted[j - 1] != 0 && fitted[j - 1] == fitted[j]) r.leg[j] = 0;  // inside a stretch
+  return stretches;
+}
+
+// The run's blocks: each stretch as NURBS pieces, each remaining move as a line cut
+// short by the blends at its ends, each blend as a quartic NURBS.
+void BlockBuilder::emit_run(const RunShape& r, const std::vector<Stretch>& stretches) {
+  const size_t n = r.n;
   std::vector<double> cursor = run_[0].pos;
   auto at = [&](const Eigen::Vector3d& p) {
     std::vector<double> v = run_[0].pos;
@@ -369,10 +387,10 @@ void BlockBuilder::flush_run() {
   };
   // The blend at vertex j, from the cursor (where the move before it was cut short).
   auto blend = [&](size_t j) {
-    const double d = leg[j];
-    const Eigen::Vector3d v = pts[j];
-    const std::vector<Eigen::Vector3d> q = {v - 2 * d * dir[j - 1], v - d * dir[j - 1], v, v + d * dir[j],
-                                            v + 2 * d * dir[j]};
+    const double d = r.leg[j];
+    const Eigen::Vector3d v = r.pts[j];
+    const std::vector<Eigen::Vector3d> q = {v - 2 * d * r.dir[j - 1], v - d * r.dir[j - 1], v, v + d * r.dir[j],
+                                            v + 2 * d * r.dir[j]};
     // Knots spanning the blend's approximate length, as the parameter of a G5.2 curve would.
     const double s = 4.0 * d;
     nurbs_block(run_[j].ref, 5, {0, 0, 0, 0, 0, s, s, s, s, s}, q, at(q.back()));
@@ -391,26 +409,44 @@ void BlockBuilder::flush_run() {
         size_t move = st.a + static_cast<size_t>(std::max<std::ptrdiff_t>(1, it - st.fit.params.begin()));
         move = std::min(move, st.b);
         // The last piece ends exactly where the stretch's last move ends, or its blend begins.
-        const std::vector<double> end =
-            k + 1 < pieces.size() ? at(pc.ctrl.back()) : leg[st.b] > 0 ? at(stretch_end(st.b)) : run_[st.b].pos;
+        const std::vector<double> end = k + 1 < pieces.size() ? at(pc.ctrl.back())
+                                        : r.leg[st.b] > 0     ? at(r.stretch_end(st.b))
+                                                              : run_[st.b].pos;
         nurbs_block(run_[move].ref, 4, pc.knots, pc.ctrl, end);
       }
       i = st.b;
-      if (leg[i] > 0) blend(i);
+      if (r.leg[i] > 0) blend(i);
       continue;
     }
     // A line, shortened by the blends at its ends, and the blend at its end.
-    const Eigen::Vector3d to = pts[i + 1] - 2.0 * leg[i + 1] * dir[i];
-    const std::vector<double> line_end = leg[i + 1] > 0 ? at(to) : run_[i + 1].pos;
+    const Eigen::Vector3d to = r.pts[i + 1] - 2.0 * r.leg[i + 1] * r.dir[i];
+    const std::vector<double> line_end = r.leg[i + 1] > 0 ? at(to) : run_[i + 1].pos;
     double d2 = 0;
     for (size_t k = 0; k < 3; ++k) d2 += (line_end[k] - cursor[k]) * (line_end[k] - cursor[k]);
     if (d2 > 0) {
       run_block(run_[i + 1].ref, program::BlockKind::kLine, cursor, line_end);
       cursor = line_end;
     }
-    if (leg[i + 1] > 0) blend(i + 1);
+    if (r.leg[i + 1] > 0) blend(i + 1);
     ++i;
   }
+}
+
+// A run of G1 moves under G64 P, as blocks: stretches of short, gently turning
+// moves fitted to cubic splines (cut into NURBS blocks), the remaining lines with
+// each corner between two of them rounded by a quartic blend, both within P less
+// the interpolation's chord share (program::shape_tolerance_mm) at every point.
+// The run's end is where the last move ends, exactly.
+void BlockBuilder::flush_run() {
+  if (run_.size() < 2) {
+    run_.clear();
+    return;
+  }
+  flushing_ = true;
+  // Less the chords' sagitta where the run holds arcs.
+  RunShape shape = run_shape(program::shape_tolerance_mm(path_tol_mm_, setup_.chord_tolerance_mm) - run_sagitta_mm_);
+  const std::vector<Stretch> stretches = fit_stretches(shape);
+  emit_run(shape, stretches);
   run_.clear();
   flushing_ = false;
 }

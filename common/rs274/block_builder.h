@@ -112,6 +112,11 @@ class BlockBuilder : public Canon {
   // a1, a2: its plane's two axes, as arc_feed found them.
   bool hold_arc(const SourceRef& ref, const program::Block& arc, int a1, int a2);
   void flush_run();
+  struct RunShape;
+  struct Stretch;
+  RunShape run_shape(double tol) const;
+  std::vector<Stretch> fit_stretches(RunShape& r) const;
+  void emit_run(const RunShape& r, const std::vector<Stretch>& stretches);
   // Whether a corner blend of leg d between the unit directions u_in and u_out is long
   // enough for the interpolation to resolve it (BuilderSetup: accel_mm_s2).
   bool resolvable_blend(double d, const Eigen::Vector3d& u_in, const Eigen::Vector3d& u_out, double feed_mm_s) const;
