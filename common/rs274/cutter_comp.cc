@@ -119,6 +119,11 @@ struct CutterComp::Impl {
     h.call = std::move(call);
     held.push_back(std::move(h));
   }
+  // The canonical call Call with these arguments, queued as above.
+  template <auto Call, class... Args>
+  void queue(const SourceRef& r, const Args&... args) {
+    queueable([r, args...](Canon& c) { (c.*Call)(r, args...); });
+  }
 
   void set_start(double u, double v) {
     start_u = u;
@@ -521,50 +526,50 @@ void CutterComp::flush() {
 // ---- calls LinuxCNC queues behind a waiting move ------------------------------------
 
 void CutterComp::set_feed_rate(const SourceRef& r, double f) {
-  impl_->queueable([r, f](Canon& c) { c.set_feed_rate(r, f); });
+  impl_->queue<&Canon::set_feed_rate>(r, f);
 }
 void CutterComp::set_feed_mode(const SourceRef& r, FeedMode m) {
-  impl_->queueable([r, m](Canon& c) { c.set_feed_mode(r, m); });
+  impl_->queue<&Canon::set_feed_mode>(r, m);
 }
 void CutterComp::dwell(const SourceRef& r, double s) {
-  impl_->queueable([r, s](Canon& c) { c.dwell(r, s); });
+  impl_->queue<&Canon::dwell>(r, s);
 }
 void CutterComp::set_spindle_speed(const SourceRef& r, double s) {
-  impl_->queueable([r, s](Canon& c) { c.set_spindle_speed(r, s); });
+  impl_->queue<&Canon::set_spindle_speed>(r, s);
 }
 void CutterComp::set_spindle_mode(const SourceRef& r, double max_rpm) {
-  impl_->queueable([r, max_rpm](Canon& c) { c.set_spindle_mode(r, max_rpm); });
+  impl_->queue<&Canon::set_spindle_mode>(r, max_rpm);
 }
 void CutterComp::orient_spindle(const SourceRef& r, double deg, int mode) {
-  impl_->queueable([r, deg, mode](Canon& c) { c.orient_spindle(r, deg, mode); });
+  impl_->queue<&Canon::orient_spindle>(r, deg, mode);
 }
 void CutterComp::start_spindle_clockwise(const SourceRef& r) {
-  impl_->queueable([r](Canon& c) { c.start_spindle_clockwise(r); });
+  impl_->queue<&Canon::start_spindle_clockwise>(r);
 }
 void CutterComp::start_spindle_counterclockwise(const SourceRef& r) {
-  impl_->queueable([r](Canon& c) { c.start_spindle_counterclockwise(r); });
+  impl_->queue<&Canon::start_spindle_counterclockwise>(r);
 }
 void CutterComp::stop_spindle_turning(const SourceRef& r) {
-  impl_->queueable([r](Canon& c) { c.stop_spindle_turning(r); });
+  impl_->queue<&Canon::stop_spindle_turning>(r);
 }
 void CutterComp::mist_on(const SourceRef& r) {
-  impl_->queueable([r](Canon& c) { c.mist_on(r); });
+  impl_->queue<&Canon::mist_on>(r);
 }
 void CutterComp::mist_off(const SourceRef& r) {
-  impl_->queueable([r](Canon& c) { c.mist_off(r); });
+  impl_->queue<&Canon::mist_off>(r);
 }
 void CutterComp::flood_on(const SourceRef& r) {
-  impl_->queueable([r](Canon& c) { c.flood_on(r); });
+  impl_->queue<&Canon::flood_on>(r);
 }
 void CutterComp::flood_off(const SourceRef& r) {
-  impl_->queueable([r](Canon& c) { c.flood_off(r); });
+  impl_->queue<&Canon::flood_off>(r);
 }
 void CutterComp::comment(const SourceRef& r, const std::string& s) {
-  impl_->queueable([r, s](Canon& c) { c.comment(r, s); });
+  impl_->queue<&Canon::comment>(r, s);
 }
 // Not a LinuxCNC call: the PROCESS directive follows its COMMENT, so it waits with it.
 void CutterComp::set_process(const SourceRef& r, const ProcessSettings& p) {
-  impl_->queueable([r, p](Canon& c) { c.set_process(r, p); });
+  impl_->queue<&Canon::set_process>(r, p);
 }
 
 // ---- calls that change the filter's state (the others that are not queued pass
