@@ -27,7 +27,7 @@ std::set<std::string> transport_names() {
 // given its table: it may read no other key, and the table rejects every other key.
 constexpr std::string_view kTopKeys[] = {"cell",    "timing", "motion", "operator",     "hmi",    "process",
                                          "cutting", "program", "axes",  "drive_bridge", "logger", "security",
-                                         "monitor", "spindle", "io",  "safety"};
+                                         "monitor", "spindle", "io",  "safety", "kinematics"};
 constexpr std::string_view kCellKeys[] = {"name", "channel_prefix", "lcm_url"};
 constexpr std::string_view kTimingKeys[] = {"ipo_period_s",       "servo_period_s",      "setpoint_timeout_s",
                                             "stop_decel_mm_s2",   "heartbeat_period_s",  "heartbeat_timeout_s",
@@ -73,6 +73,7 @@ constexpr std::string_view kIoPointKeys[] = {"name", "module", "kind", "address"
 constexpr std::string_view kIoCoolantKeys[] = {"mist", "flood"};
 constexpr std::string_view kSafetyKeys[] = {"estop"};
 constexpr std::string_view kSafetyEstopKeys[] = {"input"};
+constexpr std::string_view kKinematicsKeys[] = {"type"};
 constexpr std::string_view kDriveBridgeKeys[] = {"enable_on_start", "profile_dir",     "enable_timeout_s",
                                                  "link_loss_timeout_s", "reconnect_min_s", "reconnect_max_s",
                                                  "lead_cycles"};
@@ -108,6 +109,7 @@ constexpr KeySection kSections[] = {
     {"logger", kLoggerKeys},
     {"security", kSecurityKeys},
     {"monitor", kMonitorKeys},
+    {"kinematics", kKinematicsKeys},
 };
 
 // A path relative to the config file's folder; "" and absolute paths stay as they are.
@@ -548,6 +550,12 @@ void read_safety(MapReader r, MachineConfig& c) {
   r.finish();
 }
 
+void read_kinematics(MapReader r, MachineConfig& c) {
+  c.kinematics.type =
+      r.get_choice("type", c.kinematics.type, std::set<std::string>(std::begin(kKinematicsTypes), std::end(kKinematicsTypes)));
+  r.finish();
+}
+
 void read_logger(MapReader r, MachineConfig& c) {
   c.log_directory = r.get_string("directory", c.log_directory);
   c.log_rotate_mb = r.get_double("rotate_mb", c.log_rotate_mb, 1.0, 1e6);
@@ -584,6 +592,7 @@ MachineConfig read_machine(MapReader top) {
   if (top.has("spindle")) read_spindle(top.map("spindle", kSpindleKeys), c);
   if (top.has("io")) read_io(top.map("io", kIoKeys), c);
   if (top.has("safety")) read_safety(top.map("safety", kSafetyKeys), c);
+  if (top.has("kinematics")) read_kinematics(top.map("kinematics", kKinematicsKeys), c);
   read_logger(top.map("logger", kLoggerKeys), c);
   read_security(top.map("security", kSecurityKeys), c.security);
   read_monitor(top.map("monitor", kMonitorKeys), c);

@@ -167,6 +167,13 @@ struct OperatorConfig {
   double safe_z_mm = std::numeric_limits<double>::quiet_NaN();
 };
 
+// The map between joints and axes (section `kinematics:`, optional; common/kinematics).
+// The names make_kinematics knows: a config naming another is refused here.
+inline constexpr const char* kKinematicsTypes[] = {"identity"};
+struct KinematicsConfig {
+  std::string type = "identity";  // joint i is axis i, with axes[i]'s limits
+};
+
 // The browser HMI cnc-hmi (section `hmi:`): where it listens, who may use it.
 struct HmiConfig {
   std::string listen = "127.0.0.1";  // any other address needs users_file
@@ -266,6 +273,7 @@ struct MachineConfig {
   SpindleConfig spindle;
   IoConfig io;
   SafetyConfig safety;
+  KinematicsConfig kinematics;
 
   // motion
   double default_feed_mm_per_min = 1000.0;

@@ -23,7 +23,9 @@ bool IdentityKinematics::inverse(const Pose& axis_mm, Pose& joint_mm) const {
 }
 
 std::unique_ptr<Kinematics> make_kinematics(const config::MachineConfig& cfg) {
-  return std::make_unique<IdentityKinematics>(cfg);
+  if (cfg.kinematics.type == "identity") return std::make_unique<IdentityKinematics>(cfg);
+  // The config reader accepts only config::kKinematicsTypes.
+  throw std::invalid_argument("kinematics.type: unknown kinematics '" + cfg.kinematics.type + "'");
 }
 
 }  // namespace cnc::kinematics

@@ -62,8 +62,8 @@ class IdentityKinematics final : public Kinematics {
   std::array<JointLimits, program::kMaxAxes> limits_;
 };
 
-// The machine's kinematics. Identity is the only one today (no config key chooses):
-// a new geometry adds its class here and a `kinematics:` section to choose it.
+// The machine's kinematics, as `kinematics.type` names it (config::kKinematicsTypes):
+// a new geometry adds its class here and its name there.
 std::unique_ptr<Kinematics> make_kinematics(const config::MachineConfig& cfg);
 
 }  // namespace cnc::kinematics

@@ -98,6 +98,13 @@ TEST(MachineConfig, DefaultsApplyToOmittedSections) {
   EXPECT_EQ(c.axes[0].drive.port, DriveConfig{}.port);
 }
 
+TEST(MachineConfig, KinematicsTypeIsOneTheFactoryKnows) {
+  EXPECT_EQ(parse_machine_config(sim3_text(), kLabel).kinematics.type, "identity");
+  EXPECT_EQ(parse_machine_config(sim3_text() + "kinematics: {type: identity}\n", kLabel).kinematics.type, "identity");
+  expect_error_at(sim3_text() + "kinematics: {type: xyzac-trt}\n", "kinematics.type", "identity");
+  expect_error_at(sim3_text() + "kinematics: {type: identity, pivot_mm: 1}\n", "kinematics.pivot_mm", "unknown key");
+}
+
 TEST(MachineConfig, UnknownKeyAtTopLevel) {
   expect_error_at(sim3_text() + "bogus: 1\n", "bogus", "unknown key");
 }

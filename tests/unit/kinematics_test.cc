@@ -64,6 +64,17 @@ TEST(Kinematics, FactoryMakesIdentityWithTheConfigsAxesAsJoints) {
   }
 }
 
+// Every name the config reader accepts is made, under that name.
+TEST(Kinematics, FactoryMakesEveryTypeTheConfigAccepts) {
+  config::MachineConfig c = sim3();
+  for (const char* type : config::kKinematicsTypes) {
+    c.kinematics.type = type;
+    EXPECT_EQ(make_kinematics(c)->name(), type);
+  }
+  c.kinematics.type = "bogus";
+  EXPECT_THROW(make_kinematics(c), std::invalid_argument);
+}
+
 TEST(Kinematics, ShippedMachineIsIdentityWithItsLimits) {
   const config::MachineConfig c = sim3();
   const auto k = make_kinematics(c);
