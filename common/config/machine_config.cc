@@ -57,7 +57,8 @@ constexpr std::string_view kDriveKeys[] = {"transport", "host",      "port",    
                                            "parity",    "stop_bits", "unit_id", "profile", "response_timeout_s"};
 constexpr std::string_view kSimKeys[] = {"bandwidth_hz",         "damping",          "max_velocity_mm_s",
                                          "comm_timeout_s",       "comm_stop_decel_mm_s2", "home_switch_mm",
-                                         "home_switch_sigma_mm", "home_switch_hysteresis_mm", "home_switch_seed"};
+                                         "home_switch_sigma_mm", "home_switch_hysteresis_mm", "home_switch_seed",
+                                         "limit_min_mm",         "limit_max_mm"};
 constexpr std::string_view kHomeKeys[] = {"method",      "search_velocity_mm_s", "latch_velocity_mm_s",
                                           "direction",   "switch_position_mm",   "position_mm",
                                           "backoff_mm",  "order"};
@@ -71,8 +72,10 @@ constexpr std::string_view kIoModuleKeys[] = {"name",   "transport", "host",    
                                               "unit_id", "response_timeout_s"};
 constexpr std::string_view kIoPointKeys[] = {"name", "module", "kind", "address", "scale", "signed"};
 constexpr std::string_view kIoCoolantKeys[] = {"mist", "flood"};
-constexpr std::string_view kSafetyKeys[] = {"estop"};
+constexpr std::string_view kSafetyKeys[] = {"estop", "hard_limits", "door"};
+constexpr std::string_view kSafetyLimitKeys[] = {"axis", "min", "max"};
 constexpr std::string_view kSafetyEstopKeys[] = {"input"};
+constexpr std::string_view kSafetyDoorKeys[] = {"input"};
 constexpr std::string_view kKinematicsKeys[] = {"type"};
 constexpr std::string_view kDriveBridgeKeys[] = {"enable_on_start", "profile_dir",     "enable_timeout_s",
                                                  "link_loss_timeout_s", "reconnect_min_s", "reconnect_max_s",
@@ -106,6 +109,8 @@ constexpr KeySection kSections[] = {
     {"io.coolant", kIoCoolantKeys},
     {"safety", kSafetyKeys},
     {"safety.estop", kSafetyEstopKeys},
+    {"safety.hard_limits[]", kSafetyLimitKeys},
+    {"safety.door", kSafetyDoorKeys},
     {"logger", kLoggerKeys},
     {"security", kSecurityKeys},
     {"monitor", kMonitorKeys},
@@ -154,6 +159,9 @@ ServoSimAxisConfig read_sim(MapReader s) {
   k.home_switch_sigma_mm = s.get_double("home_switch_sigma_mm", k.home_switch_sigma_mm, 0.0, 10.0);
   k.home_switch_hysteresis_mm = s.get_double("home_switch_hysteresis_mm", k.home_switch_hysteresis_mm, 0.0, 100.0);
   k.home_switch_seed = static_cast<uint64_t>(s.get_int("home_switch_seed", 1, 0, INT64_MAX));
+  if (s.has("limit_min_mm")) k.limit_min_mm = s.get_double("limit_min_mm", 0.0, -1e5, 1e5);
+  if (s.has("limit_max_mm")) k.limit_max_mm = s.get_double("limit_max_mm", 0.0, -1e5, 1e5);
+  if (k.limit_min_mm >= k.limit_max_mm) s.fail("limit_max_mm", "must be above limit_min_mm");
   s.finish();
   return k;
 }
@@ -537,16 +545,36 @@ void read_io(MapReader r, MachineConfig& c) {
 }
 
 void read_safety(MapReader r, MachineConfig& c) {
-  MapReader estop = r.map("estop", kSafetyEstopKeys);
-  const std::string path = estop.child_path("input");
-  const std::string name = r.has("estop") ? estop.require_string("input") : estop.get_string("input", "");
-  if (!name.empty()) {
+  // A point used by a role of io: may not be a safety input too (an M66 on it).
+  std::set<int> taken(c.io.digital_inputs.begin(), c.io.digital_inputs.end());
+  auto input = [&](const MapReader& m, const std::string& path, const std::string& name) {
     if (!c.io.enabled) throw ConfigError(r.file(), path, "needs an io: section with the point '" + name + "'");
-    // A point used by a role of io: may not be the E-stop too (an M66 or M62 on it).
-    std::set<int> taken(c.io.digital_inputs.begin(), c.io.digital_inputs.end());
-    c.safety.estop_input = io_role(estop, path, name, c.io, {IoKind::kDiscreteInput}, taken);
-  }
+    return io_role(m, path, name, c.io, {IoKind::kDiscreteInput}, taken);
+  };
+  MapReader estop = r.map("estop", kSafetyEstopKeys);
+  const std::string name = r.has("estop") ? estop.require_string("input") : estop.get_string("input", "");
+  if (!name.empty()) c.safety.estop_input = input(estop, estop.child_path("input"), name);
   estop.finish();
+  YAML::Node limits = r.sequence("hard_limits");
+  for (size_t i = 0; i < limits.size(); ++i) {
+    MapReader l(limits[i], r.item_path("hard_limits", i), r.file(), kSafetyLimitKeys);
+    SafetyConfig::HardLimit h;
+    const std::string axis = l.require_string("axis");
+    h.axis = c.axis_index(axis);
+    if (h.axis < 0) l.fail("axis", "no axis " + axis);
+    for (const auto& o : c.safety.hard_limits)
+      if (o.axis == h.axis) l.fail("axis", "axis " + axis + " has its limits already");
+    const std::string lo = l.get_string("min", ""), hi = l.get_string("max", "");
+    if (lo.empty() && hi.empty()) l.fail("max", "a min or a max input is required");
+    if (!lo.empty()) h.min_input = input(l, l.child_path("min"), lo);
+    if (!hi.empty()) h.max_input = input(l, l.child_path("max"), hi);
+    l.finish();
+    c.safety.hard_limits.push_back(h);
+  }
+  MapReader door = r.map("door", kSafetyDoorKeys);
+  const std::string dname = r.has("door") ? door.require_string("input") : door.get_string("input", "");
+  if (!dname.empty()) c.safety.door_input = input(door, door.child_path("input"), dname);
+  door.finish();
   r.finish();
 }
 

@@ -58,6 +58,10 @@ struct ServoSimAxisConfig {
   double home_switch_sigma_mm = 0.002;
   double home_switch_hysteresis_mm = 0.05;
   uint64_t home_switch_seed = 1;
+  // Hard-limit switches of the simulated machine (the axis's safety.hard_limits inputs):
+  // open (0) at and beyond these positions; NaN: none at that end.
+  double limit_min_mm = std::numeric_limits<double>::quiet_NaN();
+  double limit_max_mm = std::numeric_limits<double>::quiet_NaN();
 };
 
 // Homing of one axis (axes[].home), LinuxCNC's sequence: search towards the
@@ -150,7 +154,15 @@ struct IoConfig {
 // does not answer is the condition.
 struct SafetyConfig {
   int estop_input = -1;  // safety.estop.input: the discrete-input point (index into io.points), -1: none
-  bool enabled() const { return estop_input >= 0; }
+  // safety.hard_limits[]: an axis's limit switches, discrete-input points (-1: none at that end).
+  struct HardLimit {
+    int axis = 0;  // index into axes
+    int min_input = -1;
+    int max_input = -1;
+  };
+  std::vector<HardLimit> hard_limits;
+  int door_input = -1;  // safety.door.input: the guard door's switch (1: shut), -1: none
+  bool enabled() const { return estop_input >= 0 || !hard_limits.empty() || door_input >= 0; }
 };
 
 // Operator functions (section `operator:`).

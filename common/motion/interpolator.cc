@@ -671,6 +671,7 @@ const Setpoint& Interpolator::step() {
       move_along_path(pausing);
     }
   }
+  if (door_hold_ && state_ == RunState::kHeld) door_spindle_stop();
   output_position();
   if (out_.feed_mm_per_min > 0) outputs_.motion();
   out_.state = state_;
@@ -765,9 +766,21 @@ void Interpolator::take_spindle_event(const Planned& p) {
   spindle_wait_ = wait_for_spindle_ && !auto_resume_pauses_ && dir != 0 && rpm > 0;
 }
 
+void Interpolator::door_spindle_stop() {
+  if (spindle_.direction == 0) return;
+  door_spindle_ = spindle_;
+  spindle_wait_ = false;
+  ++spindle_.seq;
+  spindle_.direction = 0;
+  spindle_.rpm = 0;
+}
+
 void Interpolator::spindle_off() {
   outputs_.end();  // the coolant stops with the spindle
   spindle_wait_ = false;
+  door_hold_ = false;
+  door_resume_ = false;
+  door_spindle_ = SpindleState{};
   if (spindle_.direction == 0 && spindle_.rpm == 0) return;
   ++spindle_.seq;
   spindle_.direction = 0;

@@ -50,6 +50,8 @@ ParamUpdate param_update_from_string(const std::string& s);
 
 struct Command {
   enum class Kind : int8_t {
+    // kHold with value 1: the guard door's (the spindle stops once the path stands, and
+    // RESUME waits for it at speed before the path moves).
     kLoad = 1, kStart = 2, kHold = 3, kResume = 4, kStop = 5, kOverride = 6, kReset = 7,
     // Homing found the axis's machine position: from now on the setpoints
     // of `axis` are its machine position plus `value` (the drive's position minus the
@@ -407,6 +409,12 @@ class Interpolator {
   uint64_t spindle_taken_ = UINT64_MAX;  // serial of the spindle event last taken
   bool spindle_wait_ = false;
   bool wait_for_spindle_ = false;  // cfg.spindle.enabled
+  // A guard door's hold (kHold with value 1): once the path stands the spindle stops;
+  // RESUME turns it on again and the path stays held until it is at speed.
+  bool door_hold_ = false;
+  SpindleState door_spindle_;  // the spindle the door stopped (direction 0: none)
+  bool door_resume_ = false;   // RESUMEd: held until the spindle is at speed
+  void door_spindle_stop();
 
   std::array<double, program::kMaxAxes> pos_{};
   std::array<double, program::kMaxAxes> drive_offset_{};

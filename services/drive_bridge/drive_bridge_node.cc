@@ -156,6 +156,29 @@ DriveBridgeNode::DriveBridgeNode(const config::MachineConfig& cfg, bus::Bus& bus
     for (auto& e : m.last_error) e.reserve(96);
     m.estop = cnc::lcmt_io_status::ESTOP_NONE;
     m.estop_stop_ms = -1;
+    auto bit_of = [&](int point, int& module, size_t& bit) {
+      const config::IoPointConfig& p = cfg_.io.points[static_cast<size_t>(point)];
+      const auto& di = io_->modules[static_cast<size_t>(p.module)].points[static_cast<size_t>(config::IoKind::kDiscreteInput)];
+      for (size_t i = 0; i < di.size(); ++i)
+        if (di[i] == point) bit = i;
+      module = p.module;
+    };
+    for (const auto& h : cfg_.safety.hard_limits)
+      for (int end : {-1, 1}) {
+        const int point = end < 0 ? h.min_input : h.max_input;
+        if (point < 0) continue;
+        LimitInput l;
+        l.axis = static_cast<size_t>(h.axis);
+        l.end = end;
+        l.point = point;
+        bit_of(point, l.module, l.bit);
+        limits_.push_back(l);
+      }
+    if (cfg_.safety.door_input >= 0) {
+      bit_of(cfg_.safety.door_input, door_.module, door_.bit);
+      m.door_input = cfg_.io.points[static_cast<size_t>(cfg_.safety.door_input)].name;
+    }
+    m.limit_stop_ms = -1;
     if (cfg_.safety.estop_input >= 0) {
       const config::IoPointConfig& p = cfg_.io.points[static_cast<size_t>(cfg_.safety.estop_input)];
       const auto& di = io_->modules[static_cast<size_t>(p.module)].points[static_cast<size_t>(config::IoKind::kDiscreteInput)];
@@ -268,10 +291,15 @@ void DriveBridgeNode::on_setpoint(const cnc::lcmt_setpoint& m) {
     for (int64_t j = std::min<int64_t>(have, m.cycle - last - 1); j >= 1; --j) {
       AxisArray q{};
       for (int i = 0; i < n; ++i) q[static_cast<size_t>(i)] = m.prev_position_mm[static_cast<size_t>((j - 1) * n + i)];
-      if (core_.on_setpoint(m.cycle - j, q, from) == BridgeCore::Verdict::kAccepted) ++recovered_setpoints_;
+      if (core_.on_setpoint(m.cycle - j, q, from) != BridgeCore::Verdict::kAccepted) continue;
+      ++recovered_setpoints_;
+      if (!limits_.empty() && limits_refuse(q, m.cycle - j)) return;
     }
   }
-  if (core_.on_setpoint(m.cycle, p, from) == BridgeCore::Verdict::kStale && now - stale_report_s_ >= 1.0) {
+  if (!limits_.empty() && limits_hold_off(p, from)) return;
+  const BridgeCore::Verdict verdict = core_.on_setpoint(m.cycle, p, from);
+  if (verdict == BridgeCore::Verdict::kAccepted && !limits_.empty() && limits_refuse(p, m.cycle)) return;
+  if (verdict == BridgeCore::Verdict::kStale && now - stale_report_s_ >= 1.0) {
     stale_report_s_ = now;
     spdlog::warn("setpoint seq {} cycle {} dropped: {} (stream {}, engagement {}; following stream {} since "
                  "engagement {}); {} stale setpoint(s) dropped so far",
@@ -460,7 +488,129 @@ void DriveBridgeNode::spindle_tick(double now_s) {
   sp.worker->set_spindle_command(sp.cmd);
 }
 
+std::string DriveBridgeNode::limit_name(const LimitInput& l) const {
+  return "axis " + cfg_.axes[l.axis].name + "'s " + (l.end < 0 ? "min" : "max") + " switch (input " +
+         cfg_.io.points[static_cast<size_t>(l.point)].name + ")";
+}
+
+bool DriveBridgeNode::settled(double& since_s, double now_s) const {
+  if (since_s < 0) since_s = now_s;
+  bool still = true;
+  for (const auto& a : axes_) still = still && (!a.rep.have_status || std::fabs(a.rep.fe_mm) <= 1e-3);
+  return still || now_s - since_s >= kStandstillWaitS;
+}
+
+void DriveBridgeNode::limits_tick(double now_s) {
+  const bool following = state_ == State::kEnabled && !core_.faulted();
+  for (size_t k = 0; k < limits_.size(); ++k) {
+    LimitInput& l = limits_[k];
+    const IoModule& mod = io_->modules[static_cast<size_t>(l.module)];
+    const bool answering = mod.rep.answering && mod.rep.in.valid;
+    const bool ok = answering && ((mod.rep.in.discrete >> l.bit) & 1) != 0;
+    const bool fell = l.ok && !ok;
+    l.ok = ok;
+    if (ok) continue;
+    // Not following (standing, braking, disabled): setpoints of the next engagement may
+    // take the axis no further towards the switch than where it comes to rest.
+    if (core_.mode() != BridgeCore::Mode::kFollowing) l.bound_mm = core_.commanded()[l.axis];
+    if (!fell || !following) continue;
+    limit_.latched = true;
+    limit_.stood = false;
+    limit_.tripped = static_cast<int>(k);
+    limit_.utime = util::wall_utime();
+    limit_.at_s = now_s;
+    limit_.stop_ms = -1;
+    limit_.command_stood_s = -1;
+    char at[64];
+    std::snprintf(at, sizeof at, " at %.4f mm", core_.commanded()[l.axis]);
+    const std::string text =
+        "hard limit: " + limit_name(l) +
+        (answering ? " reads 0 (the switch hit, or its wire cut)"
+                   : std::string(" does not answer (module ") + cfg_.io.modules[static_cast<size_t>(l.module)].name +
+                         ": " + mod.rep.last_error.data() + ")") +
+        at + ": controlled stop, drives disabled";
+    spdlog::error("{}", text);
+    alarm(cnc::lcmt_alarm::FAULT, "hard_limit", text);
+    fault(l.axis, text, false);  // brakes in this tick's core step
+  }
+  if (limit_.latched && !limit_.stood && core_.mode() != BridgeCore::Mode::kStopping &&
+      settled(limit_.command_stood_s, now_s)) {
+    limit_.stood = true;
+    limit_.stop_ms = (now_s - limit_.at_s) * 1e3;
+    for (auto& a : axes_) a.cmd.goal = drive::Goal::kDisable;
+    spdlog::info("hard limit: the axes stand {:.1f} ms after the trip ({}); drives disabled", limit_.stop_ms,
+                 limit_name(limits_[static_cast<size_t>(limit_.tripped)]));
+  }
+}
+
+int DriveBridgeNode::limit_towards(const AxisArray& p) const {
+  // The stream starts where the drives stand, to within their following error at rest.
+  constexpr double kJoinToleranceMm = 1e-3;
+  for (size_t k = 0; k < limits_.size(); ++k) {
+    const LimitInput& l = limits_[k];
+    if (!l.ok && (p[l.axis] - l.bound_mm) * l.end > kJoinToleranceMm) return static_cast<int>(k);
+  }
+  return -1;
+}
+
+bool DriveBridgeNode::limits_hold_off(const AxisArray& p, const StreamStamp& from) {
+  // A stream the core would join (the first since the engagement, or a newer one) that
+  // stands towards a switch reading 0: not joined, no fault. It is the interpolator's
+  // path from before the reset (its own brake ended beyond the bridge's); its RESET
+  // makes a stream from where the drives stand.
+  const bool joining = core_.last_cycle() < 0 || from.stream > core_.stream();
+  if (!joining || from.engagement != core_.engagement() || from.stream < core_.stream()) return false;
+  const int k = limit_towards(p);
+  if (k < 0) return false;
+  if (limit_.held_off != core_.engagement()) {
+    limit_.held_off = core_.engagement();
+    const LimitInput& l = limits_[static_cast<size_t>(k)];
+    char b[160];
+    std::snprintf(b, sizeof b, " reads 0: a setpoint stream at %.4f mm, towards it from %.4f mm, is not joined", p[l.axis],
+                  l.bound_mm);
+    const std::string text = "hard limit: " + limit_name(l) + b + ": RESET the interpolator (cnc-ctl --do reset)";
+    spdlog::warn("{}", text);
+    alarm(cnc::lcmt_alarm::WARNING, "hard_limit_not_joined", text);
+  }
+  return true;
+}
+
+bool DriveBridgeNode::limits_refuse(const AxisArray& p, int64_t cycle) {
+  // A setpoint the core has just taken: the playback, a few cycles behind the newest
+  // setpoint, has not moved towards it yet; refused, the stop begins from before it.
+  // (One the core does not follow, a stale one or one it waits on, sets no bound.)
+  const int k = limit_towards(p);
+  if (k < 0) {
+    for (LimitInput& l : limits_)
+      if (!l.ok && (p[l.axis] - l.bound_mm) * l.end < 0) l.bound_mm = p[l.axis];  // moving off: no way back
+    return false;
+  }
+  const LimitInput& l = limits_[static_cast<size_t>(k)];
+  char b[160];
+  std::snprintf(b, sizeof b, ": setpoint cycle %lld moves the axis towards it (to %.4f mm from %.4f mm)",
+                static_cast<long long>(cycle), p[l.axis], l.bound_mm);
+  const std::string text = "hard limit: " + limit_name(l) + " reads 0" + b + ": refused, controlled stop";
+  spdlog::error("{}", text);
+  alarm(cnc::lcmt_alarm::FAULT, "hard_limit_refused", text);
+  fault(l.axis, text, false);
+  return true;
+}
+
 void DriveBridgeNode::safety_tick(double now_s) {
+  if (!limits_.empty()) limits_tick(now_s);
+  if (door_.module >= 0) {
+    const IoModule& mod = io_->modules[static_cast<size_t>(door_.module)];
+    const bool ok = mod.rep.answering && mod.rep.in.valid && ((mod.rep.in.discrete >> door_.bit) & 1) != 0;
+    if (!ok && door_.ok) door_.utime = util::wall_utime();
+    if (ok != door_.ok && state_ != State::kStarting) {
+      const std::string& name = cfg_.io.points[static_cast<size_t>(cfg_.safety.door_input)].name;
+      const std::string text = ok ? "guard door: input " + name + " reads 1 (shut): RESUME to go on"
+                                  : "guard door: input " + name + " reads 0 (open): feed hold, motion refused until it is shut";
+      spdlog::warn("{}", text);
+      alarm(ok ? cnc::lcmt_alarm::INFO : cnc::lcmt_alarm::WARNING, ok ? "door_closed" : "door_open", text);
+    }
+    door_.ok = ok;
+  }
   if (estop_.module < 0) return;
   const IoModule& mod = io_->modules[static_cast<size_t>(estop_.module)];
   const bool answering = mod.rep.answering && mod.rep.in.valid;
@@ -491,10 +641,7 @@ void DriveBridgeNode::safety_tick(double now_s) {
   if (estop_.latched && !estop_.stood && core_.mode() != BridgeCore::Mode::kStopping) {
     // The command stands (or was never engaged): the drives' power off once they have
     // settled on it (following error within 1 um), or kStandstillWaitS after it at most.
-    if (estop_.command_stood_s < 0) estop_.command_stood_s = now_s;
-    bool settled = true;
-    for (const auto& a : axes_) settled = settled && (!a.rep.have_status || std::fabs(a.rep.fe_mm) <= 1e-3);
-    if (!settled && now_s - estop_.command_stood_s < kStandstillWaitS) return;
+    if (!settled(estop_.command_stood_s, now_s)) return;
     estop_.stood = true;
     estop_.stop_ms = (now_s - estop_.at_s) * 1e3;
     for (auto& a : axes_) a.cmd.goal = drive::Goal::kDisable;
@@ -502,7 +649,15 @@ void DriveBridgeNode::safety_tick(double now_s) {
   }
 }
 
-bool DriveBridgeNode::estop_refuses_enable() {
+bool DriveBridgeNode::safety_refuses_enable() {
+  if (limit_.latched) {
+    const std::string text = "ENABLE refused: the hard limit (" +
+                             limit_name(limits_[static_cast<size_t>(limit_.tripped)]) +
+                             ") is latched: FAULT_RESET first (cnc-ctl --do fault-reset)";
+    spdlog::warn("{}", text);
+    alarm(cnc::lcmt_alarm::WARNING, "enable_refused", text);
+    return true;
+  }
   if (estop_.module < 0 || (estop_.ok && !estop_.latched)) return false;
   const std::string& name = cfg_.io.points[static_cast<size_t>(cfg_.safety.estop_input)].name;
   const std::string text = !estop_.ok ? "ENABLE refused: E-stop input " + name + " reads 0 (or its module does not answer)"
@@ -589,6 +744,28 @@ void DriveBridgeNode::publish_io_status() {
     m.estop_utime = estop_.utime;
     m.estop_stop_ms = estop_.stop_ms;
   }
+  if (!limits_.empty()) {
+    int on = -1;
+    for (size_t k = 0; k < limits_.size() && on < 0; ++k)
+      if (!limits_[k].ok) on = static_cast<int>(k);
+    const int named = limit_.latched ? limit_.tripped : on >= 0 ? on : limit_.tripped;
+    m.limit = limit_.latched  ? (limit_.stood ? cnc::lcmt_io_status::LIMIT_DISABLED : cnc::lcmt_io_status::LIMIT_TRIPPED)
+              : on >= 0       ? cnc::lcmt_io_status::LIMIT_ON_SWITCH
+                              : cnc::lcmt_io_status::LIMIT_OK;
+    if (named < 0) {
+      m.limit_input.clear();
+    } else if (const std::string& name =
+                   cfg_.io.points[static_cast<size_t>(limits_[static_cast<size_t>(named)].point)].name;
+               m.limit_input != name) {
+      m.limit_input = name;  // on a change only
+    }
+    m.limit_utime = limit_.utime;
+    m.limit_stop_ms = limit_.stop_ms;
+  }
+  if (door_.module >= 0) {
+    m.door = door_.ok ? cnc::lcmt_io_status::DOOR_CLOSED : cnc::lcmt_io_status::DOOR_OPEN;
+    m.door_utime = door_.utime;
+  }
   bus_.publish(ch_io_status_, m);
 }
 
@@ -625,7 +802,7 @@ void DriveBridgeNode::take_operator_command(double now_s) {
   pending_command_ = 0;
   if (c == cnc::lcmt_drive_command::ENABLE) {
     if (state_ == State::kDisabled || state_ == State::kFault) {
-      if (!estop_refuses_enable()) begin_enable(now_s);
+      if (!safety_refuses_enable()) begin_enable(now_s);
     } else if (state_ == State::kStarting) {
       pending_command_ = c;
     } else if (state_ == State::kStopping) {
@@ -633,6 +810,10 @@ void DriveBridgeNode::take_operator_command(double now_s) {
       alarm(cnc::lcmt_alarm::WARNING, "enable_ignored",
             "ENABLE ignored: a controlled stop is running; send it again when the axes stand");
     }
+  } else if (c == cnc::lcmt_drive_command::FAULT_RESET && limit_.latched && !limit_.stood) {
+    const std::string text = "FAULT_RESET refused: the axes still brake for the hard limit";
+    spdlog::warn("{}", text);
+    alarm(cnc::lcmt_alarm::WARNING, "limit_reset_refused", text);
   } else if (c == cnc::lcmt_drive_command::FAULT_RESET && estop_.latched && (!estop_.ok || !estop_.stood)) {
     const std::string& name = cfg_.io.points[static_cast<size_t>(cfg_.safety.estop_input)].name;
     const std::string text = !estop_.ok ? "FAULT_RESET refused: E-stop input " + name + " still reads 0"
@@ -640,13 +821,17 @@ void DriveBridgeNode::take_operator_command(double now_s) {
     spdlog::warn("{}", text);
     alarm(cnc::lcmt_alarm::WARNING, "estop_reset_refused", text);
   } else if (c == cnc::lcmt_drive_command::DISABLE || c == cnc::lcmt_drive_command::FAULT_RESET) {
-    if (c == cnc::lcmt_drive_command::FAULT_RESET && estop_.module >= 0) {
-      // With an E-stop every FAULT_RESET is answered (cnc-ctl waits for it or the refusal).
+    if (c == cnc::lcmt_drive_command::FAULT_RESET && (estop_.module >= 0 || !limits_.empty())) {
+      // With an E-stop or hard limits every FAULT_RESET is answered (cnc-ctl waits for it or the refusal).
       alarm(cnc::lcmt_alarm::INFO, "fault_reset_done",
-            estop_.latched ? "FAULT_RESET: the E-stop reset, the drives disabled: ENABLE to move again"
-                           : "FAULT_RESET: the drives reset and disabled");
+            estop_.latched   ? "FAULT_RESET: the E-stop reset, the drives disabled: ENABLE to move again"
+            : limit_.latched ? "FAULT_RESET: the hard limit reset, the drives disabled: ENABLE, then move off the "
+                               "switch (moves towards it are refused while it reads 0)"
+                             : "FAULT_RESET: the drives reset and disabled");
       if (estop_.latched) spdlog::info("E-stop reset by the operator");
+      if (limit_.latched) spdlog::info("hard limit reset by the operator");
       estop_.latched = false;
+      limit_.latched = false;
     }
     for (auto& a : axes_) {
       a.cmd.goal = c == cnc::lcmt_drive_command::DISABLE ? drive::Goal::kDisable : drive::Goal::kFaultReset;
@@ -673,7 +858,7 @@ void DriveBridgeNode::advance_state(double now_s) {
       if (all) {
         state_ = State::kDisabled;
         spdlog::info("every drive answers");
-        if (cfg_.drive_bridge.enable_on_start && !estop_refuses_enable()) {
+        if (cfg_.drive_bridge.enable_on_start && !safety_refuses_enable()) {
           begin_enable(now_s);
         } else {
           ready_ = true;

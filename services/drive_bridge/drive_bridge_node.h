@@ -15,6 +15,14 @@
 // the spindle and the coolant stop at once, and once the axes stand the drives are
 // disabled. The E-stop stays latched: ENABLE is refused until the input reads 1 again
 // and the operator's FAULT_RESET has cleared it (refused while it reads 0).
+// A hard limit (safety.hard_limits, a normally closed switch per axis end): falling to 0
+// while the drives follow setpoints, the same category 1 stop (a fault naming the axis,
+// the end and the input), latched until the operator's FAULT_RESET (allowed with the
+// switch still at 0) and ENABLE. While a switch reads 0, a setpoint that takes its axis
+// further towards it than where the axis stood (or got to, moving off) is refused: a
+// stop and a fault. Moving off it is followed, as a machinist jogs off a limit.
+// The guard door (safety.door): its state on IO_STATUS with the stamp of its opening;
+// the feed hold and the refusals are the interpolator's and the program server's.
 //
 // servo_tick and publish_status never throw: an exception inside, and a failed
 // publish (the bus counts them; service::BusHealth), are faults like any other: the
@@ -117,8 +125,8 @@ class DriveBridgeNode {
   void io_tick();
   // The E-stop's share: its input, read first in every tick (safety: in the config).
   void safety_tick(double now_s);
-  // An ENABLE the E-stop forbids: ALARM enable_refused naming the input; true.
-  bool estop_refuses_enable();
+  // An ENABLE the E-stop or a hard limit's latch forbids: ALARM enable_refused naming the input; true.
+  bool safety_refuses_enable();
   void publish_io_status();
   void fault(size_t axis, const std::string& why, bool disable_axis);
   void begin_enable(double now_s);
@@ -196,6 +204,49 @@ class DriveBridgeNode {
     double command_stood_s = -1;  // when the stop's command came to rest
   };
   Estop estop_;
+  // The hard limits (safety.hard_limits): each switch, normally closed.
+  struct LimitInput {
+    int module = 0;       // index into io_->modules
+    size_t bit = 0;       // among the module's discrete inputs
+    size_t axis = 0;
+    int end = 1;          // -1 the min end, +1 the max end
+    int point = 0;        // index into io.points
+    bool ok = true;       // as read last tick
+    double bound_mm = 0;  // while it reads 0: setpoints may take the axis no further towards it
+  };
+  std::vector<LimitInput> limits_;
+  struct LimitLatch {
+    bool latched = false;  // tripped; until a FAULT_RESET once the axes stand
+    bool stood = false;    // the axes stood after the trip: drives disabled
+    int tripped = -1;      // index into limits_ of the last trip
+    int64_t utime = 0;     // the trip, wall clock
+    double at_s = 0;       // and on the servo clock
+    double stop_ms = -1;   // from the trip until the axes stood
+    double command_stood_s = -1;
+    int64_t held_off = 0;  // the engagement whose stream towards a switch was reported
+  };
+  LimitLatch limit_;
+  void limits_tick(double now_s);
+  // A setpoint (cycle) the core took that takes an axis further towards a switch reading
+  // 0 than it stood: refused, a stop and a fault; true. Else the bounds follow a move off it.
+  bool limits_refuse(const AxisArray& p, int64_t cycle);
+  // A stream the core would join standing towards a switch reading 0: dropped
+  // (ALARM hard_limit_not_joined, once per engagement); true.
+  bool limits_hold_off(const AxisArray& p, const StreamStamp& from);
+  // The first switch reading 0 that `p` goes towards beyond where its axis stood, else -1.
+  int limit_towards(const AxisArray& p) const;
+  std::string limit_name(const LimitInput& l) const;
+  // The drives have settled on a command at rest (following error within 1 um), or
+  // kStandstillWaitS have passed since `since_s` (set at the first call).
+  bool settled(double& since_s, double now_s) const;
+  // The guard door (safety.door): its switch, normally closed (1: shut).
+  struct Door {
+    int module = -1;     // index into io_->modules; -1: none configured
+    size_t bit = 0;
+    bool ok = true;      // shut, as read last tick
+    int64_t utime = 0;   // its last opening, wall clock
+  };
+  Door door_;
   std::string ch_io_status_;
   cnc::lcmt_io_status io_msg_{};  // reused by every status publish
   std::string ch_status_;

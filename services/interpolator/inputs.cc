@@ -11,7 +11,10 @@ bool to_core_command(const cnc::lcmt_program_command& m, Command* out) {
   switch (m.command) {
     case C::LOAD: *out = {Command::Kind::kLoad, 1.0, {}}; return true;
     case C::START: *out = {Command::Kind::kStart, 1.0, {}}; return true;
-    case C::HOLD: *out = {Command::Kind::kHold, 1.0, {}}; return true;
+    case C::HOLD:
+      *out = {Command::Kind::kHold, 1.0, {}};
+      out->value = m.value == 1 ? 1 : 0;  // 1: the guard door's hold
+      return true;
     case C::RESUME: *out = {Command::Kind::kResume, 1.0, {}}; return true;
     case C::STOP: *out = {Command::Kind::kStop, 1.0, {}}; return true;
     case C::OVERRIDE: *out = {Command::Kind::kOverride, m.feed_override, {}}; return true;

@@ -72,6 +72,12 @@ InterpolatorNode::InterpolatorNode(const config::MachineConfig& cfg, bus::Bus& b
     bus_.subscribe<cnc::lcmt_spindle_status>(cfg.channel(ch::kSpindleStatus), [this](const cnc::lcmt_spindle_status& m) {
       spindle_at_speed_seq_ = std::max(spindle_at_speed_seq_, m.at_speed_seq);
     });
+  if (cfg.safety.door_input >= 0) {
+    door_input_ = cfg.io.points[static_cast<size_t>(cfg.safety.door_input)].name;
+    bus_.subscribe<cnc::lcmt_io_status>(cfg.channel(ch::kIoStatus), [this](const cnc::lcmt_io_status& m) {
+      door_open_ = m.door == cnc::lcmt_io_status::DOOR_OPEN;
+    });
+  }
   bus_.subscribe<cnc::lcmt_axis_status>(cfg.channel(ch::kAxisStatus), [this](const cnc::lcmt_axis_status& m) {
     if (m.num_axes != static_cast<int32_t>(cfg_.axes.size())) return;
     axis_status_ = m;
@@ -325,6 +331,7 @@ void InterpolatorNode::run_cycle() {
   publish_config(cyc);
   apply_pending_load();
   apply_pending_commands();
+  door_cycle();
   manual_cycle();
   take_spindle_at_speed();
   feed_planner(cyc);
@@ -417,6 +424,7 @@ void InterpolatorNode::apply_pending_command(const cnc::lcmt_program_command& m)
     apply_reset(m);
     return;
   }
+  if (door_open_ && door_refuses(m)) return;
   if (m.command == PC::HOME || m.command == PC::JOG || m.command == PC::JOG_KEEPALIVE) {
     on_manual_command(m);
     return;
@@ -460,6 +468,43 @@ void InterpolatorNode::apply_pending_command(const cnc::lcmt_program_command& m)
                  c.value != 0 ? "on" : "off");
     publish_state(true);
   }
+}
+
+bool InterpolatorNode::door_refuses(const cnc::lcmt_program_command& m) {
+  using PC = cnc::lcmt_program_command;
+  const char* what = m.command == PC::START    ? "START"
+                     : m.command == PC::RESUME ? "RESUME"
+                     : m.command == PC::JOG    ? "JOG"
+                     : m.command == PC::HOME   ? "HOME"
+                                               : nullptr;
+  if (!what) return false;
+  const std::string text = std::string(what) + " refused: the guard door (input " + door_input_ + ") is open: shut it first";
+  spdlog::warn("{}", text);
+  alarm(cnc::lcmt_alarm::WARNING, "door_refused", text);
+  return true;
+}
+
+void InterpolatorNode::door_cycle() {
+  if (!door_open_) {
+    door_acted_ = false;
+    return;
+  }
+  if (door_acted_) return;
+  door_acted_ = true;
+  if (manual_ != Manual::kNone) {
+    manual_stop("the guard door (input " + door_input_ + ") opened");
+    return;
+  }
+  const RunState s = core_.state();
+  if (s != RunState::kRunning && s != RunState::kStarved && s != RunState::kHeld) return;
+  cnc::lcmt_program_command m{};
+  m.command = cnc::lcmt_program_command::HOLD;
+  m.value = 1;  // the door's: the spindle stops once the path stands
+  apply_command(Command{Command::Kind::kHold, 1.0, {}, -1, 1.0}, m);
+  const std::string text = "the guard door (input " + door_input_ +
+                           ") opened: feed hold, the spindle stops once the path stands; shut it and RESUME";
+  spdlog::warn("{}", text);
+  alarm(cnc::lcmt_alarm::WARNING, "door_hold", text);
 }
 
 void InterpolatorNode::apply_reset(const cnc::lcmt_program_command& m) {

@@ -32,6 +32,7 @@
 #include "cnc/lcmt_program_state.hpp"
 #include "cnc/lcmt_setpoint.hpp"
 #include "cnc/lcmt_io_command.hpp"
+#include "cnc/lcmt_io_status.hpp"
 #include "cnc/lcmt_spindle_command.hpp"
 #include "common/bus/bus.h"
 #include "common/config/machine_config.h"
@@ -105,6 +106,15 @@ class InterpolatorNode {
   // A line of `axis` from where the path stands to `target_mm` (machine) at `feed`.
   void start_move(int axis, double target_mm, double feed_mm_per_min, const std::string& label);
   void manual_cycle();
+  // The guard door (safety.door, from IO_STATUS): opened, a program's path is held
+  // (a recorded HOLD with value 1: the spindle stops once it stands) and an operator
+  // move stopped; START, RESUME, jogs and homing are refused while it is open.
+  void door_cycle();
+  // A motion command the open door forbids: ALARM door_refused naming the input; true.
+  bool door_refuses(const cnc::lcmt_program_command& m);
+  bool door_open_ = false;    // IO_STATUS says so
+  bool door_acted_ = false;   // this opening's hold (or stop) is applied
+  std::string door_input_;
   void home_next_axis();
   void start_search();  // the homing search of home_.axis
   // The travel the drive bridge checks on the setpoints, in machine coordinates (the

@@ -40,6 +40,8 @@ struct CellView {
   std::string unhomed;
   // kLoaded from line N: the approach waiting for CONFIRM ("" when none waits).
   std::string approach;
+  // "" when the guard door (safety.door) is shut or there is none, else e.g. "the guard door (input door_closed) is open".
+  std::string door;
 };
 
 // The operator commands in `v`: "" allowed, else why not.
@@ -65,6 +67,7 @@ inline std::string operator_refusal(const cnc::lcmt_program_command& c, const Ce
     case CellState::kIdle:
     case CellState::kLoaded:
       if (!v.drives.empty() && c.command != C::TOUCH_OFF) return v.drives + ": enable the drives first";
+      if (!v.door.empty() && c.command != C::TOUCH_OFF) return v.door + ": shut it first";
       if (c.command == C::MDI && !v.unhomed.empty()) return v.unhomed + ": HOME first";
       return "";
     case CellState::kRunning: return running;
@@ -127,6 +130,7 @@ inline std::string refusal(const cnc::lcmt_program_command& c, const CellView& v
         case CellState::kIdle: return "no program is loaded: LOAD one first";
         case CellState::kLoaded:
           if (!v.drives.empty()) return v.drives + ": enable the drives first";
+          if (!v.door.empty()) return v.door + ": shut it first";
           if (!v.unhomed.empty()) return v.unhomed + ": HOME first";
           return v.approach.empty() ? "" : "program " + v.program + " runs " + v.approach + ": CONFIRM the approach first";
         case CellState::kRunning: return running + " already";
@@ -148,7 +152,7 @@ inline std::string refusal(const cnc::lcmt_program_command& c, const CellView& v
     case C::RESUME:
       switch (v.state) {
         case CellState::kRunning:  // a hold may still be braking
-        case CellState::kHeld: return "";
+        case CellState::kHeld: return v.door.empty() ? "" : v.door + ": shut it first";
         case CellState::kIdle:
         case CellState::kLoaded: return "no program is held";
         case CellState::kFault: return fault;

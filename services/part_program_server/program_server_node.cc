@@ -15,6 +15,7 @@
 
 #include "cnc/lcmt_alarm.hpp"
 #include "cnc/lcmt_interp_state.hpp"
+#include "cnc/lcmt_io_status.hpp"
 #include "cnc/lcmt_program_state.hpp"
 #include "cnc/lcmt_setpoint.hpp"
 #include "common/program/block_msg.h"
@@ -42,6 +43,10 @@ ProgramServerNode::ProgramServerNode(const config::MachineConfig& cfg, bus::Bus&
     axes_ = m;
     axes_s_ = util::monotonic_s();
   });
+  if (cfg.safety.door_input >= 0)
+    bus_.subscribe<cnc::lcmt_io_status>(cfg.channel(ch::kIoStatus), [this](const cnc::lcmt_io_status& m) {
+      door_open_ = m.door == cnc::lcmt_io_status::DOOR_OPEN;
+    });
   // The interpolator's fault, by its own words.
   bus_.subscribe<cnc::lcmt_alarm>(cfg.channel(ch::kAlarm), [this](const cnc::lcmt_alarm& m) {
     if (m.source == "cnc-interpolator" && (m.code == "interp_fault" || m.code == "publish_failed"))
@@ -127,6 +132,8 @@ CellView ProgramServerNode::view(double now_s) const {
   } else {
     v.state = CellState::kIdle;
   }
+  if (door_open_)
+    v.door = "the guard door (input " + cfg_.io.points[static_cast<size_t>(cfg_.safety.door_input)].name + ") is open";
   if (cfg_.operator_.homing_required) {
     for (size_t a = 0; a < cfg_.axes.size() && v.unhomed.empty(); ++a)
       if (cfg_.axes[a].home.method != "none" && (a >= interp_homed_.size() || interp_homed_[a] == 0))

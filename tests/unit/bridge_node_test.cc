@@ -141,6 +141,17 @@ class Cell {
     }
     return x;
   }
+  // X from `from` to `to` as a jerk-limited interpolator streams it: a quintic
+  // smoothstep over `t_s` (1 mm in 0.2 s: jerk 7500 mm/s^3, well under the limit).
+  double move_x_smooth(double from, double to, double t_s = 0.2, double y = 10) {
+    const int n = static_cast<int>(std::lround(t_s / 0.004));
+    for (int i = 1; i <= n; ++i) {
+      const double u = static_cast<double>(i) / n;
+      setpoint(from + (to - from) * u * u * u * (10 - 15 * u + 6 * u * u), y);
+      ticks(4);
+    }
+    return to;
+  }
   // The stream of an idle interpolator at (x, y) for n cycles.
   void hold_stream(double x, double y, int n) {
     for (int i = 0; i < n; ++i) {
@@ -789,6 +800,172 @@ TEST(BridgeNode, EstopModuleThatStopsAnsweringIsAnEstop) {
   c.hold_stream(10, 10, 30);
   EXPECT_TRUE(c.alarmed("estop: E-stop: module io1 of input estop_ok does not answer")) << ::testing::PrintToString(c.alarms);
   c.link().inject_timeouts(0);
+}
+
+// X's max limit switch, normally closed, on the I/O module.
+std::string with_limit() {
+  std::string y = kIo;
+  y.insert(y.find("    - {name: door"), "    - {name: x_max_ok, kind: discrete_input, address: 5}\n");
+  return y + "safety: {hard_limits: [{axis: X, max: x_max_ok}]}\n";
+}
+
+TEST(BridgeNode, HardLimitStopsDisablesAndOnlyAMoveAwayIsAllowedOnIt) {
+  Cell c("sim", true, with_limit());
+  drive::IoEmulator* m = c.link().io_module(4);
+  ASSERT_TRUE(m->set_point("x_max_ok", 1));
+  c.ticks(40);
+  ASSERT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  EXPECT_EQ(int{c.io.limit}, int{cnc::lcmt_io_status::LIMIT_OK});
+  // X up to 25 mm/s and cruising.
+  Motion mo;
+  double x = 10, v = 0;
+  for (int i = 0; i < 40; ++i) {
+    v = std::min(0.1, v + 0.01);
+    x += v;
+    c.setpoint(x, 10);
+    c.count_allocations = i >= 20;
+    for (int k = 0; k < 4; ++k) {
+      c.tick();
+      mo.x.push_back(c.node.core().commanded()[0]);
+    }
+  }
+  c.count_allocations = false;
+  EXPECT_EQ(c.cyclic_allocations, 0);
+  ASSERT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  const size_t edge = mo.x.size();
+  const double v0 = mo.v(edge - 1);
+  ASSERT_TRUE(m->set_point("x_max_ok", 0));  // X runs into its switch
+  size_t braking = 0;
+  for (int i = 0; i < 60; ++i) {
+    if (i < 5) x += v;  // the interpolator streams on until it sees the fault
+    c.setpoint(x, 10);
+    for (int k = 0; k < 4; ++k) {
+      c.tick();
+      mo.x.push_back(c.node.core().commanded()[0]);
+      if (braking == 0 && c.node.core().faulted()) braking = mo.x.size() - 1;
+    }
+  }
+  ASSERT_GT(braking, 0u);
+  EXPECT_LE(braking - edge, 2u) << "read in the link's round, acted on in the next tick";
+  EXPECT_TRUE(c.alarmed("hard_limit: hard limit: axis X's max switch (input x_max_ok) reads 0"))
+      << ::testing::PrintToString(c.alarms);
+  for (size_t i = braking + 1; i < mo.x.size(); ++i) {
+    EXPECT_GE(mo.v(i), -1e-9) << "tick " << i;
+    EXPECT_LE(std::fabs(mo.a(i)), 2000 * 1.0001) << "tick " << i;
+  }
+  const double dist = mo.x.back() - mo.x[edge - 1];
+  const double bound = v0 * v0 / (2 * 2000) + v0 * 2000 / (2 * 60000) + v0 * 0.002;
+  EXPECT_LE(dist, bound) << "stop distance against v^2/(2a) + v*a/(2j) + 2 ticks";
+  EXPECT_GT(dist, v0 * v0 / (2 * 2000)) << "no harder than the stop deceleration";
+  // Standing: a fault naming the axis, the end and the input; the drives disabled.
+  EXPECT_EQ(c.node.state(), State::kFault) << c.node.detail();
+  EXPECT_NE(c.node.detail().find("axis X's max switch (input x_max_ok)"), std::string::npos) << c.node.detail();
+  EXPECT_FALSE(c.link().drive(1)->follows());
+  EXPECT_FALSE(c.link().drive(2)->follows());
+  EXPECT_EQ(int{c.io.limit}, int{cnc::lcmt_io_status::LIMIT_DISABLED});
+  EXPECT_EQ(c.io.limit_input, "x_max_ok");
+  EXPECT_GT(c.io.limit_utime, 0);
+  EXPECT_GT(c.io.limit_stop_ms, 0);
+  std::printf("hard limit at %.2f mm/s: braking %zu tick(s) after the edge, stop distance %.4f mm (bound %.4f), "
+              "drives disabled %.0f ms after the trip\n",
+              v0, braking - edge, dist, bound, c.io.limit_stop_ms);
+  const double rest = c.drive_mm(1);
+  // ENABLE alone is refused: latched until the operator's FAULT_RESET (allowed on the switch).
+  c.command(cnc::lcmt_drive_command::ENABLE);
+  c.hold_stream(rest, 10, 20);
+  EXPECT_TRUE(c.alarmed("enable_refused: ENABLE refused: the hard limit (axis X's max switch (input x_max_ok)) is latched"))
+      << ::testing::PrintToString(c.alarms);
+  EXPECT_FALSE(c.link().drive(1)->follows());
+  EXPECT_NEAR(c.drive_mm(1), rest, 1e-9) << "nothing moved";
+  c.command(cnc::lcmt_drive_command::FAULT_RESET);
+  c.hold_stream(rest, 10, 5);
+  EXPECT_TRUE(c.alarmed("fault_reset_done: FAULT_RESET: the hard limit reset")) << ::testing::PrintToString(c.alarms);
+  c.command(cnc::lcmt_drive_command::ENABLE);
+  c.hold_stream(rest, 10, 30);
+  ASSERT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  EXPECT_EQ(int{c.io.limit}, int{cnc::lcmt_io_status::LIMIT_ON_SWITCH});
+  // Off the switch (towards min), as the interpolator streams it: followed.
+  c.alarms.clear();
+  const double away = c.move_x_smooth(rest, rest - 1);
+  c.hold_stream(away, 10, 40);
+  EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  EXPECT_NEAR(c.node.core().commanded()[0], away, 1e-5) << "at the end of the move (the limiter's last creep)";
+  EXPECT_FALSE(c.alarmed("hard_limit")) << ::testing::PrintToString(c.alarms);
+  // Towards it again while it still reads 0: refused at the first setpoint, a stop and a fault.
+  c.move_x_smooth(away, away + 0.5);
+  EXPECT_TRUE(c.alarmed("hard_limit_refused: hard limit: axis X's max switch (input x_max_ok) reads 0: setpoint cycle"))
+      << ::testing::PrintToString(c.alarms);
+  EXPECT_NE(c.node.state(), State::kEnabled) << c.node.detail();
+  EXPECT_LE(c.node.core().commanded()[0], away + 1e-3) << "nothing of the move towards it was followed";
+  // Off the switch (it reads 1 again): reset, enable, and X moves either way.
+  ASSERT_TRUE(m->set_point("x_max_ok", 1));
+  const double here = c.node.core().commanded()[0];
+  c.command(cnc::lcmt_drive_command::FAULT_RESET);
+  c.hold_stream(here, 10, 5);
+  c.command(cnc::lcmt_drive_command::ENABLE);
+  c.hold_stream(here, 10, 30);
+  ASSERT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  EXPECT_EQ(int{c.io.limit}, int{cnc::lcmt_io_status::LIMIT_OK});
+  c.move_x(here, here + 0.5);
+  EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+}
+
+TEST(BridgeNode, HardLimitWireCutWhileMovingAwayIsATrip) {
+  // The min switch's wire cut while X moves towards max: a trip all the same.
+  std::string y = kIo;
+  y.insert(y.find("    - {name: door"), "    - {name: x_min_ok, kind: discrete_input, address: 6}\n");
+  Cell c("sim", true, y + "safety: {hard_limits: [{axis: X, min: x_min_ok}]}\n");
+  ASSERT_TRUE(c.link().io_module(4)->set_point("x_min_ok", 1));
+  c.ticks(40);
+  ASSERT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  double x = c.move_x(10, 12);
+  ASSERT_TRUE(c.link().io_module(4)->set_point("x_min_ok", 0));
+  x = c.move_x(x, x + 1);
+  c.hold_stream(x, 10, 60);
+  EXPECT_TRUE(c.alarmed("hard_limit: hard limit: axis X's min switch (input x_min_ok) reads 0"))
+      << ::testing::PrintToString(c.alarms);
+  EXPECT_EQ(c.node.state(), State::kFault) << c.node.detail();
+  EXPECT_FALSE(c.link().drive(1)->follows());
+}
+
+TEST(BridgeNode, HardLimitSetpointsTheBridgeWaitsOnSetNoBound) {
+  // Enabled on the switch: the interpolator's old stream stands elsewhere (its path braked
+  // on after the bridge's stop) until its RESET; neither side of it counts.
+  Cell c("sim", true, with_limit());
+  c.ticks(40);
+  ASSERT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  c.hold_stream(10.5, 10, 10);  // towards the switch: not joined, no fault
+  EXPECT_TRUE(c.alarmed("hard_limit_not_joined: hard limit: axis X's max switch (input x_max_ok) reads 0: a setpoint "
+                        "stream at 10.5000 mm, towards it from 10.0000 mm, is not joined"))
+      << ::testing::PrintToString(c.alarms);
+  c.hold_stream(9.5, 10, 10);    // away from it: waited on (too far to join), no bound
+  c.hold_stream(10.01, 10, 10);  // near enough to join, but towards it: not joined either
+  EXPECT_FALSE(c.alarmed("hard_limit_refused")) << ::testing::PrintToString(c.alarms);
+  EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  EXPECT_NEAR(c.drive_mm(1), 10, 1e-9);
+  c.alarms.clear();
+  c.hold_stream(10, 10, 10);  // the stream from where X stands (the interpolator's RESET): joined
+  EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  EXPECT_FALSE(c.alarmed("hard_limit")) << ::testing::PrintToString(c.alarms);
+  c.move_x_smooth(10, 9.8);
+  EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+}
+
+TEST(BridgeNode, HardLimitAtZeroWhenEnabledIsNoTripAndAMoveOffIsFollowed) {
+  // Powered on standing on the switch: enabled, and only a move off it is followed.
+  Cell c("sim", true, with_limit());
+  c.ticks(40);
+  ASSERT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  EXPECT_EQ(int{c.io.limit}, int{cnc::lcmt_io_status::LIMIT_ON_SWITCH});
+  c.hold_stream(10, 10, 10);
+  // move_x's stream reverses its acceleration at 5 times the jerk limit: the limiter
+  // runs 0.3 mm past its end and comes back towards the switch (never nearer it than
+  // the stream began). Setpoints, not the limiter's command, are held against the switch.
+  const double x = c.move_x(10, 9);
+  c.hold_stream(x, 10, 20);
+  EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  c.move_x(x, x + 0.01);
+  EXPECT_TRUE(c.alarmed("hard_limit_refused")) << ::testing::PrintToString(c.alarms);
 }
 
 }  // namespace

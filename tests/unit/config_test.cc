@@ -281,6 +281,21 @@ TEST(MachineConfig, SafetySection) {
   EXPECT_EQ(c.io.points[static_cast<size_t>(c.safety.estop_input)].name, "estop_ok");
   EXPECT_FALSE(parse_machine_config(sim3_text() + io + "safety: {}\n", kLabel).safety.enabled());
   EXPECT_TRUE(load_machine_config(std::string(CNC_SOURCE_DIR) + "/config/machines/sim3_safety.yaml").safety.enabled());
+  const MachineConfig g = load_machine_config(std::string(CNC_SOURCE_DIR) + "/config/machines/sim3_guarded.yaml");
+  EXPECT_EQ(g.safety.hard_limits.size(), 3u);
+  EXPECT_GE(g.safety.door_input, 0);
+  EXPECT_GT(g.axes[0].sim.limit_max_mm, g.axes[0].max_mm) << "the switches beyond the travel";
+}
+
+TEST(MachineConfig, SimulatedLimitSwitches) {
+  std::string y = sim3_text();
+  y = replace_nth(y, "sim: {bandwidth_hz: 40, damping: 1.0}", "sim: {bandwidth_hz: 40, limit_min_mm: -6, limit_max_mm: 401}");
+  const MachineConfig c = parse_machine_config(y, kLabel);
+  EXPECT_EQ(c.axes[0].sim.limit_min_mm, -6);
+  EXPECT_EQ(c.axes[0].sim.limit_max_mm, 401);
+  EXPECT_TRUE(std::isnan(c.axes[1].sim.limit_max_mm));
+  expect_error_at(replace_nth(sim3_text(), "sim: {bandwidth_hz: 40, damping: 1.0}", "sim: {limit_min_mm: 5, limit_max_mm: 4}"),
+                  "axes[0].sim.limit_max_mm", "must be above limit_min_mm");
 }
 
 TEST(MachineConfig, SafetyErrors) {
@@ -295,7 +310,27 @@ TEST(MachineConfig, SafetyErrors) {
   expect_error_at(with + "safety: {estop: {input: door_closed}}\n", "safety.estop.input", "has a role already");
   expect_error_at(with + "safety: {estop: {}}\n", "safety.estop.input", "required");
   expect_error_at(with + "safety: {estop: {input: estop_ok, delay: 1}}\n", "safety.estop.delay", "unknown key");
-  expect_error_at(with + "safety: {door: x}\n", "safety.door", "unknown key");
+  expect_error_at(with + "safety: {door: x}\n", "safety.door", "a map");
+  expect_error_at(with + "safety: {door: {}}\n", "safety.door.input", "required");
+  expect_error_at(with + "safety: {door: {input: clamp}}\n", "safety.door.input", "not discrete_input");
+  expect_error_at(with + "safety: {estop: {input: estop_ok}, door: {input: estop_ok}}\n", "safety.door.input",
+                  "has a role already");
+  {
+    const MachineConfig d = parse_machine_config(with + "safety: {door: {input: estop_ok}}\n", kLabel);
+    EXPECT_EQ(d.io.points[static_cast<size_t>(d.safety.door_input)].name, "estop_ok");
+    EXPECT_TRUE(d.safety.enabled());
+  }
+  expect_error_at(with + "safety: {hard_limits: [{axis: Q, max: estop_ok}]}\n", "safety.hard_limits[0].axis", "no axis Q");
+  expect_error_at(with + "safety: {hard_limits: [{axis: X}]}\n", "safety.hard_limits[0].max", "a min or a max input");
+  expect_error_at(with + "safety: {hard_limits: [{axis: X, min: clamp}]}\n", "safety.hard_limits[0].min",
+                  "not discrete_input");
+  expect_error_at(with + "safety: {estop: {input: estop_ok}, hard_limits: [{axis: X, max: estop_ok}]}\n",
+                  "safety.hard_limits[0].max", "has a role already");
+  const MachineConfig c = parse_machine_config(with + "safety: {hard_limits: [{axis: Y, max: estop_ok}]}\n", kLabel);
+  ASSERT_EQ(c.safety.hard_limits.size(), 1u);
+  EXPECT_EQ(c.safety.hard_limits[0].axis, 1);
+  EXPECT_EQ(c.safety.hard_limits[0].min_input, -1);
+  EXPECT_EQ(c.io.points[static_cast<size_t>(c.safety.hard_limits[0].max_input)].name, "estop_ok");
 }
 
 TEST(MachineConfig, DuplicateKey) {

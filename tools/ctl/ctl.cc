@@ -268,14 +268,17 @@ int Ctl::status() {
 int Ctl::disable() { return drive_command(cnc::lcmt_drive_command::DISABLE), 0; }
 
 int Ctl::fault_reset() {
-  if (!cfg_.safety.enabled()) return drive_command(cnc::lcmt_drive_command::FAULT_RESET), 0;
-  // With an E-stop the bridge answers: done (fault_reset_done), or refused while the
-  // input reads 0 (estop_reset_refused): exit 3 with its text.
+  if (cfg_.safety.estop_input < 0 && cfg_.safety.hard_limits.empty())
+    return drive_command(cnc::lcmt_drive_command::FAULT_RESET), 0;
+  // With an E-stop or hard limits the bridge answers: done (fault_reset_done), or
+  // refused while the E-stop's input reads 0 or the axes still brake
+  // (estop_reset_refused, limit_reset_refused): exit 3 with its text.
   const size_t from = view_.alarms.size();
   drive_command(cnc::lcmt_drive_command::FAULT_RESET);
   std::string why, done;
   wait(std::min(timeout_s_, 5.0), [&] {
     why = bridge_alarm_since(from, "estop_reset_refused");
+    if (why.empty()) why = bridge_alarm_since(from, "limit_reset_refused");
     done = bridge_alarm_since(from, "fault_reset_done");
     return !why.empty() || !done.empty();
   });

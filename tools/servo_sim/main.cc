@@ -9,6 +9,10 @@
 // "at AXIS MM input NAME VALUE" when AXIS next passes MM (a switch the axis runs
 // into, or a test pressing the E-stop mid-move); each change is logged with the wall
 // clock and where and how fast the axes go, and each drive's enable and disable too.
+// Hard-limit switches (safety.hard_limits) open as their axis passes
+// axes[].sim.limit_min_mm / limit_max_mm; "cut NAME" cuts a switch's wire (it reads 0
+// until "mend NAME"; also after "at AXIS MM"). The E-stop starts released, the guard
+// door shut (safety.door.input 1: "input NAME 0" opens it).
 //
 //   cnc-servo-sim --machine M [--port P] [--bind ADDR]      TCP axes: one port
 //                 [--device PTY] [--rtu-timing real|none]   RTU axes: the simulator's end of the line
@@ -314,6 +318,19 @@ class Simulator {
   IoSim* io_for(int unit, bool tcp);
   void reply_io(IoSim& io, modbus_t* ctx, const uint8_t* query, int len);
   bool set_io_point(const std::string& line);
+  // "cut NAME", "mend NAME": a hard-limit switch's wire.
+  bool cut_wire(const std::string& line);
+  // The hard-limit switches, opened by their axis's position (poll_limits).
+  struct LimitSwitch {
+    size_t drive;
+    int end;          // -1 min, +1 max
+    double at_mm;     // open at and beyond
+    std::string input;
+    bool cut = false;
+    int value = -1;   // as last set
+  };
+  std::vector<LimitSwitch> limit_switches_;
+  void poll_limits();
   // "at AXIS MM input NAME VALUE": armed now, applied when AXIS passes MM (poll_triggers).
   bool arm_trigger(const std::string& line);
   void poll_triggers();
@@ -465,11 +482,27 @@ Simulator::Simulator(const cnc::config::MachineConfig& cfg, const cnc::service::
     } else if (rtu_.empty()) {
       throw std::runtime_error("I/O module " + cfg.io.modules[m].name + " on RTU is served only on the axes' line");
     }
-    // The E-stop button (safety.estop.input, normally closed) starts released, its wire whole.
-    if (cfg.safety.estop_input >= 0) io.emu->set_point(cfg.io.points[static_cast<size_t>(cfg.safety.estop_input)].name, 1);
+    // The E-stop button (safety.estop.input, normally closed) starts released, its wire
+    // whole; the guard door shut; limit switches closed (until their axis opens them).
+    for (int point : {cfg.safety.estop_input, cfg.safety.door_input})
+      if (point >= 0) io.emu->set_point(cfg.io.points[static_cast<size_t>(point)].name, 1);
+    for (const auto& h : cfg.safety.hard_limits)
+      for (int point : {h.min_input, h.max_input})
+        if (point >= 0) io.emu->set_point(cfg.io.points[static_cast<size_t>(point)].name, 1);
     ios_.push_back(std::move(io));
   }
   if (all_.empty() && !vfd_ && ios_.empty()) throw std::runtime_error("no axis uses transport modbus_tcp or modbus_rtu");
+  for (const auto& h : cfg.safety.hard_limits) {
+    const auto& ax = cfg.axes[static_cast<size_t>(h.axis)];
+    for (int end : {-1, 1}) {
+      const int point = end < 0 ? h.min_input : h.max_input;
+      const double at = end < 0 ? ax.sim.limit_min_mm : ax.sim.limit_max_mm;
+      if (point < 0 || std::isnan(at)) continue;
+      for (size_t i = 0; i < all_.size(); ++i)
+        if (all_[i]->name() == ax.name)
+          limit_switches_.push_back(LimitSwitch{i, end, at, cfg.io.points[static_cast<size_t>(point)].name});
+    }
+  }
   {
     // How long a stalled master's dry stream stops the simulated world (SimWorld).
     const std::string p = args.option("master-stall-pause-s");
@@ -597,18 +630,44 @@ bool Simulator::arm_trigger(const std::string& line) {
   double at = 0;
   if (!(in >> what) || what != "at") return false;
   std::string rest;
-  if (!(in >> axis >> at) || !std::getline(in, rest) || rest.find("input") == std::string::npos) {
-    spdlog::error("cnc-servo-sim: control command '{}': at needs AXIS MM input NAME VALUE", line);
+  if (!(in >> axis >> at) || !std::getline(in, rest) || rest.find_first_not_of(' ') == std::string::npos) {
+    spdlog::error("cnc-servo-sim: control command '{}': at needs AXIS MM input NAME VALUE (or cut NAME, mend NAME)", line);
     return true;
   }
   for (size_t i = 0; i < all_.size(); ++i)
     if (all_[i]->name() == axis) {
-      triggers_.push_back(Trigger{i, at, all_[i]->position_mm() < at, rest.substr(rest.find("input"))});
+      triggers_.push_back(Trigger{i, at, all_[i]->position_mm() < at, rest.substr(rest.find_first_not_of(' '))});
       spdlog::info("cnc-servo-sim: armed: '{}' when {} passes {:.4f} mm", triggers_.back().command, axis, at);
       return true;
     }
   spdlog::error("cnc-servo-sim: control command '{}': no simulated axis {}", line, axis);
   return true;
+}
+
+bool Simulator::cut_wire(const std::string& line) {
+  std::istringstream in(line);
+  std::string what, name;
+  if (!(in >> what) || (what != "cut" && what != "mend")) return false;
+  in >> name;
+  for (LimitSwitch& l : limit_switches_)
+    if (l.input == name) {
+      l.cut = what == "cut";
+      spdlog::info("cnc-servo-sim: the wire of limit switch {} {}", name, l.cut ? "cut" : "mended");
+      poll_limits();
+      return true;
+    }
+  spdlog::error("cnc-servo-sim: control command '{}': no simulated limit switch '{}'", line, name);
+  return true;
+}
+
+void Simulator::poll_limits() {
+  for (LimitSwitch& l : limit_switches_) {
+    const double x = all_[l.drive]->position_mm();
+    const int value = !l.cut && (l.end > 0 ? x < l.at_mm : x > l.at_mm) ? 1 : 0;
+    if (value == l.value) continue;
+    l.value = value;
+    set_io_point("input " + l.input + " " + std::to_string(value));
+  }
 }
 
 void Simulator::poll_triggers() {
@@ -618,7 +677,7 @@ void Simulator::poll_triggers() {
       ++k;
       continue;
     }
-    set_io_point(t.command);
+    if (!cut_wire(t.command)) set_io_point(t.command);
     triggers_.erase(triggers_.begin() + static_cast<std::ptrdiff_t>(k));
   }
 }
@@ -797,7 +856,7 @@ void Simulator::read_control() {
   while ((nl = control_buf_.find('\n')) != std::string::npos) {
     const std::string line = control_buf_.substr(0, nl);
     control_buf_.erase(0, nl + 1);
-    if (arm_trigger(line) || set_io_point(line)) continue;
+    if (arm_trigger(line) || cut_wire(line) || set_io_point(line)) continue;
     const std::string why = injector_.apply(line, cnc::util::monotonic_s());
     if (why.empty()) {
       spdlog::warn("cnc-servo-sim: injected '{}'", line);
@@ -810,6 +869,7 @@ void Simulator::read_control() {
 void Simulator::housekeeping(double now) {
   injector_.poll(now);
   poll_triggers();
+  poll_limits();
   comm_seen_.resize(all_.size());
   for (size_t i = 0; i < all_.size(); ++i) {
     const SimDrive& d = *all_[i];
