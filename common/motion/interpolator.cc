@@ -654,7 +654,7 @@ const Setpoint& Interpolator::step() {
   if (active) {
     ++program_cycles_;
     hold_at_line_start();
-    const bool pausing = hold_ || stopping_;
+    const bool pausing = hold_ || stopping_ || door_resume_;
     if (!blocks_.empty() && blocks_.front().stop_block() && v_ == 0) {
       at_stop_block(pausing);
     } else if (blocks_.empty() || (stopping_ && v_ == 0 && a_ == 0)) {

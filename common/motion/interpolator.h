@@ -413,7 +413,7 @@ class Interpolator {
   // RESUME turns it on again and the path stays held until it is at speed.
   bool door_hold_ = false;
   SpindleState door_spindle_;  // the spindle the door stopped (direction 0: none)
-  bool door_resume_ = false;   // RESUMEd: held until the spindle is at speed
+  bool door_resume_ = false;   // RESUMEd: the path stands (RUNNING) until the spindle is at speed
   void door_spindle_stop();
 
   std::array<double, program::kMaxAxes> pos_{};

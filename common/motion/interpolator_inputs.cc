@@ -147,14 +147,14 @@ bool Interpolator::apply_command(const Command& cmd) {
     case Command::Kind::kResume:
       door_hold_ = false;
       if (door_spindle_.direction != 0) {
-        // The spindle the door stopped turns again; the path waits for it at speed.
+        // The spindle the door stopped turns again; the path, RUNNING, stands until it
+        // is at speed.
         ++spindle_.seq;
         spindle_.direction = door_spindle_.direction;
         spindle_.rpm = door_spindle_.rpm;
         door_spindle_ = SpindleState{};
         spindle_wait_ = wait_for_spindle_ && !auto_resume_pauses_;
         door_resume_ = spindle_wait_;
-        if (door_resume_) break;
       }
       hold_ = false;
       single_block_held_ = false;
@@ -202,11 +202,7 @@ bool Interpolator::apply_command(const Command& cmd) {
     case Command::Kind::kSpindleAtSpeed:
       if (spindle_wait_ && std::isfinite(cmd.value) && cmd.value >= static_cast<double>(spindle_.seq))
         spindle_wait_ = false;
-      if (door_resume_ && !spindle_wait_) {
-        door_resume_ = false;
-        hold_ = false;
-        single_block_held_ = false;
-      }
+      if (!spindle_wait_) door_resume_ = false;
       break;
     case Command::Kind::kOverride:
     case Command::Kind::kRapidOverride:

@@ -486,11 +486,13 @@ bool InterpolatorNode::door_refuses(const cnc::lcmt_program_command& m) {
 
 void InterpolatorNode::door_cycle() {
   if (!door_open_) {
+    if (door_acted_) publish_state(true);  // shut: the program server's interlock lets motion go
     door_acted_ = false;
     return;
   }
   if (door_acted_) return;
   door_acted_ = true;
+  publish_state(true);
   if (manual_ != Manual::kNone) {
     manual_stop("the guard door (input " + door_input_ + ") opened");
     return;
@@ -696,6 +698,7 @@ void InterpolatorNode::publish_state(bool force) {
   m.starved_cycles = core_.starved_cycles();
   m.feed_override = core_.feed_override();
   m.rapid_override = core_.rapid_override();
+  m.door_open = door_open_ ? 1 : 0;
   m.program_time_s = core_.program_time_s();
   m.num_axes = core_.last().num_axes > 0 ? core_.last().num_axes : static_cast<int32_t>(cfg_.axes.size());
   // Machine coordinates (the setpoints are the drives', which differ by a homed axis's offset).

@@ -15,7 +15,6 @@
 
 #include "cnc/lcmt_alarm.hpp"
 #include "cnc/lcmt_interp_state.hpp"
-#include "cnc/lcmt_io_status.hpp"
 #include "cnc/lcmt_program_state.hpp"
 #include "cnc/lcmt_setpoint.hpp"
 #include "common/program/block_msg.h"
@@ -36,6 +35,7 @@ ProgramServerNode::ProgramServerNode(const config::MachineConfig& cfg, bus::Bus&
   // Where the machine stands, for the start of the next program.
   bus_.subscribe<cnc::lcmt_interp_state>(cfg.channel(ch::kInterpState), [this](const cnc::lcmt_interp_state& m) {
     if (m.num_axes == static_cast<int32_t>(cfg_.axes.size())) machine_position_ = m.position_mm;
+    door_open_ = cfg_.safety.door_input >= 0 && m.door_open != 0;  // the interpolator's view of IO_STATUS
     on_interp_state(m);
   });
   bus_.subscribe<cnc::lcmt_axis_status>(cfg.channel(ch::kAxisStatus), [this](const cnc::lcmt_axis_status& m) {
@@ -43,10 +43,6 @@ ProgramServerNode::ProgramServerNode(const config::MachineConfig& cfg, bus::Bus&
     axes_ = m;
     axes_s_ = util::monotonic_s();
   });
-  if (cfg.safety.door_input >= 0)
-    bus_.subscribe<cnc::lcmt_io_status>(cfg.channel(ch::kIoStatus), [this](const cnc::lcmt_io_status& m) {
-      door_open_ = m.door == cnc::lcmt_io_status::DOOR_OPEN;
-    });
   // The interpolator's fault, by its own words.
   bus_.subscribe<cnc::lcmt_alarm>(cfg.channel(ch::kAlarm), [this](const cnc::lcmt_alarm& m) {
     if (m.source == "cnc-interpolator" && (m.code == "interp_fault" || m.code == "publish_failed"))

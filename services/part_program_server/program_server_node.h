@@ -99,7 +99,7 @@ class ProgramServerNode {
   void load_program(const std::string& path, int from_line = 0);
   bool approach_pending_ = false;  // loaded from a line: START waits for CONFIRM
   cnc::lcmt_axis_status axes_{};
-  bool door_open_ = false;  // IO_STATUS: the guard door (safety.door) is open
+  bool door_open_ = false;  // INTERP_STATE: the guard door (safety.door) is open
   double axes_s_ = -1e9;
   std::string refusal_;
   int32_t refused_sender_ = 0;

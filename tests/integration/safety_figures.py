@@ -53,8 +53,9 @@ def speed_at(axis, t0):
 
 def stop_figures(name, t0, x0, t_brake, stood_ms, t_reset, axis, power, a, jerk, check, disabled=True, lead_s=0.0):
     """Prints and checks one stop: from the edge t0 (X at x0) the reaction t_brake (wall
-    clock, us), the command's stop distance within v*t + v^2/(2a) + 2*v*a/(2j) (the
-    limiter ends a stop on a curve at half the jerk limit) and no shorter than v^2/(2a),
+    clock, us), the command's stop distance within v*t + the time-optimal brake at a and
+    j/2 (v^2/(2a) + v*a/j: the limiter ends a stop on a curve at half the jerk limit)
+    and no shorter than v^2/(2a),
     X at rest until t_reset, the drives disabled at standstill (or, disabled=False,
     enabled throughout). lead_s: how long after t_brake the drives' command begins
     braking (the bridge's playback behind a path the interpolator brakes)."""
@@ -66,10 +67,12 @@ def stop_figures(name, t0, x0, t_brake, stood_ms, t_reset, axis, power, a, jerk,
     cmd_rest, act_rest = before[-1][1], before[-1][2]
     cmd0 = interp(axis, t0, 1)
     d_cmd, d_act = abs(cmd_rest - cmd0), abs(act_rest - x0)
-    ramp = v * a / (2 * jerk)
+    def brake(j):
+        """The time-optimal stop from v at a and j (a never reached below v = a^2/j)."""
+        return v * v / (2 * a) + v * a / (2 * j) if v >= a * a / j else v * (v / j) ** 0.5
     low = v * v / (2 * a)
-    ideal = v * (t_react + lead_s) + low + ramp
-    bound = v * (t_react + lead_s) + low + 2 * ramp
+    ideal = v * (t_react + lead_s) + brake(jerk)
+    bound = v * (t_react + lead_s) + brake(jerk / 2)
     lag = abs(cmd0 - x0)
     still = next((s for s in before if all(abs(r[2] - act_rest) <= 1e-3 for r in before if r[0] >= s[0])), None)
     t_still = (still[0] - t0) * 1e-3 if still else float("nan")
@@ -79,7 +82,7 @@ def stop_figures(name, t0, x0, t_brake, stood_ms, t_reset, axis, power, a, jerk,
           f"{f' (+ the playback lead {lead_s * 1e3:.0f} ms)' if lead_s else ''}; the command at rest "
           f"{stood_ms:.1f} ms after it; X within 1 um of its rest {t_still:.1f} ms after the edge", file=sys.stderr)
     print(f"# {name}: stop distance of the command {d_cmd:.4f} mm; v^2/(2a) {low:.4f} mm; time-optimal "
-          f"v*t + v^2/(2a) + v*a/(2j) = {ideal:.4f} mm ({d_cmd / ideal:.3f} of it); bound {bound:.4f} mm "
+          f"(reaction and brake) {ideal:.4f} mm ({d_cmd / ideal:.3f} of it); bound (the brake at j/2) {bound:.4f} mm "
           f"(a {a:g} mm/s^2, j {jerk:g} mm/s^3); of X itself {d_act:.4f} mm (its lag at the edge {lag:.4f} mm)",
           file=sys.stderr)
     for p in off:

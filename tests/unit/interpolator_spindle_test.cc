@@ -101,6 +101,61 @@ TEST(InterpolatorSpindle, ThePathStandsAtAChangeUntilItIsAtSpeed) {
   EXPECT_EQ(core.last().position_mm[0], 20.0);
 }
 
+cnc::lcmt_interp_input command_input(int8_t command, double value) {
+  cnc::lcmt_interp_input in{};
+  in.kind = cnc::lcmt_interp_input::COMMAND;
+  in.command.command = command;
+  in.command.value = value;
+  return in;
+}
+
+TEST(InterpolatorSpindle, TheDoorsHoldStopsItAndResumeWaitsForItAtSpeed) {
+  // The guard door's HOLD (value 1): the path brakes, the spindle stops once it stands;
+  // RESUME turns it on again and the path stands, RUNNING, until it is at speed.
+  const config::MachineConfig cfg = load("sim3_spindle.yaml");
+  Interpolator core(cfg);
+  load_program(core);
+  for (int i = 0; i < 500; ++i) core.step();
+  EXPECT_EQ(apply_recorded_input(core, at_speed_input(1), 3), "");
+  while (core.last().position_mm[0] < 5) core.step();
+  EXPECT_EQ(apply_recorded_input(core, command_input(cnc::lcmt_program_command::HOLD, 1), 3), "");
+  int64_t braking = 0;
+  while (core.state() != RunState::kHeld && braking < 1000) {
+    core.step();
+    ++braking;
+    if (core.state() != RunState::kHeld) {
+      EXPECT_EQ(core.spindle().direction, 1) << "turning while the path brakes";
+    }
+  }
+  ASSERT_EQ(core.state(), RunState::kHeld);
+  EXPECT_EQ(core.spindle().direction, 0) << "stopped once the path stands";
+  EXPECT_EQ(core.spindle().seq, 2);
+  const double held_at = core.last().position_mm[0];
+  for (int i = 0; i < 100; ++i) core.step();
+  EXPECT_EQ(core.last().position_mm[0], held_at);
+  EXPECT_EQ(apply_recorded_input(core, command_input(cnc::lcmt_program_command::RESUME, 0), 3), "");
+  // A RESUME again (an operator's client sends it until it sees the effect) changes nothing.
+  EXPECT_EQ(apply_recorded_input(core, command_input(cnc::lcmt_program_command::RESUME, 0), 3), "");
+  for (int i = 0; i < 200; ++i) core.step();
+  EXPECT_EQ(core.spindle().seq, 3);
+  EXPECT_EQ(core.spindle().direction, 1);
+  EXPECT_EQ(core.spindle().rpm, 6000);
+  EXPECT_TRUE(core.spindle_waiting());
+  EXPECT_EQ(core.state(), RunState::kRunning);
+  EXPECT_EQ(core.last().position_mm[0], held_at) << "no motion before the spindle is at speed";
+  EXPECT_EQ(apply_recorded_input(core, at_speed_input(3), 3), "");
+  for (int i = 0; i < 10; ++i) core.step();
+  EXPECT_GT(core.last().position_mm[0], held_at);
+  ASSERT_LT(core.last().position_mm[0], 9.0) << "short of the M5 at X 10";
+  // An operator's HOLD (value 0) does not touch the spindle.
+  EXPECT_EQ(apply_recorded_input(core, command_input(cnc::lcmt_program_command::HOLD, 0), 3), "");
+  for (int i = 0; i < 1000 && core.state() != RunState::kHeld; ++i) core.step();
+  ASSERT_EQ(core.state(), RunState::kHeld);
+  for (int i = 0; i < 50; ++i) core.step();
+  EXPECT_EQ(core.spindle().direction, 1);
+  EXPECT_EQ(core.spindle().seq, 3);
+}
+
 TEST(InterpolatorSpindle, ProgramEndAndStopTurnItOff) {
   const config::MachineConfig cfg = load("sim3_spindle.yaml");
   Interpolator core(cfg);
