@@ -152,6 +152,8 @@ class Interpreter {
   void return_from_call(double value, bool has_value, int column);
   // o<name> call (m98 false) or M98 P<name> (true): where the subroutine starts.
   SubDef find_sub(const std::string& name, int column, bool m98);
+  Frame call_frame(const std::string& name, int column) const;
+  void enter_sub(Frame fr, const SubDef& def);
   std::string beyond_sub_dirs(const std::string& file) const;
   [[noreturn]] void fail_at_def(const SubDef& def, const std::string& detail);
 

@@ -119,19 +119,36 @@ void Interpreter::o_call(const OStatement& o, const std::string& name) {
   if (o.args.size() > 30) fail(o.column, "more than 30 arguments to o<" + name + ">");
   for (size_t i = 0; i < o.args.size(); ++i) args[i] = evaluate(line_.arena, o.args[i], *reader_);
   const SubDef def = find_sub(name, o.column, false);
+  Frame fr = call_frame(name, o.column);
+  params_.push_call();
+  for (size_t i = 0; i < 30; ++i)
+    if (i < o.args.size()) params_.set(static_cast<int>(i) + 1, args[i]);
+  enter_sub(std::move(fr), def);
+}
+
+// The frame of a call of `name` from the line being executed.
+Interpreter::Frame Interpreter::call_frame(const std::string& name, int column) const {
   Frame fr;
   fr.sub = name;
   fr.return_file = file_;
   fr.return_offset = files_[static_cast<size_t>(file_)]->offset();
   fr.return_line = line_no_;
-  fr.call_column = o.column;
+  fr.call_column = column;
   fr.loops = loops_.size();
-  params_.push_call();
-  for (size_t i = 0; i < 30; ++i)
-    if (i < o.args.size()) params_.set(static_cast<int>(i) + 1, args[i]);
+  return fr;
+}
+
+// Into the subroutine `def` with its frame pushed; an O-word sub called by M98, or a
+// Fanuc subprogram by o<> call, is refused at its definition.
+void Interpreter::enter_sub(Frame fr, const SubDef& def) {
+  const std::string name = fr.sub;
+  const bool m98 = fr.fanuc;
   frames_.push_back(std::move(fr));
-  if (def.fanuc)
+  if (def.fanuc && !m98)
     fail_at_def(def, "Fanuc subprogram O" + name + " is called with M98 P" + name + ", not o<" + name + "> call");
+  if (!def.fanuc && m98)
+    fail_at_def(def, "o<" + name + "> sub is called with o<" + name + "> call, not M98 P" + name +
+                         " (M98 calls Fanuc subprograms headed by a bare O" + name + ")");
   file_ = def.file;
   files_[static_cast<size_t>(file_)]->seek(def.offset);
   line_no_ = def.line;
@@ -505,24 +522,12 @@ void Interpreter::fanuc_call() {
     fail(mw.column, "M98 P" + name + ": calls nested deeper than " + std::to_string(setup_.max_call_depth));
   const int64_t call_start = files_[static_cast<size_t>(file_)]->line_start;
   const SubDef def = find_sub(name, mw.column, true);
-  Frame fr;
-  fr.sub = name;
-  fr.return_file = file_;
-  fr.return_offset = files_[static_cast<size_t>(file_)]->offset();
-  fr.return_line = line_no_;
-  fr.call_column = mw.column;
-  fr.loops = loops_.size();
+  Frame fr = call_frame(name, mw.column);
   fr.fanuc = true;
   fr.again = again;
   fr.call_start = call_start;
   params_.push_call(false);
-  frames_.push_back(std::move(fr));
-  if (!def.fanuc)
-    fail_at_def(def, "o<" + name + "> sub is called with o<" + name + "> call, not M98 P" + name +
-                         " (M98 calls Fanuc subprograms headed by a bare O" + name + ")");
-  file_ = def.file;
-  files_[static_cast<size_t>(file_)]->seek(def.offset);
-  line_no_ = def.line;
+  enter_sub(std::move(fr), def);
 }
 
 // M99 opening a line inside a call: the end of a Fanuc subprogram's run.
