@@ -27,7 +27,8 @@ std::set<std::string> transport_names() {
 // given its table: it may read no other key, and the table rejects every other key.
 constexpr std::string_view kTopKeys[] = {"cell",    "timing", "motion", "operator",     "hmi",    "process",
                                          "cutting", "program", "axes",  "drive_bridge", "logger", "security",
-                                         "monitor", "spindle", "io",  "safety", "kinematics"};
+                                         "monitor", "spindle", "io",  "safety", "kinematics",
+                                         "probe"};
 constexpr std::string_view kCellKeys[] = {"name", "channel_prefix", "lcm_url"};
 constexpr std::string_view kTimingKeys[] = {"ipo_period_s",       "servo_period_s",      "setpoint_timeout_s",
                                             "stop_decel_mm_s2",   "heartbeat_period_s",  "heartbeat_timeout_s",
@@ -77,6 +78,8 @@ constexpr std::string_view kSafetyLimitKeys[] = {"axis", "min", "max"};
 constexpr std::string_view kSafetyEstopKeys[] = {"input"};
 constexpr std::string_view kSafetyDoorKeys[] = {"input"};
 constexpr std::string_view kKinematicsKeys[] = {"type"};
+constexpr std::string_view kProbeKeys[] = {"input", "sim_box"};
+constexpr std::string_view kProbeBoxKeys[] = {"x_min_mm", "x_max_mm", "y_min_mm", "y_max_mm", "z_min_mm", "z_max_mm"};
 constexpr std::string_view kDriveBridgeKeys[] = {"enable_on_start", "profile_dir",     "enable_timeout_s",
                                                  "link_loss_timeout_s", "reconnect_min_s", "reconnect_max_s",
                                                  "lead_cycles"};
@@ -111,6 +114,8 @@ constexpr KeySection kSections[] = {
     {"safety.estop", kSafetyEstopKeys},
     {"safety.hard_limits[]", kSafetyLimitKeys},
     {"safety.door", kSafetyDoorKeys},
+    {"probe", kProbeKeys},
+    {"probe.sim_box", kProbeBoxKeys},
     {"logger", kLoggerKeys},
     {"security", kSecurityKeys},
     {"monitor", kMonitorKeys},
@@ -584,6 +589,36 @@ void read_kinematics(MapReader r, MachineConfig& c) {
   r.finish();
 }
 
+void read_probe(MapReader r, MachineConfig& c) {
+  const std::string path = r.child_path("input");
+  const std::string name = r.require_string("input");
+  if (!c.io.enabled) throw ConfigError(r.file(), path, "needs an io: section with the point '" + name + "'");
+  // Not a point another role reads (an M66 input, the safety chain's).
+  std::set<int> taken(c.io.digital_inputs.begin(), c.io.digital_inputs.end());
+  for (const int i : {c.safety.estop_input, c.safety.door_input})
+    if (i >= 0) taken.insert(i);
+  for (const auto& h : c.safety.hard_limits)
+    for (const int i : {h.min_input, h.max_input})
+      if (i >= 0) taken.insert(i);
+  c.probe.input = io_role(r, path, name, c.io, {IoKind::kDiscreteInput}, taken);
+  c.program.probe = true;
+  if (r.has("sim_box")) {
+    MapReader box = r.map("sim_box", kProbeBoxKeys);
+    static const char* const kMin[] = {"x_min_mm", "y_min_mm", "z_min_mm"};
+    static const char* const kMax[] = {"x_max_mm", "y_max_mm", "z_max_mm"};
+    for (int i = 0; i < 3; ++i) {
+      c.probe.box_min_mm[i] = box.require_double(kMin[i], -1e6, 1e6);
+      c.probe.box_max_mm[i] = box.require_double(kMax[i], -1e6, 1e6);
+      if (!(c.probe.box_max_mm[i] > c.probe.box_min_mm[i])) box.fail(kMax[i], std::string("must exceed ") + kMin[i]);
+    }
+    box.finish();
+    c.probe.sim_box = true;
+  } else {
+    r.map("sim_box", kProbeBoxKeys);
+  }
+  r.finish();
+}
+
 void read_logger(MapReader r, MachineConfig& c) {
   c.log_directory = r.get_string("directory", c.log_directory);
   c.log_rotate_mb = r.get_double("rotate_mb", c.log_rotate_mb, 1.0, 1e6);
@@ -621,6 +656,7 @@ MachineConfig read_machine(MapReader top) {
   if (top.has("io")) read_io(top.map("io", kIoKeys), c);
   if (top.has("safety")) read_safety(top.map("safety", kSafetyKeys), c);
   if (top.has("kinematics")) read_kinematics(top.map("kinematics", kKinematicsKeys), c);
+  if (top.has("probe")) read_probe(top.map("probe", kProbeKeys), c);
   read_logger(top.map("logger", kLoggerKeys), c);
   read_security(top.map("security", kSecurityKeys), c.security);
   read_monitor(top.map("monitor", kMonitorKeys), c);

@@ -165,6 +165,17 @@ struct SafetyConfig {
   bool enabled() const { return estop_input >= 0 || !hard_limits.empty() || door_input >= 0; }
 };
 
+// A touch probe (section `probe:`, optional; needs io:): G38.2-G38.5 stop where its
+// input changes, and a contact during any other move stops the machine with a fault.
+struct ProbeConfig {
+  int input = -1;  // probe.input: a discrete-input point (index into io.points), 1 while touching; -1: none
+  // The servo simulator's fixture (probe.sim_box): an axis-aligned box in machine
+  // coordinates of the first three axes; the input reads 1 while the tool tip is in it.
+  bool sim_box = false;
+  double box_min_mm[3] = {0, 0, 0}, box_max_mm[3] = {0, 0, 0};
+  bool enabled() const { return input >= 0; }
+};
+
 // Operator functions (section `operator:`).
 struct OperatorConfig {
   // No program, MDI or homing-free motion other than jogging until every axis with
@@ -286,6 +297,7 @@ struct MachineConfig {
   IoConfig io;
   SafetyConfig safety;
   KinematicsConfig kinematics;
+  ProbeConfig probe;
 
   // motion
   double default_feed_mm_per_min = 1000.0;

@@ -165,6 +165,7 @@ void Interpolator::clear_blocks() {
   blocks_.clear();
   ++epoch_;
   failed_ = false;
+  probe_braking_ = false;
   have_tail_ = false;
   PlanRequest r;
   r.kind = PlanRequest::Kind::kClear;
@@ -654,7 +655,9 @@ const Setpoint& Interpolator::step() {
   if (active) {
     ++program_cycles_;
     hold_at_line_start();
-    const bool pausing = hold_ || stopping_ || door_resume_;
+    track_probe_move();
+    if (probe_braking_ && v_ == 0) end_probe_move();
+    const bool pausing = hold_ || stopping_ || door_resume_ || probe_braking_;
     if (!blocks_.empty() && blocks_.front().stop_block() && v_ == 0) {
       at_stop_block(pausing);
     } else if (blocks_.empty() || (stopping_ && v_ == 0 && a_ == 0)) {
@@ -672,6 +675,10 @@ const Setpoint& Interpolator::step() {
     }
   }
   if (door_hold_ && state_ == RunState::kHeld) door_spindle_stop();
+  if (probe_.block_index >= 0 && !probe_.done && (blocks_.empty() || blocks_.front().serial != probe_serial_)) {
+    probe_.done = true;  // ran to its end (or the program was dropped)
+    probe_.end_cycle = cycle_;
+  }
   output_position();
   if (out_.feed_mm_per_min > 0) outputs_.motion();
   out_.state = state_;
@@ -682,6 +689,29 @@ const Setpoint& Interpolator::step() {
     link_->retire(retired_below_);
   }
   return out_;
+}
+
+void Interpolator::track_probe_move() {
+  if (blocks_.empty() || blocks_.front().block.probe == 0 || blocks_.front().serial == probe_serial_) return;
+  const Planned& f = blocks_.front();
+  probe_serial_ = f.serial;
+  probe_ = ProbeMove{f.block.index, f.block.probe, false, false, -1};
+  probe_braking_ = false;
+}
+
+void Interpolator::end_probe_move() {
+  // At rest in the probing move after its trip: it ends here, and the next block
+  // (made with this result) starts here.
+  probe_braking_ = false;
+  pop_block();
+  ++blocks_done_;
+  a_ = 0;
+  s_ = 0;
+  for (int a = 0; a < naxes_; ++a) tail_[a] = pos_[a];
+  have_tail_ = true;
+  if (!blocks_.empty()) u_ = blocks_.front().path.u_begin();
+  probe_.done = true;
+  probe_.end_cycle = cycle_;
 }
 
 void Interpolator::hold_at_line_start() {

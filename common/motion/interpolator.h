@@ -69,7 +69,12 @@ struct Command {
     // The spindle reached the speed of change `value` (a SpindleState::seq): the path,
     // at rest at that change, goes on. The node applies it when the drive bridge
     // reports the change at speed (SPINDLE_STATUS), recorded like every input.
-    kSpindleAtSpeed = 19
+    kSpindleAtSpeed = 19,
+    // The probe input changed during the probing move (G38.x) at the front: the path
+    // brakes to rest on it (jerk-limited, as at a hold) and the move ends there; the
+    // next block starts where the path rests. `position_mm` (the latched position) is
+    // carried for the record only. Refused (false) when the front is no probing move.
+    kProbeTrip = 20
   };
   Kind kind = Kind::kStart;
   double feed_override = 1.0;  // kOverride: 0.0 .. kMaxFeedOverride; kRapidOverride: 0.0 .. 1.0
@@ -122,6 +127,16 @@ struct SpindleState {
   int64_t seq = 0;
   int direction = 0;  // 1 cw, -1 ccw, 0 off
   double rpm = 0;     // 0 when off
+};
+
+// The probing move (G38.x block) the path is in or last left, for the node that
+// decides its result: from its first cycle at the front until the next one's.
+struct ProbeMove {
+  int64_t block_index = -1;  // -1: none yet
+  int kind = 0;              // 2..5 (G38.2..G38.5)
+  bool tripped = false;      // a kProbeTrip was applied during it
+  bool done = false;         // the path left it (at its end, or at rest after the trip)
+  int64_t end_cycle = -1;    // the cycle it was left at
 };
 
 // The shortest distance in which a brake limited by jerk J and acceleration A brings
@@ -198,6 +213,7 @@ class Interpolator {
   double drive_offset(int axis) const { return drive_offset_[static_cast<size_t>(axis)]; }
   const WorkCounters& work() const { return work_; }
   const SpindleState& spindle() const { return spindle_; }
+  const ProbeMove& probe_move() const { return probe_; }
   // Coolant and digital outputs where the path stands (machine_outputs.h).
   const MachineOutputs& outputs() const { return outputs_; }
   // At rest at a spindle change until kSpindleAtSpeed (a machine with a spindle:
@@ -324,6 +340,10 @@ class Interpolator {
   // A spindle event at the front, reached: the change taken (and waited for).
   void take_spindle_event(const Planned& p);
   void spindle_off();
+  // Probing: the move at the front noted when first reached; at rest after a trip it
+  // ends where the path stands.
+  void track_probe_move();
+  void end_probe_move();
 
   config::MachineConfig cfg_;
   double period_s_;
@@ -404,6 +424,9 @@ class Interpolator {
   } last_eval_;
 
   SpindleState spindle_;
+  ProbeMove probe_;
+  uint64_t probe_serial_ = UINT64_MAX;  // the front block ProbeMove describes
+  bool probe_braking_ = false;          // tripped: braking to rest in the probing move
   MachineOutputs outputs_;
   uint64_t outputs_taken_ = UINT64_MAX;  // serial of the coolant or output event last taken
   uint64_t spindle_taken_ = UINT64_MAX;  // serial of the spindle event last taken

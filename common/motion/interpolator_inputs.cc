@@ -110,6 +110,8 @@ void Interpolator::clear_program() {
   u_ = s_ = v_ = a_ = 0;
   dwell_left_ = -1;
   rest_left_ = 0;
+  probe_ = ProbeMove{};
+  probe_serial_ = UINT64_MAX;
   spindle_off();
 }
 
@@ -199,6 +201,15 @@ bool Interpolator::apply_command(const Command& cmd) {
       output_position();
       break;
     }
+    case Command::Kind::kProbeTrip:
+      // Only in the probing move at the front, and with nothing after it taken yet
+      // (its successor starts where the path comes to rest).
+      if (blocks_.empty() || blocks_.front().block.probe == 0 || blocks_.front().serial != probe_serial_ ||
+          next_index_ != blocks_.front().block.index + 1 || probe_.done)
+        return false;
+      probe_.tripped = true;
+      probe_braking_ = true;
+      break;
     case Command::Kind::kSpindleAtSpeed:
       if (spindle_wait_ && std::isfinite(cmd.value) && cmd.value >= static_cast<double>(spindle_.seq))
         spindle_wait_ = false;

@@ -699,7 +699,9 @@ bool Planner::close_in_on_low_ends(const Planned& p, BlockWork& w) const {
 
 void Planner::plan_junction(const Planned& prev, Planned& next) const {
   next.entry_free_ok = true;  // a stop; otherwise decided below
-  if (prev.stop_block() || next.stop_block() || prev.path.degenerate() || next.path.degenerate()) {
+  // A probing move starts and ends at rest (the next block starts where it stopped).
+  if (prev.stop_block() || next.stop_block() || prev.path.degenerate() || next.path.degenerate() ||
+      prev.block.probe != 0 || next.block.probe != 0) {
     next.v_entry = 0;
     return;
   }

@@ -95,7 +95,14 @@ struct Block {
   ArcGeometry arc;      // kArcCw, kArcCcw
   NurbsGeometry nurbs;  // kNurbs
   Event event;          // kEvent
+  // kLine: a G38.x probing move (2: G38.2 ... 5: G38.5), 0 none. It starts and ends
+  // at rest and stops where the probe input changes (the machine's result, not the
+  // block's end, is where the next block starts). On the wire: event_kind kProbeWire.
+  int8_t probe = 0;
 };
+
+// The event_kind a LINE block carries on the wire when it is a probing move (not an EventKind).
+inline constexpr int8_t kProbeWire = 100;
 
 // How a path tolerance P (G64 P) is shared: the interpolation's chords take at most
 // a quarter of it (never more than the machine's chord tolerance), the fit and the

@@ -63,6 +63,10 @@ cnc::lcmt_program_block to_msg(const Block& b, int64_t program_token) {
   m.event_number = b.event.number;
   m.event_value = b.event.value;
   m.event_text = b.event.text;
+  if (b.kind == BlockKind::kLine && b.probe != 0) {
+    m.event_kind = kProbeWire;
+    m.event_number = b.probe;
+  }
   return m;
 }
 
@@ -96,6 +100,10 @@ std::string from_msg(const cnc::lcmt_program_block& m, int num_axes, Block* out)
     b.event.number = m.event_number;
     b.event.value = m.event_value;
     b.event.text = m.event_text;
+  }
+  if (m.kind == static_cast<int8_t>(BlockKind::kLine) && m.event_kind == kProbeWire) {
+    if (m.event_number < 2 || m.event_number > 5) return "bad probing move (G38." + std::to_string(m.event_number) + ")";
+    b.probe = static_cast<int8_t>(m.event_number);
   }
   b.kind = static_cast<BlockKind>(m.kind);
   b.start = m.start;

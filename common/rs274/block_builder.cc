@@ -768,6 +768,16 @@ void BlockBuilder::nurbs_feed(const SourceRef& ref, int order, const std::vector
   position_ = std::move(e);
 }
 
+void BlockBuilder::straight_probe(const SourceRef& ref, const Pose& end, int kind) {
+  std::vector<double> e = to_machine(ref, end);
+  const double f = feed_mm_per_min(ref);
+  program::Block& b = begin(ref, program::BlockKind::kLine);
+  b.end = e;
+  b.feed_mm_per_min = f;
+  b.probe = static_cast<int8_t>(kind);
+  position_ = std::move(e);
+}
+
 void BlockBuilder::dwell(const SourceRef& ref, double seconds) {
   program::Block& b = begin(ref, program::BlockKind::kDwell);
   b.dwell_s = seconds;

@@ -74,6 +74,10 @@ class BlockBuilder : public Canon {
   void nurbs_feed(const SourceRef&, int order, const std::vector<NurbsPoint>& points, const std::vector<double>& knots,
                   const Pose& end) override;
   void dwell(const SourceRef&, double seconds) override;
+  void straight_probe(const SourceRef&, const Pose& end, int kind) override;
+  // Where the machine came to rest after a probing move (machine mm, one per axis):
+  // the next block starts there.
+  void set_position(const std::vector<double>& machine_mm) { position_ = machine_mm; }
   void change_tool(const SourceRef&, int) override;
   void orient_spindle(const SourceRef&, double, int) override;
   void set_spindle_speed(const SourceRef&, double) override;

@@ -73,6 +73,12 @@ class Canon {
   virtual void nurbs_feed(const SourceRef&, int order, const std::vector<NurbsPoint>& points,
                           const std::vector<double>& knots, const Pose& end) = 0;
   virtual void dwell(const SourceRef&, double seconds) = 0;
+  // G38.2-G38.5 (LinuxCNC's TURN_PROBE_ON, STRAIGHT_PROBE, TURN_PROBE_OFF): a straight
+  // move at the feed rate to `end` that stops where the probe input changes. kind:
+  // 2 toward, error without contact; 3 toward; 4 away, error without loss of contact; 5 away.
+  virtual void turn_probe_on(const SourceRef&) {}
+  virtual void straight_probe(const SourceRef&, const Pose& /*end*/, int /*kind*/) {}
+  virtual void turn_probe_off(const SourceRef&) {}
 
   // Tool.
   virtual void select_tool(const SourceRef&, int /*pocket's tool*/) {}

@@ -39,6 +39,9 @@ class CanonForward : public Canon {
     next_.nurbs_feed(r, order, points, knots, end);
   }
   void dwell(const SourceRef& r, double seconds) override { next_.dwell(r, seconds); }
+  void turn_probe_on(const SourceRef& r) override { next_.turn_probe_on(r); }
+  void straight_probe(const SourceRef& r, const Pose& end, int kind) override { next_.straight_probe(r, end, kind); }
+  void turn_probe_off(const SourceRef& r) override { next_.turn_probe_off(r); }
 
   void select_tool(const SourceRef& r, int t) override { next_.select_tool(r, t); }
   void start_change(const SourceRef& r) override { next_.start_change(r); }

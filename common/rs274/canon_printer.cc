@@ -90,6 +90,11 @@ void CanonPrinter::nurbs_feed(const SourceRef&, int, const std::vector<NurbsPoin
   line("NURBS_FEED(%lu, ...)", static_cast<unsigned long>(points.size()));
 }
 void CanonPrinter::dwell(const SourceRef&, double s) { line("DWELL(%.4f)", s); }
+void CanonPrinter::turn_probe_on(const SourceRef&) { line("TURN_PROBE_ON()"); }
+void CanonPrinter::straight_probe(const SourceRef&, const Pose& p, int) {
+  line("STRAIGHT_PROBE(%.4f, %.4f, %.4f, %.4f, %.4f, %.4f)", p[0], p[1], p[2], p[3], p[4], p[5]);
+}
+void CanonPrinter::turn_probe_off(const SourceRef&) { line("TURN_PROBE_OFF()"); }
 void CanonPrinter::select_tool(const SourceRef&, int t) { line("SELECT_TOOL(%d)", t); }
 // saicanon prints no diameter.
 void CanonPrinter::set_tool_table_entry(const SourceRef&, int index, int tool, const Pose& o, double, double front,

@@ -35,6 +35,9 @@ class CanonPrinter : public Canon {
   void nurbs_feed(const SourceRef&, int order, const std::vector<NurbsPoint>& points, const std::vector<double>& knots,
                   const Pose& end) override;
   void dwell(const SourceRef&, double seconds) override;
+  void turn_probe_on(const SourceRef&) override;
+  void straight_probe(const SourceRef&, const Pose& end, int kind) override;
+  void turn_probe_off(const SourceRef&) override;
   void select_tool(const SourceRef&, int) override;
   void set_tool_table_entry(const SourceRef&, int, int, const Pose&, double, double, double, int) override;
   void start_change(const SourceRef&) override;

@@ -67,6 +67,10 @@ struct MachineSetup {
   // var file, when write_var_file), atomically, as LinuxCNC writes its table.
   bool write_tool_table = false;
   bool has_probe = false;                  // G38.x needs one
+  // G38.x's result (#5061-#5070 and where the machine stopped): false, the interpreter
+  // takes it as LinuxCNC's rs274 does (the probe at the move's end, #5070 = 0); true,
+  // execute_next() reads no further line until set_probe_result() supplies it.
+  bool probe_results_supplied = false;
   int digital_inputs = 0;                  // M66 needs them
   int analog_inputs = 0;
   int digital_outputs = 64;                // M62-M65 indices 0..n-1
@@ -105,6 +109,16 @@ class Interpreter {
   bool execute_next();
 
   bool ended() const { return ended_; }
+  // Probing (probe_results_supplied): a G38.x move was made and its result is awaited;
+  // execute_next() does nothing meanwhile.
+  bool waiting_for_probe() const { return probe_wait_; }
+  // The G38.x move's end in machine coordinates (mm, degrees for A B C).
+  const Pose& probe_target_machine() const { return probe_target_machine_; }
+  int64_t probes_made() const { return probes_made_; }
+  // The result of the awaited G38.x move, machine coordinates: where the probe input
+  // changed (#5061-#5069 in the current work coordinates) and where the machine came
+  // to rest (the current point from now on). Throws std::logic_error when none is awaited.
+  void set_probe_result(bool tripped, const Pose& trip_machine, const Pose& rest_machine);
   // Lines read so far, executed or skipped (a loop that skips over a long block
   // every iteration costs that block each time: the bound on this number bounds the work).
   int64_t lines_executed() const { return lines_executed_; }
@@ -206,6 +220,7 @@ class Interpreter {
   void restore_modes(const SavedModes& s, int column);
   void cycle(Words& w);
   void spline(Words& w, bool cubic, int col);
+  void straight_probe(Words& w, int g, int col);
   void set_coord_system(int index);
   void end_program(bool m30);
   void persist();  // the var file and (when changed) the tool table, at program end
@@ -289,6 +304,9 @@ class Interpreter {
   int32_t fanuc_closed_line_ = 0;  // the line where the last G6.2 curve's knots were complete
   int32_t w53_column_ = 0;         // column of the G5.3 closing the curve
   bool in_cycle_ = false;
+  bool probe_wait_ = false;
+  Pose probe_target_machine_{};
+  int64_t probes_made_ = 0;
 
   // NURBS collection (G5.2 / Fanuc G6.2): control points until the curve closes.
   struct NurbsCollect;

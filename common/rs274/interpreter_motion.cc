@@ -123,7 +123,10 @@ void Interpreter::motion(Words& w) {
     return;
   }
   if (m == 330 || m == 331 || m == 760) fail(col, g_text(m) + " needs spindle synchronisation, which this machine lacks");
-  if (m >= 382 && m <= 385) fail(col, g_text(m) + " probes, and this machine's config has no probe input");
+  if (m >= 382 && m <= 385) {
+    straight_probe(w, m, col);
+    return;
+  }
   fail(col, "motion " + g_text(m) + " is not supported");
 }
 

@@ -187,6 +187,15 @@ DriveBridgeNode::DriveBridgeNode(const config::MachineConfig& cfg, bus::Bus& bus
       estop_.module = p.module;
       m.estop_input = p.name;
     }
+    if (cfg_.probe.input >= 0) {
+      const config::IoPointConfig& p = cfg_.io.points[static_cast<size_t>(cfg_.probe.input)];
+      const auto& di = io_->modules[static_cast<size_t>(p.module)].points[static_cast<size_t>(config::IoKind::kDiscreteInput)];
+      for (size_t i = 0; i < di.size(); ++i)
+        if (di[i] == cfg_.probe.input) probe_.bit = i;
+      probe_.module = p.module;
+      probe_.rise_mm.assign(cfg_.axes.size(), 0.0);
+      probe_.fall_mm.assign(cfg_.axes.size(), 0.0);
+    }
     bus_.subscribe<cnc::lcmt_io_command>(cfg.channel(ch::kIoCmd), [this](const auto& c) {
       Io& io = *io_;
       if (c.command_seq <= io.pending_seq) return;  // the newest change wins; a repeat changes nothing
@@ -425,6 +434,7 @@ void DriveBridgeNode::servo_tick_inner(double now_s) {
   if (io_)
     for (auto& m : io_->modules) m.rep = m.worker->io_report(m.slot);
   safety_tick(now_s);
+  probe_tick();
   take_operator_command(now_s);
   advance_state(now_s);
   report_reconnects();
@@ -666,6 +676,26 @@ bool DriveBridgeNode::safety_refuses_enable() {
   spdlog::warn("{}", text);
   alarm(cnc::lcmt_alarm::WARNING, "enable_refused", text);
   return true;
+}
+
+void DriveBridgeNode::probe_tick() {
+  if (probe_.module < 0) return;
+  const IoModule& mod = io_->modules[static_cast<size_t>(probe_.module)];
+  if (!(mod.rep.answering && mod.rep.in.valid)) {
+    probe_.value = -1;
+    return;
+  }
+  const int8_t v = ((mod.rep.in.discrete >> probe_.bit) & 1) != 0 ? 1 : 0;
+  if (probe_.value >= 0 && v != probe_.value) {
+    // The positions read in the round that sampled the edge: accurate to the speed
+    // times the time between two samples (a servo period) and the round's spread.
+    std::vector<double>& at = v ? probe_.rise_mm : probe_.fall_mm;
+    for (size_t i = 0; i < axes_.size(); ++i) at[i] = axes_[i].rep.actual_mm;
+    (v ? probe_.rise_cycle : probe_.fall_cycle) =
+        core_.mode() == BridgeCore::Mode::kFollowing && core_.last_cycle() >= 0 ? core_.playback_cycle() : -1.0;
+    ++(v ? probe_.rises : probe_.falls);
+  }
+  probe_.value = v;
 }
 
 void DriveBridgeNode::io_tick() {
@@ -1084,6 +1114,16 @@ void DriveBridgeNode::publish_status_inner(int64_t overruns) {
   }
   s.setpoint_gaps = core_.setpoint_gaps();
   s.servo_overruns = overruns;
+  s.probe = probe_.value;
+  if (probe_.module >= 0) {
+    s.num_probe_axes = static_cast<int32_t>(n);
+    s.probe_rises = probe_.rises;
+    s.probe_falls = probe_.falls;
+    s.probe_rise_mm = probe_.rise_mm;  // same size every time: no allocation
+    s.probe_fall_mm = probe_.fall_mm;
+    s.probe_rise_cycle = probe_.rise_cycle;
+    s.probe_fall_cycle = probe_.fall_cycle;
+  }
   bus_.publish(ch_status_, s);
   if (spindle_) publish_spindle_status();
   if (io_) publish_io_status();

@@ -128,6 +128,9 @@ class DriveBridgeNode {
   // An ENABLE the E-stop or a hard limit's latch forbids: ALARM enable_refused naming the input; true.
   bool safety_refuses_enable();
   void publish_io_status();
+  // The probe's share (probe.input): its input sampled every tick, each edge latched
+  // with the drives' actual positions of the same I/O round.
+  void probe_tick();
   void fault(size_t axis, const std::string& why, bool disable_axis);
   void begin_enable(double now_s);
   void check_drives();
@@ -247,6 +250,15 @@ class DriveBridgeNode {
     int64_t utime = 0;   // its last opening, wall clock
   };
   Door door_;
+  struct ProbeLatch {
+    int module = -1;  // index into io_->modules; -1: no probe configured
+    size_t bit = 0;   // its bit among the module's discrete inputs
+    int8_t value = -1;  // 1 touching, 0 not, -1 not read
+    int32_t rises = 0, falls = 0;
+    std::vector<double> rise_mm, fall_mm;
+    double rise_cycle = -1, fall_cycle = -1;
+  };
+  ProbeLatch probe_;
   std::string ch_io_status_;
   cnc::lcmt_io_status io_msg_{};  // reused by every status publish
   std::string ch_status_;

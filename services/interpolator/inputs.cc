@@ -32,6 +32,11 @@ bool to_core_command(const cnc::lcmt_program_command& m, Command* out) {
       out->kind = Command::Kind::kSpindleAtSpeed;
       out->value = m.value;
       return true;
+    case C::PROBE_TRIP:
+      *out = Command{};
+      out->kind = Command::Kind::kProbeTrip;
+      for (int a = 0; a < m.num_axes && a < program::kMaxAxes && static_cast<size_t>(a) < m.position_mm.size(); ++a) out->position_mm[static_cast<size_t>(a)] = m.position_mm[static_cast<size_t>(a)];
+      return true;
     case C::SINGLE_BLOCK:
     case C::OPTIONAL_STOP:
       if (!(m.value == 0 || m.value == 1)) return false;

@@ -90,6 +90,8 @@ void InterpolatorNode::on_command(const cnc::lcmt_program_command& m) { pending_
 void InterpolatorNode::on_program_state(const cnc::lcmt_program_state& m) {
   const bool loaded = m.state == cnc::lcmt_program_state::LOADED || m.state == cnc::lcmt_program_state::RUNNING;
   if (m.program_token == token_ && m.approach_pending == 0) approach_pending_ = false;
+  // A probing move's result may change the program's length (the server validates the rest again with it).
+  if (m.program_token == token_ && token_ != 0 && m.num_blocks > 0) num_blocks_ = m.num_blocks;
   if (!loaded || m.program_token == token_) return;
   // In FAULT nothing new is taken; after it, no program loaded before it.
   if (fault_ || m.program_token <= retired_token_) return;
@@ -332,6 +334,7 @@ void InterpolatorNode::run_cycle() {
   apply_pending_load();
   apply_pending_commands();
   door_cycle();
+  probe_cycle();
   manual_cycle();
   take_spindle_at_speed();
   feed_planner(cyc);
@@ -411,6 +414,9 @@ void InterpolatorNode::apply_pending_load() {
   m.program_path = program_path_;
   apply_command(Command{Command::Kind::kLoad, 1.0}, m);
   last_request_first_ = -1;
+  probe_.results = 0;
+  probe_.result_block = -1;
+  probe_.block = -1;
 }
 
 void InterpolatorNode::apply_pending_commands() {
@@ -433,9 +439,9 @@ void InterpolatorNode::apply_pending_command(const cnc::lcmt_program_command& m)
     approach_pending_ = false;
     return;
   }
-  if (m.command == PC::HOMED || m.command == PC::SPINDLE_AT_SPEED) {
+  if (m.command == PC::HOMED || m.command == PC::SPINDLE_AT_SPEED || m.command == PC::PROBE_TRIP) {
     spdlog::warn("{} from sender {} ignored: it is this interpolator's own input",
-                 m.command == PC::HOMED ? "HOMED" : "SPINDLE_AT_SPEED", m.sender);
+                 m.command == PC::HOMED ? "HOMED" : m.command == PC::PROBE_TRIP ? "PROBE_TRIP" : "SPINDLE_AT_SPEED", m.sender);
     return;
   }
   if (m.command == PC::STOP && manual_ == Manual::kHome) manual_stop("homing stopped by the operator");
@@ -604,6 +610,10 @@ void InterpolatorNode::feed_planner(int64_t cyc) {
         in.cycle = cyc;
         in.kind = cnc::lcmt_interp_input::BLOCK;
         in.block = it->second;
+        if (it->second.event_kind == program::kProbeWire) {
+          probe_.file = it->second.source_file;
+          probe_.line = it->second.source_line;
+        }
         publish_input(in);
         reorder_.erase(it);
       },
@@ -710,6 +720,14 @@ void InterpolatorNode::publish_state(bool force) {
   m.single_block = core_.single_block() ? 1 : 0;
   m.optional_stop = core_.optional_stop() ? 1 : 0;
   m.source_line = core_.last().source_line;
+  m.probe_results = probe_.results;
+  m.probe_block = probe_.result_block;
+  m.probe_tripped = probe_.tripped ? 1 : 0;
+  m.num_probe_axes = probe_.results > 0 ? m.num_axes : 0;
+  for (int a = 0; a < m.num_probe_axes; ++a) {
+    m.probe_trip_mm.push_back(probe_.trip[static_cast<size_t>(a)]);
+    m.probe_rest_mm.push_back(probe_.rest[static_cast<size_t>(a)]);
+  }
   bus_.publish(ch_state_, m);
 }
 

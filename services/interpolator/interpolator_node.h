@@ -93,6 +93,28 @@ class InterpolatorNode {
   void publish_spindle(int64_t cyc);
   // The core's coolant and digital outputs sent on IO_CMD (io: in the config).
   void publish_io(int64_t cyc);
+  // Probing (probe: in the config; interpolator_node_probe.cc). The drive bridge
+  // latches the probe input's edges (AXIS_STATUS); the edge a probing move (G38.x)
+  // waits for stops it (a recorded PROBE_TRIP); a contact during any other move is a
+  // fault. A probing move's result (tripped or not, the latched position, where the
+  // path rests) goes to the program server on INTERP_STATE, which makes the next
+  // blocks with it. A miss where G38.2/G38.4 needs a trip, and a probe standing
+  // wrongly at the move's start, stop the program with an ALARM naming file:line.
+  void probe_cycle();
+  void probe_stop(const std::string& why);
+  void probe_decide(bool tripped, const double* trip_mm);
+  struct ProbeWatch {
+    int32_t rises = -1, falls = -1;  // the bridge's edge counts already acted on (-1: none seen)
+    int64_t block = -1;              // the probing move being decided
+    bool decided = false;
+    std::string file;                // its source
+    int32_t line = 0;
+    std::array<double, program::kMaxAxes> latch{};
+    int32_t results = 0;             // of this program
+    int64_t result_block = -1;
+    bool tripped = false;
+    std::array<double, program::kMaxAxes> trip{}, rest{};
+  } probe_;
 
   // Operator motion (interpolator_node_manual.cc): jogs and the homing
   // sequence are moves the node makes itself, as a program of a line and an END

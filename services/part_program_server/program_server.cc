@@ -47,6 +47,7 @@ uint64_t block_hash(const program::Block& b, uint64_t h) {
   mix(&b.event.number, sizeof b.event.number);
   d(b.event.value);
   mix(b.event.text.data(), b.event.text.size());
+  mix(&b.probe, sizeof b.probe);
   return h;
 }
 
@@ -112,14 +113,16 @@ class ProgramServer::Run {
       const std::optional<rs274::ModalState>& modes)
       : builder_(builder_setup(s.builder, start),
                  [this](int32_t f) -> const std::string& { return interp_->file_names()[static_cast<size_t>(f)]; }),
-        max_lines_(validating ? s.max_validation_lines : -1) {
+        max_lines_(validating ? s.max_validation_lines : -1), validating_(validating) {
     rs274::MachineSetup m = s.machine;
+    m.probe_results_supplied = true;  // supply_probe() gives each G38.x move its result
     m.block_delete = block_delete;
     m.initial_modes = modes;
-    for (size_t i = 0; i < s.builder.axis_names.size() && i < start.size(); ++i) {
+    for (size_t i = 0; i < s.builder.axis_names.size(); ++i) {
       static const char kAxes[] = "XYZABCUVW";
       const char* at = s.builder.axis_names[i].size() == 1 ? std::strchr(kAxes, s.builder.axis_names[i][0]) : nullptr;
-      if (at != nullptr && *at != '\0') m.start_position[static_cast<size_t>(at - kAxes)] = start[i];
+      pose_index_.push_back(at != nullptr && *at != '\0' ? static_cast<int>(at - kAxes) : -1);
+      if (pose_index_.back() >= 0 && i < start.size()) m.start_position[static_cast<size_t>(pose_index_.back())] = start[i];
     }
     // Only the run that serves the program (and so runs it) keeps parameters.
     m.write_var_file = !validating && m.write_var_file;
@@ -131,7 +134,12 @@ class ProgramServer::Run {
   // The next block; false after the end block. Throws rs274::Error.
   bool next(program::Block* out) {
     auto& q = builder_.blocks();
+    waiting_ = false;
     while (q.empty()) {
+      if (interp_->waiting_for_probe() && !supply_probe()) {
+        waiting_ = true;
+        return false;
+      }
       if (!interp_->execute_next() && q.empty()) return false;
       if (max_lines_ > 0 && interp_->lines_executed() > max_lines_)
         throw rs274::Error(interp_->file_names().front(), rs274::SourceRef{},
@@ -145,6 +153,15 @@ class ProgramServer::Run {
   }
 
   int64_t lines() const { return interp_->lines_executed(); }
+  // next() returned false because a probing move's result is not known yet.
+  bool waiting() const { return waiting_; }
+  // The machine's results, applied in order (nullptr: none known). Past them a
+  // validating run (or one that may assume, the dry run's) takes the probe as tripped
+  // at the move's end; a serving one waits.
+  void set_probe_results(const std::vector<ProbeResult>* r, bool may_assume) {
+    results_ = r;
+    may_assume_ = may_assume || validating_;
+  }
 
   // Run from line N: the state before the main file's line N is first reached, and
   // the number of blocks made before it.
@@ -161,6 +178,25 @@ class ProgramServer::Run {
   const rs274::ModalState& state() const { return state_; }
 
  private:
+  bool supply_probe() {
+    const auto k = static_cast<size_t>(interp_->probes_made() - 1);
+    rs274::Pose trip = interp_->probe_target_machine(), rest = trip;
+    if (results_ == nullptr || k >= results_->size()) {
+      if (!may_assume_) return false;
+      interp_->set_probe_result(true, trip, rest);
+      return true;
+    }
+    const ProbeResult& r = (*results_)[k];
+    for (size_t i = 0; i < pose_index_.size(); ++i) {
+      if (pose_index_[i] < 0) continue;
+      if (i < r.trip_mm.size()) trip[static_cast<size_t>(pose_index_[i])] = r.trip_mm[i];
+      if (i < r.rest_mm.size()) rest[static_cast<size_t>(pose_index_[i])] = r.rest_mm[i];
+    }
+    if (r.rest_mm.size() == pose_index_.size()) builder_.set_position(r.rest_mm);
+    interp_->set_probe_result(r.tripped, trip, rest);
+    return true;
+  }
+
   static rs274::BuilderSetup builder_setup(rs274::BuilderSetup b, const std::vector<double>& start) {
     if (start.size() == b.axis_names.size()) b.start_position_mm = start;
     return b;
@@ -169,6 +205,11 @@ class ProgramServer::Run {
   rs274::BlockBuilder builder_;
   std::unique_ptr<rs274::Interpreter> interp_;
   int64_t max_lines_;
+  bool validating_;
+  bool waiting_ = false;
+  bool may_assume_ = true;
+  const std::vector<ProbeResult>* results_ = nullptr;
+  std::vector<int> pose_index_;  // builder axis -> interpreter pose index (-1: none)
   int64_t pulled_ = 0;
   bool reached_ = false;
   int64_t blocks_before_ = 0;
@@ -249,6 +290,7 @@ const std::string& ProgramServer::approach_text() const {
 
 std::unique_ptr<ProgramServer::Run> ProgramServer::start_run(const Loaded& p, bool validating) const {
   auto run = std::make_unique<Run>(setup_, p.start, p.block_delete, validating, p.modes_in);
+  run->set_probe_results(&p.probes, !live_probing_);
   if (p.from_line > 0) run->watch(p.from_line);
   if (p.line) run->watch(2);  // MDI: the state after the line (before its M2)
   run->open(p.path);
@@ -270,6 +312,22 @@ LoadResult ProgramServer::load_from(const std::string& path, int64_t token,
   next->modes_in = std::move(next_modes_);
   next_is_line_ = false;
   next_modes_.reset();
+  next->block_delete = setup_.machine.block_delete;
+  next->start = start_position_mm.size() == setup_.builder.axis_names.size() ? start_position_mm
+                                                                              : setup_.builder.start_position_mm;
+  if (!validate(*next, r)) return r;
+  install(std::move(next));
+  r.ok = true;
+  return r;
+}
+
+bool ProgramServer::validate(Loaded& p, LoadResult& r) const {
+  Loaded* next = &p;
+  const std::string& path = p.path;
+  p.probe_blocks.clear();
+  p.probe_hashes.clear();
+  p.chunk_hashes.clear();
+  p.approach.clear();
   // Run from line N: the tool, spindle and coolant the program had set before it, and
   // where line N's first block starts.
   const program::Block* last_tool = nullptr;
@@ -277,9 +335,6 @@ LoadResult ProgramServer::load_from(const std::string& path, int64_t token,
   const program::Block* last_coolant = nullptr;
   program::Block tool_b, spindle_b, coolant_b;
   std::vector<double> from_start;
-  next->block_delete = setup_.machine.block_delete;
-  next->start = start_position_mm.size() == setup_.builder.axis_names.size() ? start_position_mm
-                                                                              : setup_.builder.start_position_mm;
   try {
     std::unique_ptr<Run> run = start_run(*next, true);
     program::Block b;
@@ -304,7 +359,7 @@ LoadResult ProgramServer::load_from(const std::string& path, int64_t token,
         r.file = b.source_file.empty() ? path : b.source_file;
         r.line = b.source_line;
         r.column = b.source_column;
-        return r;
+        return false;
       }
       if (b.kind == program::BlockKind::kDwell && b.dwell_s > kLongDwell_s) {
         if (r.warnings.size() < 20) {
@@ -318,6 +373,10 @@ LoadResult ProgramServer::load_from(const std::string& path, int64_t token,
         }
       }
       h = block_hash(b, h);
+      if (b.probe != 0) {
+        next->probe_blocks.push_back(n);
+        next->probe_hashes.push_back(h);
+      }
       ++n;
       if (n % limits_.blocks_per_chunk == 0) {
         next->chunk_hashes.push_back(h);
@@ -335,7 +394,7 @@ LoadResult ProgramServer::load_from(const std::string& path, int64_t token,
         r.file = path;
         r.line = next->from_line;
         r.column = 1;
-        return r;
+        return false;
       }
       next->from_block = run->blocks_before();
       next->state_at_from = run->state();
@@ -345,7 +404,7 @@ LoadResult ProgramServer::load_from(const std::string& path, int64_t token,
         r.file = path;
         r.line = next->from_line;
         r.column = 1;
-        return r;
+        return false;
       }
       next->num_blocks = static_cast<int64_t>(next->approach.size()) + n - next->from_block;
     }
@@ -354,19 +413,21 @@ LoadResult ProgramServer::load_from(const std::string& path, int64_t token,
     r.file = e.file_name().empty() ? path : e.file_name();
     r.line = e.where().line;
     r.column = e.where().column;
-    return r;
+    return false;
   } catch (const std::exception& e) {
     r.error = path + ": " + e.what();
     r.file = path;
-    return r;
+    return false;
   }
+  return true;
+}
+
+void ProgramServer::install(std::unique_ptr<Loaded> next) {
   program_ = std::move(next);
   serving_.reset();
   cache_.clear();
   serving_error_.clear();
   serving_reached_ = false;
-  r.ok = true;
-  return r;
 }
 
 std::string ProgramServer::make_approach(Loaded& p, const std::vector<double>& target, const program::Block* tool,
@@ -460,8 +521,57 @@ const program::Block* ProgramServer::block(int64_t index) {
   return full_block(index);
 }
 
+int64_t ProgramServer::awaited_probe_block() const {
+  if (!program_ || !live_probing_) return -1;
+  const size_t k = program_->probes.size();
+  return k < program_->probe_blocks.size() ? program_->probe_blocks[k] : -1;
+}
+
+bool ProgramServer::awaiting_probe(int64_t index) const {
+  if (!program_) return false;
+  if (program_->from_line > 0) index = index - static_cast<int64_t>(program_->approach.size()) + program_->from_block;
+  const int64_t p = awaited_probe_block();
+  return p >= 0 && index > p;
+}
+
+LoadResult ProgramServer::probe_result(int64_t index, const ProbeResult& result) {
+  LoadResult r;
+  if (!program_) {
+    r.error = "a probe result with no program loaded";
+    return r;
+  }
+  const int64_t full = program_->from_line > 0
+                           ? index - static_cast<int64_t>(program_->approach.size()) + program_->from_block
+                           : index;
+  if (full != awaited_probe_block()) {
+    r.error = program_->path + ": a probe result for block " + std::to_string(index) + ", which is not the probing move awaited";
+    return r;
+  }
+  auto next = std::make_unique<Loaded>();
+  next->path = program_->path;
+  next->token = program_->token;
+  next->start = program_->start;
+  next->block_delete = program_->block_delete;
+  next->from_line = program_->from_line;
+  next->line = program_->line;
+  next->modes_in = program_->modes_in;
+  next->probes = program_->probes;
+  next->probes.push_back(result);
+  if (!validate(*next, r)) {
+    program_.reset();
+    serving_.reset();
+    cache_.clear();
+    return r;
+  }
+  install(std::move(next));
+  r.ok = true;
+  return r;
+}
+
 const program::Block* ProgramServer::full_block(int64_t index) {
   if (!program_ || index < 0 || index >= program_->full_blocks) return nullptr;
+  // After a probing move nothing is served before its result.
+  if (const int64_t p = awaited_probe_block(); p >= 0 && index > p) return nullptr;
   const Chunk* c = chunk_for(index);
   if (c == nullptr) return nullptr;
   const int64_t k = index - c->first;
@@ -498,7 +608,18 @@ const ProgramServer::Chunk* ProgramServer::chunk_for(int64_t index) {
         chunk_hash_ = 14695981039346656037ull;
       }
       if (!serving_->next(&b)) {
-        serving_error_ = changed + " (it ended early)";
+        if (serving_->waiting() && serving_next_ > first && program_->probes.size() < program_->probe_blocks.size() &&
+            serving_next_ - 1 == program_->probe_blocks[program_->probes.size()]) {
+          // At a probing move, awaiting its result: the chunk so far, checked up to it.
+          if (chunk_hash_ != program_->probe_hashes[program_->probes.size()]) {
+            serving_error_ = changed;
+            program_.reset();
+            cache_.clear();
+            return nullptr;
+          }
+          break;
+        }
+        serving_error_ = changed + (serving_->waiting() ? " (a probing move where none was)" : " (it ended early)");
         program_.reset();
         cache_.clear();
         return nullptr;

@@ -36,6 +36,13 @@ struct LoadResult {
   std::vector<std::string> warnings;
 };
 
+// The machine's answer to a probing move (G38.x): where the probe input changed and
+// where the machine came to rest, machine coordinates (mm), one value per axis.
+struct ProbeResult {
+  bool tripped = false;
+  std::vector<double> trip_mm, rest_mm;
+};
+
 struct ServerLimits {
   int blocks_per_chunk = 256;
   int cached_chunks = 4;
@@ -58,6 +65,11 @@ ProgramSetup program_setup(const config::MachineConfig& cfg);
 
 class ProgramServer {
  public:
+  // Probing: the validation takes each G38.x move as tripped at its end; the blocks
+  // after one depend on the machine's result. live_probing (a cell): no block after a
+  // probing move is served before probe_result() has given its result and the rest of
+  // the program has been validated again with it. Otherwise (the dry run) the blocks
+  // are served as validated.
   explicit ProgramServer(const config::MachineConfig& cfg, ServerLimits limits = {});
   ProgramServer(ProgramSetup setup, ServerLimits limits);
   ~ProgramServer();
@@ -110,6 +122,19 @@ class ProgramServer {
   const program::Block* block(int64_t index);
   const std::string& serving_error() const { return serving_error_; }
 
+  void set_live_probing(bool on) { live_probing_ = on; }
+  // Block `index` comes after a probing move whose result is not known yet (block()
+  // gives nullptr without an error: not yet).
+  bool awaiting_probe(int64_t index) const;
+  // The probing move that ends before block `index` is the awaited one; -1: none awaited.
+  int64_t awaited_probe_block() const;
+  // The result of the probing move at block `index` (the awaited one): the program is
+  // validated again from its start with every result so far; on a refusal (an error
+  // the result leads to, a path out of travel) the program is unloaded and the
+  // result says why, at its file and line. num_blocks() may change.
+  LoadResult probe_result(int64_t index, const ProbeResult& result);
+  int64_t probes_known() const { return program_ ? static_cast<int64_t>(program_->probes.size()) : 0; }
+
   const ProgramSetup& setup() const { return setup_; }
   // The block delete switch ('/' lines skipped when on) for the programs loaded from now
   // on; a loaded program keeps the value it was loaded with.
@@ -138,6 +163,9 @@ class ProgramServer {
     int64_t lines = 0;
     bool line = false;  // MDI
     std::optional<rs274::ModalState> modes_in, modes_after;
+    std::vector<ProbeResult> probes;     // the machine's results so far, in order
+    std::vector<int64_t> probe_blocks;   // each probing move's block (of the whole program)
+    std::vector<uint64_t> probe_hashes;  // its chunk's hash up to and including it
   };
   struct Chunk {
     int64_t first = -1;
@@ -146,6 +174,10 @@ class ProgramServer {
   };
 
   std::unique_ptr<Run> start_run(const Loaded& p, bool validating) const;
+  // Interprets p's program to its end (with p.probes), fills p's counts and hashes;
+  // r gets the refusal.
+  bool validate(Loaded& p, LoadResult& r) const;
+  void install(std::unique_ptr<Loaded> p);
   const Chunk* chunk_for(int64_t index);
   const program::Block* full_block(int64_t index);
   // The approach of a run from line N into p.approach (and its text): "" or why not.
@@ -167,6 +199,7 @@ class ProgramServer {
   rs274::ModalState serving_state_;
   program::Block renumbered_;
   bool next_is_line_ = false;
+  bool live_probing_ = false;
   std::optional<rs274::ModalState> next_modes_;
 };
 

@@ -30,6 +30,7 @@ ProgramServerNode::ProgramServerNode(const config::MachineConfig& cfg, bus::Bus&
     : cfg_(cfg), bus_(bus), core_(cfg), ch_blocks_(cfg.channel(ch::kProgramBlocks)),
       ch_state_(cfg.channel(ch::kProgramState)), ch_answers_(cfg.channel(ch::kProgramAnswers)), state_(cnc::lcmt_program_state::IDLE),
       health_(bus, cfg.channel(ch::kAlarm), "cnc-program-server", cnc::lcmt_alarm::WARNING) {
+  core_.set_live_probing(cfg.probe.enabled());
   bus_.subscribe<cnc::lcmt_program_command>(cfg.channel(ch::kProgramCmd), [this](const auto& m) { on_command(m); });
   bus_.subscribe<cnc::lcmt_block_request>(cfg.channel(ch::kBlockRequest), [this](const auto& m) { on_request(m); });
   // Where the machine stands, for the start of the next program.
@@ -85,6 +86,24 @@ void ProgramServerNode::on_interp_state(const cnc::lcmt_interp_state& m) {
     publish_state(true);
   }
   if (fault || !core_.loaded() || m.program_token != core_.token()) return;
+  if (m.probe_results == core_.probes_known() + 1 && m.num_probe_axes == static_cast<int32_t>(cfg_.axes.size()) &&
+      core_.awaited_probe_block() >= 0) {
+    // A probing move's result: the rest of the program is validated with it, then served.
+    ProbeResult pr{m.probe_tripped != 0, m.probe_trip_mm, m.probe_rest_mm};
+    const std::string path = core_.path();
+    const LoadResult lr = core_.probe_result(m.probe_block, pr);
+    if (!lr.ok) {
+      spdlog::error("program {} withdrawn after the probing move of block {}: {}", path, m.probe_block, lr.error);
+      last_refusal_ = lr;
+      refused_path_ = path;
+      state_ = S::REFUSED;
+      publish_state(true);
+      return;
+    }
+    spdlog::info("probe result {} (block {}, {}): the rest validated, {} blocks", m.probe_results, m.probe_block,
+                 pr.tripped ? "tripped" : "no contact", core_.num_blocks());
+    publish_state(true);
+  }
   int8_t next = state_;
   if (m.state == P::RUNNING || m.state == P::STARVED) {
     if (state_ == S::RUNNING || state_ == S::HELD) next = S::RUNNING;

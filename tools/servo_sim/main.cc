@@ -334,6 +334,12 @@ class Simulator {
   // "at AXIS MM input NAME VALUE": armed now, applied when AXIS passes MM (poll_triggers).
   bool arm_trigger(const std::string& line);
   void poll_triggers();
+  // The probe's fixture (probe.sim_box): the probe input 1 while the tool tip (the
+  // first three axes' positions) is inside the box, evaluated on every grid step.
+  void probe_fixture();
+  bool probe_in_ = false;
+  bool probe_seen_ = false;
+  double probe_prev_[3] = {0, 0, 0};
   struct Trigger {
     size_t drive;
     double at_mm;
@@ -624,6 +630,44 @@ bool Simulator::set_io_point(const std::string& line) {
   return true;
 }
 
+void Simulator::probe_fixture() {
+  const auto& pc = cfg_.probe;
+  if (!pc.sim_box || pc.input < 0 || all_.size() < 3) return;
+  double p[3];
+  bool in = true;
+  for (int i = 0; i < 3; ++i) {
+    p[i] = all_[static_cast<size_t>(i)]->position_mm();
+    in = in && p[i] >= pc.box_min_mm[i] && p[i] <= pc.box_max_mm[i];
+  }
+  if (probe_seen_ && in != probe_in_) {
+    const std::string& name = cfg_.io.points[static_cast<size_t>(pc.input)].name;
+    for (IoSim& io : ios_)
+      if (io.emu->set_point(name, in ? 1 : 0)) break;
+    // Where the straight line between the last two grid points crossed the box's faces
+    // (the truth the latch is measured against) and where the step ended.
+    double t_cross = 1.0;
+    for (int i = 0; i < 3; ++i) {
+      const double a = probe_prev_[i], b = p[i];
+      if (a == b) continue;
+      for (double f : {pc.box_min_mm[i], pc.box_max_mm[i]}) {
+        const double t = (f - a) / (b - a);
+        if (t >= 0 && t <= 1) t_cross = std::min(t_cross, t);
+      }
+    }
+    spdlog::info("cnc-servo-sim: probe {} {}: crossed at X {:.6f} Y {:.6f} Z {:.6f}, step ended at X {:.6f} Y {:.6f} Z {:.6f}",
+                 name, in ? "contact" : "released", probe_prev_[0] + t_cross * (p[0] - probe_prev_[0]),
+                 probe_prev_[1] + t_cross * (p[1] - probe_prev_[1]), probe_prev_[2] + t_cross * (p[2] - probe_prev_[2]),
+                 p[0], p[1], p[2]);
+  } else if (!probe_seen_) {
+    const std::string& name = cfg_.io.points[static_cast<size_t>(pc.input)].name;
+    for (IoSim& io : ios_)
+      if (io.emu->set_point(name, in ? 1 : 0)) break;
+  }
+  probe_seen_ = true;
+  probe_in_ = in;
+  for (int i = 0; i < 3; ++i) probe_prev_[i] = p[i];
+}
+
 bool Simulator::arm_trigger(const std::string& line) {
   std::istringstream in(line);
   std::string what, axis;
@@ -715,6 +759,7 @@ void Simulator::step_dynamics() {
   int steps = 0;
   while (now >= next_step_s_ && steps < 1000) {
     world_->advance_to(next_step_s_);
+    probe_fixture();
     if (!dbg_.file.empty() && dbg_.steps.size() < dbg_.steps.capacity()) {
       DebugTrace::Step st{};
       st.mono = cnc::util::monotonic_s();

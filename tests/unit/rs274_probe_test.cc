@@ -1,0 +1,175 @@
+// G38.2-G38.5 straight probing as LinuxCNC 2.9 has it: the canonical calls (rs274's
+// TURN_PROBE_ON, STRAIGHT_PROBE, TURN_PROBE_OFF), the refusals before the move, and the
+// result read before the next line: #5061-#5069 where the probe input changed (current
+// work coordinates, program units), #5070 1 or 0, the current point where the machine
+// came to rest. With results supplied the interpreter reads no line until it has one.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "common/rs274/canon.h"
+#include "common/rs274/interpreter.h"
+#include "tests/unit/temp_dir.h"
+
+namespace cnc::rs274 {
+namespace {
+
+class Recorder : public Canon {
+ public:
+  std::vector<std::string> calls;
+  void straight_traverse(const SourceRef&, const Pose& p) override { add("G0", p); }
+  void straight_feed(const SourceRef&, const Pose& p) override { add("G1", p); }
+  void arc_feed(const SourceRef&, double, double, double, double, int, double, const Pose&) override {}
+  void nurbs_feed(const SourceRef&, int, const std::vector<NurbsPoint>&, const std::vector<double>&,
+                  const Pose&) override {}
+  void dwell(const SourceRef&, double) override {}
+  void turn_probe_on(const SourceRef&) override { calls.push_back("ON"); }
+  void straight_probe(const SourceRef& r, const Pose& p, int kind) override {
+    add(("P" + std::to_string(kind) + " line " + std::to_string(r.line)).c_str(), p);
+  }
+  void turn_probe_off(const SourceRef&) override { calls.push_back("OFF"); }
+  void message(const SourceRef&, const std::string& t) override { calls.push_back("MSG " + t); }
+
+ private:
+  void add(const char* what, const Pose& p) {
+    char buf[128];
+    std::snprintf(buf, sizeof buf, "%s %g %g %g", what, p[0], p[1], p[2]);
+    calls.push_back(buf);
+  }
+};
+
+using test::TempDir;
+
+MachineSetup probe_setup(bool supplied) {
+  MachineSetup s;
+  s.has_probe = true;
+  s.probe_results_supplied = supplied;
+  return s;
+}
+
+Error refusal(const std::string& text, MachineSetup setup = probe_setup(false)) {
+  TempDir dir;
+  const std::string path = dir.write("main.ngc", text);
+  Recorder rec;
+  Interpreter in(setup, rec);
+  try {
+    in.open(path);
+    while (in.execute_next()) {
+    }
+  } catch (const Error& e) {
+    return e;
+  }
+  ADD_FAILURE() << "accepted: " << text;
+  return Error(0, "accepted");
+}
+
+TEST(Rs274Probe, CanonicalCallsAndRs274sSimulatedResultWithoutAMachine) {
+  // rs274 (no machine): the probe at the move's end, not tripped (#5070 = 0), as
+  // LinuxCNC's rs274 prints it for this program.
+  TempDir dir;
+  const std::string path = dir.write("main.ngc",
+                                     "G21 G90 G0 X1 Y2 Z10\nF100\nG38.2 Z-5\n"
+                                     "(debug, #5061 #5062 #5063 #5070)\nG0 Z[#5063+1]\nM2\n");
+  Recorder rec;
+  Interpreter in(probe_setup(false), rec);
+  in.open(path);
+  while (in.execute_next()) {
+  }
+  const std::vector<std::string> want = {"G0 1 2 10", "ON", "P2 line 3 1 2 -5", "OFF",
+                                         "MSG  1.000000 2.000000 -5.000000 0.000000", "G0 1 2 -4"};
+  EXPECT_EQ(rec.calls, want);
+}
+
+TEST(Rs274Probe, WaitsForTheResultAndSetsTheParametersInWorkCoordinates) {
+  // G55 with an offset and G20: #5061-#5063 in the work system and in inches; the next
+  // move starts where the machine came to rest (past the trip point).
+  TempDir dir;
+  const std::string path = dir.write("main.ngc",
+                                     "G10 L2 P2 X10 Y20 Z-30\nG55 G20 G90\nG0 X1 Y1 Z1\nF4\nG38.3 Z-1\n"
+                                     "G1 Z[#5063 + 0.5]\nM2\n");
+  Recorder rec;
+  Interpreter in(probe_setup(true), rec);
+  in.open(path);
+  while (!in.waiting_for_probe()) ASSERT_TRUE(in.execute_next());
+  // Nothing is read while the result is awaited.
+  const size_t calls = rec.calls.size();
+  const int64_t lines = in.lines_executed();
+  EXPECT_TRUE(in.execute_next());
+  EXPECT_EQ(rec.calls.size(), calls);
+  EXPECT_EQ(in.lines_executed(), lines);
+  // The target in machine mm: (1, 1, -1) in + G55's offset.
+  const Pose t = in.probe_target_machine();
+  EXPECT_NEAR(t[0], 10 + 25.4, 1e-9);
+  EXPECT_NEAR(t[2], -30 - 25.4, 1e-9);
+  Pose trip = t, rest = t;
+  trip[2] = -30 + 0.25 * 25.4;  // tripped at Z 0.25 in (work)
+  rest[2] = trip[2] - 0.001;    // came to rest 1 um further
+  in.set_probe_result(true, trip, rest);
+  EXPECT_FALSE(in.waiting_for_probe());
+  EXPECT_NEAR(in.parameters().get(5061), 1.0, 1e-12);
+  EXPECT_NEAR(in.parameters().get(5062), 1.0, 1e-12);
+  EXPECT_NEAR(in.parameters().get(5063), 0.25, 1e-12);
+  EXPECT_EQ(in.parameters().get(5070), 1.0);
+  EXPECT_NEAR(in.parameters().get(5422), 0.25 - 0.001 / 25.4, 1e-12);  // the current point: the rest
+  while (in.execute_next()) {
+  }
+  EXPECT_EQ(rec.calls.back(), "G1 1 1 0.75");
+  EXPECT_THROW(in.set_probe_result(true, trip, rest), std::logic_error);
+}
+
+TEST(Rs274Probe, AMissLeavesTheEndAndZero) {
+  TempDir dir;
+  const std::string path = dir.write("main.ngc", "G0 Z0\nF50\nG38.5 Z-3\nG0 Z[#5063]\nM2\n");
+  Recorder rec;
+  Interpreter in(probe_setup(true), rec);
+  in.open(path);
+  while (!in.waiting_for_probe()) ASSERT_TRUE(in.execute_next());
+  in.set_probe_result(false, in.probe_target_machine(), in.probe_target_machine());
+  EXPECT_EQ(in.parameters().get(5070), 0.0);
+  EXPECT_NEAR(in.parameters().get(5063), -3, 1e-12);
+  while (in.execute_next()) {
+  }
+  EXPECT_EQ(in.probes_made(), 1);
+}
+
+TEST(Rs274Probe, RefusalsBeforeTheMoveAsLinuxCnc) {
+  auto expect = [](const std::string& prog, const std::string& what, int line) {
+    MachineSetup s = probe_setup(false);
+    s.axes = "XYZA";
+    const Error e = refusal(prog, s);
+    EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+    EXPECT_EQ(e.where().line, line) << e.what();
+  };
+  expect("F100\nG38.2 Z-0.2\nM2\n", "start point too close to probe point", 2);
+  expect("G20 F10\nG38.2 Z-0.009\nM2\n", "start point too close to probe point", 2);
+  expect("G38.2 Z-5\nM2\n", "cannot probe with zero feed rate", 1);
+  expect("F0\nG38.3 Z-5\nM2\n", "cannot probe with zero feed rate", 2);
+  expect("G93 G38.2 Z-5 F1\nM2\n", "cannot probe in inverse time feed mode", 1);
+  expect("G95 F0.1\nG38.2 Z-5\nM2\n", "cannot probe with feed per rev mode", 2);
+  expect("F100 G0 X0 Y0\nG41 D0 G1 X5\nG38.2 Z-5\nM2\n", "cutter radius compensation on", 3);
+  expect("F100\nG38.4 A10 Z-5\nM2\n", "cannot move rotary axes during probing", 2);
+  // Without a probe in the config, as before.
+  MachineSetup none;
+  const Error e = refusal("F100\nG38.2 Z-5\nM2\n", none);
+  EXPECT_NE(std::string(e.what()).find("no probe input"), std::string::npos) << e.what();
+}
+
+TEST(Rs274Probe, EachKindNamesItself) {
+  for (int k = 2; k <= 5; ++k) {
+    TempDir dir;
+    const std::string path = dir.write("main.ngc", "F100\nG38." + std::to_string(k) + " X4\nM2\n");
+    Recorder rec;
+    Interpreter in(probe_setup(false), rec);
+    in.open(path);
+    while (in.execute_next()) {
+    }
+    ASSERT_GE(rec.calls.size(), 3u);
+    EXPECT_EQ(rec.calls[1], "P" + std::to_string(k) + " line 2 4 0 0");
+  }
+}
+
+}  // namespace
+}  // namespace cnc::rs274
