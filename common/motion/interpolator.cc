@@ -709,7 +709,7 @@ void Interpolator::end_probe_move() {
   s_ = 0;
   for (int a = 0; a < naxes_; ++a) tail_[a] = pos_[a];
   have_tail_ = true;
-  if (!blocks_.empty()) u_ = blocks_.front().path.u_begin();
+  u_ = blocks_.empty() ? 0 : blocks_.front().path.u_begin();  // as advance() leaves an empty buffer
   probe_.done = true;
   probe_.end_cycle = cycle_;
 }

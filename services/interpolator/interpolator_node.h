@@ -106,6 +106,8 @@ class InterpolatorNode {
   struct ProbeWatch {
     int32_t rises = -1, falls = -1;  // the bridge's edge counts already acted on (-1: none seen)
     int64_t block = -1;              // the probing move being decided
+    int64_t start_cycle = -1;        // its first cycle at the front
+    bool started = false;            // the bridge has played it from its start: the probe checked there
     bool decided = false;
     std::string file;                // its source
     int32_t line = 0;

@@ -77,15 +77,22 @@ void InterpolatorNode::probe_cycle() {
     for (size_t a = 0; a < n; ++a) probe_.latch[a] = v[a] - core_.drive_offset(static_cast<int>(a));
   };
   if (running && pm.block_index >= 0 && pm.block_index != probe_.block) {
-    // A probing move has come to the front: the probe must stand as it expects.
+    // A probing move has come to the front.
     probe_.block = pm.block_index;
+    probe_.start_cycle = core_.cycle();
+    probe_.started = false;
     probe_.decided = false;
-    if (toward && st.probe == 1) return probe_stop("G38." + std::to_string(pm.kind) + ": the probe is already tripped at the start");
-    if (!toward && st.probe == 0) return probe_stop("G38." + std::to_string(pm.kind) + ": the probe is not tripped at the start");
-    return;
   }
   if (running && pm.block_index >= 0 && pm.block_index == probe_.block && !probe_.decided) {
     const bool edge = toward ? rise : fall;
+    if (!probe_.started && st.playback_cycle >= static_cast<double>(probe_.start_cycle)) {
+      // The bridge plays the move's start: the probe must stand as the move expects
+      // (an edge since is the move's own).
+      probe_.started = true;
+      const bool touching = edge ? !toward : st.probe == 1;
+      if (toward && touching) return probe_stop("G38." + std::to_string(pm.kind) + ": the probe is already tripped at the start");
+      if (!toward && !touching) return probe_stop("G38." + std::to_string(pm.kind) + ": the probe is not tripped at the start");
+    }
     if (!pm.done) {
       if (edge && !pm.tripped) {
         latched(toward);

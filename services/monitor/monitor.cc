@@ -124,7 +124,8 @@ double Monitor::step_chord_error(const SetpointIn& sa, const SetpointIn& sb) con
       continue;
     }
     const double u0 = i == a.block_index ? a.u : k->path->u_begin();
-    const double u1 = i == b.block_index ? b.u : k->path->u_end();
+    // A probing move left before its end ended where the path left it.
+    const double u1 = i == b.block_index ? b.u : k->block.probe != 0 ? u0 : k->path->u_end();
     worst = std::max(worst, motion::chord_error(*k->path, u0, u1, a.position_mm, b.position_mm));
   }
   return worst;

@@ -103,6 +103,10 @@ void ProgramServerNode::on_interp_state(const cnc::lcmt_interp_state& m) {
     spdlog::info("probe result {} (block {}, {}): the rest validated, {} blocks", m.probe_results, m.probe_block,
                  pr.tripped ? "tripped" : "no contact", core_.num_blocks());
     publish_state(true);
+    if (last_request_.program_token == core_.token()) {
+      const cnc::lcmt_block_request again = last_request_;
+      on_request(again);
+    }
   }
   int8_t next = state_;
   if (m.state == P::RUNNING || m.state == P::STARVED) {
@@ -481,11 +485,13 @@ void ProgramServerNode::on_request(const cnc::lcmt_block_request& m) {
     spdlog::warn("block request seq {} asks for {} blocks: ignored", m.seq, m.count);
     return;
   }
+  last_request_ = m;
   const int64_t token = core_.token();
   const std::string path = core_.path();
   if (m.first_block < 0 || m.first_block >= core_.num_blocks()) return;
   const int64_t end = m.first_block + std::min<int64_t>(m.count, core_.num_blocks() - m.first_block);
   for (int64_t i = m.first_block; i < end; ++i) {
+    if (core_.awaiting_probe(i)) break;  // after a probing move: served once its result is in
     const program::Block* b = core_.block(i);
     if (b == nullptr) {
       // The file no longer reads as validated: serve nothing more of it.

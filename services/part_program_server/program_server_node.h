@@ -54,6 +54,9 @@ class ProgramServerNode {
   void on_interp_state(const cnc::lcmt_interp_state& m);
   void refuse(const cnc::lcmt_program_command& m, const std::string& why);
   void on_request(const cnc::lcmt_block_request& m);
+  // The last block request, answered again when a probing move's result lets the
+  // blocks after it be served (the interpolator need not wait for its re-request).
+  cnc::lcmt_block_request last_request_{};
   // Counts block `i` as sent; returns whether it was sent before.
   bool mark_sent(int64_t i);
 

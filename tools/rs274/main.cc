@@ -86,6 +86,7 @@ int main(int argc, char** argv) {
   app.add_option("--table-units", table_units, "lengths of the tool table and var file")
       ->check(CLI::IsMember({"inch", "mm"}));
   app.add_option("--axes", setup.axes, "the machine's axes");
+  app.add_flag("--probe", setup.has_probe, "G38.x accepted: the probe at each move's end, not tripped (as rs274)");
   app.add_option("program", program, "the RS274NGC program")->required()->type_name("PROGRAM");
   app.add_option("out", out_path, "where the canonical calls go (default: stdout)")->type_name("OUT");
   if (const int rc = cnc::util::cli::parse(app, argc, argv); rc >= 0) return rc;
