@@ -8,6 +8,7 @@
 #     surface (mean, max, std) within the bound v x (servo period + simulator step);
 #     the simulator's own crossing of the surface is logged as the truth beside it.
 #     Bound: v x (servo period + the simulator's step + 2 ms of I/O round latency).
+#     Then a G38.2 and a G38.4 from in contact: the loss of contact latched at the top.
 #  2. G38.3 beside the box: no contact, #5070 = 0, the program goes on (its next line,
 #     taken only when #5070 is 0, moves X to 30).
 #  3. G38.2 beside the box: no contact is an error; the program stops (ALARM probe
@@ -32,6 +33,8 @@ o100 repeat [20]
   G38.2 Z-21 F100
   G0 Z[#5063 + 0.3]
 o100 endrepeat
+G38.2 Z-21 F100
+G38.4 Z-19.5 F100
 G0 Z-10
 M2
 NGC
@@ -71,10 +74,15 @@ t0=$(date +%s.%N)
 note "20 probes in $(python3 -c "print(f'{$(date +%s.%N) - $t0:.1f}')") s"
 /usr/bin/python3 - "$WORK/interpolator.log" "$WORK/servo-sim.log" <<'PY' || fail "the probe's trip positions are off the surface"
 import re, statistics, sys
-trips = [float(m.group(1)) for m in re.finditer(r"probe: G38\.2 at \S+ \(block \d+\): tripped at X \S+ Y \S+ Z (-?[0-9.]+)", open(sys.argv[1]).read())]
+log = open(sys.argv[1]).read()
+trips = [float(m.group(1)) for m in re.finditer(r"probe: G38\.2 at \S+ \(block \d+\): tripped at X \S+ Y \S+ Z (-?[0-9.]+)", log)]
+away = [float(m.group(1)) for m in re.finditer(r"probe: G38\.4 at \S+ \(block \d+\): tripped at X \S+ Y \S+ Z (-?[0-9.]+)", log)]
+ok_away = len(trips) == 21 and len(away) == 1
+print(("# " if ok_away else "# FAILED: ") + f"G38.4 from in contact: the loss of contact latched at {away[0] if away else float('nan'):.4f}", file=sys.stderr)
+trips = trips[:20]
 truth = [float(m.group(1)) for m in re.finditer(r"probe probe_tip contact: crossed at X \S+ Y \S+ Z (-?[0-9.]+)", open(sys.argv[2]).read())]
-ok = len(trips) == 20
-print(("# " if ok else "# FAILED: ") + f"{len(trips)} trips latched (20 probes)", file=sys.stderr)
+ok = len(trips) == 20 and ok_away
+print(("# " if len(trips) == 20 else "# FAILED: ") + f"{len(trips)} trips latched (20 probes)", file=sys.stderr)
 if not trips: sys.exit(1)
 surface = -20.0
 err = [(z - surface) * 1e3 for z in trips]  # um; below the surface is negative
@@ -87,7 +95,8 @@ mean, std, worst = statistics.mean(err), statistics.pstdev(err), max(abs(e) for 
 print(f"# trip error against the surface: mean {mean:+.3f} um, max |e| {worst:.3f} um, std {std:.3f} um, "
       f"bound {bound:.2f} um (20 probes at 100 mm/min)", file=sys.stderr)
 print(f"# simulator's crossings: {len(truth)}, at Z {min(truth):.6f} .. {max(truth):.6f}" if truth else "# no crossing logged", file=sys.stderr)
-good = worst <= bound
+if away: print(f"# G38.4: loss of contact {(away[0] - surface) * 1e3:+.3f} um from the surface", file=sys.stderr)
+good = worst <= bound and (not away or abs(away[0] - surface) * 1e3 <= bound)
 print(("# " if good else "# FAILED: ") + "every trip within the bound", file=sys.stderr)
 sys.exit(0 if ok and good else 1)
 PY
