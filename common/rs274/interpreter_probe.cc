@@ -1,7 +1,6 @@
 // G38.2-G38.5 straight probing, as LinuxCNC 2.9's convert_straight_probe and
 // set_probe_data have it: the checks before the move, the canonical calls, and the
 // result (#5061-#5070, the current point) read before the next line.
-#include <cmath>
 #include <stdexcept>
 
 #include "common/rs274/interpreter_impl.h"
@@ -19,10 +18,10 @@ void Interpreter::straight_probe(Words& w, int g, int col) {
   const Pose end = axis_target(w, w.g[0] == 530);
   for (size_t i = 3; i < 6; ++i)
     if (end[i] != position_[i]) fail(col, "cannot move rotary axes during probing");
-  double d2 = 0;
-  for (size_t i = 0; i < 3; ++i) d2 += (end[i] - position_[i]) * (end[i] - position_[i]);
-  // LinuxCNC: 0.254 mm in a G21 program, 0.01 inch in a G20 one (the same length).
-  if (std::sqrt(d2) < 0.254) fail(col, "start point too close to probe point");
+  // LinuxCNC 2.9's rs274 refuses only a move of no length, and only where a missing
+  // change is an error (G38.2, G38.4); a G38.3/G38.5 of no length just reads the probe.
+  const bool moves = end[0] != position_[0] || end[1] != position_[1] || end[2] != position_[2];
+  if (!moves && (g == 382 || g == 384)) fail(col, "start point too close to probe point");
   comp_filter_->flush();
   const SourceRef r = ref(col);
   const Pose shown = program_pose(end);

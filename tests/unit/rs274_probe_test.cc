@@ -143,8 +143,10 @@ TEST(Rs274Probe, RefusalsBeforeTheMoveAsLinuxCnc) {
     EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
     EXPECT_EQ(e.where().line, line) << e.what();
   };
-  expect("F100\nG38.2 Z-0.2\nM2\n", "start point too close to probe point", 2);
-  expect("G20 F10\nG38.2 Z-0.009\nM2\n", "start point too close to probe point", 2);
+  // LinuxCNC 2.9's rs274: only a G38.2/G38.4 of no length (0.1 mm, 1e-7 mm and a
+  // G38.3/G38.5 of no length it accepts).
+  expect("F100\nG38.2 Z0\nM2\n", "start point too close to probe point", 2);
+  expect("G20 F10 G0 Z1\nG38.4 Z1\nM2\n", "start point too close to probe point", 2);
   expect("G38.2 Z-5\nM2\n", "cannot probe with zero feed rate", 1);
   expect("F0\nG38.3 Z-5\nM2\n", "cannot probe with zero feed rate", 2);
   expect("G93 G38.2 Z-5 F1\nM2\n", "cannot probe in inverse time feed mode", 1);
@@ -155,6 +157,22 @@ TEST(Rs274Probe, RefusalsBeforeTheMoveAsLinuxCnc) {
   MachineSetup none;
   const Error e = refusal("F100\nG38.2 Z-5\nM2\n", none);
   EXPECT_NE(std::string(e.what()).find("no probe input"), std::string::npos) << e.what();
+}
+
+TEST(Rs274Probe, ShortMovesAndAZeroLengthReadAreAccepted) {
+  for (const char* prog : {"F100\nG38.2 Z-0.1\nM2\n", "F100\nG38.2 Z-0.0000001\nM2\n", "F100\nG38.3 Z0\nM2\n",
+                           "F100\nG38.5 Z0\nM2\n"}) {
+    TempDir dir;
+    const std::string path = dir.write("main.ngc", prog);
+    Recorder rec;
+    Interpreter in(probe_setup(false), rec);
+    in.open(path);
+    EXPECT_NO_THROW({
+      while (in.execute_next()) {
+      }
+    }) << prog;
+    EXPECT_EQ(in.probes_made(), 1) << prog;
+  }
 }
 
 TEST(Rs274Probe, EachKindNamesItself) {
