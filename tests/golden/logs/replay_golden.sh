@@ -47,3 +47,13 @@ rc=0; out="$("$BUILD/tools/cnc-replay" --log "$tmp" 2>&1)" || rc=$?
 echo "$out" | grep -q "format 9 (recorded by cnc .*), newer than this cnc .* read it with the version that recorded it" \
   || { echo "$out" >&2; echo "FAIL: the refusal does not name the format, its version and what to do" >&2; exit 1; }
 echo "format 9: refused: ${out#*: }"
+# The report's tables of an older log: every message this build cannot decode (a
+# status message that has gained fields since) is counted and said, never dropped unsaid.
+exp="$(mktemp -d /tmp/cnc-golden-export.XXXXXX)"
+trap 'rm -f "$tmp"; rm -rf "$exp"' EXIT
+rc=0; out="$("$BUILD/tools/cnc-logexport" --machine "$SRC/config/machines/sim3.yaml" --log "$newest" --out "$exp" 2>&1)" || rc=$?
+[ "$rc" -eq 0 ] || { echo "$out" >&2; echo "FAIL: cnc-logexport of $newest: exit $rc" >&2; exit 1; }
+n_status="$(/usr/bin/python3 -c 'import sys; print(sum(1 for _ in open(sys.argv[1])) - 1)' "$exp/axis_status.csv")"
+[ "$n_status" -gt 0 ] || echo "$out" | grep -q "AXIS_STATUS message(s) do not decode in this version" \
+  || { echo "$out" >&2; echo "FAIL: $newest: no AXIS_STATUS row and no word why" >&2; exit 1; }
+echo "export of $(basename "$newest"): $n_status AXIS_STATUS rows; $(echo "$out" | grep -c 'do not decode') channel(s) named as not decoded"
