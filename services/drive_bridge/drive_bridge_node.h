@@ -28,6 +28,7 @@
 // publish (the bus counts them; service::BusHealth), are faults like any other: the
 // axes brake to a controlled stop at timing.stop_decel_mm_s2 and the bridge stays in
 // FAULT until ENABLE; the ALARM naming the cause goes out when the bus works again.
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -119,6 +120,9 @@ class DriveBridgeNode {
   // was (its publish stamp against its arrival), as an ALARM `watchdog_cause`.
   void explain_trip(const cnc::lcmt_setpoint& m);
   // The spindle's share of a servo tick and of a status publish.
+  LinkWorker* worker_for(const config::DriveConfig& d, std::map<std::string, LinkWorker*>& by_link);
+  void make_spindle(std::map<std::string, LinkWorker*>& by_link);
+  void make_io(std::map<std::string, LinkWorker*>& by_link);
   void spindle_tick(double now_s);
   void publish_spindle_status();
   // The I/O modules' share (io: in the config).

@@ -1,0 +1,514 @@
+#include "services/drive_bridge/drive_bridge_node.h"
+
+#include <spdlog/spdlog.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+
+#include "cnc/lcmt_alarm.hpp"
+#include "cnc/lcmt_axis_status.hpp"
+#include "common/config/yaml_reader.h"
+#include "common/drive/delta_vfd_profile.h"
+#include "common/drive/loopback_link.h"
+#include "common/util/clock.h"
+
+// The machine beside the axes: the spindle drive, the I/O modules and what reads
+// them (the E-stop, hard limits, guard door, probe), set up and run each servo tick.
+namespace cnc::bridge {
+
+namespace ch = config::channels;
+// An E-stop disables the drives once they stand on the stopped command, at most this long after it.
+constexpr double kStandstillWaitS = 0.2;
+using cnc::lcmt_axis_status;
+
+// The spindle drive on its link (config spindle:), and its commands.
+void DriveBridgeNode::make_spindle(std::map<std::string, LinkWorker*>& by_link) {
+  const config::DriveConfig& d = cfg_.spindle.drive;
+  const std::string file = drive::find_drive_profile(d.profile, cfg_.source_file, cfg_.drive_profile_dir);
+  if (!std::filesystem::exists(file))
+    throw config::ConfigError(cfg_.source_file, "spindle.drive.profile",
+                              "no drive profile '" + d.profile + "' (looked for " + file + ")");
+  profiles_.push_back(std::make_unique<drive::DriveProfile>(drive::load_drive_profile(file)));
+  spindle_ = std::make_unique<Spindle>(cfg_.spindle);
+  spindle_->profile = profiles_.back().get();
+  if (!drive::is_spindle_profile(*spindle_->profile))
+    throw config::ConfigError(cfg_.source_file, "spindle.drive.profile",
+                              "'" + d.profile + "' is no spindle drive's profile (its state_machine is " +
+                                  spindle_->profile->state_machine + ", a spindle needs delta_vfd)");
+  spindle_->worker = worker_for(d, by_link);
+  if (auto* loopback = dynamic_cast<drive::LoopbackLink*>(&spindle_->worker->link()))
+    loopback->add_vfd(d.unit_id, *spindle_->profile, cfg_.spindle.sim, cfg_.spindle.max_rpm / cfg_.spindle.rpm_per_hz);
+  spindle_->worker->add_spindle(*spindle_->profile, d.unit_id);
+  ch_spindle_status_ = cfg_.channel(ch::kSpindleStatus);
+  bus_.subscribe<cnc::lcmt_spindle_command>(cfg_.channel(ch::kSpindleCmd), [this](const auto& m) {
+    Spindle& sp = *spindle_;
+    if (m.command_seq <= sp.pending_seq) return;  // the newest change wins; a repeat changes nothing
+    sp.pending = true;
+    sp.pending_seq = m.command_seq;
+    sp.pending_direction = m.direction;
+    sp.pending_rpm = m.rpm;
+  });
+}
+
+// The I/O modules on their links (config io:), the status message's fixed part,
+// the safety chain's and the probe's inputs, and the output commands.
+void DriveBridgeNode::make_io(std::map<std::string, LinkWorker*>& by_link) {
+  std::vector<IoModule> modules(cfg_.io.modules.size());
+  std::vector<std::vector<int>> coils;
+  for (size_t m = 0; m < cfg_.io.modules.size(); ++m) {
+    const config::DriveConfig& d = cfg_.io.modules[m].link;
+    IoModule& mod = modules[m];
+    mod.worker = worker_for(d, by_link);
+    if (auto* loopback = dynamic_cast<drive::LoopbackLink*>(&mod.worker->link()))
+      loopback->add_io_module(d.unit_id, cfg_.io, static_cast<int>(m));
+    try {
+      mod.slot = mod.worker->add_io_module(cfg_.io, static_cast<int>(m));
+    } catch (const std::invalid_argument& e) {
+      throw config::ConfigError(cfg_.source_file, "io.points", e.what());
+    }
+    for (size_t k = 0; k < 4; ++k)
+      mod.points[k] = mod.worker->io_module(mod.slot).points(static_cast<config::IoKind>(k));
+    coils.push_back(mod.points[static_cast<size_t>(config::IoKind::kCoil)]);
+  }
+  io_ = std::make_unique<Io>(cfg_.io, coils);
+  io_->modules = std::move(modules);
+  ch_io_status_ = cfg_.channel(ch::kIoStatus);
+  cnc::lcmt_io_status& m = io_msg_;
+  m.num_points = static_cast<int32_t>(cfg_.io.points.size());
+  m.name.resize(cfg_.io.points.size());
+  m.kind.resize(cfg_.io.points.size());
+  m.value.assign(cfg_.io.points.size(), 0.0);
+  m.valid.assign(cfg_.io.points.size(), false);
+  for (size_t i = 0; i < cfg_.io.points.size(); ++i) {
+    m.name[i] = cfg_.io.points[i].name;
+    m.kind[i] = static_cast<int8_t>(cfg_.io.points[i].kind);
+  }
+  const size_t nm = cfg_.io.modules.size();
+  m.num_modules = static_cast<int32_t>(nm);
+  m.module.resize(nm);
+  for (size_t i = 0; i < nm; ++i) m.module[i] = cfg_.io.modules[i].name;
+  m.answering.assign(nm, false);
+  m.transactions.assign(nm, 0);
+  m.timeouts.assign(nm, 0);
+  m.exceptions.assign(nm, 0);
+  m.last_error.assign(nm, std::string());
+  for (auto& e : m.last_error) e.reserve(96);
+  m.estop = cnc::lcmt_io_status::ESTOP_NONE;
+  m.estop_stop_ms = -1;
+  auto bit_of = [&](int point, int& module, size_t& bit) {
+    const config::IoPointConfig& p = cfg_.io.points[static_cast<size_t>(point)];
+    const auto& di = io_->modules[static_cast<size_t>(p.module)].points[static_cast<size_t>(config::IoKind::kDiscreteInput)];
+    for (size_t i = 0; i < di.size(); ++i)
+      if (di[i] == point) bit = i;
+    module = p.module;
+  };
+  for (const auto& h : cfg_.safety.hard_limits)
+    for (int end : {-1, 1}) {
+      const int point = end < 0 ? h.min_input : h.max_input;
+      if (point < 0) continue;
+      LimitInput l;
+      l.axis = static_cast<size_t>(h.axis);
+      l.end = end;
+      l.point = point;
+      bit_of(point, l.module, l.bit);
+      limits_.push_back(l);
+    }
+  if (cfg_.safety.door_input >= 0) {
+    bit_of(cfg_.safety.door_input, door_.module, door_.bit);
+    m.door_input = cfg_.io.points[static_cast<size_t>(cfg_.safety.door_input)].name;
+  }
+  m.limit_stop_ms = -1;
+  if (cfg_.safety.estop_input >= 0) {
+    const config::IoPointConfig& p = cfg_.io.points[static_cast<size_t>(cfg_.safety.estop_input)];
+    const auto& di = io_->modules[static_cast<size_t>(p.module)].points[static_cast<size_t>(config::IoKind::kDiscreteInput)];
+    for (size_t i = 0; i < di.size(); ++i)
+      if (di[i] == cfg_.safety.estop_input) estop_.bit = i;
+    estop_.module = p.module;
+    m.estop_input = p.name;
+  }
+  if (cfg_.probe.input >= 0) {
+    const config::IoPointConfig& p = cfg_.io.points[static_cast<size_t>(cfg_.probe.input)];
+    const auto& di = io_->modules[static_cast<size_t>(p.module)].points[static_cast<size_t>(config::IoKind::kDiscreteInput)];
+    for (size_t i = 0; i < di.size(); ++i)
+      if (di[i] == cfg_.probe.input) probe_.bit = i;
+    probe_.module = p.module;
+    probe_.rise_mm.assign(cfg_.axes.size(), 0.0);
+    probe_.fall_mm.assign(cfg_.axes.size(), 0.0);
+  }
+  bus_.subscribe<cnc::lcmt_io_command>(cfg_.channel(ch::kIoCmd), [this](const auto& c) {
+    Io& io = *io_;
+    if (c.command_seq <= io.pending_seq) return;  // the newest change wins; a repeat changes nothing
+    io.pending = true;
+    io.pending_seq = c.command_seq;
+    io.pending_coolant = c.coolant;
+    io.pending_outputs = static_cast<uint64_t>(c.outputs);
+  });
+}
+
+void DriveBridgeNode::spindle_tick(double now_s) {
+  if (!spindle_) return;
+  Spindle& sp = *spindle_;
+  sp.rep = sp.worker->spindle_report();
+  // The spindle turns only while the bridge follows setpoints: a command that comes
+  // otherwise is spent, and any fault or stop of the bridge stops it.
+  const bool following = state_ == State::kEnabled && !core_.faulted();
+  const bool was_at_speed = sp.ctl.at_speed();
+  if (sp.pending) {
+    sp.pending = false;
+    const int64_t before = sp.ctl.command_seq();
+    sp.ctl.on_command(sp.pending_seq, sp.pending_direction, sp.pending_rpm, following, now_s);
+    // A line per change (events, not every tick).
+    if (sp.ctl.command_seq() != before)
+      spdlog::info("spindle: change {}: {} {:.0f} rpm{}", sp.ctl.command_seq(),
+                   sp.ctl.direction() > 0 ? "clockwise" : sp.ctl.direction() < 0 ? "counterclockwise" : "stop",
+                   sp.ctl.commanded_rpm(), following ? "" : " (not followed: the drives do not follow setpoints)");
+  }
+  if (!following) sp.ctl.stop();
+  sp.fb.answering = sp.rep.answering;
+  sp.fb.have_status = sp.rep.in.valid;
+  sp.fb.running = sp.rep.in.running;
+  sp.fb.error_code = sp.rep.in.error_code;
+  sp.fb.output_hz = sp.rep.in.output_hz;
+  sp.fb.lost_events = sp.rep.lost_events;
+  if (sp.ctl.update(sp.fb, now_s)) {
+    if (state_ == State::kEnabled || state_ == State::kEnabling || state_ == State::kStopping) {
+      fault(0, sp.ctl.fault_reason(), false);
+    } else {
+      spdlog::error("{}", sp.ctl.fault_reason());
+      alarm(cnc::lcmt_alarm::FAULT, "spindle_fault", sp.ctl.fault_reason());
+    }
+  }
+  if (!was_at_speed && sp.ctl.at_speed() && sp.ctl.direction() != 0)
+    spdlog::info("spindle: at speed: {:.0f} rpm, {:.3f} s after change {}", sp.ctl.actual_rpm(sp.fb),
+                 sp.ctl.time_to_speed_s(now_s), sp.ctl.command_seq());
+  sp.cmd.direction = static_cast<int8_t>(sp.ctl.direction());
+  sp.cmd.hz = sp.ctl.commanded_hz();
+  sp.worker->set_spindle_command(sp.cmd);
+}
+
+std::string DriveBridgeNode::limit_name(const LimitInput& l) const {
+  return "axis " + cfg_.axes[l.axis].name + "'s " + (l.end < 0 ? "min" : "max") + " switch (input " +
+         cfg_.io.points[static_cast<size_t>(l.point)].name + ")";
+}
+
+bool DriveBridgeNode::settled(double& since_s, double now_s) const {
+  if (since_s < 0) since_s = now_s;
+  bool still = true;
+  for (const auto& a : axes_) still = still && (!a.rep.have_status || std::fabs(a.rep.fe_mm) <= 1e-3);
+  return still || now_s - since_s >= kStandstillWaitS;
+}
+
+void DriveBridgeNode::limits_tick(double now_s) {
+  const bool following = state_ == State::kEnabled && !core_.faulted();
+  for (size_t k = 0; k < limits_.size(); ++k) {
+    LimitInput& l = limits_[k];
+    const IoModule& mod = io_->modules[static_cast<size_t>(l.module)];
+    const bool answering = mod.rep.answering && mod.rep.in.valid;
+    const bool ok = answering && ((mod.rep.in.discrete >> l.bit) & 1) != 0;
+    const bool fell = l.ok && !ok;
+    l.ok = ok;
+    if (ok) continue;
+    // Not following (standing, braking, disabled): setpoints of the next engagement may
+    // take the axis no further towards the switch than where it comes to rest.
+    if (core_.mode() != BridgeCore::Mode::kFollowing) l.bound_mm = core_.commanded()[l.axis];
+    if (!fell || !following) continue;
+    limit_.latched = true;
+    limit_.stood = false;
+    limit_.tripped = static_cast<int>(k);
+    limit_.utime = util::wall_utime();
+    limit_.at_s = now_s;
+    limit_.stop_ms = -1;
+    limit_.command_stood_s = -1;
+    char at[64];
+    std::snprintf(at, sizeof at, " at %.4f mm", core_.commanded()[l.axis]);
+    const std::string text =
+        "hard limit: " + limit_name(l) +
+        (answering ? " reads 0 (the switch hit, or its wire cut)"
+                   : std::string(" does not answer (module ") + cfg_.io.modules[static_cast<size_t>(l.module)].name +
+                         ": " + mod.rep.last_error.data() + ")") +
+        at + ": controlled stop, drives disabled";
+    spdlog::error("{}", text);
+    alarm(cnc::lcmt_alarm::FAULT, "hard_limit", text);
+    fault(l.axis, text, false);  // brakes in this tick's core step
+  }
+  if (limit_.latched && !limit_.stood && core_.mode() != BridgeCore::Mode::kStopping &&
+      settled(limit_.command_stood_s, now_s)) {
+    limit_.stood = true;
+    limit_.stop_ms = (now_s - limit_.at_s) * 1e3;
+    for (auto& a : axes_) a.cmd.goal = drive::Goal::kDisable;
+    spdlog::info("hard limit: the axes stand {:.1f} ms after the trip ({}); drives disabled", limit_.stop_ms,
+                 limit_name(limits_[static_cast<size_t>(limit_.tripped)]));
+  }
+}
+
+int DriveBridgeNode::limit_towards(const AxisArray& p) const {
+  // The stream starts where the drives stand, to within their following error at rest.
+  constexpr double kJoinToleranceMm = 1e-3;
+  for (size_t k = 0; k < limits_.size(); ++k) {
+    const LimitInput& l = limits_[k];
+    if (!l.ok && (p[l.axis] - l.bound_mm) * l.end > kJoinToleranceMm) return static_cast<int>(k);
+  }
+  return -1;
+}
+
+bool DriveBridgeNode::limits_hold_off(const AxisArray& p, const StreamStamp& from) {
+  // A stream the core would join (the first since the engagement, or a newer one) that
+  // stands towards a switch reading 0: not joined, no fault. It is the interpolator's
+  // path from before the reset (its own brake ended beyond the bridge's); its RESET
+  // makes a stream from where the drives stand.
+  const bool joining = core_.last_cycle() < 0 || from.stream > core_.stream();
+  if (!joining || from.engagement != core_.engagement() || from.stream < core_.stream()) return false;
+  const int k = limit_towards(p);
+  if (k < 0) return false;
+  if (limit_.held_off != core_.engagement()) {
+    limit_.held_off = core_.engagement();
+    const LimitInput& l = limits_[static_cast<size_t>(k)];
+    char b[160];
+    std::snprintf(b, sizeof b, " reads 0: a setpoint stream at %.4f mm, towards it from %.4f mm, is not joined", p[l.axis],
+                  l.bound_mm);
+    const std::string text = "hard limit: " + limit_name(l) + b + ": RESET the interpolator (cnc-ctl --do reset)";
+    spdlog::warn("{}", text);
+    alarm(cnc::lcmt_alarm::WARNING, "hard_limit_not_joined", text);
+  }
+  return true;
+}
+
+bool DriveBridgeNode::limits_refuse(const AxisArray& p, int64_t cycle) {
+  // A setpoint the core has just taken: the playback, a few cycles behind the newest
+  // setpoint, has not moved towards it yet; refused, the stop begins from before it.
+  // (One the core does not follow, a stale one or one it waits on, sets no bound.)
+  const int k = limit_towards(p);
+  if (k < 0) {
+    for (LimitInput& l : limits_)
+      if (!l.ok && (p[l.axis] - l.bound_mm) * l.end < 0) l.bound_mm = p[l.axis];  // moving off: no way back
+    return false;
+  }
+  const LimitInput& l = limits_[static_cast<size_t>(k)];
+  char b[160];
+  std::snprintf(b, sizeof b, ": setpoint cycle %lld moves the axis towards it (to %.4f mm from %.4f mm)",
+                static_cast<long long>(cycle), p[l.axis], l.bound_mm);
+  const std::string text = "hard limit: " + limit_name(l) + " reads 0" + b + ": refused, controlled stop";
+  spdlog::error("{}", text);
+  alarm(cnc::lcmt_alarm::FAULT, "hard_limit_refused", text);
+  fault(l.axis, text, false);
+  return true;
+}
+
+void DriveBridgeNode::safety_tick(double now_s) {
+  if (!limits_.empty()) limits_tick(now_s);
+  if (door_.module >= 0) {
+    const IoModule& mod = io_->modules[static_cast<size_t>(door_.module)];
+    const bool ok = mod.rep.answering && mod.rep.in.valid && ((mod.rep.in.discrete >> door_.bit) & 1) != 0;
+    if (!ok && door_.ok) door_.utime = util::wall_utime();
+    if (ok != door_.ok && state_ != State::kStarting) {
+      const std::string& name = cfg_.io.points[static_cast<size_t>(cfg_.safety.door_input)].name;
+      const std::string text = ok ? "guard door: input " + name + " reads 1 (shut): RESUME to go on"
+                                  : "guard door: input " + name + " reads 0 (open): feed hold, motion refused until it is shut";
+      spdlog::warn("{}", text);
+      alarm(ok ? cnc::lcmt_alarm::INFO : cnc::lcmt_alarm::WARNING, ok ? "door_closed" : "door_open", text);
+    }
+    door_.ok = ok;
+  }
+  if (estop_.module < 0) return;
+  const IoModule& mod = io_->modules[static_cast<size_t>(estop_.module)];
+  const bool answering = mod.rep.answering && mod.rep.in.valid;
+  const bool ok = answering && ((mod.rep.in.discrete >> estop_.bit) & 1) != 0;
+  const std::string& name = cfg_.io.points[static_cast<size_t>(cfg_.safety.estop_input)].name;
+  if (ok && !estop_.ok && estop_.latched) {
+    spdlog::warn("E-stop: input {} reads 1 again; the drives stay disabled until FAULT_RESET and ENABLE", name);
+    alarm(cnc::lcmt_alarm::INFO, "estop_released",
+          "E-stop input " + name + " reads 1 again: FAULT_RESET, then ENABLE (cnc-ctl --do fault-reset, --do reset)");
+  }
+  estop_.ok = ok;
+  // Before the start-up ends (the module not read yet) there is nothing to stop.
+  if (!ok && !estop_.latched && state_ != State::kStarting) {
+    estop_.latched = true;
+    estop_.stood = false;
+    estop_.utime = util::wall_utime();
+    estop_.at_s = now_s;
+    estop_.stop_ms = -1;
+    estop_.command_stood_s = -1;
+    const std::string text =
+        answering ? "E-stop: input " + name + " reads 0 (pressed, or its wire cut): controlled stop, drives disabled"
+                  : "E-stop: module " + cfg_.io.modules[static_cast<size_t>(estop_.module)].name + " of input " + name +
+                        " does not answer (" + mod.rep.last_error.data() + "): controlled stop, drives disabled";
+    spdlog::error("{}", text);
+    alarm(cnc::lcmt_alarm::FAULT, "estop", text);
+    fault(0, text, false);  // brakes in this tick's core step; the spindle and coolant stop in this tick
+  }
+  if (estop_.latched && !estop_.stood && core_.mode() != BridgeCore::Mode::kStopping) {
+    // The command stands (or was never engaged): the drives' power off once they have
+    // settled on it (following error within 1 um), or kStandstillWaitS after it at most.
+    if (!settled(estop_.command_stood_s, now_s)) return;
+    estop_.stood = true;
+    estop_.stop_ms = (now_s - estop_.at_s) * 1e3;
+    for (auto& a : axes_) a.cmd.goal = drive::Goal::kDisable;
+    spdlog::info("E-stop: the axes stand {:.1f} ms after the E-stop (input {}); drives disabled", estop_.stop_ms, name);
+  }
+}
+
+bool DriveBridgeNode::safety_refuses_enable() {
+  if (limit_.latched) {
+    const std::string text = "ENABLE refused: the hard limit (" +
+                             limit_name(limits_[static_cast<size_t>(limit_.tripped)]) +
+                             ") is latched: FAULT_RESET first (cnc-ctl --do fault-reset)";
+    spdlog::warn("{}", text);
+    alarm(cnc::lcmt_alarm::WARNING, "enable_refused", text);
+    return true;
+  }
+  if (estop_.module < 0 || (estop_.ok && !estop_.latched)) return false;
+  const std::string& name = cfg_.io.points[static_cast<size_t>(cfg_.safety.estop_input)].name;
+  const std::string text = !estop_.ok ? "ENABLE refused: E-stop input " + name + " reads 0 (or its module does not answer)"
+                                      : "ENABLE refused: the E-stop (input " + name +
+                                            ") is latched: FAULT_RESET first (cnc-ctl --do fault-reset)";
+  spdlog::warn("{}", text);
+  alarm(cnc::lcmt_alarm::WARNING, "enable_refused", text);
+  return true;
+}
+
+void DriveBridgeNode::probe_tick() {
+  if (probe_.module < 0) return;
+  const IoModule& mod = io_->modules[static_cast<size_t>(probe_.module)];
+  if (!(mod.rep.answering && mod.rep.in.valid)) {
+    probe_.value = -1;
+    return;
+  }
+  const int8_t v = ((mod.rep.in.discrete >> probe_.bit) & 1) != 0 ? 1 : 0;
+  if (probe_.value >= 0 && v != probe_.value) {
+    // The positions read in the round that sampled the edge: accurate to the speed
+    // times the time between two samples (a servo period) and the round's spread.
+    std::vector<double>& at = v ? probe_.rise_mm : probe_.fall_mm;
+    for (size_t i = 0; i < axes_.size(); ++i) at[i] = axes_[i].rep.actual_mm;
+    (v ? probe_.rise_cycle : probe_.fall_cycle) =
+        core_.mode() == BridgeCore::Mode::kFollowing && core_.last_cycle() >= 0 ? core_.playback_cycle() : -1.0;
+    ++(v ? probe_.rises : probe_.falls);
+  }
+  probe_.value = v;
+}
+
+void DriveBridgeNode::io_tick() {
+  if (!io_) return;
+  Io& io = *io_;
+  // The coolant runs only while the bridge follows setpoints (as the spindle turns).
+  const bool following = state_ == State::kEnabled && !core_.faulted();
+  if (io.pending) {
+    io.pending = false;
+    if (io.ctl.on_command(io.pending_seq, io.pending_coolant, io.pending_outputs, following))
+      spdlog::info("io: change {}: coolant {}{}, outputs 0x{:x}{}", io.ctl.command_seq(),
+                   (io.pending_coolant & 1) ? "mist " : "", (io.pending_coolant & 2) ? "flood" : (io.pending_coolant & 1) ? "" : "off",
+                   io.ctl.outputs(), following || io.pending_coolant == 0 ? "" : " (coolant not followed: the drives do not follow setpoints)");
+  }
+  if (!following && io.ctl.coolant() != 0) {
+    io.ctl.stop();
+    spdlog::info("io: coolant off: the drives do not follow setpoints");
+  }
+  for (size_t m = 0; m < io.modules.size(); ++m) {
+    IoModule& mod = io.modules[m];
+    IoCommand c;
+    c.coils = io.ctl.module_coils(m);
+    mod.worker->set_io_command(mod.slot, c);
+    // A line per change of a coil as read back from the module (events, not every tick).
+    if (mod.rep.in.valid && (!mod.logged_valid || mod.rep.in.coils != mod.logged_coils)) {
+      const uint64_t changed = mod.logged_valid ? mod.rep.in.coils ^ mod.logged_coils : ~uint64_t{0};
+      const auto& coils = mod.points[static_cast<size_t>(config::IoKind::kCoil)];
+      for (size_t i = 0; i < coils.size(); ++i) {
+        if (((changed >> i) & 1) == 0) continue;
+        spdlog::info("io: {} {}", cfg_.io.points[static_cast<size_t>(coils[i])].name,
+                     ((mod.rep.in.coils >> i) & 1) ? "on" : "off");
+      }
+      mod.logged_coils = mod.rep.in.coils;
+    }
+    mod.logged_valid = mod.rep.in.valid;
+  }
+}
+
+void DriveBridgeNode::publish_io_status() {
+  Io& io = *io_;
+  cnc::lcmt_io_status& m = io_msg_;
+  m.command_seq = io.ctl.command_seq();
+  m.coolant = static_cast<int8_t>(io.ctl.coolant());
+  m.outputs = static_cast<int64_t>(io.ctl.outputs());
+  for (size_t mi = 0; mi < io.modules.size(); ++mi) {
+    const IoModule& mod = io.modules[mi];
+    const drive::IoModuleInputs& in = mod.rep.in;
+    for (size_t k = 0; k < 4; ++k) {
+      const std::vector<int>& pts = mod.points[k];
+      for (size_t i = 0; i < pts.size(); ++i) {
+        const auto p = static_cast<size_t>(pts[i]);
+        uint16_t raw = 0;
+        switch (static_cast<config::IoKind>(k)) {
+          case config::IoKind::kCoil: raw = (in.coils >> i) & 1; break;
+          case config::IoKind::kDiscreteInput: raw = (in.discrete >> i) & 1; break;
+          case config::IoKind::kInputRegister: raw = in.input_registers[i]; break;
+          case config::IoKind::kHoldingRegister: raw = in.holding_registers[i]; break;
+        }
+        m.value[p] = IoControl::value(cfg_.io.points[p], raw);
+        m.valid[p] = in.valid;
+      }
+    }
+    m.answering[mi] = mod.rep.answering;
+    m.transactions[mi] = mod.rep.counters.transactions;
+    m.timeouts[mi] = mod.rep.counters.timeouts;
+    m.exceptions[mi] = mod.rep.counters.exceptions;
+    m.last_error[mi].assign(mod.rep.last_error.data());
+  }
+  if (estop_.module >= 0) {
+    bool disabled = true;
+    for (const auto& a : axes_) disabled = disabled && !(a.rep.answering && a.rep.status.enabled);
+    m.estop = !estop_.latched      ? (estop_.ok ? cnc::lcmt_io_status::ESTOP_OK : cnc::lcmt_io_status::ESTOP_TRIPPED)
+              : !estop_.stood || !disabled ? cnc::lcmt_io_status::ESTOP_TRIPPED
+              : estop_.ok                   ? cnc::lcmt_io_status::ESTOP_RELEASED
+                                            : cnc::lcmt_io_status::ESTOP_DISABLED;
+    m.estop_utime = estop_.utime;
+    m.estop_stop_ms = estop_.stop_ms;
+  }
+  if (!limits_.empty()) {
+    int on = -1;
+    for (size_t k = 0; k < limits_.size() && on < 0; ++k)
+      if (!limits_[k].ok) on = static_cast<int>(k);
+    const int named = limit_.latched ? limit_.tripped : on >= 0 ? on : limit_.tripped;
+    m.limit = limit_.latched  ? (limit_.stood ? cnc::lcmt_io_status::LIMIT_DISABLED : cnc::lcmt_io_status::LIMIT_TRIPPED)
+              : on >= 0       ? cnc::lcmt_io_status::LIMIT_ON_SWITCH
+                              : cnc::lcmt_io_status::LIMIT_OK;
+    if (named < 0) {
+      m.limit_input.clear();
+    } else if (const std::string& name =
+                   cfg_.io.points[static_cast<size_t>(limits_[static_cast<size_t>(named)].point)].name;
+               m.limit_input != name) {
+      m.limit_input = name;  // on a change only
+    }
+    m.limit_utime = limit_.utime;
+    m.limit_stop_ms = limit_.stop_ms;
+  }
+  if (door_.module >= 0) {
+    m.door = door_.ok ? cnc::lcmt_io_status::DOOR_CLOSED : cnc::lcmt_io_status::DOOR_OPEN;
+    m.door_utime = door_.utime;
+  }
+  bus_.publish(ch_io_status_, m);
+}
+
+void DriveBridgeNode::publish_spindle_status() {
+  const Spindle& sp = *spindle_;
+  cnc::lcmt_spindle_status& m = spindle_msg_;
+  if (m.fault.capacity() < 256) m.fault.reserve(256);
+  const bool faulted = sp.ctl.faulted() || (sp.rep.in.valid && sp.rep.in.error_code != 0);
+  m.state = faulted ? cnc::lcmt_spindle_status::FAULT
+            : !sp.rep.in.valid ? cnc::lcmt_spindle_status::STARTING
+            : sp.rep.in.running ? cnc::lcmt_spindle_status::RUNNING
+                                : cnc::lcmt_spindle_status::STOPPED;
+  m.command_seq = sp.ctl.command_seq();
+  m.at_speed_seq = sp.ctl.at_speed_seq();
+  m.direction = static_cast<int8_t>(sp.ctl.direction());
+  m.commanded_rpm = sp.ctl.commanded_rpm();
+  m.actual_rpm = sp.ctl.actual_rpm(sp.fb);
+  m.current_a = sp.rep.in.current_a;
+  m.error_code = sp.rep.in.error_code;
+  m.fault.assign(sp.ctl.fault_reason());
+  m.transactions = sp.rep.counters.transactions;
+  m.timeouts = sp.rep.counters.timeouts;
+  bus_.publish(ch_spindle_status_, m);
+}
+
+}  // namespace cnc::bridge
