@@ -121,19 +121,11 @@ void DriveBridgeNode::make_io(std::map<std::string, LinkWorker*>& by_link) {
   }
   m.limit_stop_ms = -1;
   if (cfg_.safety.estop_input >= 0) {
-    const config::IoPointConfig& p = cfg_.io.points[static_cast<size_t>(cfg_.safety.estop_input)];
-    const auto& di = io_->modules[static_cast<size_t>(p.module)].points[static_cast<size_t>(config::IoKind::kDiscreteInput)];
-    for (size_t i = 0; i < di.size(); ++i)
-      if (di[i] == cfg_.safety.estop_input) estop_.bit = i;
-    estop_.module = p.module;
-    m.estop_input = p.name;
+    bit_of(cfg_.safety.estop_input, estop_.module, estop_.bit);
+    m.estop_input = cfg_.io.points[static_cast<size_t>(cfg_.safety.estop_input)].name;
   }
   if (cfg_.probe.input >= 0) {
-    const config::IoPointConfig& p = cfg_.io.points[static_cast<size_t>(cfg_.probe.input)];
-    const auto& di = io_->modules[static_cast<size_t>(p.module)].points[static_cast<size_t>(config::IoKind::kDiscreteInput)];
-    for (size_t i = 0; i < di.size(); ++i)
-      if (di[i] == cfg_.probe.input) probe_.bit = i;
-    probe_.module = p.module;
+    bit_of(cfg_.probe.input, probe_.module, probe_.bit);
     probe_.rise_mm.assign(cfg_.axes.size(), 0.0);
     probe_.fall_mm.assign(cfg_.axes.size(), 0.0);
   }
