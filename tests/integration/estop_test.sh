@@ -96,7 +96,7 @@ grep -E "E-stop|estop|axis [XYZ]: (enabled|disabled)|spindle: stop|coolant_flood
 import re, sys
 log, prefix, here, simlog, resets_file, machine = sys.argv[1:7]
 sys.path.insert(0, here)
-from lcmlog import events, Fields
+import safety_figures
 text = open(machine).read()
 decel = float(re.search(r"stop_decel_mm_s2:\s*([0-9.]+)", text).group(1))
 x_axis = text[text.index("- name: X"):text.index("- name: Y")]
@@ -112,28 +112,8 @@ for line in open(simlog):
     m = re.search(r"axis ([XYZ]): (enabled|disabled) at (-?[0-9.]+) mm, (-?[0-9.]+) mm/s, utime (\d+)", line)
     if m: power.append((int(m.group(5)), m.group(1), m.group(2), float(m.group(3)), float(m.group(4))))
 resets = [int(l.split()[1]) for l in open(resets_file)]
-axis, io = [], []
-for ts, ch, b in events(log):
-    if ch == prefix + "AXIS_STATUS":
-        f = Fields(b)
-        utime, _, _, _ = f.get("qqiq")
-        n = f.get("i")
-        for _ in range(n): f.str()
-        cmd = f.get("%dd" % n)
-        act = f.get("%dd" % n)
-        axis.append((utime, cmd[0], act[0]))
-    elif ch == prefix + "IO_STATUS":
-        f = Fields(b)
-        f.get("qqiqbq")
-        n = f.get("i")
-        for _ in range(n): f.str()
-        f.get("%db" % n); f.get("%dd" % n); f.get("%db" % n)
-        m = f.get("i")
-        for _ in range(m): f.str()
-        f.get("%db" % m); f.get("%dq" % m); f.get("%dq" % m); f.get("%dq" % m)
-        for _ in range(m): f.str()
-        estop = f.get("b"); f.str(); trip = f.get("q"); stop_ms = f.get("d")
-        io.append((ts, estop, trip, stop_ms))
+axis, statuses = safety_figures.read_io_status(log, prefix)
+io = [(s["ts"], s["estop"], s["estop_utime"], s["estop_stop_ms"]) for s in statuses]
 ok = True
 def check(cond, what):
     global ok
@@ -142,11 +122,7 @@ def check(cond, what):
 check(len(edges) == 2, f"two E-stop edges in the simulator's log ({len(edges)})")
 if not ok: sys.exit(1)
 def interp(t, k):
-    """AXIS_STATUS field k (1 commanded, 2 actual) of X at wall time t, linearly between statuses."""
-    for p, q in zip(axis, axis[1:]):
-        if p[0] <= t <= q[0]:
-            return p[k] + (q[k] - p[k]) * (t - p[0]) / (q[0] - p[0])
-    return float("nan")
+    return safety_figures.interp(axis, t, k)
 for (name, (t0, x0, _)), t_reset in zip((("pressed", edges[0]), ("wire cut", edges[1])), resets):
     # X's speed at the edge: its command's over the status periods before (one every
     # T_ipo of servo ticks; their wall stamps jitter with the publish, the simulator's
