@@ -64,6 +64,7 @@ grep -E "door|spindle: (stop|run)|axis [XYZ]: (enabled|disabled)" "$WORK/servo-s
 import datetime, re, sys
 log, prefix, here, simlog, resumes, machine, interplog = sys.argv[1:8]
 sys.path.insert(0, here)
+import safety_figures
 from safety_figures import read_io_status, stop_figures
 text = open(machine).read()
 x_axis = text[text.index("- name: X"):text.index("- name: Y")]
@@ -77,13 +78,9 @@ def stamp(hms, ref_us):
     day = datetime.datetime.fromtimestamp(ref_us * 1e-6).date()
     t = datetime.datetime.strptime(hms, "%H:%M:%S.%f").time()
     return datetime.datetime.combine(day, t).timestamp() * 1e6
-edges, power, spindle = [], [], []
+spindle = []
 lines = open(simlog).read().splitlines()
-for line in lines:
-    m = re.search(r"io io1: door_closed set to 0 at utime (\d+) with X (-?[0-9.]+) mm (-?[0-9.]+) mm/s", line)
-    if m: edges.append((int(m.group(1)), float(m.group(2)), float(m.group(3))))
-    m = re.search(r"axis ([XYZ]): (enabled|disabled) at (-?[0-9.]+) mm, (-?[0-9.]+) mm/s, utime (\d+)", line)
-    if m: power.append((int(m.group(5)), m.group(1), m.group(2), float(m.group(3)), float(m.group(4))))
+edges, power = safety_figures.sim_edges(lines, "door_closed")
 ref = edges[0][0] if edges else 0
 for line in lines:
     m = re.match(r"([0-9:.]+) .*spindle: (stop|run)", line)

@@ -97,20 +97,11 @@ import re, sys
 log, prefix, here, simlog, resets_file, machine = sys.argv[1:7]
 sys.path.insert(0, here)
 import safety_figures
-text = open(machine).read()
-decel = float(re.search(r"stop_decel_mm_s2:\s*([0-9.]+)", text).group(1))
-x_axis = text[text.index("- name: X"):text.index("- name: Y")]
-accel = float(re.search(r"max_accel_mm_s2:\s*([0-9.]+)", x_axis).group(1))
-jerk = float(re.search(r"max_jerk_mm_s3:\s*([0-9.]+)", x_axis).group(1))
+decel, accel, jerk = safety_figures.x_stop_limits(machine)
 a = min(decel, accel)
 
 # The simulator's view: the edges (wall clock, X and its speed) and each drive's disable/enable.
-edges, power = [], []
-for line in open(simlog):
-    m = re.search(r"io io1: estop_ok set to 0 at utime (\d+) with X (-?[0-9.]+) mm (-?[0-9.]+) mm/s", line)
-    if m: edges.append((int(m.group(1)), float(m.group(2)), float(m.group(3))))
-    m = re.search(r"axis ([XYZ]): (enabled|disabled) at (-?[0-9.]+) mm, (-?[0-9.]+) mm/s, utime (\d+)", line)
-    if m: power.append((int(m.group(5)), m.group(1), m.group(2), float(m.group(3)), float(m.group(4))))
+edges, power = safety_figures.sim_edges(open(simlog), "estop_ok")
 resets = [int(l.split()[1]) for l in open(resets_file)]
 axis, statuses = safety_figures.read_io_status(log, prefix)
 io = [(s["ts"], s["estop"], s["estop_utime"], s["estop_stop_ms"]) for s in statuses]

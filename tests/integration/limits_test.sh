@@ -85,19 +85,11 @@ import re, sys
 log, prefix, here, simlog, resets_file, machine, toward_file = sys.argv[1:8]
 sys.path.insert(0, here)
 from lcmlog import events, Fields
+import safety_figures
 from safety_figures import read_io_status, stop_figures
-text = open(machine).read()
-decel = float(re.search(r"stop_decel_mm_s2:\s*([0-9.]+)", text).group(1))
-x_axis = text[text.index("- name: X"):text.index("- name: Y")]
-accel = float(re.search(r"max_accel_mm_s2:\s*([0-9.]+)", x_axis).group(1))
-jerk = float(re.search(r"max_jerk_mm_s3:\s*([0-9.]+)", x_axis).group(1))
+decel, accel, jerk = safety_figures.x_stop_limits(machine)
 a = min(decel, accel)
-edges, power = [], []
-for line in open(simlog):
-    m = re.search(r"io io1: x_max_ok set to 0 at utime (\d+) with X (-?[0-9.]+) mm (-?[0-9.]+) mm/s", line)
-    if m: edges.append((int(m.group(1)), float(m.group(2)), float(m.group(3))))
-    m = re.search(r"axis ([XYZ]): (enabled|disabled) at (-?[0-9.]+) mm, (-?[0-9.]+) mm/s, utime (\d+)", line)
-    if m: power.append((int(m.group(5)), m.group(1), m.group(2), float(m.group(3)), float(m.group(4))))
+edges, power = safety_figures.sim_edges(open(simlog), "x_max_ok")
 resets = [int(l.split()[1]) for l in open(resets_file)]
 axis, io = read_io_status(log, prefix)
 ok = True

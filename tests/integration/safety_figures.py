@@ -2,7 +2,32 @@
 AXIS_STATUS and IO_STATUS read from a cell's log, and a stop measured from an input's
 edge (the simulator's wall-clock stamp) against the bounds of a stop at deceleration a
 and jerk j."""
+import re
+
 from lcmlog import events, Fields
+
+
+def x_stop_limits(machine_file):
+    """(stop deceleration, X's acceleration, X's jerk) of a machine file."""
+    text = open(machine_file).read()
+    decel = float(re.search(r"stop_decel_mm_s2:\s*([0-9.]+)", text).group(1))
+    x_axis = text[text.index("- name: X"):text.index("- name: Y")]
+    accel = float(re.search(r"max_accel_mm_s2:\s*([0-9.]+)", x_axis).group(1))
+    jerk = float(re.search(r"max_jerk_mm_s3:\s*([0-9.]+)", x_axis).group(1))
+    return decel, accel, jerk
+
+
+def sim_edges(lines, point):
+    """From the simulator's log lines: the falling edges of I/O point `point` (wall us, X mm,
+    X mm/s) and each drive's enable and disable (wall us, axis, what, mm, mm/s)."""
+    edges, power = [], []
+    edge = re.compile(r"io io1: %s set to 0 at utime (\d+) with X (-?[0-9.]+) mm (-?[0-9.]+) mm/s" % re.escape(point))
+    for line in lines:
+        m = edge.search(line)
+        if m: edges.append((int(m.group(1)), float(m.group(2)), float(m.group(3))))
+        m = re.search(r"axis ([XYZ]): (enabled|disabled) at (-?[0-9.]+) mm, (-?[0-9.]+) mm/s, utime (\d+)", line)
+        if m: power.append((int(m.group(5)), m.group(1), m.group(2), float(m.group(3)), float(m.group(4))))
+    return edges, power
 
 
 def read_io_status(log, prefix):
