@@ -86,6 +86,8 @@ uint16_t delta_vfd_command(int direction) {
   return static_cast<uint16_t>(kCmdRun | (direction > 0 ? kCmdForward : kCmdReverse));
 }
 
-bool is_spindle_profile(const DriveProfile& p) { return p.state_machine == delta_vfd_logic().name(); }
+bool is_spindle_profile(const DriveProfile& p) {
+  return p.state_machine == delta_vfd_logic().name() || p.state_machine == "huanyang";
+}
 
 }  // namespace cnc::drive

@@ -20,13 +20,37 @@ constexpr std::array<const char*, kRoleCount> kRoleNames = {
 
 // The keys a profile file may hold: its top level, `registers:` (one per role) and each field.
 constexpr std::string_view kProfileKeys[] = {"name",         "description",       "state_machine", "write_and_read",
-                                             "read_gap_max", "mode_of_operation", "registers"};
+                                             "read_gap_max", "mode_of_operation", "registers",     "huanyang"};
 constexpr auto kRegisterKeys = [] {
   std::array<std::string_view, kRoleCount> k{};
   for (int i = 0; i < kRoleCount; ++i) k[i] = kRoleNames[i];
   return k;
 }();
 constexpr std::string_view kFieldKeys[] = {"address", "words", "signed", "word_order", "scale"};
+constexpr std::string_view kHuanyangKeys[] = {"output_frequency_index", "output_current_index", "frequency_scale",
+                                              "current_scale",          "run_source_pd",        "frequency_source_pd",
+                                              "source_link",            "max_frequency_pd",     "rated_rpm_pd",
+                                              "rated_rpm_hz"};
+
+HuanyangMap read_huanyang(config::MapReader r) {
+  HuanyangMap h;
+  h.present = true;
+  const auto byte = [&](const char* key) { return static_cast<int>(r.require_int(key, 0, 255)); };
+  h.output_frequency_index = byte("output_frequency_index");
+  h.output_current_index = byte("output_current_index");
+  h.frequency_scale = r.require_double("frequency_scale", 1e-3, 1e4);
+  h.current_scale = r.require_double("current_scale", 1e-3, 1e4);
+  h.run_source_pd = byte("run_source_pd");
+  h.frequency_source_pd = byte("frequency_source_pd");
+  h.source_link = static_cast<int>(r.require_int("source_link", 0, 65535));
+  h.max_frequency_pd = byte("max_frequency_pd");
+  h.rated_rpm_pd = byte("rated_rpm_pd");
+  h.rated_rpm_hz = r.require_double("rated_rpm_hz", 1, 1000);
+  if (h.output_frequency_index == h.output_current_index)
+    r.fail("output_current_index", "is the output frequency's index too");
+  r.finish();
+  return h;
+}
 
 uint32_t join(const uint16_t* regs, WordOrder order) {
   const uint32_t lo = order == WordOrder::kLowFirst ? regs[0] : regs[1];
@@ -64,6 +88,10 @@ DriveProfile read_profile(config::MapReader top, const std::string& file) {
     if (regs.has(kRoleNames[i])) p.fields[i] = read_field(regs.map(kRoleNames[i], kFieldKeys));
   }
   regs.finish();
+  const bool huanyang = p.state_machine == "huanyang";
+  if (huanyang != top.has("huanyang"))
+    top.fail("huanyang", huanyang ? "is required by state_machine huanyang" : "belongs to state_machine huanyang only");
+  if (huanyang) p.huanyang = read_huanyang(top.map("huanyang", kHuanyangKeys));
   const ProfileLogic& logic = profile_logic(p);
   for (Role r : logic.required_roles()) {
     if (!p.has(r)) regs.fail(role_name(r), std::string("is required by state_machine ") + logic.name());
@@ -96,6 +124,7 @@ const char* role_name(Role r) { return kRoleNames[static_cast<size_t>(r)]; }
 std::span<const std::string_view> drive_profile_keys() { return kProfileKeys; }
 std::span<const std::string_view> drive_profile_register_keys() { return kRegisterKeys; }
 std::span<const std::string_view> drive_profile_field_keys() { return kFieldKeys; }
+std::span<const std::string_view> drive_profile_huanyang_keys() { return kHuanyangKeys; }
 
 int64_t Field::min_raw() const {
   if (!is_signed) return 0;

@@ -4,7 +4,7 @@
 // keys and bad values are errors naming the file and the key path.
 //
 //   name: cia402_modbus
-//   state_machine: cia402          # sim | cia402 | leadshine | delta_vfd: the enable / fault-reset logic in code
+//   state_machine: cia402          # sim | cia402 | leadshine | delta_vfd | huanyang: the logic in code
 //   write_and_read: true           # the drive answers function 23 (write and read in one transaction)
 //   read_gap_max: 0                # unused registers a cyclic read may span to merge two fields
 //   mode_of_operation: 8           # cia402: the mode written before enabling
@@ -64,15 +64,33 @@ struct Field {
   int64_t max_raw() const;
 };
 
+// A Huanyang VFD's data (state_machine huanyang; its frames in huanyang_frame.h, its
+// command and status bits in huanyang_profile.h): where its values are and how they
+// scale, and the PD parameters that must be set for the link to drive it.
+struct HuanyangMap {
+  bool present = false;
+  int output_frequency_index = 1;  // function 0x04's index of the output frequency
+  int output_current_index = 2;    // and of the output current
+  double frequency_scale = 100;    // counts per Hz: function 0x05, the output frequency, PD005
+  double current_scale = 10;       // counts per A
+  int run_source_pd = 1;           // PD001: where run commands come from
+  int frequency_source_pd = 2;     // PD002: where the frequency comes from
+  int source_link = 2;             // the value of both that means the communication port
+  int max_frequency_pd = 5;        // PD005: the highest frequency the drive puts out
+  int rated_rpm_pd = 144;          // PD144: the motor's rpm at rated_rpm_hz
+  double rated_rpm_hz = 50;
+};
+
 struct DriveProfile {
   std::string name;
   std::string file;
   std::string description;
-  std::string state_machine;  // sim | cia402 | leadshine | delta_vfd (a spindle drive)
+  std::string state_machine;  // sim | cia402 | leadshine | delta_vfd, huanyang (spindle drives)
   bool write_and_read = false;
   int read_gap_max = 0;
   int mode_of_operation = 8;
   std::array<Field, kRoleCount> fields{};
+  HuanyangMap huanyang;
 
   const Field& field(Role r) const { return fields[static_cast<size_t>(r)]; }
   bool has(Role r) const { return field(r).present(); }
@@ -86,6 +104,7 @@ struct DriveProfile {
 std::span<const std::string_view> drive_profile_keys();
 std::span<const std::string_view> drive_profile_register_keys();
 std::span<const std::string_view> drive_profile_field_keys();
+std::span<const std::string_view> drive_profile_huanyang_keys();
 
 // Loads and validates; throws config::ConfigError naming the file and key path.
 DriveProfile load_drive_profile(const std::string& file);

@@ -4,7 +4,10 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
+
+#include "common/drive/huanyang_frame.h"
 
 namespace cnc::drive {
 
@@ -55,6 +58,10 @@ TxResult Link::finish(int err, LinkCounters& c) {
   ++c.transactions;
   if (err == 0) return TxResult::kOk;
   last_error_ = modbus_strerror(err);
+  if (detail_[0] != '\0') {
+    last_error_.append(": ").append(detail_.data());
+    detail_[0] = '\0';
+  }
   if (err == ETIMEDOUT) {
     ++c.timeouts;
     discard_input();
@@ -127,9 +134,26 @@ TxResult Link::read_input_registers(int unit, int addr, int n, uint16_t* dest, L
   return finish(do_read_input_registers(unit, addr, n, dest), c);
 }
 
+TxResult Link::exchange_frame(const uint8_t* request, int request_n, uint8_t* reply, int* n, LinkCounters& c) {
+  *n = 0;
+  if (!open_) return TxResult::kLinkLost;
+  int err = do_frame(request, request_n, reply, huanyang::kMaxFrame, n);
+  if (err == 0 || err == ETIMEDOUT) {
+    const huanyang::Check k = err == 0 ? huanyang::check_reply(request, reply, *n) : huanyang::Check::kNone;
+    if (k != huanyang::Check::kOk) {
+      huanyang::describe(k, request, reply, *n, detail_.data(), static_cast<int>(detail_.size()));
+      err = k == huanyang::Check::kNone ? ETIMEDOUT : k == huanyang::Check::kCrc ? EMBBADCRC : EMBBADDATA;
+    }
+  } else if (err == EPROTONOSUPPORT) {
+    std::snprintf(detail_.data(), detail_.size(), "%s carries no Huanyang frames (a serial line does)", name_.c_str());
+  }
+  return finish(err, c);
+}
+
 int Link::do_read_bits(int, int, int, uint8_t*, bool) { return EMBXILFUN; }
 int Link::do_write_bit(int, int, bool) { return EMBXILFUN; }
 int Link::do_write_bits(int, int, int, const uint8_t*) { return EMBXILFUN; }
 int Link::do_read_input_registers(int, int, int, uint16_t*) { return EMBXILFUN; }
+int Link::do_frame(const uint8_t*, int, uint8_t*, int, int*) { return EPROTONOSUPPORT; }
 
 }  // namespace cnc::drive

@@ -4,6 +4,7 @@
 // kept apart from the register transactions (DriveIo) as LinuxCNC's mb2hal keeps
 // them: a failed transaction is counted by kind and is never fatal; a broken
 // connection is closed and reopened with exponential back-off.
+#include <array>
 #include <cstdint>
 #include <string>
 
@@ -50,6 +51,11 @@ class Link {
   TxResult write_coil(int unit, int addr, bool on, LinkCounters& c);
   TxResult write_coils(int unit, int addr, int n, const uint8_t* src, LinkCounters& c);
   TxResult read_input_registers(int unit, int addr, int n, uint16_t* dest, LinkCounters& c);
+  // A Huanyang frame (huanyang_frame.h, not Modbus): `request` out (a whole frame),
+  // the reply into `reply` (huanyang::kMaxFrame bytes), `*n` its length. kOk only for a
+  // whole reply with its CRC, the request's unit and function and the right length;
+  // a short or malformed one is kOther, none kTimeout, each named in last_error().
+  TxResult exchange_frame(const uint8_t* request, int request_n, uint8_t* reply, int* n, LinkCounters& c);
 
  protected:
   // Each returns 0 on success or the errno of the failure (libmodbus codes for
@@ -66,6 +72,10 @@ class Link {
   virtual int do_write_bit(int unit, int addr, bool on);
   virtual int do_write_bits(int unit, int addr, int n, const uint8_t* src);
   virtual int do_read_input_registers(int unit, int addr, int n, uint16_t* dest);
+  // Sends a frame and reads what comes back within the response timeout (`*got`
+  // bytes, as many as a whole frame's length byte asks for); 0 or an I/O errno.
+  // A link that cannot carry such frames answers EPROTONOSUPPORT.
+  virtual int do_frame(const uint8_t* request, int n, uint8_t* reply, int cap, int* got);
   // After a failed transaction that may leave bytes in flight (timeouts, garbage):
   // a serial line is flushed, a TCP connection made afresh.
   virtual void discard_input() {}
@@ -79,6 +89,7 @@ class Link {
   double backoff_max_s_ = 2.0;
   double backoff_s_ = 0.1;
   std::string last_error_;
+  std::array<char, 96> detail_{};  // what a failed frame exchange found, for last_error_
 };
 
 }  // namespace cnc::drive

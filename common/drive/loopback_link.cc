@@ -12,8 +12,9 @@ void LoopbackLink::add_drive(int unit, const DriveProfile& profile, double start
   drives_[unit] = std::make_unique<DriveEmulator>(profile, start_mm);
 }
 
-void LoopbackLink::add_vfd(int unit, const DriveProfile& profile, const config::SpindleSimConfig& sim, double max_hz) {
-  vfds_[unit] = std::make_unique<VfdEmulator>(profile, sim, max_hz);
+void LoopbackLink::add_vfd(int unit, const DriveProfile& profile, const config::SpindleSimConfig& sim, double max_hz,
+                           double rpm_per_hz) {
+  vfds_[unit] = std::make_unique<VfdEmulator>(profile, sim, max_hz, rpm_per_hz);
 }
 
 VfdEmulator* LoopbackLink::vfd(int unit) {
@@ -43,6 +44,8 @@ void LoopbackLink::inject_exceptions(int count, int code) {
 }
 
 void LoopbackLink::inject_timeouts(int count) { timeouts_left_ = count; }
+
+void LoopbackLink::inject_short_replies(int count) { short_left_ = count; }
 
 void LoopbackLink::set_stalled(bool stalled) { stalled_ = stalled; }
 
@@ -122,6 +125,20 @@ int LoopbackLink::do_write_read(int unit, int waddr, int wn, const uint16_t* src
   int x = d->write(waddr, wn, src);
   if (x == 0) x = d->read(raddr, rn, dest);
   return x ? MODBUS_ENOBASE + x : 0;
+}
+
+int LoopbackLink::do_frame(const uint8_t* request, int n, uint8_t* reply, int, int* got) {
+  *got = 0;
+  if (const int e = injected()) return e;
+  VfdEmulator* v = vfd(request[0]);
+  if (v == nullptr) return ETIMEDOUT;
+  move(*v);
+  *got = v->answer_frame(request, n, reply);
+  if (short_left_ > 0 && *got > 3) {
+    --short_left_;
+    *got -= 3;
+  }
+  return 0;
 }
 
 int LoopbackLink::do_read_bits(int unit, int addr, int n, uint8_t* dest, bool discrete_inputs) {

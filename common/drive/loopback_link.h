@@ -19,8 +19,9 @@ class LoopbackLink final : public Link {
   LoopbackLink();
   void add_drive(int unit, const DriveProfile& profile, double start_mm);
   DriveEmulator* drive(int unit);
-  // A spindle VFD (profile delta_vfd) under `unit`; `max_hz`: its frequency at max_rpm.
-  void add_vfd(int unit, const DriveProfile& profile, const config::SpindleSimConfig& sim, double max_hz);
+  // A spindle VFD (profile delta_vfd or huanyang) under `unit`; `max_hz`: its frequency at max_rpm.
+  void add_vfd(int unit, const DriveProfile& profile, const config::SpindleSimConfig& sim, double max_hz,
+               double rpm_per_hz);
   VfdEmulator* vfd(int unit);
   // An I/O module (io.modules[module] with its points) under `unit`.
   void add_io_module(int unit, const config::IoConfig& io, int module);
@@ -30,6 +31,7 @@ class LoopbackLink final : public Link {
   void set_reachable(bool reachable);          // false: the link breaks and cannot be opened
   void inject_exceptions(int count, int code);  // the next `count` transactions answer with `code`
   void inject_timeouts(int count);
+  void inject_short_replies(int count);         // the next `count` Huanyang replies lose their last 3 bytes
   void set_stalled(bool stalled);               // the axes and motors stop moving (a blocked axis: following error)
 
  private:
@@ -43,6 +45,7 @@ class LoopbackLink final : public Link {
   int do_write_bit(int unit, int addr, bool on) override;
   int do_write_bits(int unit, int addr, int n, const uint8_t* src) override;
   int do_read_input_registers(int unit, int addr, int n, uint16_t* dest) override;
+  int do_frame(const uint8_t* request, int n, uint8_t* reply, int cap, int* got) override;
   int injected();
   void move(DriveEmulator& d);
   void move(VfdEmulator& v);
@@ -54,6 +57,7 @@ class LoopbackLink final : public Link {
   int exceptions_left_ = 0;
   int exception_code_ = 0;
   int timeouts_left_ = 0;
+  int short_left_ = 0;
   bool stalled_ = false;
 };
 

@@ -1,10 +1,16 @@
 #include "common/drive/modbus_link.h"
 
+#include <poll.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <ctime>
 #include <stdexcept>
+
+#include "common/drive/huanyang_frame.h"
 
 namespace cnc::drive {
 namespace {
@@ -119,6 +125,52 @@ int ModbusLink::do_read_input_registers(int unit, int addr, int n, uint16_t* des
   modbus_set_slave(ctx_, unit);
   errno = 0;
   return rc_to_err(modbus_read_input_registers(ctx_, addr, n, dest));
+}
+
+int ModbusLink::do_frame(const uint8_t* request, int n, uint8_t* reply, int cap, int* got) {
+  *got = 0;
+  if (!serial_) return EPROTONOSUPPORT;
+  const int fd = modbus_get_socket(ctx_);
+  if (fd < 0) return EBADF;
+  using Clock = std::chrono::steady_clock;
+  const auto deadline = Clock::now() + std::chrono::microseconds(std::lround(timeout_s_ * 1e6));
+  auto wait = [&](short events) {
+    for (;;) {
+      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
+      if (left < 0) return 0;
+      pollfd p{fd, events, 0};
+      const int r = ::poll(&p, 1, static_cast<int>(left) + 1);
+      if (r >= 0) return r;
+      if (errno != EINTR) return -1;
+    }
+  };
+  for (int sent = 0; sent < n;) {
+    const ssize_t w = ::write(fd, request + sent, static_cast<size_t>(n - sent));
+    if (w > 0) {
+      sent += static_cast<int>(w);
+      continue;
+    }
+    if (w < 0 && errno != EAGAIN && errno != EINTR) return errno;
+    const int r = wait(POLLOUT);
+    if (r < 0) return errno;
+    if (r == 0) return ETIMEDOUT;
+  }
+  // The reply's length is in its third byte: read the header, then the rest.
+  for (;;) {
+    const int whole = huanyang::frame_length(reply, *got);
+    if (whole < 0 || (whole > 0 && *got >= whole)) return 0;
+    const int want = std::min(whole > 0 ? whole - *got : 3 - *got, cap - *got);
+    if (want <= 0) return 0;
+    const int r = wait(POLLIN);
+    if (r < 0) return errno;
+    if (r == 0) return 0;  // what came in time (none: a timeout), judged by the caller
+    const ssize_t k = ::read(fd, reply + *got, static_cast<size_t>(want));
+    if (k > 0) {
+      *got += static_cast<int>(k);
+    } else if (k == 0 || (errno != EAGAIN && errno != EINTR)) {
+      return k == 0 ? EIO : errno;
+    }
+  }
 }
 
 }  // namespace cnc::drive

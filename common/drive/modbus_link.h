@@ -30,6 +30,8 @@ class ModbusLink final : public Link {
   int do_write_bit(int unit, int addr, bool on) override;
   int do_write_bits(int unit, int addr, int n, const uint8_t* src) override;
   int do_read_input_registers(int unit, int addr, int n, uint16_t* dest) override;
+  // Huanyang frames on the serial line's descriptor, framed here (not by libmodbus).
+  int do_frame(const uint8_t* request, int n, uint8_t* reply, int cap, int* got) override;
   void discard_input() override;
 
   modbus_t* ctx_;

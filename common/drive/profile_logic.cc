@@ -4,13 +4,15 @@
 
 #include "common/drive/cia402_profile.h"
 #include "common/drive/delta_vfd_profile.h"
+#include "common/drive/huanyang_profile.h"
 #include "common/drive/leadshine_profile.h"
 #include "common/drive/sim_profile.h"
 
 namespace cnc::drive {
 
 const ProfileLogic* find_profile_logic(const std::string& state_machine) {
-  for (const ProfileLogic* l : {&sim_logic(), &cia402_logic(), &leadshine_logic(), &delta_vfd_logic()})
+  for (const ProfileLogic* l : {&sim_logic(), &cia402_logic(), &leadshine_logic(), &delta_vfd_logic(),
+                                  &huanyang_logic()})
     if (state_machine == l->name()) return l;
   return nullptr;
 }
@@ -21,6 +23,6 @@ const ProfileLogic& profile_logic(const DriveProfile& p) {
   return *l;
 }
 
-std::vector<std::string> profile_logic_names() { return {"sim", "cia402", "leadshine", "delta_vfd"}; }
+std::vector<std::string> profile_logic_names() { return {"sim", "cia402", "leadshine", "delta_vfd", "huanyang"}; }
 
 }  // namespace cnc::drive

@@ -5,6 +5,7 @@
 #include <stdexcept>
 
 #include "common/drive/delta_vfd_profile.h"
+#include "common/drive/huanyang_device.h"
 
 namespace cnc::drive {
 
@@ -14,9 +15,9 @@ constexpr Role kReadRoles[] = {Role::kStatusword, Role::kErrorCode, Role::kActua
 
 SpindleDevice::SpindleDevice(const DriveProfile& profile, int unit, Link& link)
     : profile_(profile), unit_(unit), link_(link) {
-  if (!is_spindle_profile(profile))
+  if (!is_spindle_profile(profile) || profile.huanyang.present)
     throw std::invalid_argument("drive profile " + profile.name + " (" + profile.file +
-                                ") is no spindle drive's: its state_machine is " + profile.state_machine);
+                                ") is no register-mapped spindle drive's: its state_machine is " + profile.state_machine);
   int lo = 65536, hi = -1;
   for (Role r : kReadRoles) {
     if (!profile.has(r)) continue;
@@ -80,6 +81,12 @@ TxResult SpindleDevice::control(Goal goal, LinkCounters& c) {
 void SpindleDevice::forget(std::span<std::byte> inputs) {
   last_error_ = 0;
   put_pdo(inputs, SpindleInputs{});
+}
+
+std::unique_ptr<Device> make_spindle_device(const DriveProfile& profile, int unit, Link& link, double max_hz,
+                                            double rpm_per_hz) {
+  if (profile.huanyang.present) return std::make_unique<HuanyangSpindleDevice>(profile, unit, link, max_hz, rpm_per_hz);
+  return std::make_unique<SpindleDevice>(profile, unit, link);
 }
 
 }  // namespace cnc::drive

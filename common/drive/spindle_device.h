@@ -8,6 +8,7 @@
 // No allocation after construction: it runs on the bridge's link workers.
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <span>
 
 #include "common/drive/device.h"
@@ -33,6 +34,9 @@ struct SpindleInputs {
   double output_hz = 0;     // signed: negative in reverse
   bool has_current = false;
   double current_a = 0;
+  // What is wrong with the drive's own settings for the link, read when the link
+  // opened (Huanyang: its PD parameters); empty when nothing is, or not known.
+  std::array<char, 160> setup_error{};
 };
 
 class SpindleDevice final : public Device {
@@ -57,5 +61,12 @@ class SpindleDevice final : public Device {
   std::array<uint16_t, 125> buf_{};
   uint16_t last_error_ = 0;
 };
+
+// The spindle device of a spindle drive's profile: SpindleDevice (delta_vfd) or
+// HuanyangSpindleDevice (huanyang). `max_hz` and `rpm_per_hz` from spindle: (the
+// Huanyang checks its drive's settings against them). Throws std::invalid_argument
+// for a profile that is no spindle drive's.
+std::unique_ptr<Device> make_spindle_device(const DriveProfile& profile, int unit, Link& link, double max_hz,
+                                            double rpm_per_hz);
 
 }  // namespace cnc::drive

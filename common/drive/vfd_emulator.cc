@@ -1,19 +1,34 @@
 #include "common/drive/vfd_emulator.h"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
 #include "common/drive/delta_vfd_profile.h"
+#include "common/drive/huanyang_frame.h"
+#include "common/drive/huanyang_profile.h"
 
 namespace cnc::drive {
 
-VfdEmulator::VfdEmulator(const DriveProfile& profile, const config::SpindleSimConfig& sim, double max_hz)
+VfdEmulator::VfdEmulator(const DriveProfile& profile, const config::SpindleSimConfig& sim, double max_hz,
+                         double rpm_per_hz)
     : profile_(profile), logic_(profile_logic(profile)), sim_(sim), max_hz_(max_hz),
-      base_(profile.first_address()), count_(profile.end_address() - profile.first_address()) {
+      base_(profile.first_address()), count_(profile.end_address() - profile.first_address()),
+      hy_(profile.huanyang.present), rpm_per_hz_(rpm_per_hz) {
   map_ = modbus_mapping_new_start_address(0, 0, 0, 0, static_cast<unsigned>(base_), static_cast<unsigned>(count_), 0, 0);
   if (map_ == nullptr) throw std::runtime_error("modbus_mapping_new_start_address failed");
   logic_.drive_power_up(drive_);
   for (int i = 0; i < count_; ++i) map_->tab_registers[i] = 0;
+  if (hy_) {
+    // Set up for the link (LinuxCNC's hy_vfd documents the same): run and frequency
+    // from the communication port, the max frequency and the rated rpm of the motor.
+    const HuanyangMap& h = profile_.huanyang;
+    const auto at = [&](int pd) -> uint16_t& { return pd_[static_cast<size_t>(pd)]; };
+    at(h.run_source_pd) = static_cast<uint16_t>(h.source_link);
+    at(h.frequency_source_pd) = static_cast<uint16_t>(h.source_link);
+    at(h.max_frequency_pd) = static_cast<uint16_t>(std::lround(max_hz * h.frequency_scale));
+    at(h.rated_rpm_pd) = static_cast<uint16_t>(std::lround(rpm_per_hz * h.rated_rpm_hz));
+  }
   refresh();
 }
 
@@ -48,6 +63,12 @@ bool VfdEmulator::running() const { return logic_.drive_follows(drive_, profile_
 
 double VfdEmulator::command_hz() const {
   if (!running()) return 0.0;
+  if (hy_) {
+    // The drive limits the frequency to its PD005.
+    const HuanyangMap& h = profile_.huanyang;
+    const double hz = std::min(hy_frequency_, pd_[static_cast<size_t>(h.max_frequency_pd)]) / h.frequency_scale;
+    return (logic_.drive_statusword(drive_) & kHyReverseCommanded) ? -hz : hz;
+  }
   const Field& f = profile_.field(Role::kSpeedSetpoint);
   const double hz = std::fabs(f.decode(reg(f.address)));
   return (logic_.drive_statusword(drive_) & kDeltaVfdCommandedReverse) ? -hz : hz;
@@ -75,7 +96,66 @@ void VfdEmulator::inject_fault(uint16_t code) {
   refresh();
 }
 
+int VfdEmulator::answer_frame(const uint8_t* request, int n, uint8_t* reply) {
+  namespace hy = huanyang;
+  if (!hy_ || hy::frame_length(request, n) != n || !hy::crc_ok(request, n)) return 0;
+  const HuanyangMap& h = profile_.huanyang;
+  const uint8_t* d = request + 3;
+  const int len = request[2];
+  uint8_t out[hy::kMaxData];
+  int out_n = 0;
+  const auto value = [&](uint8_t first, double v) {
+    const long raw = std::lround(std::fabs(v));
+    const auto u = static_cast<uint16_t>(std::min(raw, 65535L));
+    out[0] = first;
+    out[1] = static_cast<uint8_t>(u >> 8);
+    out[2] = static_cast<uint8_t>(u & 0xFF);
+    out_n = 3;
+  };
+  switch (request[1]) {
+    case hy::kReadFunctionData:
+      if (len != 3) return 0;
+      value(d[0], pd_[d[0]]);
+      break;
+    case hy::kWriteFunctionData:
+      if (len != 3) return 0;
+      pd_[d[0]] = hy::be16(d + 1);
+      value(d[0], pd_[d[0]]);
+      break;
+    case hy::kWriteControlData: {
+      if (len != 1) return 0;
+      logic_.drive_write(drive_, Role::kControlword, d[0], profile_);
+      uint16_t cnst = logic_.drive_statusword(drive_);
+      if (hz_ < 0) cnst |= kHyTurnsReverse;
+      out[0] = static_cast<uint8_t>(cnst);
+      out_n = 1;
+      break;
+    }
+    case hy::kReadControlStatus: {
+      if (len != 1) return 0;
+      const int index = d[0];
+      double v = 0;
+      if (index == h.output_frequency_index) v = hz_ * h.frequency_scale;
+      else if (index == h.output_current_index) v = current_a_ * h.current_scale;
+      else if (index == 0) v = hy_frequency_;                      // the set frequency
+      else if (index == 3) v = hz_ * rpm_per_hz_;                   // rpm
+      value(d[0], v);
+      break;
+    }
+    case hy::kWriteFrequency:
+      if (len != 2) return 0;
+      hy_frequency_ = hy::be16(d);
+      out[0] = d[0];
+      out[1] = d[1];
+      out_n = 2;
+      break;
+    default: return 0;
+  }
+  return hy::encode(request[0], request[1], out, out_n, reply);
+}
+
 void VfdEmulator::refresh() {
+  if (hy_) return;  // answer_frame reads the motor as it is
   uint16_t sw = logic_.drive_statusword(drive_);
   sw = static_cast<uint16_t>((sw & ~kDeltaVfdTurnsReverse) | (hz_ < 0 ? kDeltaVfdTurnsReverse : 0));
   *reg(profile_.field(Role::kStatusword).address) = sw;

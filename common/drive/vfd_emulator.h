@@ -1,12 +1,16 @@
 #pragma once
-// The drive end of a spindle VFD profile (state_machine delta_vfd): its register
-// image and a motor whose output frequency follows the command with a first-order
-// response, with a load figure (output current) of a steady part proportional to
-// speed and an inertial part proportional to the acceleration. The servo simulator
-// serves it over Modbus (modbus_reply on mapping()) and steps it on its 1 ms grid;
-// tests drive it through a link of their own.
+// The drive end of a spindle VFD profile: a motor whose output frequency follows the
+// command with a first-order response, with a load figure (output current) of a
+// steady part proportional to speed and an inertial part proportional to the
+// acceleration, behind either of two protocols: a register image (state_machine
+// delta_vfd; the servo simulator serves it with modbus_reply on mapping()) or the
+// Huanyang frames (state_machine huanyang; answer_frame, with the PD parameters the
+// master checks set as a drive set up for the link has them). One VFD model, two
+// protocols. The simulator steps it on its 1 ms grid; tests drive it through a link
+// of their own.
 #include <modbus.h>
 
+#include <array>
 #include <cstdint>
 
 #include "common/config/machine_config.h"
@@ -17,8 +21,9 @@ namespace cnc::drive {
 
 class VfdEmulator {
  public:
-  // `max_hz`: the frequency at the spindle's max_rpm (the load figure's scale).
-  VfdEmulator(const DriveProfile& profile, const config::SpindleSimConfig& sim, double max_hz);
+  // `max_hz`: the frequency at the spindle's max_rpm (the load figure's scale; a
+  // Huanyang's PD005); `rpm_per_hz`: the motor's (a Huanyang's PD144 follows from it).
+  VfdEmulator(const DriveProfile& profile, const config::SpindleSimConfig& sim, double max_hz, double rpm_per_hz = 60);
   ~VfdEmulator();
   VfdEmulator(const VfdEmulator&) = delete;
   VfdEmulator& operator=(const VfdEmulator&) = delete;
@@ -29,6 +34,12 @@ class VfdEmulator {
   int write(int addr, int n, const uint16_t* src);
   // After the registers [addr, addr + n) were written through mapping().
   void after_write(int addr, int n);
+  // A Huanyang request (a whole frame, its CRC checked); its reply into `reply`
+  // (huanyang::kMaxFrame bytes). Returns the reply's length, 0 for no reply (a bad
+  // CRC or a function the drive does not have: a real one stays silent).
+  int answer_frame(const uint8_t* request, int n, uint8_t* reply);
+  // A Huanyang's PD parameter (function 0x01 reads it), to set up a drive wrongly.
+  void set_pd(int number, uint16_t value) { pd_[static_cast<size_t>(number & 0xFF)] = value; }
   // The motor over dt_s seconds; refreshes the read registers.
   void step(double dt_s);
   // An ideal motor (the loopback link): at the commanded frequency at once.
@@ -58,6 +69,10 @@ class VfdEmulator {
   EmulatedDrive drive_;
   double hz_ = 0;
   double current_a_ = 0;
+  bool hy_ = false;              // the Huanyang protocol
+  uint16_t hy_frequency_ = 0;    // function 0x05's value
+  std::array<uint16_t, 256> pd_{};
+  double rpm_per_hz_;
 };
 
 }  // namespace cnc::drive

@@ -11,6 +11,7 @@
 #include "cnc/lcmt_axis_status.hpp"
 #include "common/config/yaml_reader.h"
 #include "common/drive/delta_vfd_profile.h"
+#include "common/drive/link_factory.h"
 #include "common/drive/loopback_link.h"
 #include "common/util/clock.h"
 
@@ -36,11 +37,17 @@ void DriveBridgeNode::make_spindle(std::map<std::string, LinkWorker*>& by_link) 
   if (!drive::is_spindle_profile(*spindle_->profile))
     throw config::ConfigError(cfg_.source_file, "spindle.drive.profile",
                               "'" + d.profile + "' is no spindle drive's profile (its state_machine is " +
-                                  spindle_->profile->state_machine + ", a spindle needs delta_vfd)");
+                                  spindle_->profile->state_machine + ", a spindle needs delta_vfd or huanyang)");
+  // A Huanyang's frames are no Modbus: TCP (or a Modbus gateway) cannot carry them.
+  if (spindle_->profile->huanyang.present && drive::transport_of(d) == drive::Transport::kModbusTcp)
+    throw config::ConfigError(cfg_.source_file, "spindle.drive.transport",
+                              "modbus_tcp cannot carry the Huanyang protocol of profile '" + d.profile +
+                                  "' (its own function codes on RS-485, no Modbus): use modbus_rtu");
   spindle_->worker = worker_for(d, by_link);
+  const double max_hz = cfg_.spindle.max_rpm / cfg_.spindle.rpm_per_hz;
   if (auto* loopback = dynamic_cast<drive::LoopbackLink*>(&spindle_->worker->link()))
-    loopback->add_vfd(d.unit_id, *spindle_->profile, cfg_.spindle.sim, cfg_.spindle.max_rpm / cfg_.spindle.rpm_per_hz);
-  spindle_->worker->add_spindle(*spindle_->profile, d.unit_id);
+    loopback->add_vfd(d.unit_id, *spindle_->profile, cfg_.spindle.sim, max_hz, cfg_.spindle.rpm_per_hz);
+  spindle_->worker->add_spindle(*spindle_->profile, d.unit_id, max_hz, cfg_.spindle.rpm_per_hz);
   ch_spindle_status_ = cfg_.channel(ch::kSpindleStatus);
   bus_.subscribe<cnc::lcmt_spindle_command>(cfg_.channel(ch::kSpindleCmd), [this](const auto& m) {
     Spindle& sp = *spindle_;
@@ -164,6 +171,8 @@ void DriveBridgeNode::spindle_tick(double now_s) {
   sp.fb.error_code = sp.rep.in.error_code;
   sp.fb.output_hz = sp.rep.in.output_hz;
   sp.fb.lost_events = sp.rep.lost_events;
+  sp.fb.last_error = sp.rep.last_error.data();
+  sp.fb.setup_error = sp.rep.in.setup_error.data();
   if (sp.ctl.update(sp.fb, now_s)) {
     if (state_ == State::kEnabled || state_ == State::kEnabling || state_ == State::kStopping) {
       fault(0, sp.ctl.fault_reason(), false);

@@ -31,10 +31,10 @@ void LinkWorker::add_axis(int axis_index, const drive::DriveProfile& profile, in
   axis_index_.push_back(axis_index);
 }
 
-void LinkWorker::add_spindle(const drive::DriveProfile& profile, int unit) {
+void LinkWorker::add_spindle(const drive::DriveProfile& profile, int unit, double max_hz, double rpm_per_hz) {
   if (spindle_) throw std::runtime_error("a second spindle on link " + link_.name());
   spindle_ = std::make_unique<SpindleSlot>();
-  spindle_->dev = std::make_unique<drive::SpindleDevice>(profile, unit, link_);
+  spindle_->dev = drive::make_spindle_device(profile, unit, link_, max_hz, rpm_per_hz);
   spindle_->pdo = image_.add(spindle_->dev->layout());
 }
 

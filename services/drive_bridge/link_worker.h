@@ -106,7 +106,8 @@ class LinkWorker {
   void add_axis(int axis_index, const drive::DriveProfile& profile, int unit);
   const std::vector<int>& axes() const { return axis_index_; }
   // The spindle's VFD on this link (at most one); its exchange follows the axes' in a round.
-  void add_spindle(const drive::DriveProfile& profile, int unit);
+  // `max_hz`, `rpm_per_hz`: spindle.max_rpm's frequency and spindle.rpm_per_hz.
+  void add_spindle(const drive::DriveProfile& profile, int unit, double max_hz, double rpm_per_hz);
   bool has_spindle() const { return spindle_ != nullptr; }
   void set_spindle_command(const SpindleCommand& c) { spindle_->cmd.write(c); }
   const SpindleReport& spindle_report() { return spindle_->rep.read(); }
@@ -147,7 +148,7 @@ class LinkWorker {
     bool hold_valid = false;
   };
   struct SpindleSlot {
-    std::unique_ptr<drive::Device> dev;  // a drive::SpindleDevice
+    std::unique_ptr<drive::Device> dev;  // drive::make_spindle_device's
     size_t pdo = 0;
     util::TripleBuffer<SpindleCommand> cmd;
     util::TripleBuffer<SpindleReport> rep;

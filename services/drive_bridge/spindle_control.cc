@@ -45,7 +45,14 @@ bool SpindleControl::update(const SpindleFeedback& fb, double now_s) {
   const bool lost = fb.lost_events > lost_seen_;
   lost_seen_ = fb.lost_events;
   if (lost && direction_ != 0) {
-    raise("spindle: the link to its drive was lost while it turned");
+    std::string why = "spindle: the link to its drive was lost while it turned";
+    if (!fb.last_error.empty()) why.append(" (").append(fb.last_error).append(")");
+    raise(std::move(why));
+    return true;
+  }
+  if (fb.have_status && !fb.setup_error.empty() && (direction_ != 0 || setup_raised_ != fb.lost_events)) {
+    setup_raised_ = fb.lost_events;
+    raise(std::string("spindle: ").append(fb.setup_error));
     return true;
   }
   if (fb.have_status && fb.error_code != 0) {
@@ -68,8 +75,9 @@ bool SpindleControl::update(const SpindleFeedback& fb, double now_s) {
       std::snprintf(text, sizeof text, "spindle: %.0f rpm not reached within %.1f s (at %.0f rpm, tolerance %.1f %%)",
                     want, cfg_.at_speed_timeout_s, actual, cfg_.at_speed_tolerance * 100);
     else
-      std::snprintf(text, sizeof text, "spindle: %.0f rpm not reached within %.1f s: its drive does not answer", want,
-                    cfg_.at_speed_timeout_s);
+      std::snprintf(text, sizeof text, "spindle: %.0f rpm not reached within %.1f s: its drive does not answer%s%.*s%s",
+                    want, cfg_.at_speed_timeout_s, fb.last_error.empty() ? "" : " (",
+                    static_cast<int>(fb.last_error.size()), fb.last_error.data(), fb.last_error.empty() ? "" : ")");
     raise(text);
     return true;
   }

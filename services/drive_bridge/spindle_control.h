@@ -6,12 +6,15 @@
 // answers: at speed when the output is within spindle.at_speed_tolerance of the
 // command (a stop counts at once), and a fault, naming its reason, when a change is
 // not at speed within spindle.at_speed_timeout_s, when the drive reports a fault
-// code, or when its link is lost while it should turn. A fault, and a stop of the
+// code, when its link is lost while it should turn (naming the last failed
+// transaction), and when the drive's own settings do not let the link drive it
+// (once when read, and at every change that would turn it). A fault, and a stop of the
 // bridge's own (its FAULT, a shut-down), stops the spindle; a command from before
 // that stop is never taken again: only a newer change (after the interpolator's
 // STOP or RESET) turns it again.
 #include <cstdint>
 #include <string>
+#include <string_view>
 
 #include "common/config/machine_config.h"
 
@@ -25,6 +28,8 @@ struct SpindleFeedback {
   uint16_t error_code = 0;
   double output_hz = 0;  // signed
   int64_t lost_events = 0;
+  std::string_view last_error;   // the link's last failed transaction (names a lost link's cause)
+  std::string_view setup_error;  // what is wrong with the drive's settings for the link, empty if nothing
 };
 
 class SpindleControl {
@@ -64,6 +69,7 @@ class SpindleControl {
   double taken_s_ = 0;        // when the newest change was taken
   double at_speed_s_ = 0;     // and when it was at speed
   int64_t lost_seen_ = 0;
+  int64_t setup_raised_ = -1;  // the lost_events count of the connection whose setup fault was raised
   bool faulted_ = false;
   std::string fault_;
 };

@@ -13,6 +13,11 @@
 #     told to stop.
 #  3. The interpolator killed (SIGKILL) while the spindle turns in a dwell: the
 #     bridge's setpoint watchdog faults and the bridge stops the spindle itself.
+#  4. A Huanyang VFD (its own function codes, config/machines/sim3_huanyang.yaml) on a
+#     serial line of its own (a socat pty pair), answered by a third party
+#     (huanyang_vfd.py, pyserial): M3 S6000, a feed move after at speed, M4 S3000
+#     (the reversal waited for), a feed move back, M5; the commanded and actual
+#     speeds on SPINDLE_STATUS, the drive's own log of its commands.
 #   spindle_test.sh BUILD_DIR SOURCE_DIR
 source "$(dirname "$0")/lib.sh"
 enter_private_netns "$@"
@@ -161,4 +166,83 @@ grep -q "fault: .*setpoint" "$WORK/drive-bridge.log" || fail "the bridge did not
 grep -q "cnc-servo-sim: spindle: stop" "$WORK/servo-sim.log" ||
   fail "the bridge did not stop the spindle when its interpolator was lost"
 for s in program-server monitor drive-bridge servo-sim; do stop "$s" TERM; done
+
+# ---- 4. a Huanyang VFD on its own line, a third party's ------------------------------
+M="$WORK/huanyang.yaml"
+make_machine "$SRC/config/machines/sim3_huanyang.yaml" "$M"
+sed -i "s#/tmp/cnc-hy-bridge#$WORK/hy-bridge#" "$M"
+CTL=("$BUILD/tools/cnc-ctl" --machine "$M")
+cat >"$WORK/reverse.ngc" <<'NGC'
+G21 G90
+M3 S6000
+G1 X5 F3000
+M4 S3000
+G1 X0
+M5
+M30
+NGC
+start socat socat pty,raw,echo=0,link="$WORK/hy-bridge" pty,raw,echo=0,link="$WORK/hy-vfd"
+for ((i = 0; i < 50; i++)); do [ -e "$WORK/hy-vfd" ] && break; sleep 0.1; done
+[ -e "$WORK/hy-vfd" ] || fail "socat made no pseudo-terminal pair"
+start hy-vfd /usr/bin/python3 "$(dirname "$0")/huanyang_vfd.py" --device "$WORK/hy-vfd" --tau 0.15
+start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M"
+start logger "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/hy"
+start_cell
+"${CTL[@]}" --do run --program "$WORK/reverse.ngc" --timeout 30 >"$WORK/ctl4.out" 2>&1 ||
+  { cat "$WORK/ctl4.out" "$WORK/drive-bridge.log" >&2; fail "the program did not run to its end on the Huanyang VFD"; }
+sleep 0.3
+for s in interpolator program-server monitor drive-bridge servo-sim logger hy-vfd; do stop "$s" TERM; done
+kill "${TEST_PIDS[socat]}"; wait "${TEST_PIDS[socat]}" 2>/dev/null || true; unset "TEST_PIDS[socat]"
+cat "$WORK/hy-vfd.log" >&2
+grep -q "run forward at 100.00 Hz" "$WORK/hy-vfd.log" || fail "the VFD was not run forward at 100 Hz (M3 S6000)"
+grep -q "run reverse at 50.00 Hz" "$WORK/hy-vfd.log" || fail "the VFD was not run in reverse at 50 Hz (M4 S3000)"
+grep -q "stop at" "$WORK/hy-vfd.log" || fail "the VFD was not stopped (M5)"
+/usr/bin/python3 - "$WORK/hy.lcmlog" "$TEST_PREFIX" "$TOL" "$(dirname "$0")" <<'PY' || fail "the Huanyang spindle did not run as it should"
+import sys
+log, prefix, tol = sys.argv[1], sys.argv[2], float(sys.argv[3])
+sys.path.insert(0, sys.argv[4])
+from lcmlog import events, fields
+cmds, stats, xs = [], [], []
+for ts, ch, b in events(log):
+    if ch == prefix + "SPINDLE_CMD":
+        _, _, _, seq, d, rpm, _ = fields(b, "qqiqbdq")
+        cmds.append((ts, seq, d, rpm))
+    elif ch == prefix + "SPINDLE_STATUS":
+        _, _, _, state, seq, at_seq, d, crpm, arpm, cur = fields(b, "qqibqqbddd")
+        stats.append((ts, state, seq, at_seq, d, crpm, arpm, cur))
+    elif ch == prefix + "SETPOINTS":
+        _, _, _, cycle, _, n, x = fields(b, "qqiqdid")
+        xs.append((ts, x))
+ok = True
+def check(cond, what):
+    global ok
+    print(("# " if cond else "# FAILED: ") + what, file=sys.stderr)
+    ok = ok and cond
+m3 = next((c for c in cmds if c[2] == 1 and c[3] == 6000), None)
+m4 = next((c for c in cmds if c[2] == -1 and c[3] == 3000), None)
+m5 = next((c for c in cmds if m4 and c[0] > m4[0] and c[2] == 0), None)
+check(m3 is not None and m4 is not None and m5 is not None, "SPINDLE_CMD M3 6000, M4 3000 and M5 sent")
+if not ok: sys.exit(1)
+def at_speed(c):
+    return next((s for s in stats if s[3] >= c[1] and s[0] >= c[0]), None)
+a3, a4 = at_speed(m3), at_speed(m4)
+check(a3 is not None and a4 is not None, "SPINDLE_STATUS reports M3 and M4 at speed")
+if not ok: sys.exit(1)
+print(f"# M3: commanded {a3[5]:.0f} rpm, actual {a3[6]:.0f} rpm at speed {(a3[0] - m3[0]) * 1e-6:.3f} s after it; "
+      f"current then {a3[7]:.2f} A", file=sys.stderr)
+print(f"# M4: commanded {a4[5]:.0f} rpm, actual {a4[6]:.0f} rpm at speed {(a4[0] - m4[0]) * 1e-6:.3f} s after it",
+      file=sys.stderr)
+check(a3[5] == 6000 and abs(a3[6] - 6000) <= tol * 6000, "M3: commanded 6000, actual within tolerance")
+check(a4[4] == -1 and a4[5] == 3000 and abs(a4[6] + 3000) <= tol * 3000, "M4: reverse, commanded 3000, actual -3000 within tolerance")
+x0 = xs[0][1]
+out = next((x for x in xs if x[1] > x0 + 1e-6), None)
+back = next((x for x in xs if x[0] > m4[0] and x[1] < x0 + 5 - 1e-6), None)
+check(out is not None and out[0] >= a3[0], "the feed move out began after M3 was at speed")
+check(back is not None and back[0] >= a4[0], "the feed move back began after M4 was at speed")
+check(max(s[7] for s in stats if m3[0] <= s[0] <= a3[0]) > 0, "a load figure (output current) on the bus")
+last = stats[-1]
+print(f"# last SPINDLE_STATUS: commanded {last[5]:.0f} rpm, actual {last[6]:.0f} rpm; {len(stats)} messages", file=sys.stderr)
+check(last[5] == 0 and last[4] == 0, "M5: commanded 0")
+sys.exit(0 if ok else 1)
+PY
 echo "PASS"

@@ -425,6 +425,77 @@ TEST(BridgeNode, IoCoolantStopsAtAFault) {
   EXPECT_EQ(c.coil(8), 1);
 }
 
+// A Huanyang VFD (its own frames, huanyang_frame.h) as unit 3 on the axes' loopback link.
+const std::string kHuanyang =
+    "spindle: {drive: {transport: loopback, unit_id: 3, profile: huanyang}, at_speed_tolerance: 0.02,"
+    " at_speed_timeout_s: 0.2}\n";
+
+TEST(BridgeNode, HuanyangSpindleFollowsItsCommandsAndReportsAtSpeed) {
+  Cell c("sim", true, kHuanyang);
+  c.ticks(40);
+  ASSERT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  c.spindle_command(11, 1, 6000);
+  c.hold_stream(10, 10, 5);
+  drive::VfdEmulator* vfd = c.link().vfd(3);
+  ASSERT_NE(vfd, nullptr);
+  EXPECT_TRUE(vfd->running());
+  EXPECT_NEAR(vfd->command_hz(), 100.0, 1e-9);
+  EXPECT_EQ(c.spindle.at_speed_seq, 11);
+  EXPECT_EQ(int{c.spindle.state}, int{cnc::lcmt_spindle_status::RUNNING});
+  EXPECT_NEAR(c.spindle.actual_rpm, 6000, 1e-6);
+  EXPECT_GT(c.spindle.current_a, 0);
+  c.spindle_command(12, -1, 3000);
+  c.hold_stream(10, 10, 5);
+  EXPECT_NEAR(c.spindle.actual_rpm, -3000, 1e-6);
+  EXPECT_EQ(c.spindle.at_speed_seq, 12);
+  c.spindle_command(13, 0, 0);
+  c.hold_stream(10, 10, 5);
+  EXPECT_FALSE(vfd->running());
+  EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+}
+
+TEST(BridgeNode, HuanyangShortRepliesWhileItTurnsAreALostLinkNamingThem) {
+  Cell c("sim", true, kHuanyang);
+  c.ticks(40);
+  c.spindle_command(5, 1, 6000);
+  c.hold_stream(10, 10, 5);
+  ASSERT_EQ(c.spindle.at_speed_seq, 5);
+  c.link().inject_short_replies(1000000);
+  c.hold_stream(10, 10, 30);  // 120 ms: beyond the 50 ms link-loss timeout
+  EXPECT_EQ(c.node.state(), State::kFault) << c.node.detail();
+  EXPECT_NE(c.node.detail().find("spindle: the link to its drive was lost while it turned (error: Invalid data: "
+                                 "short reply from unit 3 to function 0x0"),
+            std::string::npos)
+      << c.node.detail();
+  EXPECT_TRUE(c.alarmed("drive_fault: spindle: the link to its drive was lost"));
+}
+
+TEST(BridgeNode, HuanyangSetUpForItsPanelIsAFaultNamingThePdParameter) {
+  Cell c("sim", true, kHuanyang);
+  c.link().vfd(3)->set_pd(1, 0);  // run commands from the panel
+  c.ticks(40);
+  c.spindle_command(5, 1, 6000);
+  c.hold_stream(10, 10, 5);
+  EXPECT_FALSE(c.link().vfd(3)->running());
+  EXPECT_NE(c.node.detail().find("spindle: the VFD takes its run command (PD001 = 0)"), std::string::npos)
+      << c.node.detail();
+  EXPECT_EQ(int{c.spindle.state}, int{cnc::lcmt_spindle_status::FAULT});
+}
+
+TEST(BridgeNode, AHuanyangOverModbusTcpIsRefusedNamingTheKey) {
+  const std::string tcp =
+      "spindle: {drive: {transport: modbus_tcp, host: 127.0.0.1, port: 1502, unit_id: 3, profile: huanyang}}\n";
+  const config::MachineConfig cfg = config::parse_machine_config(machine_yaml("sim", true) + tcp, "lb.yaml");
+  bus::Bus bus("memq://");
+  try {
+    DriveBridgeNode node(cfg, bus, DriveBridgeNode::Options{false});
+    ADD_FAILURE() << "a Huanyang over Modbus TCP accepted";
+  } catch (const config::ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("spindle.drive.transport"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("modbus_rtu"), std::string::npos) << e.what();
+  }
+}
+
 TEST(BridgeNode, SpindleNotAtSpeedInTimeIsAFaultNamingIt) {
   Cell c("sim", true, kSpindle);
   c.ticks(40);

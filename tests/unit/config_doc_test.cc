@@ -55,13 +55,14 @@ std::set<std::string> machine_keys() {
   return leaves;
 }
 
-// A profile's keys: its top level, `registers.<role>` and `registers.*.<field key>`.
+// A profile's keys: its top level, `registers.<role>`, `registers.*.<field key>` and `huanyang.<key>`.
 std::set<std::string> profile_keys() {
   std::set<std::string> keys;
   for (const std::string_view k : drive::drive_profile_keys())
-    if (k != "registers") keys.insert(std::string(k));
+    if (k != "registers" && k != "huanyang") keys.insert(std::string(k));
   for (const std::string_view k : drive::drive_profile_register_keys()) keys.insert("registers." + std::string(k));
   for (const std::string_view k : drive::drive_profile_field_keys()) keys.insert("registers.*." + std::string(k));
+  for (const std::string_view k : drive::drive_profile_huanyang_keys()) keys.insert("huanyang." + std::string(k));
   return keys;
 }
 

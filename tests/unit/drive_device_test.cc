@@ -5,10 +5,14 @@
 // loopback_io_device.h) shares the image and the cycle with it. A spindle VFD
 // (spindle_device.h, profile delta_vfd) against its emulator: the command and the
 // first-order speed response through the image, a drive fault and its reset, a lost link.
+// A Huanyang VFD (huanyang_frame.h, huanyang_device.h): its frames with their CRC, the
+// replies a master must refuse (short, malformed, none) named, the device against the
+// same emulator speaking the Huanyang protocol, its PD parameters checked.
 #include <gtest/gtest.h>
 
 #include <cerrno>
 #include <cmath>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -16,10 +20,13 @@
 #include "common/drive/delta_vfd_profile.h"
 #include "common/drive/device.h"
 #include "common/drive/drive_io.h"
+#include "common/drive/huanyang_device.h"
+#include "common/drive/huanyang_frame.h"
 #include "common/drive/io_module_device.h"
 #include "common/drive/loopback_io_device.h"
 #include "common/drive/loopback_link.h"
 #include "common/config/machine_config.h"
+#include "common/config/yaml_reader.h"
 #include "common/drive/spindle_device.h"
 #include "common/drive/vfd_emulator.h"
 
@@ -376,6 +383,223 @@ TEST(IoModuleDevice, WritesOnlyTheCoilsThatDifferAndReadsEachTableOnce) {
   EXPECT_EQ(c.exceptions + c.timeouts + c.other_errors, 0);
   dev.forget(image.inputs(s));
   EXPECT_FALSE(get_pdo<IoModuleInputs>(image.inputs(s)).valid);
+}
+
+namespace hy = huanyang;
+
+TEST(HuanyangFrame, EncodesWithModbusCrcLowByteFirstAndFramesByItsLengthByte) {
+  // Modbus RTU's CRC on its textbook request 01 03 00 00 00 01: 0x0A84, on the wire 84 0A.
+  const uint8_t modbus[] = {0x01, 0x03, 0x00, 0x00, 0x00, 0x01};
+  EXPECT_EQ(hy::crc16(modbus, 6), 0x0A84);
+  uint8_t f[hy::kMaxFrame];
+  const uint8_t freq[] = {0x5D, 0xC0};  // 240.00 Hz in 0.01 Hz
+  ASSERT_EQ(hy::encode(0x01, hy::kWriteFrequency, freq, 2, f), 7);
+  EXPECT_EQ(f[0], 0x01);
+  EXPECT_EQ(f[1], 0x05);
+  EXPECT_EQ(f[2], 0x02);
+  EXPECT_EQ(f[3], 0x5D);
+  EXPECT_EQ(f[4], 0xC0);
+  const uint16_t crc = hy::crc16(f, 5);
+  EXPECT_EQ(f[5], crc & 0xFF);
+  EXPECT_EQ(f[6], crc >> 8);
+  EXPECT_TRUE(hy::crc_ok(f, 7));
+  f[4] ^= 1;
+  EXPECT_FALSE(hy::crc_ok(f, 7));
+  EXPECT_EQ(hy::frame_length(f, 2), 0);
+  EXPECT_EQ(hy::frame_length(f, 3), 7);
+  const uint8_t bad_len[] = {0x01, 0x04, 0x00};
+  EXPECT_EQ(hy::frame_length(bad_len, 3), -1);
+  EXPECT_EQ(hy::be16(freq), 24000);
+}
+
+TEST(HuanyangFrame, RefusesShortMalformedAndForeignRepliesAndNamesThem) {
+  uint8_t req[hy::kMaxFrame], rep[hy::kMaxFrame];
+  const uint8_t index = 1;
+  const int req_n = hy::encode(4, hy::kReadControlStatus, &index, 1, req);
+  EXPECT_EQ(req_n, 6);
+  const uint8_t good[] = {1, 0x27, 0x10};  // index 1: 100.00 Hz
+  const int n = hy::encode(4, hy::kReadControlStatus, good, 3, rep);
+  EXPECT_EQ(n, 8);
+  EXPECT_EQ(hy::check_reply(req, rep, n), hy::Check::kOk);
+  EXPECT_EQ(hy::check_reply(req, rep, 0), hy::Check::kNone);
+  EXPECT_EQ(hy::check_reply(req, rep, 2), hy::Check::kShort);
+  EXPECT_EQ(hy::check_reply(req, rep, 5), hy::Check::kShort);
+  char text[96];
+  hy::describe(hy::Check::kShort, req, rep, 5, text, sizeof text);
+  EXPECT_STREQ(text, "short reply from unit 4 to function 0x04: 5 of 8 bytes");
+  hy::describe(hy::Check::kNone, req, rep, 0, text, sizeof text);
+  EXPECT_STREQ(text, "no reply from unit 4 to function 0x04");
+  rep[5] ^= 0xFF;
+  EXPECT_EQ(hy::check_reply(req, rep, n), hy::Check::kCrc);
+  const uint8_t other_index[] = {2, 0, 15};
+  hy::encode(4, hy::kReadControlStatus, other_index, 3, rep);
+  EXPECT_EQ(hy::check_reply(req, rep, n), hy::Check::kEcho);
+  hy::encode(5, hy::kReadControlStatus, good, 3, rep);
+  EXPECT_EQ(hy::check_reply(req, rep, n), hy::Check::kUnit);
+  hy::encode(4, hy::kReadFunctionData, good, 3, rep);
+  EXPECT_EQ(hy::check_reply(req, rep, n), hy::Check::kFunction);
+  const uint8_t two[] = {1, 0x27};
+  const int m = hy::encode(4, hy::kReadControlStatus, two, 2, rep);
+  EXPECT_EQ(hy::check_reply(req, rep, m), hy::Check::kLength);
+  hy::describe(hy::Check::kLength, req, rep, m, text, sizeof text);
+  EXPECT_STREQ(text, "malformed reply from unit 4 to function 0x04: 2 data bytes");
+}
+
+// A serial line with one Huanyang VFD (unit 4) on it: each frame goes to the
+// emulator, its function code is written down; a reply can be cut short, its CRC
+// spoiled or withheld.
+class HyLink final : public Link {
+ public:
+  HyLink(const DriveProfile& p, const config::SpindleSimConfig& sim) : Link("hy"), vfd(p, sim, 400.0, 60.0) {}
+  VfdEmulator vfd;
+  static constexpr int kUnit = 4;
+  std::vector<int> functions;
+  enum class Damage { kNone, kShort, kCrc, kSilent } damage = Damage::kNone;
+
+ private:
+  int do_open(std::string&) override { return 0; }
+  void do_close() override {}
+  int do_read(int, int, int, uint16_t*) override { return EIO; }
+  int do_write1(int, int, uint16_t) override { return EIO; }
+  int do_write(int, int, int, const uint16_t*) override { return EIO; }
+  int do_write_read(int, int, int, const uint16_t*, int, int, uint16_t*) override { return EIO; }
+  int do_frame(const uint8_t* request, int n, uint8_t* reply, int, int* got) override {
+    functions.push_back(request[1]);
+    *got = request[0] == kUnit ? vfd.answer_frame(request, n, reply) : 0;
+    if (damage == Damage::kShort) *got -= 3;
+    if (damage == Damage::kCrc) reply[*got - 1] ^= 0x5A;
+    if (damage == Damage::kSilent) *got = 0;
+    return 0;
+  }
+};
+
+TEST(HuanyangSpindle, ReadsItsSetupThenCommandsAndFollowsTheFirstOrderResponse) {
+  const DriveProfile p = load_drive_profile(kDrives + "huanyang.yaml");
+  EXPECT_TRUE(is_spindle_profile(p));
+  LoopbackLink loopback;
+  EXPECT_THROW(SpindleDevice(p, 4, loopback), std::invalid_argument);
+  config::SpindleSimConfig sim;
+  sim.time_constant_s = 0.5;
+  HyLink link(p, sim);
+  ASSERT_TRUE(link.ensure_open(0.0));
+  std::unique_ptr<Device> dev = make_spindle_device(p, HyLink::kUnit, link, 400.0, 60.0);
+  ProcessImage image;
+  const std::size_t s = image.add(dev->layout());
+  LinkCounters c;
+  // The first exchange only reads: PD001, PD002, PD005, PD144, then output frequency and current.
+  put_pdo(image.outputs(s), SpindleOutputs{false, 0, 0.0});
+  ASSERT_EQ(dev->exchange(image.outputs(s), image.inputs(s), c), TxResult::kOk);
+  EXPECT_EQ(link.functions, (std::vector<int>{1, 1, 1, 1, 4, 4}));
+  EXPECT_STREQ(get_pdo<SpindleInputs>(image.inputs(s)).setup_error.data(), "");
+  // 200 Hz forward (12000 rpm at 60 rpm/Hz), 1 ms cycles for 2 s: the frequency once, then command and reads.
+  double hz_at_tau = 0;
+  for (int k = 0; k < 2000; ++k) {
+    link.functions.clear();
+    put_pdo(image.outputs(s), SpindleOutputs{true, 1, 200.0});
+    ASSERT_EQ(dev->exchange(image.outputs(s), image.inputs(s), c), TxResult::kOk);
+    if (k == 0) {
+      EXPECT_EQ(link.functions, (std::vector<int>{5, 3, 4, 4}));
+    }
+    link.vfd.step(0.001);
+    if (k == 500) hz_at_tau = get_pdo<SpindleInputs>(image.inputs(s)).output_hz;
+  }
+  EXPECT_EQ(link.functions, (std::vector<int>{3, 4, 4}));
+  EXPECT_NEAR(link.vfd.command_hz(), 200.0, 1e-9);
+  const auto in = get_pdo<SpindleInputs>(image.inputs(s));
+  EXPECT_TRUE(in.valid);
+  EXPECT_TRUE(in.running);
+  EXPECT_FALSE(in.reverse);
+  EXPECT_EQ(in.error_code, 0);
+  EXPECT_NEAR(hz_at_tau, 200.0 * (1 - std::exp(-1.0)), 0.6);  // 63.2 % after one time constant (0.01 Hz counts)
+  EXPECT_NEAR(in.output_hz, 200.0 * (1 - std::exp(-4.0)), 0.6);
+  EXPECT_TRUE(in.has_current);
+  EXPECT_GT(in.current_a, 0.9);
+  // Reverse at 100 Hz: the output passes through zero and turns negative, its sign from the status byte.
+  for (int k = 0; k < 4000; ++k) {
+    put_pdo(image.outputs(s), SpindleOutputs{true, -1, 100.0});
+    ASSERT_EQ(dev->exchange(image.outputs(s), image.inputs(s), c), TxResult::kOk);
+    link.vfd.step(0.001);
+  }
+  EXPECT_TRUE(get_pdo<SpindleInputs>(image.inputs(s)).reverse);
+  EXPECT_NEAR(get_pdo<SpindleInputs>(image.inputs(s)).output_hz, -100.0, 0.6);
+  // Stop: the command byte 0x08, the drive runs down.
+  for (int k = 0; k < 4000; ++k) {
+    put_pdo(image.outputs(s), SpindleOutputs{true, 0, 0.0});
+    ASSERT_EQ(dev->exchange(image.outputs(s), image.inputs(s), c), TxResult::kOk);
+    link.vfd.step(0.001);
+  }
+  EXPECT_FALSE(link.vfd.running());
+  EXPECT_FALSE(get_pdo<SpindleInputs>(image.inputs(s)).running);
+  EXPECT_NEAR(get_pdo<SpindleInputs>(image.inputs(s)).output_hz, 0.0, 0.6);
+}
+
+TEST(HuanyangSpindle, NamesThePdParameterThatIsNotSetForTheLink) {
+  const DriveProfile p = load_drive_profile(kDrives + "huanyang.yaml");
+  auto setup = [&](int pd, uint16_t value) {
+    HyLink link(p, config::SpindleSimConfig{});
+    link.vfd.set_pd(pd, value);
+    EXPECT_TRUE(link.ensure_open(0.0));
+    HuanyangSpindleDevice dev(p, HyLink::kUnit, link, 400.0, 60.0);
+    ProcessImage image;
+    const std::size_t s = image.add(dev.layout());
+    LinkCounters c;
+    put_pdo(image.outputs(s), SpindleOutputs{false, 0, 0.0});
+    EXPECT_EQ(dev.exchange(image.outputs(s), image.inputs(s), c), TxResult::kOk);
+    return std::string(get_pdo<SpindleInputs>(image.inputs(s)).setup_error.data());
+  };
+  EXPECT_EQ(setup(1, 0), "the VFD takes its run command (PD001 = 0) or frequency (PD002 = 2) elsewhere: both must be 2 "
+                         "(the communication port)");
+  EXPECT_EQ(setup(5, 30000), "spindle.max_rpm needs 400.00 Hz, the VFD's max frequency (PD005) is 300.00 Hz");
+  EXPECT_EQ(setup(144, 2880), "the VFD's rated speed (PD144) is 2880 rpm at 50 Hz, 57.60 rpm/Hz; spindle.rpm_per_hz is 60");
+  EXPECT_EQ(setup(144, 3000), "");
+}
+
+TEST(HuanyangSpindle, AShortMalformedOrMissingReplyFailsTheExchangeNamingIt) {
+  const DriveProfile p = load_drive_profile(kDrives + "huanyang.yaml");
+  HyLink link(p, config::SpindleSimConfig{});
+  ASSERT_TRUE(link.ensure_open(0.0));
+  HuanyangSpindleDevice dev(p, HyLink::kUnit, link, 400.0, 60.0);
+  ProcessImage image;
+  const std::size_t s = image.add(dev.layout());
+  LinkCounters c;
+  put_pdo(image.outputs(s), SpindleOutputs{false, 0, 0.0});
+  ASSERT_EQ(dev.exchange(image.outputs(s), image.inputs(s), c), TxResult::kOk);
+  put_pdo(image.outputs(s), SpindleOutputs{true, 1, 100.0});
+  ASSERT_EQ(dev.exchange(image.outputs(s), image.inputs(s), c), TxResult::kOk);
+  const auto good = get_pdo<SpindleInputs>(image.inputs(s));
+  link.damage = HyLink::Damage::kShort;
+  EXPECT_EQ(dev.exchange(image.outputs(s), image.inputs(s), c), TxResult::kOther);
+  EXPECT_EQ(link.last_error(), "Invalid data: short reply from unit 4 to function 0x03: 3 of 6 bytes");
+  link.damage = HyLink::Damage::kCrc;
+  EXPECT_EQ(dev.exchange(image.outputs(s), image.inputs(s), c), TxResult::kCrc);
+  EXPECT_EQ(c.crc_errors, 1);
+  EXPECT_NE(link.last_error().find("reply from unit 4 to function 0x03: 6 bytes, CRC wrong"), std::string::npos)
+      << link.last_error();
+  link.damage = HyLink::Damage::kSilent;
+  EXPECT_EQ(dev.exchange(image.outputs(s), image.inputs(s), c), TxResult::kTimeout);
+  EXPECT_EQ(c.timeouts, 1);
+  EXPECT_NE(link.last_error().find("no reply from unit 4 to function 0x03"), std::string::npos) << link.last_error();
+  // The inputs keep the last good cycle.
+  EXPECT_EQ(get_pdo<SpindleInputs>(image.inputs(s)).output_hz, good.output_hz);
+  link.damage = HyLink::Damage::kNone;
+  EXPECT_EQ(dev.exchange(image.outputs(s), image.inputs(s), c), TxResult::kOk);
+}
+
+TEST(HuanyangSpindle, AProfileWithoutItsSectionOrWithItForAnotherMachineIsRefused) {
+  const std::string head = "name: hy\nstate_machine: huanyang\n";
+  try {
+    parse_drive_profile(head, "hy.yaml");
+    ADD_FAILURE() << "no huanyang: section accepted";
+  } catch (const config::ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("huanyang"), std::string::npos) << e.what();
+  }
+  try {
+    parse_drive_profile(head + "huanyang: {output_frequency_index: 1}\n", "hy.yaml");
+    ADD_FAILURE() << "a section without its keys accepted";
+  } catch (const config::ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("huanyang.output_current_index"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(parse_drive_profile("name: d\nstate_machine: sim\nhuanyang: {}\n", "d.yaml"), config::ConfigError);
 }
 
 }  // namespace

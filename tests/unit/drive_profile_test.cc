@@ -174,7 +174,7 @@ TEST(DriveProfile, ErrorsNameTheKeyPath) {
                "'middle_first' is not one of: high_first, low_first");
   expect_error(kGood + "  mode: {address: 9, scale: 0}\n", "registers.mode.scale", "out of range");
   expect_error(kGood + "  mode: {address: 3}\n", "registers.target_position", "overlaps mode");
-  expect_error("name: t\nstate_machine: canopen\n", "state_machine", "is not one of: cia402, delta_vfd, leadshine, sim");
+  expect_error("name: t\nstate_machine: canopen\n", "state_machine", "is not one of: cia402, delta_vfd, huanyang, leadshine, sim");
   std::string no_status = kGood;
   no_status.replace(no_status.find("  statusword: {address: 1}\n"), 27, "");
   expect_error(no_status, "registers.statusword", "is required by state_machine sim");

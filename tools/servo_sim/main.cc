@@ -2,7 +2,8 @@
 // one unit id per axis, each axis with the drive profile its machine config names
 // (config/drives/*.yaml) and the servo dynamics of its `sim:` section; and the
 // spindle's VFD when the config has one (spindle:, its unit id on the same port or
-// line; a first-order speed response and a load figure, spindle.sim); and the I/O
+// line; a first-order speed response and a load figure, spindle.sim; a Huanyang VFD,
+// which speaks no Modbus, on a line of its own: --spindle-device); and the I/O
 // modules of io: (coils, discrete inputs, input and holding registers) on the same
 // port or line, each coil's change logged with where the axes stand. The control
 // FIFO's "input NAME VALUE" sets a point (a switch or sensor of the module) now, and
@@ -16,6 +17,7 @@
 //
 //   cnc-servo-sim --machine M [--port P] [--bind ADDR]      TCP axes: one port
 //                 [--device PTY] [--rtu-timing real|none]   RTU axes: the simulator's end of the line
+//                 [--spindle-device PTY]                    a Huanyang VFD's own line (the simulator's end)
 //                 [--control FIFO] [--inject "T:CMD; ..."]  fault injection (fault_injector.h)
 //                 [--trace CSV] [--persist FILE] [--final-state FILE]
 //                 [--latency-dir DIR]                       cycle timing at the end (or $CNC_LATENCY_DIR)
@@ -59,6 +61,7 @@
 
 #include "common/config/yaml_reader.h"
 #include "common/drive/delta_vfd_profile.h"
+#include "common/drive/huanyang_frame.h"
 #include "common/drive/drive_profile.h"
 #include "common/drive/io_emulator.h"
 #include "common/drive/vfd_emulator.h"
@@ -304,6 +307,7 @@ class Simulator {
   void close_tcp();
   void serve_tcp_client(int fd, std::vector<int>& closed);
   void serve_rtu_input();
+  void serve_vfd_line();
   void answer_rtu(const uint8_t* frame, int len, double rx_end_s);
   void read_control();
   void housekeeping(double now);
@@ -360,6 +364,10 @@ class Simulator {
   bool vfd_tcp_ = false;
   double vfd_t_ = -1;
   double vfd_logged_hz_ = 0;
+  // A Huanyang VFD on a line of its own (--spindle-device): its frames are no Modbus.
+  std::string vfd_device_;
+  int vfd_fd_ = -1;
+  std::vector<uint8_t> vfd_rx_;
   bool vfd_logged_run_ = false;
   std::vector<IoSim> ios_;
   cnc::servo_sim::FaultInjector injector_;
@@ -461,10 +469,25 @@ Simulator::Simulator(const cnc::config::MachineConfig& cfg, const cnc::service::
       throw cnc::config::ConfigError(cfg.source_file, "spindle.drive.profile",
                                      "'" + d.profile + "' is no spindle drive's profile");
     vfd_ = std::make_unique<cnc::drive::VfdEmulator>(*profiles_.back(), cfg.spindle.sim,
-                                                     cfg.spindle.max_rpm / cfg.spindle.rpm_per_hz);
+                                                     cfg.spindle.max_rpm / cfg.spindle.rpm_per_hz, cfg.spindle.rpm_per_hz);
     vfd_unit_ = d.unit_id;
     vfd_tcp_ = transport == cnc::drive::Transport::kModbusTcp;
-    if (vfd_tcp_) {
+    if (vfd_->profile().huanyang.present) {
+      if (vfd_tcp_)
+        throw cnc::config::ConfigError(cfg.source_file, "spindle.drive.transport",
+                                       "modbus_tcp cannot carry the Huanyang protocol: use modbus_rtu");
+      for (const auto& a : cfg.axes)
+        if (cnc::drive::transport_of(a.drive) == cnc::drive::Transport::kModbusRtu && a.drive.device == d.device)
+          throw std::runtime_error("the spindle's Huanyang VFD is served on a line of its own, not on the axes' " +
+                                   d.device);
+      vfd_device_ = args.option("spindle-device");
+      if (vfd_device_.empty()) {
+        // Whatever else is on its line answers it (a test's counterpart).
+        spdlog::info("cnc-servo-sim: the spindle's Huanyang VFD on {} is not served here (no --spindle-device)",
+                     d.device);
+        vfd_.reset();
+      }
+    } else if (vfd_tcp_) {
       if (port_ < 0) port_ = d.port;
       if (d.port != port_)
         throw std::runtime_error("the spindle: the simulator serves one TCP port; the axes use " +
@@ -497,7 +520,7 @@ Simulator::Simulator(const cnc::config::MachineConfig& cfg, const cnc::service::
         if (point >= 0) io.emu->set_point(cfg.io.points[static_cast<size_t>(point)].name, 1);
     ios_.push_back(std::move(io));
   }
-  if (all_.empty() && !vfd_ && ios_.empty()) throw std::runtime_error("no axis uses transport modbus_tcp or modbus_rtu");
+  if (all_.empty() && !vfd_ && ios_.empty() && !cfg.spindle.enabled) throw std::runtime_error("no axis uses transport modbus_tcp or modbus_rtu");
   for (const auto& h : cfg.safety.hard_limits) {
     const auto& ax = cfg.axes[static_cast<size_t>(h.axis)];
     for (int end : {-1, 1}) {
@@ -542,6 +565,7 @@ Simulator::~Simulator() {
   close_tcp();
   if (tcp_ctx_) modbus_free(tcp_ctx_);
   if (serial_fd_ >= 0) ::close(serial_fd_);
+  if (vfd_fd_ >= 0) ::close(vfd_fd_);
   if (rtu_ctx_) modbus_free(rtu_ctx_);
   for (int fd : capture_)
     if (fd >= 0) ::close(fd);
@@ -892,6 +916,37 @@ void Simulator::serve_rtu_input() {
   }
 }
 
+void Simulator::serve_vfd_line() {
+  uint8_t buf[64];
+  const ssize_t n = ::read(vfd_fd_, buf, sizeof buf);
+  if (n < 0) {
+    if (errno == EAGAIN || errno == EINTR) return;
+    ::close(vfd_fd_);  // the other end went away: reopened by housekeeping
+    vfd_fd_ = -1;
+    vfd_rx_.clear();
+    return;
+  }
+  vfd_rx_.insert(vfd_rx_.end(), buf, buf + n);
+  while (!vfd_rx_.empty()) {
+    const int need = cnc::drive::huanyang::frame_length(vfd_rx_.data(), static_cast<int>(vfd_rx_.size()));
+    if (need < 0) {  // no frame: drop the buffer, the master times out
+      vfd_rx_.clear();
+      break;
+    }
+    if (need == 0 || static_cast<int>(vfd_rx_.size()) < need) break;
+    uint8_t reply[cnc::drive::huanyang::kMaxFrame];
+    const int len = vfd_rx_[0] == vfd_unit_ && !injector_.dropped(cnc::util::monotonic_s())
+                        ? vfd_->answer_frame(vfd_rx_.data(), need, reply)
+                        : 0;
+    if (len > 0) {
+      if (injector_.take_crc()) reply[len - 1] ^= 0x5A;
+      if (::write(vfd_fd_, reply, static_cast<size_t>(len)) != len)
+        spdlog::warn("cnc-servo-sim: short write on the spindle's line");
+    }
+    vfd_rx_.erase(vfd_rx_.begin(), vfd_rx_.begin() + need);
+  }
+}
+
 void Simulator::read_control() {
   char buf[256];
   const ssize_t n = ::read(control_fd_, buf, sizeof buf);
@@ -943,6 +998,7 @@ void Simulator::housekeeping(double now) {
     }
   }
   if (!rtu_.empty() && serial_fd_ < 0) serial_fd_ = open_serial(device_, baud_);
+  if (vfd_ && !vfd_device_.empty() && vfd_fd_ < 0) vfd_fd_ = open_serial(vfd_device_, cfg_.spindle.drive.baud);
   follows_seen_.resize(all_.size(), false);
   for (size_t i = 0; i < all_.size(); ++i) {
     // Each drive's power stage: following (enabled) or not, with where it stands then.
@@ -994,9 +1050,13 @@ int Simulator::run() {
   for (SimDrive* d : all_)
     spdlog::info("cnc-servo-sim: axis {} unit {} profile {} at {:.4f} mm", d->name(), d->unit(),
                  d->emulator().profile().name, d->position_mm());
+  if (vfd_ && !vfd_device_.empty()) {
+    vfd_fd_ = open_serial(vfd_device_, cfg_.spindle.drive.baud);
+    if (vfd_fd_ < 0) throw std::runtime_error("cannot open " + vfd_device_ + ": " + std::strerror(errno));
+  }
   if (vfd_)
-    spdlog::info("cnc-servo-sim: spindle unit {} profile {}: time constant {:g} s", vfd_unit_, vfd_->profile().name,
-                 cfg_.spindle.sim.time_constant_s);
+    spdlog::info("cnc-servo-sim: spindle unit {} profile {}: time constant {:g} s{}{}", vfd_unit_, vfd_->profile().name,
+                 cfg_.spindle.sim.time_constant_s, vfd_device_.empty() ? "" : " on ", vfd_device_);
   for (const IoSim& io : ios_)
     spdlog::info("cnc-servo-sim: io {} unit {}: {} coils, {} discrete inputs, {} input and {} holding registers",
                  io.emu->name(), io.unit, io.emu->mapping()->nb_bits, io.emu->mapping()->nb_input_bits,
@@ -1050,6 +1110,7 @@ int Simulator::run() {
     watch(listen_fd_);
     for (int fd : clients_) watch(fd);
     watch(serial_fd_);
+    watch(vfd_fd_);
     watch(control_fd_);
     const double wait = std::clamp(next_step_s_ - cnc::util::monotonic_s(), 0.0, 0.01);
     timeval tv{0, static_cast<suseconds_t>(wait * 1e6)};
@@ -1074,6 +1135,7 @@ int Simulator::run() {
       clients_.erase(std::remove(clients_.begin(), clients_.end(), fd), clients_.end());
     }
     if (serial_fd_ >= 0 && FD_ISSET(serial_fd_, &rd)) serve_rtu_input();
+    if (vfd_fd_ >= 0 && FD_ISSET(vfd_fd_, &rd)) serve_vfd_line();
   }
 
   // The last positions reach the persisted file before the writer ends.
@@ -1145,6 +1207,7 @@ int main(int argc, char** argv) {
                           {{"port", "P", "the TCP axes' port (default: the config's)", true},
                            {"bind", "ADDR", "the TCP address to listen on (default 127.0.0.1)"},
                            {"device", "PTY", "the RTU axes' serial line (the simulator's end)"},
+                           {"spindle-device", "PTY", "a Huanyang spindle VFD's own line (the simulator's end)"},
                            {"rtu-timing", "real|none", "hold RTU replies as long as a real line takes (default real)"},
                            {"control", "FIFO", "fault injection commands read from FIFO"},
                            {"inject", "\"T:CMD; ...\"", "fault injection at given times"},
