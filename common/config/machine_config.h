@@ -143,8 +143,8 @@ struct IoConfig {
   int coolant_mist = -1;   // the coil point M7 switches (index into points), -1: none
   int coolant_flood = -1;  // the coil point M8 switches
   std::vector<int> digital_outputs;  // M62-M65 P n: the coil point points[digital_outputs[n]]
-  std::vector<int> digital_inputs;   // discrete inputs (M66 P, later), shown on IO_STATUS
-  std::vector<int> analog_inputs;    // input or holding registers (M66 E, later)
+  std::vector<int> digital_inputs;   // discrete inputs: M66 P n waits on points[digital_inputs[n]]
+  std::vector<int> analog_inputs;    // input or holding registers: M66 E n reads the n-th
   std::vector<int> analog_outputs;   // holding registers (M67/M68 E, later)
   int point_index(const std::string& name) const;
 };

@@ -166,6 +166,7 @@ void Interpolator::clear_blocks() {
   ++epoch_;
   failed_ = false;
   probe_braking_ = false;
+  input_.waiting = false;  // a STOP at the wait: the program ends there
   have_tail_ = false;
   PlanRequest r;
   r.kind = PlanRequest::Kind::kClear;
@@ -759,6 +760,10 @@ void Interpolator::at_stop_block(bool pausing) {
     hold_ = true;
     state_ = RunState::kHeld;
   } else if (!pausing) {
+    if (wait_on_input(p)) {
+      state_ = RunState::kRunning;  // at rest until the input's value or the timeout
+      return;
+    }
     if (p.block.kind == program::BlockKind::kEvent && p.block.event.kind == program::EventKind::kSpindle &&
         spindle_taken_ != p.serial)
       take_spindle_event(p);
@@ -783,6 +788,32 @@ void Interpolator::at_stop_block(bool pausing) {
   } else if (hold_) {
     state_ = RunState::kHeld;  // held at rest before a dwell or an event
   }
+}
+
+bool Interpolator::wait_on_input(const Planned& p) {
+  if (p.block.kind != program::BlockKind::kEvent || p.block.event.kind != program::EventKind::kWaitInput) return false;
+  // The dry run passes it at once (the program server took the value rs274 takes).
+  if (auto_resume_pauses_) return false;
+  if (input_serial_ != p.serial) {
+    input_serial_ = p.serial;
+    input_.block_index = p.block.index;
+    input_.wait = program::InputWait::of(p.block.event.number);
+    input_.timeout_cycles = input_.wait.mode == program::InputWait::kImmediate || !(p.block.event.value > 0)
+                                ? 0
+                                : std::max<int64_t>(1, static_cast<int64_t>(std::ceil(p.block.event.value / period_s_ - 1e-9)));
+    input_.start_cycle = cycle_;
+    input_.waiting = true;
+    input_.value = 0;
+  }
+  if (input_.waiting && input_.timeout_cycles > 0 && cycle_ - input_.start_cycle >= input_.timeout_cycles)
+    end_input_wait(-1.0);  // LinuxCNC: a timeout is no error, #5399 = -1
+  return input_.waiting;
+}
+
+void Interpolator::end_input_wait(double value) {
+  input_.waiting = false;
+  input_.value = value;
+  ++input_.results;
 }
 
 void Interpolator::take_spindle_event(const Planned& p) {

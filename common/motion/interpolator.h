@@ -74,7 +74,11 @@ struct Command {
     // brakes to rest on it (jerk-limited, as at a hold) and the move ends there; the
     // next block starts where the path rests. `position_mm` (the latched position) is
     // carried for the record only. Refused (false) when the front is no probing move.
-    kProbeTrip = 20
+    kProbeTrip = 20,
+    // The input the path waits on at an M66 (the input wait at the front) read `value`,
+    // meeting the wait's condition (an immediate read: its value): the wait ends, #5399 =
+    // value. The node applies it from IO_STATUS. Refused (false) when no wait is on.
+    kInputValue = 21
   };
   Kind kind = Kind::kStart;
   double feed_override = 1.0;  // kOverride: 0.0 .. kMaxFeedOverride; kRapidOverride: 0.0 .. 1.0
@@ -83,7 +87,7 @@ struct Command {
   std::array<double, program::kMaxAxes> position_mm{};
   int axis = -1;      // kHomed
   double value = 0;   // kHomed: drive minus machine position, mm; kSingleBlock, kOptionalStop: 1 on, 0 off;
-                      // kSpindleAtSpeed: the change's seq
+                      // kSpindleAtSpeed: the change's seq; kInputValue: the input's value
 };
 
 struct Setpoint {
@@ -137,6 +141,20 @@ struct ProbeMove {
   bool tripped = false;      // a kProbeTrip was applied during it
   bool done = false;         // the path left it (at its end, or at rest after the trip)
   int64_t end_cycle = -1;    // the cycle it was left at
+};
+
+// The input wait (M66 event) the path stands at or last left, for the node that reads
+// the input: from the cycle the path reached it at rest. A wait with a timeout ends
+// by itself after timeout_cycles (value -1), counted by the core so a replay times out
+// at the same cycle.
+struct InputWaitState {
+  int64_t block_index = -1;    // -1: none yet in this program
+  program::InputWait wait;
+  int64_t timeout_cycles = 0;  // 0: none (an immediate read)
+  int64_t start_cycle = -1;
+  bool waiting = false;        // the path stands at it until its value comes or it times out
+  double value = 0;            // #5399: the value read, -1 when it timed out
+  int64_t results = 0;         // the program's waits ended so far
 };
 
 // The shortest distance in which a brake limited by jerk J and acceleration A brings
@@ -214,6 +232,7 @@ class Interpolator {
   const WorkCounters& work() const { return work_; }
   const SpindleState& spindle() const { return spindle_; }
   const ProbeMove& probe_move() const { return probe_; }
+  const InputWaitState& input_wait() const { return input_; }
   // Coolant and digital outputs where the path stands (machine_outputs.h).
   const MachineOutputs& outputs() const { return outputs_; }
   // At rest at a spindle change until kSpindleAtSpeed (a machine with a spindle:
@@ -344,6 +363,9 @@ class Interpolator {
   // ends where the path stands.
   void track_probe_move();
   void end_probe_move();
+  // An M66 at the front, reached at rest: true while the path waits there.
+  bool wait_on_input(const Planned& p);
+  void end_input_wait(double value);
 
   config::MachineConfig cfg_;
   double period_s_;
@@ -427,6 +449,8 @@ class Interpolator {
   ProbeMove probe_;
   uint64_t probe_serial_ = UINT64_MAX;  // the front block ProbeMove describes
   bool probe_braking_ = false;          // tripped: braking to rest in the probing move
+  InputWaitState input_;
+  uint64_t input_serial_ = UINT64_MAX;  // the M66 event input_ describes
   MachineOutputs outputs_;
   uint64_t outputs_taken_ = UINT64_MAX;  // serial of the coolant or output event last taken
   uint64_t spindle_taken_ = UINT64_MAX;  // serial of the spindle event last taken

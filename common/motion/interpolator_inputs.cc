@@ -112,6 +112,8 @@ void Interpolator::clear_program() {
   rest_left_ = 0;
   probe_ = ProbeMove{};
   probe_serial_ = UINT64_MAX;
+  input_ = InputWaitState{};
+  input_serial_ = UINT64_MAX;
   spindle_off();
 }
 
@@ -209,6 +211,11 @@ bool Interpolator::apply_command(const Command& cmd) {
         return false;
       probe_.tripped = true;
       probe_braking_ = true;
+      break;
+    case Command::Kind::kInputValue:
+      if (!input_.waiting || !std::isfinite(cmd.value) || blocks_.empty() || blocks_.front().serial != input_serial_)
+        return false;
+      end_input_wait(cmd.value);
       break;
     case Command::Kind::kSpindleAtSpeed:
       if (spindle_wait_ && std::isfinite(cmd.value) && cmd.value >= static_cast<double>(spindle_.seq))

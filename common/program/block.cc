@@ -29,6 +29,7 @@ const char* to_string(EventKind kind) {
     case EventKind::kDigitalOutput: return "digital_output";
     case EventKind::kAnalogOutput: return "analog_output";
     case EventKind::kOverrides: return "overrides";
+    case EventKind::kWaitInput: return "wait_input";
   }
   return "?";
 }

@@ -28,7 +28,26 @@ enum class EventKind : int8_t {
   kDigitalOutput = 8,  // M62-M65: number = index, value = 1 on (M64), 0 off (M65); +2 with the next motion (M62, M63)
   kAnalogOutput = 9,   // M67/M68: number = index, value
   kOverrides = 10,     // M48-M53: number = bits feed, speed, adaptive, hold
-  kLast = kOverrides,
+  kWaitInput = 11,     // M66: number = InputWait::number(), value = timeout, s (0: none)
+  kLast = kWaitInput,
+};
+
+// M66's input and wait mode, packed in an event's number as index + 1000 x mode
+// (+ 10000 for an analog input), readable in a log as it is.
+struct InputWait {
+  // LinuxCNC's WAIT_MODE_*: 0 read at once, 1 rise, 2 fall, 3 high, 4 low.
+  enum Mode : int8_t { kImmediate = 0, kRise = 1, kFall = 2, kHigh = 3, kLow = 4 };
+  int index = 0;        // P (digital) or E (analog), 0 .. 63
+  bool analog = false;  // E: an analog input (kImmediate only)
+  int mode = kImmediate;
+  int32_t number() const { return index + 1000 * mode + (analog ? 10000 : 0); }
+  static InputWait of(int32_t number) {
+    InputWait w;
+    w.analog = number >= 10000;
+    w.index = number % 1000;
+    w.mode = number % 10000 / 1000;
+    return w;
+  }
 };
 
 const char* to_string(EventKind kind);
@@ -99,6 +118,9 @@ struct Block {
   // at rest and stops where the probe input changes (the machine's result, not the
   // block's end, is where the next block starts). On the wire: event_kind kProbeWire.
   int8_t probe = 0;
+  // The program reads the machine's answer to this block before its next line: a
+  // probing move's result (#5061-#5070) or an M66's input value (#5399).
+  bool awaits_result() const { return probe != 0 || (kind == BlockKind::kEvent && event.kind == EventKind::kWaitInput); }
 };
 
 // The event_kind a LINE block carries on the wire when it is a probing move (not an EventKind).

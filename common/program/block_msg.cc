@@ -89,6 +89,12 @@ std::string from_msg(const cnc::lcmt_program_block& m, int num_axes, Block* out)
   if (m.kind == static_cast<int8_t>(BlockKind::kEvent) &&
       (m.event_kind <= 0 || m.event_kind > static_cast<int8_t>(EventKind::kLast) || !std::isfinite(m.event_value)))
     return "bad event";
+  if (m.kind == static_cast<int8_t>(BlockKind::kEvent) && m.event_kind == static_cast<int8_t>(EventKind::kWaitInput)) {
+    const InputWait w = InputWait::of(m.event_number);
+    if (m.event_number < 0 || m.event_number >= 20000 || w.index >= 64 || w.mode > InputWait::kLow ||
+        (w.analog && w.mode != InputWait::kImmediate) || m.event_value < 0)
+      return "bad input wait (M66)";
+  }
   if (m.source_file.size() > 4096 || m.event_text.size() > 4096) return "source file or event text too long";
   Block b;
   b.index = m.block_index;

@@ -847,6 +847,9 @@ void BlockBuilder::digital_output(const SourceRef& ref, int index, bool on, bool
 void BlockBuilder::analog_output(const SourceRef& ref, int index, double value, bool) {
   event(ref, program::EventKind::kAnalogOutput, index, value);
 }
+void BlockBuilder::wait_input(const SourceRef& ref, int index, bool analog, int mode, double timeout_s) {
+  event(ref, program::EventKind::kWaitInput, program::InputWait{index, analog, mode}.number(), timeout_s);
+}
 void BlockBuilder::set_process(const SourceRef&, const ProcessSettings& p) {
   // The program's first directive describes its cut: the keys it leaves out come
   // from the machine's process: section.

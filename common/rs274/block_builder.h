@@ -94,6 +94,7 @@ class BlockBuilder : public Canon {
   void enable_feed_hold(const SourceRef&, bool) override;
   void digital_output(const SourceRef&, int, bool, bool) override;
   void analog_output(const SourceRef&, int, double, bool) override;
+  void wait_input(const SourceRef&, int, bool, int, double) override;
   void set_process(const SourceRef&, const ProcessSettings&) override;
   void message(const SourceRef&, const std::string&) override;
   void program_stop(const SourceRef&) override;

@@ -115,6 +115,9 @@ class Canon {
   // Outputs (M62-M65 digital, synchronised with motion or immediate; M67/M68 analog).
   virtual void digital_output(const SourceRef&, int /*index*/, bool /*on*/, bool /*synchronised*/) {}
   virtual void analog_output(const SourceRef&, int /*index*/, double /*value*/, bool /*synchronised*/) {}
+  // M66 (LinuxCNC's WAIT): the motion ends, then the machine waits on input `index`
+  // (program::InputWait's mode) for at most timeout_s; the program reads the value in #5399.
+  virtual void wait_input(const SourceRef&, int /*index*/, bool /*analog*/, int /*mode*/, double /*timeout_s*/) {}
 
   // The PROCESS directive (after the COMMENT call of the same comment).
   virtual void set_process(const SourceRef&, const ProcessSettings&) {}

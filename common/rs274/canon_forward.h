@@ -69,6 +69,7 @@ class CanonForward : public Canon {
   void enable_feed_hold(const SourceRef& r, bool b) override { next_.enable_feed_hold(r, b); }
   void digital_output(const SourceRef& r, int i, bool on, bool sync) override { next_.digital_output(r, i, on, sync); }
   void analog_output(const SourceRef& r, int i, double v, bool sync) override { next_.analog_output(r, i, v, sync); }
+  void wait_input(const SourceRef& r, int i, bool analog, int mode, double t) override { next_.wait_input(r, i, analog, mode, t); }
   void set_process(const SourceRef& r, const ProcessSettings& p) override { next_.set_process(r, p); }
 
   void comment(const SourceRef& r, const std::string& s) override { next_.comment(r, s); }

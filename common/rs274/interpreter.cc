@@ -197,7 +197,7 @@ bool Interpreter::read_line() {
 
 bool Interpreter::execute_next() {
   if (ended_) return false;
-  if (probe_wait_) return true;  // LinuxCNC syncs at a probe: the next lines read its result
+  if (probe_wait_ || input_wait_) return true;  // LinuxCNC syncs at a probe and an M66: the next lines read the result
   if (!read_line()) {
     if (!frames_.empty()) fail(0, "the file ended inside o<" + frames_.back().sub + "> (no endsub)");
     if (nurbs_) fail(0, "the file ended inside a NURBS curve opened at line " + std::to_string(nurbs_->line));

@@ -67,12 +67,14 @@ struct MachineSetup {
   // var file, when write_var_file), atomically, as LinuxCNC writes its table.
   bool write_tool_table = false;
   bool has_probe = false;                  // G38.x needs one
-  // G38.x's result (#5061-#5070 and where the machine stopped): false, the interpreter
-  // takes it as LinuxCNC's rs274 does (the probe at the move's end, #5070 = 0); true,
-  // execute_next() reads no further line until set_probe_result() supplies it.
-  bool probe_results_supplied = false;
-  int digital_inputs = 0;                  // M66 needs them
-  int analog_inputs = 0;
+  // What the program reads from the machine: G38.x's result (#5061-#5070 and where the
+  // machine stopped) and M66's input (#5399). false, the interpreter takes them as
+  // LinuxCNC's rs274 does (the probe at the move's end, #5070 = 0; #5399 as it was,
+  // a digital input 0 or 1); true, execute_next() reads no further line until
+  // set_probe_result() or set_input_result() supplies it.
+  bool machine_results_supplied = false;
+  int digital_inputs = 0;                  // M66 P indices 0..n-1
+  int analog_inputs = 0;                   // M66 E indices 0..n-1
   int digital_outputs = 64;                // M62-M65 indices 0..n-1
   int analog_outputs = 64;                 // M67/M68
   bool block_delete = true;                // '/' lines are skipped (LinuxCNC's switch on)
@@ -109,7 +111,7 @@ class Interpreter {
   bool execute_next();
 
   bool ended() const { return ended_; }
-  // Probing (probe_results_supplied): a G38.x move was made and its result is awaited;
+  // Probing (machine_results_supplied): a G38.x move was made and its result is awaited;
   // execute_next() does nothing meanwhile.
   bool waiting_for_probe() const { return probe_wait_; }
   // The G38.x move's end in machine coordinates (mm, degrees for A B C).
@@ -119,6 +121,16 @@ class Interpreter {
   // changed (#5061-#5069 in the current work coordinates) and where the machine came
   // to rest (the current point from now on). Throws std::logic_error when none is awaited.
   void set_probe_result(bool tripped, const Pose& trip_machine, const Pose& rest_machine);
+  // M66 (machine_results_supplied): the wait was made and the input's value is awaited;
+  // execute_next() does nothing meanwhile.
+  bool waiting_for_input() const { return input_wait_; }
+  int64_t input_waits_made() const { return input_waits_; }
+  // What LinuxCNC's rs274 reads (its simulated machine's inputs keep #5399: a digital
+  // input 1 if it was not 0, an analog one #5399 itself).
+  double simulated_input() const;
+  // The value the awaited M66 read (-1: its wait timed out) into #5399. Throws
+  // std::logic_error when none is awaited.
+  void set_input_result(double value);
   // Lines read so far, executed or skipped (a loop that skips over a long block
   // every iteration costs that block each time: the bound on this number bounds the work).
   int64_t lines_executed() const { return lines_executed_; }
@@ -221,6 +233,7 @@ class Interpreter {
   void cycle(Words& w);
   void spline(Words& w, bool cubic, int col);
   void straight_probe(Words& w, int g, int col);
+  void wait_input(const Words& w);
   void set_coord_system(int index);
   void end_program(bool m30);
   void persist();  // the var file and (when changed) the tool table, at program end
@@ -305,6 +318,9 @@ class Interpreter {
   int32_t w53_column_ = 0;         // column of the G5.3 closing the curve
   bool in_cycle_ = false;
   bool probe_wait_ = false;
+  bool input_wait_ = false;
+  bool input_analog_ = false;
+  int64_t input_waits_ = 0;
   Pose probe_target_machine_{};
   int64_t probes_made_ = 0;
 

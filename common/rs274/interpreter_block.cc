@@ -71,9 +71,10 @@ void Interpreter::f_s_t(const Words& w) {
 void Interpreter::m62_m68(const Words& w) {
   const int m = w.m[5];
   const SourceRef r = ref(w.mcol[5]);
-  if (m == 66) fail(w.mcol[5], setup_.digital_inputs + setup_.analog_inputs == 0
-                                   ? "M66 waits on an input, and this machine's config has none"
-                                   : "M66 is not supported yet");
+  if (m == 66) return wait_input(w);
+  if (m >= 67 && comp_ != 400)
+    fail(w.mcol[5], std::string("cannot set ") + (m == 67 ? "motion" : "auxiliary") +
+                        " analog output with cutter radius compensation on");
   if (!w.on(m >= 67 ? 'E' : 'P')) fail(w.mcol[5], "M" + std::to_string(m) + (m >= 67 ? " needs an E word (output index)" : " needs a P word (output index)"));
   const int idx = static_cast<int>(std::lround(m >= 67 ? w['E'] : w['P']));
   const int n = m >= 67 ? setup_.analog_outputs : setup_.digital_outputs;

@@ -33,7 +33,7 @@ void Interpreter::straight_probe(Words& w, int g, int col) {
   ++probes_made_;
   probe_wait_ = true;
   // rs274's simulated machine: the probe at the move's end, not tripped.
-  if (!setup_.probe_results_supplied) set_probe_result(false, probe_target_machine_, probe_target_machine_);
+  if (!setup_.machine_results_supplied) set_probe_result(false, probe_target_machine_, probe_target_machine_);
 }
 
 void Interpreter::set_probe_result(bool tripped, const Pose& trip_machine, const Pose& rest_machine) {

@@ -150,7 +150,7 @@ void Interpreter::check_words(const Words& w) {
     not_with('P', "with no G code or M code that uses it");
   if (w.on('Q') && !(cyc || nurbs_g || w.g[13] == 640 || w.m[5] >= 0 || w.m[6] == 61 || g0 == 100))
     not_with('Q', "with no G code or M code that uses it");
-  if (w.on('L') && !(g0 == 100 || cyc || nurbs_g)) not_with('L', "with no G code that uses it (G10, canned cycles)");
+  if (w.on('L') && !(g0 == 100 || cyc || nurbs_g || w.m[5] == 66)) not_with('L', "with no G code or M code that uses it (G10, canned cycles, M66)");
   if (w.on('H') && !(w.g[8] == 430 || w.g[8] == 432 || g0 == 100)) not_with('H', "with no G43 that uses it");
   if (w.on('D') && !(w.g[7] == 410 || w.g[7] == 420 || w.g[7] == 411 || w.g[7] == 421))
     not_with('D', "with no G41/G42 that uses it");

@@ -32,6 +32,12 @@ bool to_core_command(const cnc::lcmt_program_command& m, Command* out) {
       out->kind = Command::Kind::kSpindleAtSpeed;
       out->value = m.value;
       return true;
+    case C::INPUT_VALUE:
+      if (!std::isfinite(m.value)) return false;
+      *out = Command{};
+      out->kind = Command::Kind::kInputValue;
+      out->value = m.value;
+      return true;
     case C::PROBE_TRIP:
       *out = Command{};
       out->kind = Command::Kind::kProbeTrip;

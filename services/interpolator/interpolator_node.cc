@@ -72,12 +72,14 @@ InterpolatorNode::InterpolatorNode(const config::MachineConfig& cfg, bus::Bus& b
     bus_.subscribe<cnc::lcmt_spindle_status>(cfg.channel(ch::kSpindleStatus), [this](const cnc::lcmt_spindle_status& m) {
       spindle_at_speed_seq_ = std::max(spindle_at_speed_seq_, m.at_speed_seq);
     });
-  if (cfg.safety.door_input >= 0) {
-    door_input_ = cfg.io.points[static_cast<size_t>(cfg.safety.door_input)].name;
+  if (cfg.safety.door_input >= 0) door_input_ = cfg.io.points[static_cast<size_t>(cfg.safety.door_input)].name;
+  if (cfg.io.enabled)
     bus_.subscribe<cnc::lcmt_io_status>(cfg.channel(ch::kIoStatus), [this](const cnc::lcmt_io_status& m) {
-      door_open_ = m.door == cnc::lcmt_io_status::DOOR_OPEN;
+      if (cfg_.safety.door_input >= 0) door_open_ = m.door == cnc::lcmt_io_status::DOOR_OPEN;
+      if (m.num_points != static_cast<int32_t>(cfg_.io.points.size())) return;
+      io_status_ = m;
+      io_status_s_ = util::monotonic_s();
     });
-  }
   bus_.subscribe<cnc::lcmt_axis_status>(cfg.channel(ch::kAxisStatus), [this](const cnc::lcmt_axis_status& m) {
     if (m.num_axes != static_cast<int32_t>(cfg_.axes.size())) return;
     axis_status_ = m;
@@ -335,6 +337,7 @@ void InterpolatorNode::run_cycle() {
   apply_pending_commands();
   door_cycle();
   probe_cycle();
+  input_cycle();
   manual_cycle();
   take_spindle_at_speed();
   feed_planner(cyc);
@@ -728,6 +731,10 @@ void InterpolatorNode::publish_state(bool force) {
     m.probe_trip_mm.push_back(probe_.trip[static_cast<size_t>(a)]);
     m.probe_rest_mm.push_back(probe_.rest[static_cast<size_t>(a)]);
   }
+  const InputWaitState& iw = core_.input_wait();
+  m.input_results = static_cast<int32_t>(iw.results);
+  m.input_block = iw.results > 0 ? iw.block_index : -1;
+  m.input_value = iw.results > 0 ? iw.value : 0;
   bus_.publish(ch_state_, m);
 }
 

@@ -101,6 +101,23 @@ class InterpolatorNode {
   // blocks with it. A miss where G38.2/G38.4 needs a trip, and a probe standing
   // wrongly at the move's start, stop the program with an ALARM naming file:line.
   void probe_cycle();
+  // Input waits (M66; io: in the config; interpolator_node_input.cc). While the path
+  // stands at one, the input named by io.digital_inputs / io.analog_inputs is read from
+  // IO_STATUS each cycle; the value that meets the wait's mode (LinuxCNC's: an
+  // immediate read, a rise, a fall, high, low) ends it as a recorded INPUT_VALUE. The
+  // core times it out by itself (#5399 = -1). Each ended wait goes to the program
+  // server on INTERP_STATE, which makes the next blocks with its value. An input not
+  // read (its module silent, IO_STATUS stale) for kInputStale_s stops the program with
+  // an ALARM naming it.
+  void input_cycle();
+  struct InputWatch {
+    int64_t start_cycle = -1;  // the wait being watched (the core's start cycle)
+    bool seen_low = false, seen_high = false;
+    double unread_s = -1;      // monotonic time the input was first not read (-1: read)
+    int64_t published = 0;     // the core's results sent on INTERP_STATE
+  } input_watch_;
+  cnc::lcmt_io_status io_status_{};
+  double io_status_s_ = -1e9;  // monotonic time it arrived
   void probe_stop(const std::string& why);
   void probe_decide(bool tripped, const double* trip_mm);
   struct ProbeWatch {

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <stdexcept>
 
 #include "common/motion/corner.h"
 #include "common/motion/path_segment.h"
@@ -115,7 +116,7 @@ class ProgramServer::Run {
                  [this](int32_t f) -> const std::string& { return interp_->file_names()[static_cast<size_t>(f)]; }),
         max_lines_(validating ? s.max_validation_lines : -1), validating_(validating) {
     rs274::MachineSetup m = s.machine;
-    m.probe_results_supplied = true;  // supply_probe() gives each G38.x move its result
+    m.machine_results_supplied = true;  // supply_result() gives each G38.x move and M66 its result
     m.block_delete = block_delete;
     m.initial_modes = modes;
     for (size_t i = 0; i < s.builder.axis_names.size(); ++i) {
@@ -136,7 +137,7 @@ class ProgramServer::Run {
     auto& q = builder_.blocks();
     waiting_ = false;
     while (q.empty()) {
-      if (interp_->waiting_for_probe() && !supply_probe()) {
+      if ((interp_->waiting_for_probe() || interp_->waiting_for_input()) && !supply_result()) {
         waiting_ = true;
         return false;
       }
@@ -153,12 +154,12 @@ class ProgramServer::Run {
   }
 
   int64_t lines() const { return interp_->lines_executed(); }
-  // next() returned false because a probing move's result is not known yet.
+  // next() returned false because a probing move's or an input wait's result is not known yet.
   bool waiting() const { return waiting_; }
   // The machine's results, applied in order (nullptr: none known). Past them a
   // validating run (or one that may assume, the dry run's) takes the probe as tripped
-  // at the move's end; a serving one waits.
-  void set_probe_results(const std::vector<ProbeResult>* r, bool may_assume) {
+  // at the move's end and an input as rs274 reads it; a serving one waits.
+  void set_results(const std::vector<MachineResult>* r, bool may_assume) {
     results_ = r;
     may_assume_ = may_assume || validating_;
   }
@@ -178,15 +179,27 @@ class ProgramServer::Run {
   const rs274::ModalState& state() const { return state_; }
 
  private:
-  bool supply_probe() {
-    const auto k = static_cast<size_t>(interp_->probes_made() - 1);
+  bool supply_result() {
+    const auto k = static_cast<size_t>(supplied_);
+    const bool probe = interp_->waiting_for_probe();
     rs274::Pose trip = interp_->probe_target_machine(), rest = trip;
     if (results_ == nullptr || k >= results_->size()) {
       if (!may_assume_) return false;
-      interp_->set_probe_result(true, trip, rest);
+      if (probe) interp_->set_probe_result(true, trip, rest);
+      else interp_->set_input_result(interp_->simulated_input());
+      ++supplied_;
       return true;
     }
-    const ProbeResult& r = (*results_)[k];
+    const MachineResult& m = (*results_)[k];
+    if (m.is_probe != probe)
+      throw std::runtime_error(probe ? "a probing move where the machine answered an input wait (M66)"
+                                     : "an input wait (M66) where the machine answered a probing move");
+    ++supplied_;
+    if (!probe) {
+      interp_->set_input_result(m.input_value);
+      return true;
+    }
+    const ProbeResult& r = m.probe;
     for (size_t i = 0; i < pose_index_.size(); ++i) {
       if (pose_index_[i] < 0) continue;
       if (i < r.trip_mm.size()) trip[static_cast<size_t>(pose_index_[i])] = r.trip_mm[i];
@@ -208,7 +221,8 @@ class ProgramServer::Run {
   bool validating_;
   bool waiting_ = false;
   bool may_assume_ = true;
-  const std::vector<ProbeResult>* results_ = nullptr;
+  const std::vector<MachineResult>* results_ = nullptr;
+  int64_t supplied_ = 0;  // results given to the interpreter
   std::vector<int> pose_index_;  // builder axis -> interpreter pose index (-1: none)
   int64_t pulled_ = 0;
   bool reached_ = false;
@@ -290,7 +304,7 @@ const std::string& ProgramServer::approach_text() const {
 
 std::unique_ptr<ProgramServer::Run> ProgramServer::start_run(const Loaded& p, bool validating) const {
   auto run = std::make_unique<Run>(setup_, p.start, p.block_delete, validating, p.modes_in);
-  run->set_probe_results(&p.probes, !live_probing_);
+  run->set_results(&p.results, !live_probing_);
   if (p.from_line > 0) run->watch(p.from_line);
   if (p.line) run->watch(2);  // MDI: the state after the line (before its M2)
   run->open(p.path);
@@ -324,8 +338,9 @@ LoadResult ProgramServer::load_from(const std::string& path, int64_t token,
 bool ProgramServer::validate(Loaded& p, LoadResult& r) const {
   Loaded* next = &p;
   const std::string& path = p.path;
-  p.probe_blocks.clear();
-  p.probe_hashes.clear();
+  p.result_blocks.clear();
+  p.result_is_probe.clear();
+  p.result_hashes.clear();
   p.chunk_hashes.clear();
   p.approach.clear();
   // Run from line N: the tool, spindle and coolant the program had set before it, and
@@ -373,9 +388,10 @@ bool ProgramServer::validate(Loaded& p, LoadResult& r) const {
         }
       }
       h = block_hash(b, h);
-      if (b.probe != 0) {
-        next->probe_blocks.push_back(n);
-        next->probe_hashes.push_back(h);
+      if (b.awaits_result()) {
+        next->result_blocks.push_back(n);
+        next->result_is_probe.push_back(b.probe != 0);
+        next->result_hashes.push_back(h);
       }
       ++n;
       if (n % limits_.blocks_per_chunk == 0) {
@@ -521,30 +537,49 @@ const program::Block* ProgramServer::block(int64_t index) {
   return full_block(index);
 }
 
-int64_t ProgramServer::awaited_probe_block() const {
+int64_t ProgramServer::awaited_result_block() const {
   if (!program_ || !live_probing_) return -1;
-  const size_t k = program_->probes.size();
-  return k < program_->probe_blocks.size() ? program_->probe_blocks[k] : -1;
+  const size_t k = program_->results.size();
+  return k < program_->result_blocks.size() ? program_->result_blocks[k] : -1;
 }
 
-bool ProgramServer::awaiting_probe(int64_t index) const {
+bool ProgramServer::awaited_result_is_probe() const {
+  if (awaited_result_block() < 0) return false;
+  return program_->result_is_probe[program_->results.size()];
+}
+
+bool ProgramServer::awaiting_result(int64_t index) const {
   if (!program_) return false;
   if (program_->from_line > 0) index = index - static_cast<int64_t>(program_->approach.size()) + program_->from_block;
-  const int64_t p = awaited_probe_block();
+  const int64_t p = awaited_result_block();
   return p >= 0 && index > p;
 }
 
 LoadResult ProgramServer::probe_result(int64_t index, const ProbeResult& result) {
+  MachineResult m;
+  m.is_probe = true;
+  m.probe = result;
+  return add_result(index, m);
+}
+
+LoadResult ProgramServer::input_result(int64_t index, double value) {
+  MachineResult m;
+  m.input_value = value;
+  return add_result(index, m);
+}
+
+LoadResult ProgramServer::add_result(int64_t index, const MachineResult& result) {
   LoadResult r;
+  const char* what = result.is_probe ? "a probe result" : "an input value (M66)";
   if (!program_) {
-    r.error = "a probe result with no program loaded";
+    r.error = std::string(what) + " with no program loaded";
     return r;
   }
   const int64_t full = program_->from_line > 0
                            ? index - static_cast<int64_t>(program_->approach.size()) + program_->from_block
                            : index;
-  if (full != awaited_probe_block()) {
-    r.error = program_->path + ": a probe result for block " + std::to_string(index) + ", which is not the probing move awaited";
+  if (full != awaited_result_block() || result.is_probe != awaited_result_is_probe()) {
+    r.error = program_->path + ": " + what + " for block " + std::to_string(index) + ", which is not the block awaiting one";
     return r;
   }
   auto next = std::make_unique<Loaded>();
@@ -555,8 +590,9 @@ LoadResult ProgramServer::probe_result(int64_t index, const ProbeResult& result)
   next->from_line = program_->from_line;
   next->line = program_->line;
   next->modes_in = program_->modes_in;
-  next->probes = program_->probes;
-  next->probes.push_back(result);
+  next->results = program_->results;
+  next->results.push_back(result);
+  next->probes_known = program_->probes_known + (result.is_probe ? 1 : 0);
   if (!validate(*next, r)) {
     program_.reset();
     serving_.reset();
@@ -570,8 +606,8 @@ LoadResult ProgramServer::probe_result(int64_t index, const ProbeResult& result)
 
 const program::Block* ProgramServer::full_block(int64_t index) {
   if (!program_ || index < 0 || index >= program_->full_blocks) return nullptr;
-  // After a probing move nothing is served before its result.
-  if (const int64_t p = awaited_probe_block(); p >= 0 && index > p) return nullptr;
+  // After a probing move or an input wait nothing is served before its result.
+  if (const int64_t p = awaited_result_block(); p >= 0 && index > p) return nullptr;
   const Chunk* c = chunk_for(index);
   if (c == nullptr) return nullptr;
   const int64_t k = index - c->first;
@@ -608,10 +644,11 @@ const ProgramServer::Chunk* ProgramServer::chunk_for(int64_t index) {
         chunk_hash_ = 14695981039346656037ull;
       }
       if (!serving_->next(&b)) {
-        if (serving_->waiting() && serving_next_ > first && program_->probes.size() < program_->probe_blocks.size() &&
-            serving_next_ - 1 == program_->probe_blocks[program_->probes.size()]) {
-          // At a probing move, awaiting its result: the chunk so far, checked up to it.
-          if (chunk_hash_ != program_->probe_hashes[program_->probes.size()]) {
+        const size_t k = program_->results.size();
+        if (serving_->waiting() && serving_next_ > first && k < program_->result_blocks.size() &&
+            serving_next_ - 1 == program_->result_blocks[k]) {
+          // At a probing move or an input wait, awaiting its result: the chunk so far, checked up to it.
+          if (chunk_hash_ != program_->result_hashes[k]) {
             serving_error_ = changed;
             program_.reset();
             cache_.clear();
@@ -619,7 +656,7 @@ const ProgramServer::Chunk* ProgramServer::chunk_for(int64_t index) {
           }
           break;
         }
-        serving_error_ = changed + (serving_->waiting() ? " (a probing move where none was)" : " (it ended early)");
+        serving_error_ = changed + (serving_->waiting() ? " (a probing move or an input wait where none was)" : " (it ended early)");
         program_.reset();
         cache_.clear();
         return nullptr;

@@ -43,6 +43,14 @@ struct ProbeResult {
   std::vector<double> trip_mm, rest_mm;
 };
 
+// The machine's answer to a block whose result the rest of the program reads
+// (program::Block::awaits_result): a probing move's or an input wait's (M66).
+struct MachineResult {
+  bool is_probe = false;
+  ProbeResult probe;
+  double input_value = 0;  // M66: the value read, -1 when its wait timed out (#5399)
+};
+
 struct ServerLimits {
   int blocks_per_chunk = 256;
   int cached_chunks = 4;
@@ -65,11 +73,12 @@ ProgramSetup program_setup(const config::MachineConfig& cfg);
 
 class ProgramServer {
  public:
-  // Probing: the validation takes each G38.x move as tripped at its end; the blocks
-  // after one depend on the machine's result. live_probing (a cell): no block after a
-  // probing move is served before probe_result() has given its result and the rest of
-  // the program has been validated again with it. Otherwise (the dry run) the blocks
-  // are served as validated.
+  // Probing and input waits: the validation takes each G38.x move as tripped at its
+  // end and each M66 as LinuxCNC's rs274 reads it (#5399 as it was, a digital input 0
+  // or 1); the blocks after one depend on the machine's result. live_probing (a cell):
+  // no block after such a block is served before probe_result() or input_result() has
+  // given its result and the rest of the program has been validated again with it.
+  // Otherwise (the dry run) the blocks are served as validated.
   explicit ProgramServer(const config::MachineConfig& cfg, ServerLimits limits = {});
   ProgramServer(ProgramSetup setup, ServerLimits limits);
   ~ProgramServer();
@@ -123,17 +132,22 @@ class ProgramServer {
   const std::string& serving_error() const { return serving_error_; }
 
   void set_live_probing(bool on) { live_probing_ = on; }
-  // Block `index` comes after a probing move whose result is not known yet (block()
-  // gives nullptr without an error: not yet).
-  bool awaiting_probe(int64_t index) const;
-  // The probing move that ends before block `index` is the awaited one; -1: none awaited.
-  int64_t awaited_probe_block() const;
+  // Block `index` comes after a probing move or an input wait whose result is not
+  // known yet (block() gives nullptr without an error: not yet).
+  bool awaiting_result(int64_t index) const;
+  // The block (of the whole program) whose result is awaited; -1: none awaited.
+  int64_t awaited_result_block() const;
+  // ...and whether it is a probing move (else an input wait).
+  bool awaited_result_is_probe() const;
   // The result of the probing move at block `index` (the awaited one): the program is
   // validated again from its start with every result so far; on a refusal (an error
   // the result leads to, a path out of travel) the program is unloaded and the
   // result says why, at its file and line. num_blocks() may change.
   LoadResult probe_result(int64_t index, const ProbeResult& result);
-  int64_t probes_known() const { return program_ ? static_cast<int64_t>(program_->probes.size()) : 0; }
+  // The same for the input wait (M66) at block `index`: the value it read (#5399).
+  LoadResult input_result(int64_t index, double value);
+  int64_t probes_known() const { return program_ ? program_->probes_known : 0; }
+  int64_t inputs_known() const { return program_ ? static_cast<int64_t>(program_->results.size()) - program_->probes_known : 0; }
 
   const ProgramSetup& setup() const { return setup_; }
   // The block delete switch ('/' lines skipped when on) for the programs loaded from now
@@ -163,9 +177,11 @@ class ProgramServer {
     int64_t lines = 0;
     bool line = false;  // MDI
     std::optional<rs274::ModalState> modes_in, modes_after;
-    std::vector<ProbeResult> probes;     // the machine's results so far, in order
-    std::vector<int64_t> probe_blocks;   // each probing move's block (of the whole program)
-    std::vector<uint64_t> probe_hashes;  // its chunk's hash up to and including it
+    std::vector<MachineResult> results;   // the machine's results so far, in order
+    int64_t probes_known = 0;             // ...of which probing moves'
+    std::vector<int64_t> result_blocks;   // each block awaiting a result (of the whole program)
+    std::vector<bool> result_is_probe;    // ...a probing move (else an input wait)
+    std::vector<uint64_t> result_hashes;  // its chunk's hash up to and including it
   };
   struct Chunk {
     int64_t first = -1;
@@ -174,7 +190,8 @@ class ProgramServer {
   };
 
   std::unique_ptr<Run> start_run(const Loaded& p, bool validating) const;
-  // Interprets p's program to its end (with p.probes), fills p's counts and hashes;
+  LoadResult add_result(int64_t index, const MachineResult& result);
+  // Interprets p's program to its end (with p.results), fills p's counts and hashes;
   // r gets the refusal.
   bool validate(Loaded& p, LoadResult& r) const;
   void install(std::unique_ptr<Loaded> p);

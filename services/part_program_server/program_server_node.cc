@@ -30,7 +30,7 @@ ProgramServerNode::ProgramServerNode(const config::MachineConfig& cfg, bus::Bus&
     : cfg_(cfg), bus_(bus), core_(cfg), ch_blocks_(cfg.channel(ch::kProgramBlocks)),
       ch_state_(cfg.channel(ch::kProgramState)), ch_answers_(cfg.channel(ch::kProgramAnswers)), state_(cnc::lcmt_program_state::IDLE),
       health_(bus, cfg.channel(ch::kAlarm), "cnc-program-server", cnc::lcmt_alarm::WARNING) {
-  core_.set_live_probing(cfg.probe.enabled());
+  core_.set_live_probing(cfg.probe.enabled() || cfg.io.enabled);  // the machine answers G38.x and M66
   bus_.subscribe<cnc::lcmt_program_command>(cfg.channel(ch::kProgramCmd), [this](const auto& m) { on_command(m); });
   bus_.subscribe<cnc::lcmt_block_request>(cfg.channel(ch::kBlockRequest), [this](const auto& m) { on_request(m); });
   // Where the machine stands, for the start of the next program.
@@ -86,8 +86,29 @@ void ProgramServerNode::on_interp_state(const cnc::lcmt_interp_state& m) {
     publish_state(true);
   }
   if (fault || !core_.loaded() || m.program_token != core_.token()) return;
+  if (m.input_results == core_.inputs_known() + 1 && core_.awaited_result_block() >= 0 &&
+      !core_.awaited_result_is_probe()) {
+    // An input wait's value (M66): the rest of the program is validated with it, then served.
+    const std::string path = core_.path();
+    const LoadResult lr = core_.input_result(m.input_block, m.input_value);
+    if (!lr.ok) {
+      spdlog::error("program {} withdrawn after the input wait (M66) of block {}: {}", path, m.input_block, lr.error);
+      last_refusal_ = lr;
+      refused_path_ = path;
+      state_ = S::REFUSED;
+      publish_state(true);
+      return;
+    }
+    spdlog::info("input wait {} (block {}): #5399 = {}; the rest validated, {} blocks", m.input_results, m.input_block,
+                 m.input_value, core_.num_blocks());
+    publish_state(true);
+    if (last_request_.program_token == core_.token()) {
+      const cnc::lcmt_block_request again = last_request_;
+      on_request(again);
+    }
+  }
   if (m.probe_results == core_.probes_known() + 1 && m.num_probe_axes == static_cast<int32_t>(cfg_.axes.size()) &&
-      core_.awaited_probe_block() >= 0) {
+      core_.awaited_result_block() >= 0 && core_.awaited_result_is_probe()) {
     // A probing move's result: the rest of the program is validated with it, then served.
     ProbeResult pr{m.probe_tripped != 0, m.probe_trip_mm, m.probe_rest_mm};
     const std::string path = core_.path();
@@ -491,7 +512,7 @@ void ProgramServerNode::on_request(const cnc::lcmt_block_request& m) {
   if (m.first_block < 0 || m.first_block >= core_.num_blocks()) return;
   const int64_t end = m.first_block + std::min<int64_t>(m.count, core_.num_blocks() - m.first_block);
   for (int64_t i = m.first_block; i < end; ++i) {
-    if (core_.awaiting_probe(i)) break;  // after a probing move: served once its result is in
+    if (core_.awaiting_result(i)) break;  // after a probing move or an M66: served once its result is in
     const program::Block* b = core_.block(i);
     if (b == nullptr) {
       // The file no longer reads as validated: serve nothing more of it.

@@ -9,8 +9,10 @@
 #     positions then): flood on before X moves; air_blast on with X standing at 10
 #     before the dwell; clamp on when X starts its second move, after the dwell;
 #     air_blast off with X at 20; after M30 the coolant is off and clamp and
-#     lamp_green stay on. A digital input set on the module (the simulator's control
-#     FIFO) and the scaled analog input are on IO_STATUS. The run replays bit for bit.
+#     lamp_green stay on. Then M66 P0 L1 Q20 waits for clamp_closed to rise: X stands
+#     at 20 until the input is set on the module (the simulator's control FIFO), and
+#     the O-word branch on #5399 = 1 takes X to 25 (-1, a timeout, would take it to 5).
+#     The scaled analog input is on IO_STATUS. The run replays bit for bit.
 #  2. mbpoll, a third-party Modbus client, reads the module's coils: 0 0 for the
 #     coolant, 1 0 1 0 for the four outputs.
 #  3. The interpolator killed while the coolant runs in a dwell: the bridge's
@@ -36,6 +38,12 @@ G4 P0.5
 G1 X20
 M65 P1
 M64 P2
+M66 P0 L1 Q20
+o10 if [#5399 EQ 1]
+  G1 X25
+o10 else
+  G1 X5
+o10 endif
 M30
 NGC
 
@@ -47,8 +55,16 @@ start logger "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/cell"
 start_cell
 echo "input door_closed 1" >&7
 echo "input air_pressure_bar 612" >&7
-"${CTL[@]}" --do run --program "$WORK/io.ngc" --timeout 60 >"$WORK/ctl1.out" 2>&1 ||
-  { cat "$WORK/ctl1.out" >&2; fail "the I/O program did not run to its end"; }
+"${CTL[@]}" --do run --program "$WORK/io.ngc" --timeout 60 >"$WORK/ctl1.out" 2>&1 &
+ctl_pid=$!
+# At the M66 (lamp_green, M64 P2, is the line before): the path stands until the input rises.
+for ((i = 0; i < 300; i++)); do
+  grep -q "io io1: lamp_green on" "$WORK/servo-sim.log" && break
+  sleep 0.1
+done
+sleep 0.5
+echo "input clamp_closed 1" >&7
+wait "$ctl_pid" || { cat "$WORK/ctl1.out" >&2; fail "the I/O program did not run to its end"; }
 sleep 1
 grep "io" "$WORK/servo-sim.log" | grep -v "^.*unit" >&2 || true
 grep "io:" "$WORK/drive-bridge.log" >&2 || true
@@ -65,7 +81,7 @@ coils() { sed -n 's/^\[\([0-9]*\)\]:[[:space:]]*\([01]\).*/\1=\2/p' "$1" | tr '\
 note "mbpoll coils 0-1: $(coils "$WORK/mbpoll.coolant"); 8-11: $(coils "$WORK/mbpoll.outputs"); inputs 0-1: $(coils "$WORK/mbpoll.inputs")"
 [ "$(coils "$WORK/mbpoll.coolant")" = "0=0 1=0 " ] || { cat "$WORK/mbpoll.coolant" >&2; fail "the coolant is not off after M30 (mbpoll)"; }
 [ "$(coils "$WORK/mbpoll.outputs")" = "8=1 9=0 10=1 11=0 " ] || { cat "$WORK/mbpoll.outputs" >&2; fail "the outputs are not as the program left them (mbpoll)"; }
-[ "$(coils "$WORK/mbpoll.inputs")" = "0=0 1=1 " ] || { cat "$WORK/mbpoll.inputs" >&2; fail "the discrete inputs are not as set (mbpoll)"; }
+[ "$(coils "$WORK/mbpoll.inputs")" = "0=1 1=1 " ] || { cat "$WORK/mbpoll.inputs" >&2; fail "the discrete inputs are not as set (mbpoll)"; }
 
 for s in interpolator program-server monitor drive-bridge servo-sim logger; do stop "$s" TERM; done
 exec 7>&-
@@ -126,6 +142,21 @@ print("# last IO_STATUS: " + ", ".join(f"{k} {v:g}" for k, v in last.items()), f
 check(last["coolant_flood"] == 0 and last["clamp"] == 1 and last["air_blast"] == 0 and last["lamp_green"] == 1,
       "IO_STATUS read back: flood off, clamp on, air_blast off, lamp_green on")
 check(last["door_closed"] == 1 and abs(last["air_pressure_bar"] - 6.12) < 1e-9, "IO_STATUS: the input set on the module, 612 counts x 0.01")
+# M66 P0 L1: X stands at 20 from lamp_green's change until clamp_closed reads 1, then the
+# branch on #5399 = 1 takes it to 25, never towards 5.
+rise = next((s for s in stats if s[1].get("clamp_closed") == 1), None)
+check(rise is not None, "IO_STATUS: clamp_closed set on the module")
+if rise:
+    held = [x for x in xs if lamp_on[0] <= x[0] <= rise[0]]
+    print(f"# M66: X held at 20 for {(rise[0] - lamp_on[0]) * 1e-6:.2f} s ({len(held)} setpoints) until clamp_closed rose", file=sys.stderr)
+    check(len(held) > 50 and all(x[1] == 20 for x in held), "M66 P0 L1: X stands at 20 until the input rises")
+    go = next((x for x in xs if x[0] > rise[0] and x[1] > 20), None)
+    check(go is not None, "M66: X moves on after the rise")
+    if go:
+        print(f"# M66: the input's rise on IO_STATUS to X's first setpoint past 20: {(go[0] - rise[0]) * 1e-3:.1f} ms", file=sys.stderr)
+        check(go[0] - rise[0] < 500e3, "...within 0.5 s (the value, the server's revalidation, the blocks, the plan)")
+    after = [x[1] for x in xs if x[0] > rise[0]]
+    check(abs(after[-1] - 25) < 1e-9 and min(after) >= 20, f"#5399 = 1: the branch to X 25 (X ends at {after[-1]:.4f})")
 seen_flood = next((s for s in stats if s[1].get("coolant_flood") == 1), None)
 check(seen_flood is not None, "IO_STATUS: flood read back on")
 if seen_flood:
@@ -148,7 +179,7 @@ for line in open(sys.argv[1]):
     if m: seen.append((m.group(1), m.group(2), float(m.group(3))))
 for s in seen: print(f"# module: {s[0]} {s[1]} at X {s[2]:.4f}", file=sys.stderr)
 want = [("coolant_flood", "on", 0, 0), ("air_blast", "on", 9.7, 10.05), ("clamp", "on", 10, 10),
-        ("air_blast", "off", 19.7, 20.05), ("lamp_green", "on", 19.7, 20.05), ("coolant_flood", "off", 19.7, 20.05)]
+        ("air_blast", "off", 19.7, 20.05), ("lamp_green", "on", 19.7, 20.05), ("coolant_flood", "off", 24.7, 25.05)]
 got = [(n, v) for n, v, _ in seen]
 ok = got == [(n, v) for n, v, _, _ in want]
 print(("# " if ok else "# FAILED: ") + "the module's coils changed in the program's order", file=sys.stderr)

@@ -60,12 +60,12 @@ TEST(ProgramServerProbe, NothingAfterAProbingMoveBeforeItsResult) {
   const LoadResult r = server.load(path, 1);
   ASSERT_TRUE(r.ok) << r.error;
   // Validated as tripped at the end (Z -10); served: up to the probing move.
-  EXPECT_EQ(server.awaited_probe_block(), 1);
+  EXPECT_EQ(server.awaited_result_block(), 1);
   const std::vector<Block> before = served(server);
   ASSERT_EQ(before.size(), 2u) << "the rapid and the probing move only";
   EXPECT_EQ(before[1].probe, 3);
-  EXPECT_TRUE(server.awaiting_probe(2));
-  EXPECT_FALSE(server.awaiting_probe(1));
+  EXPECT_TRUE(server.awaiting_result(2));
+  EXPECT_FALSE(server.awaiting_result(1));
   EXPECT_EQ(server.block(2), nullptr);
   EXPECT_TRUE(server.serving_error().empty());
 }
@@ -81,7 +81,7 @@ TEST(ProgramServerProbe, TheResultIsReadAndTheNextBlockStartsAtRest) {
   ProbeResult pr{true, {10, 0, -4.25}, {10, 0, -4.2513}};
   const LoadResult r = server.probe_result(1, pr);
   ASSERT_TRUE(r.ok) << r.error;
-  EXPECT_EQ(server.awaited_probe_block(), -1);
+  EXPECT_EQ(server.awaited_result_block(), -1);
   const std::vector<Block> all = served(server);
   ASSERT_EQ(all.size(), static_cast<size_t>(server.num_blocks()));
   ASSERT_GE(all.size(), 4u);

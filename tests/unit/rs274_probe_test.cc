@@ -46,7 +46,7 @@ using test::TempDir;
 MachineSetup probe_setup(bool supplied) {
   MachineSetup s;
   s.has_probe = true;
-  s.probe_results_supplied = supplied;
+  s.machine_results_supplied = supplied;
   return s;
 }
 

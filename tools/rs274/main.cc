@@ -87,6 +87,11 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"inch", "mm"}));
   app.add_option("--axes", setup.axes, "the machine's axes");
   app.add_flag("--probe", setup.has_probe, "G38.x accepted: the probe at each move's end, not tripped (as rs274)");
+  // rs274's simulated machine answers every M66 (WAIT never fails there); 64 is the
+  // most LinuxCNC's motion module has (EMCMOT_MAX_DIO, EMCMOT_MAX_AIO).
+  setup.digital_inputs = setup.analog_inputs = 64;
+  app.add_option("--inputs", setup.digital_inputs, "M66 P inputs (default 64; #5399 as rs274 reads it)");
+  app.add_option("--analog-inputs", setup.analog_inputs, "M66 E inputs (default 64)");
   app.add_option("program", program, "the RS274NGC program")->required()->type_name("PROGRAM");
   app.add_option("out", out_path, "where the canonical calls go (default: stdout)")->type_name("OUT");
   if (const int rc = cnc::util::cli::parse(app, argc, argv); rc >= 0) return rc;
