@@ -544,10 +544,11 @@ void read_io(MapReader r, MachineConfig& c) {
   list("digital_inputs", {IoKind::kDiscreteInput}, io.digital_inputs, 64);
   list("analog_inputs", {IoKind::kInputRegister, IoKind::kHoldingRegister}, io.analog_inputs, 64);
   list("analog_outputs", {IoKind::kHoldingRegister}, io.analog_outputs, 64);
-  // M62-M65 and M66 address exactly the listed points.
+  // M62-M65, M66 and M67/M68 address exactly the listed points.
   c.program.digital_outputs = static_cast<int>(io.digital_outputs.size());
   c.program.digital_inputs = static_cast<int>(io.digital_inputs.size());
   c.program.analog_inputs = static_cast<int>(io.analog_inputs.size());
+  c.program.analog_outputs = static_cast<int>(io.analog_outputs.size());
   r.finish();
 }
 

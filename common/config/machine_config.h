@@ -145,7 +145,7 @@ struct IoConfig {
   std::vector<int> digital_outputs;  // M62-M65 P n: the coil point points[digital_outputs[n]]
   std::vector<int> digital_inputs;   // discrete inputs: M66 P n waits on points[digital_inputs[n]]
   std::vector<int> analog_inputs;    // input or holding registers: M66 E n reads the n-th
-  std::vector<int> analog_outputs;   // holding registers (M67/M68 E, later)
+  std::vector<int> analog_outputs;   // holding registers: M67/M68 E n sets the n-th (value / scale)
   int point_index(const std::string& name) const;
 };
 

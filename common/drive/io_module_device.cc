@@ -66,6 +66,13 @@ TxResult IoModuleDevice::exchange(std::span<const std::byte> outputs, std::span<
                                 : link_.write_coils(unit_, r.addr, n, bits_.data(), c);
       if (w != TxResult::kOk) return w;
     }
+    const std::vector<int>& regs = addr_[kHoldingReg];
+    for (size_t i = 0; i < regs.size(); ++i) {
+      if (((out.holding_write >> i) & 1) == 0 || out.holding[i] == holding_back_[i]) continue;
+      ++last_tx_;
+      const TxResult w = link_.write_register(unit_, regs[i], out.holding[i], c);
+      if (w != TxResult::kOk) return w;
+    }
   }
   // Bits: the span of each kind's points in one read, then each point's bit.
   for (size_t k : {kCoil, kDiscrete}) {
@@ -91,6 +98,7 @@ TxResult IoModuleDevice::exchange(std::span<const std::byte> outputs, std::span<
     for (size_t i = 0; i < addr_[k].size(); ++i) dest[i] = regs_[static_cast<size_t>(addr_[k][i] - s.addr)];
   }
   read_back_ = in.coils;
+  holding_back_ = in.holding_registers;
   have_read_back_ = true;
   in.valid = true;
   put_pdo(inputs, in);

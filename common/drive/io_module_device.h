@@ -3,7 +3,8 @@
 // are coils, discrete inputs, input registers and holding registers. Its process data
 // are the coils' wanted states out, and every point's value in. Each cycle writes the
 // coils whose read-back differs from what is wanted (a run of adjacent coil points in
-// one function 15, a single one with function 5), then reads each table that has
+// one function 15, a single one with function 5) and each holding register that is an
+// output and whose read-back differs (function 6), then reads each table that has
 // points in one transaction over the span of its points (functions 1, 2, 4, 3).
 // No allocation after construction: it runs on the bridge's link workers.
 #include <modbus.h>
@@ -24,8 +25,10 @@ inline constexpr int kMaxIoPointsPerKind = 64;
 
 // Master to module, each cycle. Bit i: the module's i-th coil point (config order).
 struct IoModuleOutputs {
-  bool write = false;  // write the coils that differ; otherwise only read
+  bool write = false;  // write the coils and registers that differ; otherwise only read
   uint64_t coils = 0;
+  uint64_t holding_write = 0;  // bit i: the i-th holding-register point is written with holding[i]
+  std::array<uint16_t, kMaxIoPointsPerKind> holding{};
 };
 
 // Module to master: the last good cycle's answer.
@@ -73,6 +76,7 @@ class IoModuleDevice final : public Device {
   std::array<uint8_t, MODBUS_MAX_READ_BITS> bits_{};
   std::array<uint16_t, MODBUS_MAX_READ_REGISTERS> regs_{};
   uint64_t read_back_ = 0;
+  std::array<uint16_t, kMaxIoPointsPerKind> holding_back_{};
   bool have_read_back_ = false;
   int last_tx_ = 0;
 };

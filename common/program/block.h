@@ -26,7 +26,7 @@ enum class EventKind : int8_t {
   kCoolant = 6,        // M7/M8/M9: number = bit 0 mist, bit 1 flood
   kMessage = 7,        // (MSG,...), (DEBUG,...): text
   kDigitalOutput = 8,  // M62-M65: number = index, value = 1 on (M64), 0 off (M65); +2 with the next motion (M62, M63)
-  kAnalogOutput = 9,   // M67/M68: number = index, value
+  kAnalogOutput = 9,   // M67/M68: number = index (+1000 with the next motion, M67), value
   kOverrides = 10,     // M48-M53: number = bits feed, speed, adaptive, hold
   kWaitInput = 11,     // M66: number = InputWait::number(), value = timeout, s (0: none)
   kLast = kWaitInput,

@@ -844,8 +844,8 @@ void BlockBuilder::enable_feed_hold(const SourceRef& ref, bool on) {
 void BlockBuilder::digital_output(const SourceRef& ref, int index, bool on, bool synchronised) {
   event(ref, program::EventKind::kDigitalOutput, index, (on ? 1 : 0) + (synchronised ? 2 : 0));
 }
-void BlockBuilder::analog_output(const SourceRef& ref, int index, double value, bool) {
-  event(ref, program::EventKind::kAnalogOutput, index, value);
+void BlockBuilder::analog_output(const SourceRef& ref, int index, double value, bool synchronised) {
+  event(ref, program::EventKind::kAnalogOutput, index + (synchronised ? 1000 : 0), value);
 }
 void BlockBuilder::wait_input(const SourceRef& ref, int index, bool analog, int mode, double timeout_s) {
   event(ref, program::EventKind::kWaitInput, program::InputWait{index, analog, mode}.number(), timeout_s);

@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -79,7 +80,10 @@ void DriveBridgeNode::make_io(std::map<std::string, LinkWorker*>& by_link) {
       mod.points[k] = mod.worker->io_module(mod.slot).points(static_cast<config::IoKind>(k));
     coils.push_back(mod.points[static_cast<size_t>(config::IoKind::kCoil)]);
   }
-  io_ = std::make_unique<Io>(cfg_.io, coils);
+  std::vector<std::vector<int>> holding;
+  for (const IoModule& mod : modules) holding.push_back(mod.points[static_cast<size_t>(config::IoKind::kHoldingRegister)]);
+  io_ = std::make_unique<Io>(cfg_.io, coils, holding);
+  io_->pending_analog.assign(cfg_.io.analog_outputs.size(), 0.0);
   io_->modules = std::move(modules);
   ch_io_status_ = cfg_.channel(ch::kIoStatus);
   cnc::lcmt_io_status& m = io_msg_;
@@ -143,6 +147,19 @@ void DriveBridgeNode::make_io(std::map<std::string, LinkWorker*>& by_link) {
     io.pending_seq = c.command_seq;
     io.pending_coolant = c.coolant;
     io.pending_outputs = static_cast<uint64_t>(c.outputs);
+    // The analog outputs' values (one per io.analog_outputs, finite); otherwise kept as they were.
+    if (c.num_analog == static_cast<int32_t>(io.pending_analog.size()) && c.analog.size() == io.pending_analog.size()) {
+      bool finite = true;
+      for (double v : c.analog) finite = finite && std::isfinite(v);
+      if (finite) {
+        std::copy(c.analog.begin(), c.analog.end(), io.pending_analog.begin());
+        io.analog_known = true;
+      }
+      else spdlog::warn("io: IO_CMD seq {} carries an analog output that is not finite: the analog outputs are kept", c.seq);
+    } else if (!io.pending_analog.empty()) {
+      spdlog::warn("io: IO_CMD seq {} carries {} analog outputs, the config has {}: the analog outputs are kept", c.seq,
+                   c.num_analog, io.pending_analog.size());
+    }
   });
 }
 
@@ -396,10 +413,21 @@ void DriveBridgeNode::io_tick() {
   const bool following = state_ == State::kEnabled && !core_.faulted();
   if (io.pending) {
     io.pending = false;
-    if (io.ctl.on_command(io.pending_seq, io.pending_coolant, io.pending_outputs, following))
+    const int64_t clamped = io.ctl.clamped();
+    static const std::vector<double> kNone;
+    if (io.ctl.on_command(io.pending_seq, io.pending_coolant, io.pending_outputs,
+                          io.analog_known ? io.pending_analog : kNone, following)) {
       spdlog::info("io: change {}: coolant {}{}, outputs 0x{:x}{}", io.ctl.command_seq(),
                    (io.pending_coolant & 1) ? "mist " : "", (io.pending_coolant & 2) ? "flood" : (io.pending_coolant & 1) ? "" : "off",
                    io.ctl.outputs(), following || io.pending_coolant == 0 ? "" : " (coolant not followed: the drives do not follow setpoints)");
+      for (size_t n = 0; n < io.pending_analog.size() && io.ctl.clamped() != clamped; ++n) {
+        const config::IoPointConfig& p = cfg_.io.points[static_cast<size_t>(cfg_.io.analog_outputs[n])];
+        const double count = std::round(io.ctl.analog(n) / p.scale);
+        if (count >= (p.is_signed ? -32768.0 : 0.0) && count <= (p.is_signed ? 32767.0 : 65535.0)) continue;
+        spdlog::warn("io: analog output E{} ({}) = {}: beyond its register's range, held at raw {}", n,
+                       cfg_.io.points[static_cast<size_t>(cfg_.io.analog_outputs[n])].name, io.ctl.analog(n), io.ctl.analog_raw(n));
+      }
+    }
   }
   if (!following && io.ctl.coolant() != 0) {
     io.ctl.stop();
@@ -409,6 +437,7 @@ void DriveBridgeNode::io_tick() {
     IoModule& mod = io.modules[m];
     IoCommand c;
     c.coils = io.ctl.module_coils(m);
+    c.holding_write = io.ctl.module_holding(m, c.holding.data());
     mod.worker->set_io_command(mod.slot, c);
     // A line per change of a coil as read back from the module (events, not every tick).
     if (mod.rep.in.valid && (!mod.logged_valid || mod.rep.in.coils != mod.logged_coils)) {

@@ -659,9 +659,13 @@ void DriveBridgeNode::shut_down() {
     spindle_->worker->set_spindle_command(spindle_->cmd);
   }
   if (io_) {
-    io_->ctl.stop();  // the coolant off; the digital outputs keep their state
-    for (size_t m = 0; m < io_->modules.size(); ++m)
-      io_->modules[m].worker->set_io_command(io_->modules[m].slot, IoCommand{io_->ctl.module_coils(m)});
+    io_->ctl.stop();  // the coolant off; the digital and analog outputs keep their state
+    for (size_t m = 0; m < io_->modules.size(); ++m) {
+      IoCommand c;
+      c.coils = io_->ctl.module_coils(m);
+      c.holding_write = io_->ctl.module_holding(m, c.holding.data());
+      io_->modules[m].worker->set_io_command(io_->modules[m].slot, c);
+    }
   }
   // Disable whatever answers: a few rounds, each at most one step of a state machine.
   for (int round = 0; round < 10; ++round) {

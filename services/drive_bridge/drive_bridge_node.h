@@ -190,13 +190,16 @@ class DriveBridgeNode {
     bool logged_valid = false;
   };
   struct Io {
-    Io(const config::IoConfig& c, const std::vector<std::vector<int>>& coils) : ctl(c, coils) {}
+    Io(const config::IoConfig& c, const std::vector<std::vector<int>>& coils, const std::vector<std::vector<int>>& holding)
+        : ctl(c, coils, holding) {}
     IoControl ctl;
     std::vector<IoModule> modules;
     bool pending = false;  // an IO_CMD arrived since the last tick (the newest kept)
     int64_t pending_seq = 0;
     int8_t pending_coolant = 0;
     uint64_t pending_outputs = 0;
+    std::vector<double> pending_analog;  // io.analog_outputs' values, sized once
+    bool analog_known = false;           // an IO_CMD has carried them
   };
   std::unique_ptr<Io> io_;
   struct Estop {

@@ -133,6 +133,8 @@ void LinkWorker::io_round(IoSlot& io, double now_s) {
   drive::IoModuleOutputs out;
   out.write = io.work.in.valid;  // the first exchange after (re)opening only reads
   out.coils = c.coils;
+  out.holding_write = c.holding_write;
+  out.holding = c.holding;
   drive::put_pdo(image_.outputs(io.pdo), out);
   const drive::TxResult r = io.dev->exchange(image_.outputs(io.pdo), image_.inputs(io.pdo), io.work.counters);
   if (r == drive::TxResult::kOk) {

@@ -86,6 +86,8 @@ struct SpindleReport {
 // What the servo loop and a worker exchange for an I/O module.
 struct IoCommand {
   uint64_t coils = 0;  // bit i: the module's i-th coil point (IoModuleDevice::points)
+  uint64_t holding_write = 0;  // bit i: the i-th holding-register point is an output, holding[i] wanted
+  std::array<uint16_t, drive::kMaxIoPointsPerKind> holding{};
 };
 
 struct IoReport {

@@ -73,6 +73,8 @@ InterpolatorNode::InterpolatorNode(const config::MachineConfig& cfg, bus::Bus& b
       spindle_at_speed_seq_ = std::max(spindle_at_speed_seq_, m.at_speed_seq);
     });
   if (cfg.safety.door_input >= 0) door_input_ = cfg.io.points[static_cast<size_t>(cfg.safety.door_input)].name;
+  io_msg_.num_analog = static_cast<int32_t>(std::min<size_t>(cfg.io.analog_outputs.size(), 64));
+  io_msg_.analog.assign(static_cast<size_t>(io_msg_.num_analog), 0.0);  // sized once: the publish allocates nothing
   if (cfg.io.enabled)
     bus_.subscribe<cnc::lcmt_io_status>(cfg.channel(ch::kIoStatus), [this](const cnc::lcmt_io_status& m) {
       if (cfg_.safety.door_input >= 0) door_open_ = m.door == cnc::lcmt_io_status::DOOR_OPEN;
@@ -391,6 +393,7 @@ void InterpolatorNode::publish_io(int64_t cyc) {
   io_msg_.command_seq = seq;
   io_msg_.coolant = static_cast<int8_t>(o.coolant);
   io_msg_.outputs = static_cast<int64_t>(o.outputs);
+  for (size_t n = 0; n < io_msg_.analog.size(); ++n) io_msg_.analog[n] = o.analog[n];
   io_msg_.stream = stream_;
   if (bus_.publish(ch_io_cmd_, io_msg_)) {
     io_sent_seq_ = seq;

@@ -12,9 +12,12 @@
 #     lamp_green stay on. Then M66 P0 L1 Q20 waits for clamp_closed to rise: X stands
 #     at 20 until the input is set on the module (the simulator's control FIFO), and
 #     the O-word branch on #5399 = 1 takes X to 25 (-1, a timeout, would take it to 5).
+#     M68 E0 Q42.5 at the start and M67 E0 Q55 in the branch set the analog output
+#     coolant_valve_pct (a holding register, scale 0.1): 425 counts at once, 550 when X
+#     leaves 20, read back on IO_STATUS.
 #     The scaled analog input is on IO_STATUS. The run replays bit for bit.
 #  2. mbpoll, a third-party Modbus client, reads the module's coils: 0 0 for the
-#     coolant, 1 0 1 0 for the four outputs.
+#     coolant, 1 0 1 0 for the four outputs; and the analog output's register: 550.
 #  3. The interpolator killed while the coolant runs in a dwell: the bridge's
 #     setpoint watchdog faults and the bridge turns the coolant off itself.
 #   io_test.sh BUILD_DIR SOURCE_DIR
@@ -31,6 +34,7 @@ CTL=("$BUILD/tools/cnc-ctl" --machine "$M")
 cat >"$WORK/io.ngc" <<'NGC'
 G21 G90
 M8
+M68 E0 Q42.5
 G1 X10 F3000
 M62 P0
 M64 P1
@@ -40,6 +44,7 @@ M65 P1
 M64 P2
 M66 P0 L1 Q20
 o10 if [#5399 EQ 1]
+  M67 E0 Q55
   G1 X25
 o10 else
   G1 X5
@@ -77,10 +82,15 @@ mbpoll -m tcp -p "$TEST_MODBUS_PORT" -a 5 -t 0 -0 -r 8 -c 4 -1 -o 1 127.0.0.1 >"
   { cat "$WORK/mbpoll.outputs" >&2; fail "mbpoll could not read the output coils"; }
 mbpoll -m tcp -p "$TEST_MODBUS_PORT" -a 5 -t 1 -0 -r 0 -c 2 -1 -o 1 127.0.0.1 >"$WORK/mbpoll.inputs" 2>&1 ||
   { cat "$WORK/mbpoll.inputs" >&2; fail "mbpoll could not read the discrete inputs"; }
+mbpoll -m tcp -p "$TEST_MODBUS_PORT" -a 5 -t 4 -0 -r 0 -c 1 -1 -o 1 127.0.0.1 >"$WORK/mbpoll.analog" 2>&1 ||
+  { cat "$WORK/mbpoll.analog" >&2; fail "mbpoll could not read the analog output's holding register"; }
 coils() { sed -n 's/^\[\([0-9]*\)\]:[[:space:]]*\([01]\).*/\1=\2/p' "$1" | tr '\n' ' '; }
 note "mbpoll coils 0-1: $(coils "$WORK/mbpoll.coolant"); 8-11: $(coils "$WORK/mbpoll.outputs"); inputs 0-1: $(coils "$WORK/mbpoll.inputs")"
 [ "$(coils "$WORK/mbpoll.coolant")" = "0=0 1=0 " ] || { cat "$WORK/mbpoll.coolant" >&2; fail "the coolant is not off after M30 (mbpoll)"; }
 [ "$(coils "$WORK/mbpoll.outputs")" = "8=1 9=0 10=1 11=0 " ] || { cat "$WORK/mbpoll.outputs" >&2; fail "the outputs are not as the program left them (mbpoll)"; }
+analog="$(sed -n 's/^\[0\]:[[:space:]]*\([0-9-]*\).*/\1/p' "$WORK/mbpoll.analog")"
+note "mbpoll holding register 0 (coolant_valve_pct): $analog"
+[ "$analog" = "550" ] || { cat "$WORK/mbpoll.analog" >&2; fail "the analog output is not M67's 55 (550 counts) (mbpoll)"; }
 [ "$(coils "$WORK/mbpoll.inputs")" = "0=1 1=1 " ] || { cat "$WORK/mbpoll.inputs" >&2; fail "the discrete inputs are not as set (mbpoll)"; }
 
 for s in interpolator program-server monitor drive-bridge servo-sim logger; do stop "$s" TERM; done
@@ -141,6 +151,9 @@ last = stats[-1][1]
 print("# last IO_STATUS: " + ", ".join(f"{k} {v:g}" for k, v in last.items()), file=sys.stderr)
 check(last["coolant_flood"] == 0 and last["clamp"] == 1 and last["air_blast"] == 0 and last["lamp_green"] == 1,
       "IO_STATUS read back: flood off, clamp on, air_blast off, lamp_green on")
+v42 = next((s for s in stats if abs(s[1].get("coolant_valve_pct", 0) - 42.5) < 1e-9), None)
+check(v42 is not None and v42[0] < air_on[0], "M68 E0 Q42.5: read back on IO_STATUS (425 counts x 0.1) before X reaches 10")
+check(abs(last["coolant_valve_pct"] - 55) < 1e-9, "IO_STATUS: the analog output M67 left, 55")
 check(last["door_closed"] == 1 and abs(last["air_pressure_bar"] - 6.12) < 1e-9, "IO_STATUS: the input set on the module, 612 counts x 0.01")
 # M66 P0 L1: X stands at 20 from lamp_green's change until clamp_closed reads 1, then the
 # branch on #5399 = 1 takes it to 25, never towards 5.
@@ -155,6 +168,10 @@ if rise:
     if go:
         print(f"# M66: the input's rise on IO_STATUS to X's first setpoint past 20: {(go[0] - rise[0]) * 1e-3:.1f} ms", file=sys.stderr)
         check(go[0] - rise[0] < 500e3, "...within 0.5 s (the value, the server's revalidation, the blocks, the plan)")
+    v55 = next((s for s in stats if abs(s[1].get("coolant_valve_pct", 0) - 55) < 1e-9), None)
+    check(v55 is not None and v55[0] > rise[0], "M67 E0 Q55: read back on IO_STATUS after the rise, not before")
+    if v55 and go:
+        print(f"# M67: X's first setpoint past 20 to IO_STATUS reading 55: {(v55[0] - go[0]) * 1e-3:.1f} ms", file=sys.stderr)
     after = [x[1] for x in xs if x[0] > rise[0]]
     check(abs(after[-1] - 25) < 1e-9 and min(after) >= 20, f"#5399 = 1: the branch to X 25 (X ends at {after[-1]:.4f})")
 seen_flood = next((s for s in stats if s[1].get("coolant_flood") == 1), None)
@@ -187,6 +204,14 @@ for (n, v, x), (_, _, lo, hi) in zip(seen, want):
     good = lo - 5e-5 <= x <= hi + 5e-5  # the log's 0.1 um
     print(("# " if good else "# FAILED: ") + f"{n} {v} with X in [{lo}, {hi}]", file=sys.stderr)
     ok = ok and good
+# The analog output: M68's 42.5 with X at rest at 0, M67's 55 as X leaves 20 (the
+# bridge's lead behind the setpoints: within the first 0.05 mm).
+regs = [(float(m.group(1)), float(m.group(2))) for m in
+        (re.search(r"io io1: coolant_valve_pct = (-?[0-9.]+) \(raw \d+\) at X (-?[0-9.]+)", l) for l in open(sys.argv[1])) if m]
+for v, x in regs: print(f"# module: coolant_valve_pct = {v:g} at X {x:.4f}", file=sys.stderr)
+good = [v for v, _ in regs] == [42.5, 55] and regs[0][1] == 0 and 20 - 5e-5 <= regs[1][1] <= 20.05
+print(("# " if good else "# FAILED: ") + "coolant_valve_pct 42.5 at X 0 (M68), 55 with X in [20, 20.05] (M67)", file=sys.stderr)
+ok = ok and good
 sys.exit(0 if ok else 1)
 PY
 "$BUILD/tools/cnc-replay" --log "$WORK/cell.lcmlog" >"$WORK/replay.out" 2>&1 || { cat "$WORK/replay.out" >&2; fail "the run does not replay"; }

@@ -186,11 +186,13 @@ class Cell {
     bus.publish("LB.SPINDLE_CMD", m);
   }
 
-  void io_command(int64_t seq, int8_t coolant, int64_t outputs) {
+  void io_command(int64_t seq, int8_t coolant, int64_t outputs, std::vector<double> analog = {}) {
     cnc::lcmt_io_command m{};
     m.command_seq = seq;
     m.coolant = coolant;
     m.outputs = outputs;
+    m.num_analog = static_cast<int32_t>(analog.size());
+    m.analog = std::move(analog);
     bus.publish("LB.IO_CMD", m);
   }
   int coil(int addr) { return link().io_module(4)->coil(addr); }
@@ -391,6 +393,20 @@ TEST(BridgeNode, IoModuleFollowsItsCommandsAndReportsItsPoints) {
   EXPECT_EQ(c.coil(1), 0);
   EXPECT_EQ(c.coil(8), 1);
   EXPECT_EQ(c.coil(9), 0);
+  // The analog output (M67/M68): the module kept its own value until a command gave
+  // one; -7.5 at scale 0.5, signed: -15 counts, written and read back.
+  EXPECT_DOUBLE_EQ(c.io_value("valve"), -5.0);
+  c.io_command(13, 1, 0b01, {-7.5});
+  c.hold_stream(10, 10, 5);
+  int raw = 0;
+  ASSERT_TRUE(m->point("valve", &raw));
+  EXPECT_EQ(raw, 0xFFF1);
+  EXPECT_DOUBLE_EQ(c.io_value("valve"), -7.5);
+  // A DISABLE keeps it.
+  c.command(cnc::lcmt_drive_command::DISABLE);
+  c.hold_stream(10, 10, 5);
+  ASSERT_TRUE(m->point("valve", &raw));
+  EXPECT_EQ(raw, 0xFFF1);
 }
 
 TEST(BridgeNode, IoServoTickAllocatesNothing) {

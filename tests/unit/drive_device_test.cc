@@ -385,6 +385,58 @@ TEST(IoModuleDevice, WritesOnlyTheCoilsThatDifferAndReadsEachTableOnce) {
   EXPECT_FALSE(get_pdo<IoModuleInputs>(image.inputs(s)).valid);
 }
 
+// Analog outputs (M67/M68): a holding register that is an output is written (function
+// 6) only when its read-back differs; one that is not (an analog input) never is.
+TEST(IoModuleDevice, WritesTheOutputRegistersThatDiffer) {
+  config::IoConfig io;
+  io.enabled = true;
+  io.modules.push_back({"m", config::DriveConfig{}});
+  io.modules[0].link.unit_id = 5;
+  for (const auto& [name, addr] : {std::pair{"valve", 2}, std::pair{"speed", 3}, std::pair{"gauge", 6}}) {
+    config::IoPointConfig p;
+    p.name = name;
+    p.kind = config::IoKind::kHoldingRegister;
+    p.address = addr;
+    io.points.push_back(p);
+  }
+  LoopbackLink link;
+  link.add_io_module(5, io, 0);
+  ASSERT_TRUE(link.ensure_open(0.0));
+  IoModuleDevice dev(io, 0, link);
+  ProcessImage image;
+  const size_t s = image.add(dev.layout());
+  LinkCounters c;
+  IoEmulator& m = *link.io_module(5);
+  m.set_point("gauge", 77);
+  IoModuleOutputs out;
+  out.holding_write = 0b011;  // valve and speed are outputs, gauge is not
+  out.holding = {425, 65535, 9};
+  put_pdo(image.outputs(s), out);
+  ASSERT_EQ(dev.exchange(image.outputs(s), image.inputs(s), c), TxResult::kOk);
+  EXPECT_EQ(dev.last_transactions(), 1) << "the first exchange only reads";
+  out.write = true;
+  put_pdo(image.outputs(s), out);
+  ASSERT_EQ(dev.exchange(image.outputs(s), image.inputs(s), c), TxResult::kOk);
+  EXPECT_EQ(dev.last_transactions(), 3) << "two registers written, one read";
+  int raw = 0;
+  ASSERT_TRUE(m.point("valve", &raw));
+  EXPECT_EQ(raw, 425);
+  ASSERT_TRUE(m.point("speed", &raw));
+  EXPECT_EQ(raw, 65535);
+  ASSERT_TRUE(m.point("gauge", &raw));
+  EXPECT_EQ(raw, 77) << "not an output: never written";
+  const IoModuleInputs in = get_pdo<IoModuleInputs>(image.inputs(s));
+  EXPECT_EQ(in.holding_registers[0], 425) << "read back in the same exchange";
+  ASSERT_EQ(dev.exchange(image.outputs(s), image.inputs(s), c), TxResult::kOk);
+  EXPECT_EQ(dev.last_transactions(), 1) << "nothing differs: no write";
+  m.set_point("valve", 0);  // behind the master's back
+  ASSERT_EQ(dev.exchange(image.outputs(s), image.inputs(s), c), TxResult::kOk);
+  ASSERT_EQ(dev.exchange(image.outputs(s), image.inputs(s), c), TxResult::kOk);
+  ASSERT_TRUE(m.point("valve", &raw));
+  EXPECT_EQ(raw, 425) << "written again";
+  EXPECT_EQ(c.exceptions + c.timeouts + c.other_errors, 0);
+}
+
 namespace hy = huanyang;
 
 TEST(HuanyangFrame, EncodesWithModbusCrcLowByteFirstAndFramesByItsLengthByte) {

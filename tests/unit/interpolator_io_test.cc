@@ -85,6 +85,31 @@ TEST(MachineOutputs, ImmediateQueuedAndEnd) {
   EXPECT_EQ(o.outputs, 1u | (1u << 5));
 }
 
+TEST(MachineOutputs, AnalogImmediateAndWithTheNextMotion) {
+  MachineOutputs o;
+  o.take({K::kAnalogOutput, 2, 42.5, {}});  // M68 E2 Q42.5: at once
+  EXPECT_EQ(o.analog[2], 42.5);
+  EXPECT_EQ(o.seq, 1);
+  o.take({K::kAnalogOutput, 1000 + 3, 7, {}});  // M67 E3 Q7: queued
+  o.take({K::kAnalogOutput, 1000 + 3, 8, {}});  // a later one overwrites it
+  EXPECT_EQ(o.analog[3], 0.0);
+  EXPECT_EQ(o.seq, 1);
+  o.take({K::kAnalogOutput, 2, 42.5, {}});
+  EXPECT_EQ(o.seq, 1) << "the same value: no change";
+  o.motion();
+  EXPECT_EQ(o.analog[3], 8.0);
+  EXPECT_EQ(o.seq, 2);
+  o.take({K::kAnalogOutput, 1000 + 3, -1, {}});
+  o.take({K::kAnalogOutput, 3, 5, {}});  // M68 for the same output drops the queued M67
+  o.motion();
+  EXPECT_EQ(o.analog[3], 5.0);
+  o.take({K::kAnalogOutput, 1000 + 2, 1, {}});
+  o.end();
+  o.motion();
+  EXPECT_EQ(o.analog[2], 42.5) << "analog outputs keep their values; the queued M67 is dropped";
+  EXPECT_EQ(o.analog[3], 5.0);
+}
+
 // M8, G1 X10, M62 P1, M64 P2, G4 P0.2, G1 X20, M65 P2, M30.
 struct IoRun {
   std::vector<Setpoint> sp;

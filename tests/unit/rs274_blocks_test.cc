@@ -888,7 +888,7 @@ TEST(Rs274BlocksEvents, Outputs) {
   const std::vector<std::tuple<EventKind, int, double>> want = {{EventKind::kDigitalOutput, 3, 3},
                                                                 {EventKind::kDigitalOutput, 3, 0},
                                                                 {EventKind::kDigitalOutput, 0, 1},
-                                                                {EventKind::kAnalogOutput, 2, 5.5},
+                                                                {EventKind::kAnalogOutput, 1002, 5.5},
                                                                 {EventKind::kAnalogOutput, 1, -2}};
   EXPECT_EQ(got, want);
 }

@@ -318,6 +318,7 @@ class Simulator {
     int unit = 0;
     bool tcp = true;
     std::vector<uint8_t> coils;  // as last logged
+    std::vector<uint16_t> regs;  // holding registers, as last logged
   };
   IoSim* io_for(int unit, bool tcp);
   void reply_io(IoSim& io, modbus_t* ctx, const uint8_t* query, int len);
@@ -503,6 +504,7 @@ Simulator::Simulator(const cnc::config::MachineConfig& cfg, const cnc::service::
     io.unit = d.unit_id;
     io.tcp = cnc::drive::transport_of(d) == cnc::drive::Transport::kModbusTcp;
     io.coils.assign(static_cast<size_t>(io.emu->mapping()->nb_bits), 0);
+    io.regs.assign(static_cast<size_t>(io.emu->mapping()->nb_registers), 0);
     if (io.tcp) {
       if (port_ < 0) port_ = d.port;
       if (d.port != port_)
@@ -626,6 +628,23 @@ void Simulator::reply_io(IoSim& io, modbus_t* ctx, const uint8_t* query, int len
     std::string where;
     for (const SimDrive* d : all_) where += fmt::format(" {} {:.4f}", d->name(), d->position_mm());
     spdlog::info("cnc-servo-sim: io {}: {} {} at{}", io.emu->name(), name, now ? "on" : "off", where);
+  }
+  // Each holding register's change (an analog output written by the master), scaled.
+  for (size_t a = 0; a < io.regs.size(); ++a) {
+    const uint16_t now = io.emu->mapping()->tab_registers[a];
+    if (now == io.regs[a]) continue;
+    io.regs[a] = now;
+    std::string name = "register " + std::to_string(a);
+    double value = now;
+    for (const auto& p : cfg_.io.points)
+      if (p.kind == cnc::config::IoKind::kHoldingRegister && p.address == static_cast<int>(a) &&
+          cfg_.io.modules[static_cast<size_t>(p.module)].name == io.emu->name()) {
+        name = p.name;
+        value = (p.is_signed ? static_cast<double>(static_cast<int16_t>(now)) : static_cast<double>(now)) * p.scale;
+      }
+    std::string where;
+    for (const SimDrive* d : all_) where += fmt::format(" {} {:.4f}", d->name(), d->position_mm());
+    spdlog::info("cnc-servo-sim: io {}: {} = {} (raw {}) at{}", io.emu->name(), name, value, now, where);
   }
 }
 
