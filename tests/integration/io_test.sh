@@ -103,7 +103,7 @@ from lcmlog import events, fields, Fields
 cmds, stats, xs = [], [], []
 for ts, ch, b in events(log):
     if ch == prefix + "IO_CMD":
-        _, _, _, seq, coolant, outputs, _ = fields(b, "qqiqbqq")
+        _, _, _, seq, coolant, outputs = fields(b, "qqiqbq")
         cmds.append((ts, seq, coolant, outputs))
     elif ch == prefix + "IO_STATUS":
         f = Fields(b)
