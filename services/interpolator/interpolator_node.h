@@ -33,6 +33,7 @@
 #include "cnc/lcmt_setpoint.hpp"
 #include "cnc/lcmt_io_command.hpp"
 #include "cnc/lcmt_io_status.hpp"
+#include "common/motion/input_wait.h"
 #include "cnc/lcmt_spindle_command.hpp"
 #include "common/bus/bus.h"
 #include "common/config/machine_config.h"
@@ -112,7 +113,7 @@ class InterpolatorNode {
   void input_cycle();
   struct InputWatch {
     int64_t start_cycle = -1;  // the wait being watched (the core's start cycle)
-    bool seen_low = false, seen_high = false;
+    InputWaitCondition condition;
     double unread_s = -1;      // monotonic time the input was first not read (-1: read)
     int64_t published = 0;     // the core's results sent on INTERP_STATE
   } input_watch_;

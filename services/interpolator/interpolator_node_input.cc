@@ -26,7 +26,7 @@ void InterpolatorNode::input_cycle() {
   }
   if (!w.waiting || token_ == 0) return;
   if (w.start_cycle != input_watch_.start_cycle) {
-    input_watch_ = InputWatch{w.start_cycle, false, false, -1, input_watch_.published};
+    input_watch_ = InputWatch{w.start_cycle, InputWaitCondition(w.wait.mode), -1, input_watch_.published};
   }
   const auto& list = w.wait.analog ? cfg_.io.analog_inputs : cfg_.io.digital_inputs;
   const std::string letter = w.wait.analog ? "E" : "P";
@@ -58,24 +58,11 @@ void InterpolatorNode::input_cycle() {
   }
   input_watch_.unread_s = -1;
   const double v = io_status_.value[point];
-  const bool high = v != 0;
-  input_watch_.seen_low = input_watch_.seen_low || !high;
-  input_watch_.seen_high = input_watch_.seen_high || high;
-  bool met = false;
-  switch (w.wait.mode) {
-    case program::InputWait::kImmediate: met = true; break;
-    // LinuxCNC's RISE waits for the input low, then high; FALL the other way round.
-    case program::InputWait::kRise: met = high && input_watch_.seen_low; break;
-    case program::InputWait::kFall: met = !high && input_watch_.seen_high; break;
-    case program::InputWait::kHigh: met = high; break;
-    case program::InputWait::kLow: met = !high; break;
-    default: break;
-  }
-  if (!met) return;
+  if (!input_watch_.condition.met(v)) return;
   cnc::lcmt_program_command m{};
   m.command = cnc::lcmt_program_command::INPUT_VALUE;
   m.axis = static_cast<int32_t>(w.block_index);
-  m.value = w.wait.analog ? v : (high ? 1.0 : 0.0);
+  m.value = w.wait.analog ? v : (v != 0 ? 1.0 : 0.0);
   Command c;
   c.kind = Command::Kind::kInputValue;
   c.value = m.value;

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "common/config/machine_config.h"
+#include "common/motion/input_wait.h"
 #include "common/motion/interpolator.h"
 #include "common/program/block.h"
 
@@ -172,6 +173,30 @@ TEST(InterpolatorInput, TheDryRunPassesTheWait) {
   EXPECT_EQ(core.state(), RunState::kDone);
   EXPECT_LT(cycles * cfg.ipo_period_s, 5.0);  // two 10 mm moves at 50 mm/s, not the 30 s timeout
   EXPECT_EQ(core.input_wait().results, 0);
+}
+
+TEST(InputWaitCondition, LinuxCncsModes) {
+  using W = program::InputWait;
+  auto first_met = [](int mode, std::vector<double> readings) {
+    InputWaitCondition c(mode);
+    for (size_t i = 0; i < readings.size(); ++i)
+      if (c.met(readings[i])) return static_cast<int>(i);
+    return -1;
+  };
+  EXPECT_EQ(first_met(W::kImmediate, {1}), 0);
+  EXPECT_EQ(first_met(W::kImmediate, {0}), 0);
+  EXPECT_EQ(first_met(W::kRise, {0, 0, 1}), 2);
+  EXPECT_EQ(first_met(W::kRise, {1, 1, 0, 1}), 3) << "already high: it must fall, then rise";
+  EXPECT_EQ(first_met(W::kRise, {1, 1, 1}), -1);
+  EXPECT_EQ(first_met(W::kFall, {0, 1, 0}), 2) << "already low: it must rise, then fall";
+  EXPECT_EQ(first_met(W::kFall, {1, 0}), 1);
+  EXPECT_EQ(first_met(W::kHigh, {0, 0, 1}), 2);
+  EXPECT_EQ(first_met(W::kHigh, {1}), 0);
+  EXPECT_EQ(first_met(W::kLow, {1, 0}), 1);
+  InputWaitCondition c(W::kRise);
+  c.met(0);
+  EXPECT_TRUE(c.met(1));
+  EXPECT_TRUE(c.met(0)) << "once met, it stays met";
 }
 
 TEST(InputWaitNumber, RoundTrips) {
