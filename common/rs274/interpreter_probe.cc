@@ -1,6 +1,7 @@
 // G38.2-G38.5 straight probing, as LinuxCNC 2.9's convert_straight_probe and
 // set_probe_data have it: the checks before the move, the canonical calls, and the
 // result (#5061-#5070, the current point) read before the next line.
+#include <cmath>
 #include <stdexcept>
 
 #include "common/rs274/interpreter_impl.h"
@@ -25,6 +26,7 @@ void Interpreter::straight_probe(Words& w, int g, int col) {
   comp_filter_->flush();
   const SourceRef r = ref(col);
   const Pose shown = program_pose(end);
+  const Pose start_machine = machine_of(position_, coord_);
   canon_.turn_probe_on(r);
   canon_.straight_probe(r, shown, g - 380);
   canon_.turn_probe_off(r);
@@ -32,8 +34,18 @@ void Interpreter::straight_probe(Words& w, int g, int col) {
   probe_target_machine_ = machine_of(end, coord_);
   ++probes_made_;
   probe_wait_ = true;
-  // rs274's simulated machine: the probe at the move's end, not tripped.
-  if (!setup_.machine_results_supplied) set_probe_result(false, probe_target_machine_, probe_target_machine_);
+  if (setup_.machine_results_supplied) return;
+  // rs274's simulated machine (saicanon's STRAIGHT_PROBE): not tripped, the probe at
+  // the move's end, and the machine backed off 0.254 mm (0.01 in) from it towards the
+  // move's start, where the next move starts.
+  Pose rest = probe_target_machine_;
+  double d2 = 0;
+  for (size_t i = 0; i < 3; ++i) d2 += (start_machine[i] - rest[i]) * (start_machine[i] - rest[i]);
+  if (d2 > 0) {
+    const double backoff = 0.254, d = std::sqrt(d2);  // mm here; 0.01 in in a G20 program
+    for (size_t i = 0; i < 3; ++i) rest[i] += backoff * (start_machine[i] - rest[i]) / d;
+  }
+  set_probe_result(false, probe_target_machine_, rest);
 }
 
 void Interpreter::set_probe_result(bool tripped, const Pose& trip_machine, const Pose& rest_machine) {

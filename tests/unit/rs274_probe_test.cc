@@ -83,6 +83,26 @@ TEST(Rs274Probe, CanonicalCallsAndRs274sSimulatedResultWithoutAMachine) {
   EXPECT_EQ(rec.calls, want);
 }
 
+TEST(Rs274Probe, Rs274sSimulatedMachineBacksOffFromTheEnd) {
+  // saicanon's STRAIGHT_PROBE leaves the machine 0.254 mm (0.01 in) back from the
+  // move's end towards its start: a relative move after it starts there (LinuxCNC's
+  // rs274 prints -8.7460 and, in inches, -1.6700 for these programs).
+  for (const auto& [text, want] :
+       {std::pair{"G21 G90 F10\nG38.2 Z-10\nG91 G1 Z1\nM2\n", "G1 0 0 -8.746"},
+        std::pair{"G20 G90 F10\nG38.2 Z-1.75\nG91 G1 Z0.07\nM2\n", "G1 0 0 -1.67"},
+        std::pair{"G21 G90 F10\nG0 X3 Y4\nG38.3 X0 Y0\nG91 G1 X0\nM2\n", "G1 0.1524 0.2032 0"}}) {
+    TempDir dir;
+    const std::string path = dir.write("main.ngc", text);
+    Recorder rec;
+    Interpreter in(probe_setup(false), rec);
+    in.open(path);
+    while (in.execute_next()) {
+    }
+    ASSERT_FALSE(rec.calls.empty());
+    EXPECT_EQ(rec.calls.back(), want) << text;
+  }
+}
+
 TEST(Rs274Probe, WaitsForTheResultAndSetsTheParametersInWorkCoordinates) {
   // G55 with an offset and G20: #5061-#5063 in the work system and in inches; the next
   // move starts where the machine came to rest (past the trip point).
