@@ -158,6 +158,27 @@ TEST(InterpolatorInput, AValueWithNoWaitOnIsRefusedAndStopEndsTheWait) {
   EXPECT_FALSE(core.apply_command(value));
 }
 
+TEST(InterpolatorInput, ATimeoutDuringAHoldTakesEffectAtResume) {
+  const config::MachineConfig cfg = load("sim3_io.yaml");
+  Interpolator core(cfg);
+  core.apply_command({Command::Kind::kLoad, 1.0, {}});
+  ASSERT_TRUE(core.apply_block(line_block(0, 0, 10)));
+  ASSERT_TRUE(core.apply_block(wait_block(1, 10, {0, false, program::InputWait::kHigh}, 0.1)));
+  core.apply_command({Command::Kind::kStart, 1.0, {}});
+  for (int i = 0; i < 20000 && !core.input_wait().waiting; ++i) core.step();
+  ASSERT_TRUE(core.input_wait().waiting);
+  core.apply_command({Command::Kind::kHold, 1.0, {}});
+  for (int i = 0; i < 100; ++i) core.step();  // 0.4 s, past the 0.1 s timeout
+  EXPECT_EQ(core.state(), RunState::kHeld);
+  EXPECT_TRUE(core.input_wait().waiting);
+  EXPECT_EQ(core.last().position_mm[0], 10.0);
+  core.apply_command({Command::Kind::kResume, 1.0, {}});
+  core.step();
+  EXPECT_FALSE(core.input_wait().waiting);
+  EXPECT_EQ(core.input_wait().value, -1.0);
+  EXPECT_EQ(core.input_wait().results, 1);
+}
+
 TEST(InterpolatorInput, TheDryRunPassesTheWait) {
   const config::MachineConfig cfg = load("sim3_io.yaml");
   Interpolator core(cfg);
