@@ -106,11 +106,15 @@ struct SpindleSimConfig {
 // section the cell has no spindle device and M3/M4/M5/S stay events in the log.
 struct SpindleConfig {
   bool enabled = false;  // the section is present
-  DriveConfig drive;     // transport, address, unit id and a profile with state_machine delta_vfd
+  DriveConfig drive;     // transport, address, unit id and a profile with state_machine delta_vfd or huanyang
   double max_rpm = 24000;          // S is limited to this
   double rpm_per_hz = 60;          // spindle rpm per Hz of the drive's output frequency (2-pole motor: 60)
   double at_speed_tolerance = 0.05;  // at speed: |actual - commanded| <= this fraction of commanded
   double at_speed_timeout_s = 10;    // a change not at speed within this is a fault
+  // The spindle override's range (LinuxCNC's [DISPLAY] MIN_SPINDLE_OVERRIDE and
+  // MAX_SPINDLE_OVERRIDE, whose defaults these are).
+  double min_override = 0.5;
+  double max_override = 1.0;
   SpindleSimConfig sim;
 };
 

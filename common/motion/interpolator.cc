@@ -767,6 +767,16 @@ void Interpolator::at_stop_block(bool pausing) {
     if (p.block.kind == program::BlockKind::kEvent && p.block.event.kind == program::EventKind::kSpindle &&
         spindle_taken_ != p.serial)
       take_spindle_event(p);
+    if (p.block.kind == program::BlockKind::kEvent && p.block.event.kind == program::EventKind::kOverrides &&
+        overrides_taken_ != p.serial) {
+      // M48-M53 (bits: feed, speed, adaptive, hold): the speed bit enables the spindle override.
+      overrides_taken_ = p.serial;
+      const bool on = (p.block.event.number & 2) != 0;
+      if (on != spindle_override_on_) {
+        spindle_override_on_ = on;
+        spindle_reoverride();
+      }
+    }
     if (p.block.kind == program::BlockKind::kEvent && outputs_taken_ != p.serial) {
       outputs_taken_ = p.serial;
       outputs_.take(p.block.event);
@@ -820,11 +830,25 @@ void Interpolator::take_spindle_event(const Planned& p) {
   spindle_taken_ = p.serial;
   const int dir = p.block.event.number > 0 ? 1 : p.block.event.number < 0 ? -1 : 0;
   const double rpm = dir == 0 || !(p.block.event.value > 0) ? 0.0 : p.block.event.value;
-  if (dir == spindle_.direction && rpm == spindle_.rpm) return;  // no change: nothing to wait for
+  if (dir == spindle_.direction && rpm == spindle_.program_rpm) return;  // no change: nothing to wait for
   ++spindle_.seq;
   spindle_.direction = dir;
+  spindle_.program_rpm = rpm;
+  spindle_.rpm = overridden_rpm(rpm);
+  spindle_wait_ = wait_for_spindle_ && !auto_resume_pauses_ && dir != 0 && spindle_.rpm > 0;
+}
+
+double Interpolator::overridden_rpm(double program_rpm) const {
+  if (!spindle_override_on_ || spindle_override_ == 1.0) return program_rpm;  // as before any override: S as programmed
+  return std::min(program_rpm * spindle_override_, cfg_.spindle.max_rpm);
+}
+
+void Interpolator::spindle_reoverride() {
+  if (spindle_.direction == 0) return;  // a stopped spindle takes it at its next M3/M4
+  const double rpm = overridden_rpm(spindle_.program_rpm);
+  if (rpm == spindle_.rpm) return;
+  ++spindle_.seq;
   spindle_.rpm = rpm;
-  spindle_wait_ = wait_for_spindle_ && !auto_resume_pauses_ && dir != 0 && rpm > 0;
 }
 
 void Interpolator::door_spindle_stop() {
@@ -834,6 +858,7 @@ void Interpolator::door_spindle_stop() {
   ++spindle_.seq;
   spindle_.direction = 0;
   spindle_.rpm = 0;
+  spindle_.program_rpm = 0;
 }
 
 void Interpolator::spindle_off() {
@@ -842,10 +867,12 @@ void Interpolator::spindle_off() {
   door_hold_ = false;
   door_resume_ = false;
   door_spindle_ = SpindleState{};
+  spindle_override_on_ = true;  // M48 is in effect at a program's start (LinuxCNC's)
   if (spindle_.direction == 0 && spindle_.rpm == 0) return;
   ++spindle_.seq;
   spindle_.direction = 0;
   spindle_.rpm = 0;
+  spindle_.program_rpm = 0;
 }
 
 void Interpolator::end_or_starve() {

@@ -78,10 +78,16 @@ struct Command {
     // The input the path waits on at an M66 (the input wait at the front) read `value`,
     // meeting the wait's condition (an immediate read: its value): the wait ends, #5399 =
     // value. The node applies it from IO_STATUS. Refused (false) when no wait is on.
-    kInputValue = 21
+    kInputValue = 21,
+    // The spindle override (feed_override: a fraction, clamped to spindle.min_override
+    // .. max_override, LinuxCNC's MIN/MAX_SPINDLE_OVERRIDE): the spindle turns at the
+    // program's S times it (at most spindle.max_rpm) while M51 has not disabled it.
+    // A change of speed it makes is a new spindle change, not waited for (LinuxCNC's
+    // motion scales the spindle at once and waits for at speed only after M3/M4/S).
+    kSpindleOverride = 22
   };
   Kind kind = Kind::kStart;
-  double feed_override = 1.0;  // kOverride: 0.0 .. kMaxFeedOverride; kRapidOverride: 0.0 .. 1.0
+  double feed_override = 1.0;  // kOverride: 0.0 .. kMaxFeedOverride; kRapidOverride: 0.0 .. 1.0; kSpindleOverride
   // kReset: the program is dropped, the path is at rest at this position (where
   // the drives stand, as the node took it from AXIS_STATUS); one finite value per axis.
   std::array<double, program::kMaxAxes> position_mm{};
@@ -130,7 +136,8 @@ struct WorkCounters {
 struct SpindleState {
   int64_t seq = 0;
   int direction = 0;  // 1 cw, -1 ccw, 0 off
-  double rpm = 0;     // 0 when off
+  double rpm = 0;     // 0 when off; the program's S under the spindle override
+  double program_rpm = 0;  // the program's S (0 when off)
 };
 
 // The probing move (G38.x block) the path is in or last left, for the node that
@@ -217,6 +224,9 @@ class Interpolator {
   int64_t planned_samples() const { return planned_samples_; }
   double feed_override() const { return override_; }
   double rapid_override() const { return rapid_override_; }
+  double spindle_override() const { return spindle_override_; }
+  // False between M51 P0 (or M49) and M51 P1 (M48) in the program the path runs.
+  bool spindle_override_enabled() const { return spindle_override_on_; }
   bool single_block() const { return single_block_; }
   bool optional_stop() const { return optional_stop_; }
   // Held by single block at the start of a line (a RESUME runs that line).
@@ -359,6 +369,10 @@ class Interpolator {
   // A spindle event at the front, reached: the change taken (and waited for).
   void take_spindle_event(const Planned& p);
   void spindle_off();
+  // The speed the spindle turns at for the program's S: under the override, at most spindle.max_rpm.
+  double overridden_rpm(double program_rpm) const;
+  // After the override or its enable changed: the spindle turning takes the new speed (a change, not waited for).
+  void spindle_reoverride();
   // Probing: the move at the front noted when first reached; at rest after a trip it
   // ends where the path stands.
   void track_probe_move();
@@ -382,6 +396,9 @@ class Interpolator {
   bool stopping_ = false;
   double override_ = 1.0;
   double rapid_override_ = 1.0;
+  double spindle_override_ = 1.0;
+  bool spindle_override_on_ = true;
+  uint64_t overrides_taken_ = UINT64_MAX;  // serial of the M48-M53 event last taken
   bool single_block_ = false;
   bool optional_stop_ = true;
   bool single_block_held_ = false;           // hold_ was set by single block

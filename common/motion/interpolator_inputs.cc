@@ -155,7 +155,8 @@ bool Interpolator::apply_command(const Command& cmd) {
         // is at speed.
         ++spindle_.seq;
         spindle_.direction = door_spindle_.direction;
-        spindle_.rpm = door_spindle_.rpm;
+        spindle_.program_rpm = door_spindle_.program_rpm;
+        spindle_.rpm = overridden_rpm(door_spindle_.program_rpm);
         door_spindle_ = SpindleState{};
         spindle_wait_ = wait_for_spindle_ && !auto_resume_pauses_;
         door_resume_ = spindle_wait_;
@@ -221,6 +222,11 @@ bool Interpolator::apply_command(const Command& cmd) {
       if (spindle_wait_ && std::isfinite(cmd.value) && cmd.value >= static_cast<double>(spindle_.seq))
         spindle_wait_ = false;
       if (!spindle_wait_) door_resume_ = false;
+      break;
+    case Command::Kind::kSpindleOverride:
+      if (!std::isfinite(cmd.feed_override)) return false;
+      spindle_override_ = std::clamp(cmd.feed_override, cfg_.spindle.min_override, cfg_.spindle.max_override);
+      spindle_reoverride();
       break;
     case Command::Kind::kOverride:
     case Command::Kind::kRapidOverride:

@@ -9,7 +9,8 @@ std::optional<int8_t> program_command_by_name(const std::string& name) {
   using C = lcmt_program_command;
   static const std::map<std::string, int8_t> kNames = {
       {"load", C::LOAD},   {"start", C::START},   {"hold", C::HOLD},       {"resume", C::RESUME},
-      {"stop", C::STOP},   {"override", C::OVERRIDE}, {"rapid-override", C::RAPID_OVERRIDE}, {"reset", C::RESET}, {"home", C::HOME},
+      {"stop", C::STOP},   {"override", C::OVERRIDE}, {"rapid-override", C::RAPID_OVERRIDE},
+      {"spindle-override", C::SPINDLE_OVERRIDE}, {"reset", C::RESET}, {"home", C::HOME},
       {"jog", C::JOG},     {"jog-keepalive", C::JOG_KEEPALIVE},            {"touch-off", C::TOUCH_OFF},
       {"mdi", C::MDI},     {"single-block", C::SINGLE_BLOCK}, {"optional-stop", C::OPTIONAL_STOP},
       {"block-delete", C::BLOCK_DELETE}, {"confirm", C::CONFIRM}};

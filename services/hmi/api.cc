@@ -88,6 +88,8 @@ const std::vector<Api::Action>& Api::actions() {
        &Api::override_command},
       {"rapid_override", "`value` (0 .. 1)", "PROGRAM_CMD RAPID_OVERRIDE", "`rapid_override sent` / refusal", false,
        &Api::override_command},
+      {"spindle_override", "`value` (`spindle.min_override` .. `max_override`)", "PROGRAM_CMD SPINDLE_OVERRIDE",
+       "`spindle_override sent` / refusal", false, &Api::override_command},
       {"single_block", "`value` (bool)", "PROGRAM_CMD SINGLE_BLOCK",
        "`single-block on sent` / `… off sent`, then the interlock's refusal", false, &Api::program_switch},
       {"optional_stop", "`value` (bool)", "PROGRAM_CMD OPTIONAL_STOP",
@@ -230,9 +232,10 @@ void Api::program_switch(const Request& r) {
 }
 
 void Api::override_command(const Request& r) {
-  const bool rapid = r.action == "rapid_override";
   service::OperatorCommand c;
-  c.command = rapid ? lcmt_program_command::RAPID_OVERRIDE : lcmt_program_command::OVERRIDE;
+  c.command = r.action == "rapid_override"     ? lcmt_program_command::RAPID_OVERRIDE
+              : r.action == "spindle_override" ? lcmt_program_command::SPINDLE_OVERRIDE
+                                               : lcmt_program_command::OVERRIDE;
   c.feed_override = number(r.message, "value", 1.0);
   if (send_cmd(r.client, r.id, r.action, c)) result(r.client, r.id, true, r.action + " sent");
 }
@@ -686,6 +689,8 @@ json Api::status(double now, int64_t login_refusals, int clients) const {
                    {"mode_text", interp_.mode_text},
                    {"feed_override", fin(interp_.feed_override)},
                    {"rapid_override", fin(interp_.rapid_override)},
+                   {"spindle_override", fin(interp_.spindle_override)},
+                   {"spindle_override_enabled", interp_.spindle_override_enabled != 0},
                    {"token", interp_.program_token},
                    {"blocks_done", interp_.blocks_done},
                    {"program_time_s", fin(interp_.program_time_s)},

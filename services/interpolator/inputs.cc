@@ -19,6 +19,7 @@ bool to_core_command(const cnc::lcmt_program_command& m, Command* out) {
     case C::STOP: *out = {Command::Kind::kStop, 1.0, {}}; return true;
     case C::OVERRIDE: *out = {Command::Kind::kOverride, m.feed_override, {}}; return true;
     case C::RAPID_OVERRIDE: *out = {Command::Kind::kRapidOverride, m.feed_override, {}}; return true;
+    case C::SPINDLE_OVERRIDE: *out = {Command::Kind::kSpindleOverride, m.feed_override, {}}; return true;
     case C::HOMED:
       if (!std::isfinite(m.value) || m.axis < 0 || m.axis >= program::kMaxAxes) return false;
       *out = Command{};

@@ -472,7 +472,15 @@ void InterpolatorNode::apply_pending_command(const cnc::lcmt_program_command& m)
     spdlog::warn("rapid override {} outside 0..1: ignored (seq {})", m.feed_override, m.seq);
     return;
   }
+  if (c.kind == Command::Kind::kSpindleOverride &&
+      (!std::isfinite(m.feed_override) || m.feed_override < cfg_.spindle.min_override ||
+       m.feed_override > cfg_.spindle.max_override)) {
+    spdlog::warn("spindle override {} outside {}..{}: ignored (seq {})", m.feed_override, cfg_.spindle.min_override,
+                 cfg_.spindle.max_override, m.seq);
+    return;
+  }
   if (c.kind == Command::Kind::kRapidOverride) spdlog::info("rapid override {}", m.feed_override);
+  if (c.kind == Command::Kind::kSpindleOverride) spdlog::info("spindle override {}", m.feed_override);
   if (c.kind == Command::Kind::kStart) spdlog::info("START {} (token {})", program_path_, token_);
   apply_command(c, m);
   if (c.kind == Command::Kind::kSingleBlock || c.kind == Command::Kind::kOptionalStop) {
@@ -714,6 +722,8 @@ void InterpolatorNode::publish_state(bool force) {
   m.starved_cycles = core_.starved_cycles();
   m.feed_override = core_.feed_override();
   m.rapid_override = core_.rapid_override();
+  m.spindle_override = core_.spindle_override();
+  m.spindle_override_enabled = core_.spindle_override_enabled() ? 1 : 0;
   m.door_open = door_open_ ? 1 : 0;
   m.program_time_s = core_.program_time_s();
   m.num_axes = core_.last().num_axes > 0 ? core_.last().num_axes : static_cast<int32_t>(cfg_.axes.size());

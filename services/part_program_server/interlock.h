@@ -42,6 +42,9 @@ struct CellView {
   std::string approach;
   // "" when the guard door (safety.door) is shut or there is none, else e.g. "the guard door (input door_closed) is open".
   std::string door;
+  // The spindle override's range (spindle.min_override .. max_override).
+  double spindle_min_override = 0.5;
+  double spindle_max_override = 1.0;
 };
 
 // The operator commands in `v`: "" allowed, else why not.
@@ -170,6 +173,15 @@ inline std::string refusal(const cnc::lcmt_program_command& c, const CellView& v
     case C::RAPID_OVERRIDE:
       if (!std::isfinite(c.feed_override) || c.feed_override < 0 || c.feed_override > 1)
         return "rapid override " + std::to_string(c.feed_override) + " is outside 0 .. 1";
+      return "";
+    case C::SPINDLE_OVERRIDE:
+      if (!std::isfinite(c.feed_override) || c.feed_override < v.spindle_min_override ||
+          c.feed_override > v.spindle_max_override) {
+        char range[64];
+        std::snprintf(range, sizeof range, "%g .. %g", v.spindle_min_override, v.spindle_max_override);
+        return "spindle override " + std::to_string(c.feed_override) + " is outside " + range +
+               " (spindle.min_override .. max_override)";
+      }
       return "";
     case C::RESET:
       switch (v.state) {

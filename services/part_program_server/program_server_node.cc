@@ -151,6 +151,8 @@ void ProgramServerNode::on_interp_state(const cnc::lcmt_interp_state& m) {
 CellView ProgramServerNode::view(double now_s) const {
   using S = cnc::lcmt_program_state;
   CellView v;
+  v.spindle_min_override = cfg_.spindle.min_override;
+  v.spindle_max_override = cfg_.spindle.max_override;
   v.program = core_.path();
   if (own_fault_ || interp_fault_) {
     v.state = CellState::kFault;
@@ -194,9 +196,9 @@ void ProgramServerNode::refuse(const cnc::lcmt_program_command& m, const std::st
   static const char* const kNames[] = {"?",    "LOAD", "START",         "HOLD",      "RESUME", "STOP", "OVERRIDE",
                                        "RESET", "HOME", "JOG", "JOG_KEEPALIVE", "TOUCH_OFF", "MDI",    "HOMED",
                                        "SINGLE_BLOCK", "OPTIONAL_STOP", "BLOCK_DELETE", "CONFIRM", "RAPID_OVERRIDE",
-                                       "SPINDLE_AT_SPEED"};
+                                       "SPINDLE_AT_SPEED", "PROBE_TRIP", "INPUT_VALUE", "SPINDLE_OVERRIDE"};
   constexpr int kLast = static_cast<int>(sizeof kNames / sizeof kNames[0]) - 1;
-  static_assert(kLast == cnc::lcmt_program_command::SPINDLE_AT_SPEED, "a command without its name");
+  static_assert(kLast == cnc::lcmt_program_command::SPINDLE_OVERRIDE, "a command without its name");
   const char* name = m.command >= 1 && m.command <= kLast ? kNames[m.command] : "?";
   refusal_ = std::string(name) + (m.command == cnc::lcmt_program_command::LOAD ? " " + m.program_path : "") +
              " refused: " + why;

@@ -15,9 +15,12 @@
 #     bridge's setpoint watchdog faults and the bridge stops the spindle itself.
 #  4. A Huanyang VFD (its own function codes, config/machines/sim3_huanyang.yaml) on a
 #     serial line of its own (a socat pty pair), answered by a third party
-#     (huanyang_vfd.py, pyserial): M3 S6000, a feed move after at speed, M4 S3000
-#     (the reversal waited for), a feed move back, M5; the commanded and actual
-#     speeds on SPINDLE_STATUS, the drive's own log of its commands.
+#     (huanyang_vfd.py, pyserial): M3 S6000, a feed move after at speed, a dwell in
+#     which the operator sets the spindle override to 0.8 (cnc-ctl: commanded 4800 rpm
+#     at once, no wait), M4 S3000 (2400 under the override; the reversal waited for),
+#     a feed move back, M5; the commanded and actual speeds on SPINDLE_STATUS, the
+#     drive's own log of its commands; the run replays bit for bit (the override is a
+#     recorded input).
 #   spindle_test.sh BUILD_DIR SOURCE_DIR
 source "$(dirname "$0")/lib.sh"
 enter_private_netns "$@"
@@ -176,6 +179,7 @@ cat >"$WORK/reverse.ngc" <<'NGC'
 G21 G90
 M3 S6000
 G1 X5 F3000
+G4 P1.5
 M4 S3000
 G1 X0
 M5
@@ -188,14 +192,24 @@ start hy-vfd /usr/bin/python3 "$(dirname "$0")/huanyang_vfd.py" --device "$WORK/
 start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M"
 start logger "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/hy"
 start_cell
-"${CTL[@]}" --do run --program "$WORK/reverse.ngc" --timeout 30 >"$WORK/ctl4.out" 2>&1 ||
-  { cat "$WORK/ctl4.out" "$WORK/drive-bridge.log" >&2; fail "the program did not run to its end on the Huanyang VFD"; }
+"${CTL[@]}" --do run --program "$WORK/reverse.ngc" --timeout 30 >"$WORK/ctl4.out" 2>&1 &
+ctl_pid=$!
+for ((i = 0; i < 100; i++)); do
+  grep -q "spindle: at speed" "$WORK/drive-bridge.log" && break
+  sleep 0.05
+done
+"${CTL[@]}" --do spindle-override --value 0.8 >"$WORK/override.out" 2>&1 ||
+  { cat "$WORK/override.out" >&2; fail "cnc-ctl could not set the spindle override"; }
+"${CTL[@]}" --do spindle-override --value 1.2 >"$WORK/override_bad.out" 2>&1 && fail "a spindle override above 1.0 was taken"
+grep -q "spindle override 1.200000 is outside 0.5 .. 1" "$WORK/override_bad.out" ||
+  { cat "$WORK/override_bad.out" >&2; fail "the refusal of 1.2 does not name the range"; }
+wait "$ctl_pid" || { cat "$WORK/ctl4.out" "$WORK/drive-bridge.log" >&2; fail "the program did not run to its end on the Huanyang VFD"; }
 sleep 0.3
 for s in interpolator program-server monitor drive-bridge servo-sim logger hy-vfd; do stop "$s" TERM; done
 kill "${TEST_PIDS[socat]}"; wait "${TEST_PIDS[socat]}" 2>/dev/null || true; unset "TEST_PIDS[socat]"
 cat "$WORK/hy-vfd.log" >&2
 grep -q "run forward at 100.00 Hz" "$WORK/hy-vfd.log" || fail "the VFD was not run forward at 100 Hz (M3 S6000)"
-grep -q "run reverse at 50.00 Hz" "$WORK/hy-vfd.log" || fail "the VFD was not run in reverse at 50 Hz (M4 S3000)"
+grep -q "run reverse at 40.00 Hz" "$WORK/hy-vfd.log" || fail "the VFD was not run in reverse at 40 Hz (M4 S3000 at 0.8)"
 grep -q "stop at" "$WORK/hy-vfd.log" || fail "the VFD was not stopped (M5)"
 /usr/bin/python3 - "$WORK/hy.lcmlog" "$TEST_PREFIX" "$TOL" "$(dirname "$0")" <<'PY' || fail "the Huanyang spindle did not run as it should"
 import sys
@@ -219,21 +233,28 @@ def check(cond, what):
     print(("# " if cond else "# FAILED: ") + what, file=sys.stderr)
     ok = ok and cond
 m3 = next((c for c in cmds if c[2] == 1 and c[3] == 6000), None)
-m4 = next((c for c in cmds if c[2] == -1 and c[3] == 3000), None)
+ov = next((c for c in cmds if c[2] == 1 and c[3] == 4800), None)
+m4 = next((c for c in cmds if c[2] == -1 and c[3] == 2400), None)
 m5 = next((c for c in cmds if m4 and c[0] > m4[0] and c[2] == 0), None)
-check(m3 is not None and m4 is not None and m5 is not None, "SPINDLE_CMD M3 6000, M4 3000 and M5 sent")
+check(m3 is not None and ov is not None and m4 is not None and m5 is not None,
+      "SPINDLE_CMD M3 6000, the override's 4800, M4 2400 (3000 at 0.8) and M5 sent")
 if not ok: sys.exit(1)
 def at_speed(c):
     return next((s for s in stats if s[3] >= c[1] and s[0] >= c[0]), None)
-a3, a4 = at_speed(m3), at_speed(m4)
-check(a3 is not None and a4 is not None, "SPINDLE_STATUS reports M3 and M4 at speed")
+a3, a4, aov = at_speed(m3), at_speed(m4), at_speed(ov)
+check(a3 is not None and a4 is not None and aov is not None, "SPINDLE_STATUS reports M3, the override and M4 at speed")
 if not ok: sys.exit(1)
+first_ov = next(s for s in stats if s[0] >= ov[0] and s[2] >= ov[1])
+print(f"# override 0.8: SPINDLE_STATUS commanded {first_ov[5]:.0f} rpm {(first_ov[0] - ov[0]) * 1e-6:.3f} s after the "
+      f"SPINDLE_CMD; actual {aov[6]:.0f} rpm at speed {(aov[0] - ov[0]) * 1e-6:.3f} s after it", file=sys.stderr)
+check(first_ov[5] == 4800 and abs(aov[6] - 4800) <= tol * 4800, "the override: commanded 4800, actual follows within tolerance")
+check(ov[0] < m4[0], "the override came before M4 (in the dwell)")
 print(f"# M3: commanded {a3[5]:.0f} rpm, actual {a3[6]:.0f} rpm at speed {(a3[0] - m3[0]) * 1e-6:.3f} s after it; "
       f"current then {a3[7]:.2f} A", file=sys.stderr)
 print(f"# M4: commanded {a4[5]:.0f} rpm, actual {a4[6]:.0f} rpm at speed {(a4[0] - m4[0]) * 1e-6:.3f} s after it",
       file=sys.stderr)
 check(a3[5] == 6000 and abs(a3[6] - 6000) <= tol * 6000, "M3: commanded 6000, actual within tolerance")
-check(a4[4] == -1 and a4[5] == 3000 and abs(a4[6] + 3000) <= tol * 3000, "M4: reverse, commanded 3000, actual -3000 within tolerance")
+check(a4[4] == -1 and a4[5] == 2400 and abs(a4[6] + 2400) <= tol * 2400, "M4: reverse, commanded 2400, actual -2400 within tolerance")
 x0 = xs[0][1]
 out = next((x for x in xs if x[1] > x0 + 1e-6), None)
 back = next((x for x in xs if x[0] > m4[0] and x[1] < x0 + 5 - 1e-6), None)
@@ -245,4 +266,6 @@ print(f"# last SPINDLE_STATUS: commanded {last[5]:.0f} rpm, actual {last[6]:.0f}
 check(last[5] == 0 and last[4] == 0, "M5: commanded 0")
 sys.exit(0 if ok else 1)
 PY
+"$BUILD/tools/cnc-replay" --log "$WORK/hy.lcmlog" >"$WORK/replay4.out" 2>&1 || { cat "$WORK/replay4.out" >&2; fail "the run with the override does not replay"; }
+grep "^identical" "$WORK/replay4.out" >&2 || fail "no verdict from cnc-replay"
 echo "PASS"

@@ -171,6 +171,8 @@ TEST(MachineConfig, SpindleSection) {
   EXPECT_DOUBLE_EQ(c.spindle.max_rpm, 24000);
   EXPECT_DOUBLE_EQ(c.spindle.rpm_per_hz, 60);
   EXPECT_DOUBLE_EQ(c.spindle.sim.time_constant_s, 0.4);
+  EXPECT_DOUBLE_EQ(c.spindle.min_override, 0.5);  // LinuxCNC's MIN/MAX_SPINDLE_OVERRIDE defaults
+  EXPECT_DOUBLE_EQ(c.spindle.max_override, 1.0);
   EXPECT_TRUE(load_machine_config(std::string(CNC_SOURCE_DIR) + "/config/machines/sim3_spindle.yaml").spindle.enabled);
 }
 
@@ -189,6 +191,11 @@ TEST(MachineConfig, SpindleErrors) {
                   "out of range");
   expect_error_at(with + "  max_rpm: 0\n", "spindle.max_rpm", "out of range");
   expect_error_at(with + "  rpm_per_hz: 5000\n", "spindle.rpm_per_hz", "out of range");
+  expect_error_at(with + "  min_override: 1.2\n", "spindle.min_override", "out of range");
+  expect_error_at(with + "  max_override: 0.9\n", "spindle.max_override", "out of range");
+  const MachineConfig wide = parse_machine_config(with + "  min_override: 0.2\n  max_override: 1.5\n", kLabel);
+  EXPECT_DOUBLE_EQ(wide.spindle.min_override, 0.2);
+  EXPECT_DOUBLE_EQ(wide.spindle.max_override, 1.5);
   expect_error_at(with + "  colour: red\n", "spindle.colour", "unknown key");
   expect_error_at(replace_nth(with, "profile: delta_vfd}", "profile: delta_vfd, response_timeout_s: 1}"),
                   "spindle.drive", "must not exceed drive_bridge.link_loss_timeout_s");

@@ -164,6 +164,19 @@ TEST(Interlock, OperatorCommandsInEveryState) {
     r.feed_override = 1.5;
     EXPECT_EQ(pps::refusal(r, v), "rapid override 1.500000 is outside 0 .. 1");
   }
+  {
+    // The spindle override's range is the machine's (spindle.min_override .. max_override).
+    lcmt_program_command r = cmd(C::SPINDLE_OVERRIDE);
+    r.feed_override = 0.8;
+    EXPECT_EQ(pps::refusal(r, v), "");
+    r.feed_override = 1.2;
+    EXPECT_EQ(pps::refusal(r, v), "spindle override 1.200000 is outside 0.5 .. 1 (spindle.min_override .. max_override)");
+    pps::CellView wide = v;
+    wide.spindle_max_override = 1.5;
+    EXPECT_EQ(pps::refusal(r, wide), "");
+    r.feed_override = std::nan("");
+    EXPECT_NE(pps::refusal(r, wide), "");
+  }
   tool.jog_continuous = 3;
   EXPECT_NE(pps::refusal(tool, v).find("neither 0 (the work offset) nor 2"), std::string::npos);
   // Run from line N: START waits for CONFIRM of the approach, which is then allowed.

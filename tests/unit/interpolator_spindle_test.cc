@@ -2,7 +2,9 @@
 // reaches it, in order with motion; on a machine with a spindle the path stands at a
 // change to a speed until the recorded at-speed input names that change (through
 // inputs.cc, as replay applies it); program end and STOP turn the spindle off; a
-// machine without one, and the dry run, never wait.
+// machine without one, and the dry run, never wait. The spindle override (a recorded
+// input, SPINDLE_OVERRIDE) scales the commanded speed at once, within its configured
+// range and spindle.max_rpm, with no at-speed wait; M51 P0 disables it, M51 P1 again.
 #include <gtest/gtest.h>
 
 #include <string>
@@ -211,6 +213,140 @@ TEST(InterpolatorSpindle, NoSpindleOrADryRunNeverWaits) {
     EXPECT_EQ(core.state(), RunState::kDone) << name;
     EXPECT_EQ(core.spindle().seq, 2) << name << ": the changes are taken all the same";
   }
+}
+
+cnc::lcmt_interp_input spindle_override_input(double value) {
+  cnc::lcmt_interp_input in{};
+  in.kind = cnc::lcmt_interp_input::COMMAND;
+  in.command.command = cnc::lcmt_program_command::SPINDLE_OVERRIDE;
+  in.command.feed_override = value;
+  return in;
+}
+
+TEST(InterpolatorSpindle, TheOverrideScalesTheCommandedSpeedAtOnceWithinItsRangeAndNoWait) {
+  config::MachineConfig cfg = load("sim3_spindle.yaml");
+  EXPECT_EQ(cfg.spindle.min_override, 0.5);  // LinuxCNC's MIN_SPINDLE_OVERRIDE and MAX_SPINDLE_OVERRIDE defaults
+  EXPECT_EQ(cfg.spindle.max_override, 1.0);
+  cfg.spindle.max_override = 1.5;
+  Interpolator core(cfg);
+  // Set before the program: M3 S6000 turns at 80 %.
+  EXPECT_EQ(apply_recorded_input(core, spindle_override_input(0.8), 3), "");
+  EXPECT_EQ(core.spindle_override(), 0.8);
+  EXPECT_EQ(core.spindle().seq, 0) << "a stopped spindle changes nothing";
+  load_program(core);
+  for (int i = 0; i < 50; ++i) core.step();
+  ASSERT_TRUE(core.spindle_waiting());
+  EXPECT_EQ(core.spindle().seq, 1);
+  EXPECT_EQ(core.spindle().program_rpm, 6000);
+  EXPECT_NEAR(core.spindle().rpm, 4800, 1e-9);
+  EXPECT_EQ(apply_recorded_input(core, at_speed_input(1), 3), "");
+  while (core.last().position_mm[0] < 2) core.step();
+  // Mid-cut: a new change at once, not waited for; the path goes on.
+  EXPECT_EQ(apply_recorded_input(core, spindle_override_input(1.25), 3), "");
+  EXPECT_EQ(core.spindle().seq, 2);
+  EXPECT_NEAR(core.spindle().rpm, 7500, 1e-9);
+  EXPECT_FALSE(core.spindle_waiting());
+  const double x = core.last().position_mm[0];
+  core.step();
+  EXPECT_GT(core.last().position_mm[0], x) << "the path does not stand for an override's change";
+  // Beyond its range: clamped (the node refuses such a command; replay applies what was recorded).
+  EXPECT_EQ(apply_recorded_input(core, spindle_override_input(2.0), 3), "");
+  EXPECT_EQ(core.spindle_override(), 1.5);
+  EXPECT_NEAR(core.spindle().rpm, 9000, 1e-9);
+  EXPECT_EQ(apply_recorded_input(core, spindle_override_input(0.1), 3), "");
+  EXPECT_EQ(core.spindle_override(), 0.5);
+  EXPECT_NEAR(core.spindle().rpm, 3000, 1e-9);
+  EXPECT_EQ(core.spindle().seq, 4);
+  // The same value again: no change.
+  EXPECT_EQ(apply_recorded_input(core, spindle_override_input(0.5), 3), "");
+  EXPECT_EQ(core.spindle().seq, 4);
+  // M5: off whatever the override; it stays for the next M3.
+  for (int i = 0; i < 100000 && core.state() != RunState::kDone; ++i) core.step();
+  EXPECT_EQ(core.spindle().direction, 0);
+  EXPECT_EQ(core.spindle().rpm, 0);
+  EXPECT_EQ(core.spindle_override(), 0.5);
+  // S above what spindle.max_rpm allows under the override: at most max_rpm (24000).
+  core.apply_command({Command::Kind::kLoad, 1.0, {}});
+  EXPECT_EQ(apply_recorded_input(core, spindle_override_input(1.5), 3), "");
+  const std::vector<double> here{core.machine_position(0), 0, 0};
+  ASSERT_TRUE(core.apply_block(event_block(0, here, -1, 20000)));
+  core.apply_command({Command::Kind::kStart, 1.0, {}});
+  for (int i = 0; i < 5; ++i) core.step();
+  EXPECT_EQ(core.spindle().direction, -1);
+  EXPECT_NEAR(core.spindle().rpm, 24000, 1e-9);
+}
+
+program::Block overrides_block(int64_t index, const std::vector<double>& at, int bits) {
+  program::Block b = event_block(index, at, 0, 0);
+  b.event.kind = program::EventKind::kOverrides;
+  b.event.number = bits;
+  return b;
+}
+
+TEST(InterpolatorSpindle, M51P0DisablesTheOverrideUntilM51P1AndAProgramStartsWithItOn) {
+  const config::MachineConfig cfg = load("sim3_spindle.yaml");
+  Interpolator core(cfg);
+  EXPECT_EQ(apply_recorded_input(core, spindle_override_input(0.5), 3), "");
+  core.apply_command({Command::Kind::kLoad, 1.0, {}});
+  // M3 S6000, M51 P0 (bits feed, adaptive, hold: 0xD), G1 X10, M51 P1 (0xF), G1 X20, END.
+  const std::vector<double> o{0, 0, 0}, x10{10, 0, 0}, x20{20, 0, 0};
+  ASSERT_TRUE(core.apply_block(event_block(0, o, 1, 6000)));
+  ASSERT_TRUE(core.apply_block(overrides_block(1, o, 0xD)));
+  ASSERT_TRUE(core.apply_block(line_block(2, o, 10)));
+  ASSERT_TRUE(core.apply_block(overrides_block(3, x10, 0xF)));
+  ASSERT_TRUE(core.apply_block(line_block(4, x10, 20)));
+  program::Block end;
+  end.index = 5;
+  end.kind = program::BlockKind::kEnd;
+  end.start = end.end = x20;
+  ASSERT_TRUE(core.apply_block(end));
+  core.apply_command({Command::Kind::kStart, 1.0, {}});
+  for (int i = 0; i < 20; ++i) core.step();
+  ASSERT_TRUE(core.spindle_waiting());
+  EXPECT_NEAR(core.spindle().rpm, 3000, 1e-9);
+  EXPECT_EQ(apply_recorded_input(core, at_speed_input(1), 3), "");
+  for (int i = 0; i < 20; ++i) core.step();
+  EXPECT_FALSE(core.spindle_override_enabled());
+  EXPECT_EQ(core.spindle().seq, 2);
+  EXPECT_NEAR(core.spindle().rpm, 6000, 1e-9) << "M51 P0: S as programmed";
+  EXPECT_FALSE(core.spindle_waiting()) << "an override's change is not waited for";
+  // The operator's override meanwhile is kept, not applied.
+  EXPECT_EQ(apply_recorded_input(core, spindle_override_input(0.7), 3), "");
+  EXPECT_EQ(core.spindle().seq, 2);
+  EXPECT_NEAR(core.spindle().rpm, 6000, 1e-9);
+  while (core.last().position_mm[0] < 10 - 1e-9) core.step();
+  for (int i = 0; i < 20; ++i) core.step();
+  EXPECT_TRUE(core.spindle_override_enabled());
+  EXPECT_EQ(core.spindle().seq, 3);
+  EXPECT_NEAR(core.spindle().rpm, 4200, 1e-9) << "M51 P1: the override again";
+  for (int i = 0; i < 100000 && core.state() != RunState::kDone; ++i) core.step();
+  EXPECT_EQ(core.state(), RunState::kDone);
+  EXPECT_TRUE(core.spindle_override_enabled());
+}
+
+TEST(InterpolatorSpindle, TheOverrideAsARecordedInputReplaysBitForBit) {
+  const config::MachineConfig cfg = load("sim3_spindle.yaml");
+  auto run = [&](std::vector<double>* xs, std::vector<double>* rpms) {
+    Interpolator core(cfg);
+    load_program(core);
+    for (int64_t i = 0; i < 100000 && core.state() != RunState::kDone; ++i) {
+      if (i == 40) {
+        EXPECT_EQ(apply_recorded_input(core, at_speed_input(1), 3), "");
+      }
+      if (i == 45) {
+        EXPECT_EQ(apply_recorded_input(core, spindle_override_input(0.65), 3), "");
+      }
+      core.step();
+      xs->push_back(core.last().position_mm[0]);
+      rpms->push_back(core.spindle().rpm);
+    }
+  };
+  std::vector<double> x1, r1, x2, r2;
+  run(&x1, &r1);
+  run(&x2, &r2);
+  EXPECT_EQ(x1, x2);
+  EXPECT_EQ(r1, r2);
+  EXPECT_NEAR(r1[50], 3900, 1e-9);
 }
 
 }  // namespace

@@ -250,9 +250,11 @@ int Ctl::status() {
     std::printf("program: %s %s\n", view_.program.state >= 0 && view_.program.state <= 7 ? kProgram[view_.program.state] : "?",
                 view_.program.program_path.empty() ? "(none loaded)" : view_.program.program_path.c_str());
   if (view_.have_interp)
-    std::printf("interpolator: %s, feed override %.2f, rapid override %.2f, line %d, single block %s, optional stop %s\n",
+    std::printf("interpolator: %s, feed override %.2f, rapid override %.2f, spindle override %.2f%s, line %d, "
+                "single block %s, optional stop %s\n",
                 view_.interp.state >= 0 && view_.interp.state <= 5 ? kInterp[view_.interp.state] : "?",
-                view_.interp.feed_override, view_.interp.rapid_override, view_.interp.source_line,
+                view_.interp.feed_override, view_.interp.rapid_override, view_.interp.spindle_override,
+                view_.interp.spindle_override_enabled ? "" : " (off: M51 P0)", view_.interp.source_line,
                 view_.interp.single_block ? "on" : "off", view_.interp.optional_stop ? "on" : "off");
   if (view_.have_interp) {
     std::printf("position:");
@@ -409,9 +411,12 @@ int Ctl::plain() {
                                                        {"resume", lcmt_program_command::RESUME},
                                                        {"stop", lcmt_program_command::STOP},
                                                        {"override", lcmt_program_command::OVERRIDE},
-                                                       {"rapid-override", lcmt_program_command::RAPID_OVERRIDE}};
+                                                       {"rapid-override", lcmt_program_command::RAPID_OVERRIDE},
+                                                       {"spindle-override", lcmt_program_command::SPINDLE_OVERRIDE}};
   wait(0.5, [&] { return view_.have_program && view_.have_interp; });  // the states first
-  const double value = what_ == "override" || what_ == "rapid-override" ? args_.number("value", 1.0) : 1.0;
+  const double value = what_ == "override" || what_ == "rapid-override" || what_ == "spindle-override"
+                           ? args_.number("value", 1.0)
+                           : 1.0;
   // Sent again until the interpolator's state shows its effect (a datagram lost on
   // the way, or the state report that answered it): a hold that was never seen is
   // not reported as done. Each command is idempotent in the state it asks for.
@@ -453,6 +458,7 @@ int Ctl::plain() {
       case lcmt_program_command::STOP: return !active;
       case lcmt_program_command::OVERRIDE: return std::fabs(view_.interp.feed_override - value) < 1e-9;
       case lcmt_program_command::RAPID_OVERRIDE: return std::fabs(view_.interp.rapid_override - value) < 1e-9;
+      case lcmt_program_command::SPINDLE_OVERRIDE: return std::fabs(view_.interp.spindle_override - value) < 1e-9;
       default: return true;  // START: taken once the server answered without a refusal
     }
   };
@@ -845,6 +851,7 @@ constexpr Verb kVerbs[] = {
     {"stop", &Ctl::plain},
     {"override", &Ctl::plain},
     {"rapid-override", &Ctl::plain},
+    {"spindle-override", &Ctl::plain},
     {"reset", &Ctl::reset},
     {"enable", &Ctl::enable},
     {"disable", &Ctl::disable},

@@ -4,6 +4,8 @@
 //   cnc-ctl --machine M --do run --program P [--timeout S]
 //   cnc-ctl --machine M --do load --program P | start | hold | resume | stop | override --value 0.8
 //   cnc-ctl --machine M --do rapid-override --value 0.25    G0 at a quarter of its speed (0 .. 1)
+//   cnc-ctl --machine M --do spindle-override --value 0.8   the spindle at 80 % of S (spindle.min_override ..
+//                                                  max_override, 0.5 .. 1.0 by default; M51 P0 disables it)
 //   cnc-ctl --machine M --do enable [--timeout S] | disable | fault-reset    (drive bridge, DRIVE_CMD)
 //   cnc-ctl --machine M --do reset [--timeout S]   after a fault: enable the drives (DRIVE_CMD), then
 //                                                  RESET (the interpolator takes their position)
@@ -36,7 +38,8 @@ int main(int argc, char** argv) {
   cnc::service::Spec spec{"cnc-ctl",
                           "operator commands to a running cell",
                           {{"do", "CMD",
-                            "run (default), load, start, hold, resume, stop, override, enable, disable, fault-reset, "
+                            "run (default), load, start, hold, resume, stop, override, rapid-override, spindle-override, enable, disable, "
+                            "fault-reset, "
                             "reset, home, jog, touch-off, mdi, status, single-block, optional-stop, block-delete, confirm"},
                            {"program", "FILE", "the part program of run and load"},
                            {"value", "X",
