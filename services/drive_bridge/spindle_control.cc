@@ -24,6 +24,7 @@ void SpindleControl::on_command(int64_t seq, int direction, double rpm, bool acc
 }
 
 void SpindleControl::stop() {
+  not_running_since_s_ = -1;
   direction_ = 0;
   rpm_ = 0;
   at_speed_seq_ = seq_;
@@ -60,6 +61,19 @@ bool SpindleControl::update(const SpindleFeedback& fb, double now_s) {
     std::snprintf(text, sizeof text, "spindle: drive fault 0x%04X", fb.error_code);
     raise(text);
     return true;
+  }
+  if (direction_ != 0 && fb.have_status && !fb.running) {
+    if (not_running_since_s_ < 0) not_running_since_s_ = now_s;
+    if (now_s - not_running_since_s_ > kNotRunningS) {
+      char text[160];
+      std::snprintf(text, sizeof text,
+                    "spindle: its drive does not run although commanded to (%.1f s): tripped, or stopped at its panel",
+                    now_s - not_running_since_s_);
+      raise(text);
+      return true;
+    }
+  } else {
+    not_running_since_s_ = -1;
   }
   if (at_speed()) return false;
   const double want = direction_ * rpm_;

@@ -8,7 +8,9 @@
 // not at speed within spindle.at_speed_timeout_s, when the drive reports a fault
 // code, when its link is lost while it should turn (naming the last failed
 // transaction), and when the drive's own settings do not let the link drive it
-// (once when read, and at every change that would turn it). A fault, and a stop of the
+// (once when read, and at every change that would turn it), and when the drive
+// says it does not run although commanded to, for longer than kNotRunningS (a
+// Huanyang has no fault code: a trip, or its panel's STOP, shows only so). A fault, and a stop of the
 // bridge's own (its FAULT, a shut-down), stops the spindle; a command from before
 // that stop is never taken again: only a newer change (after the interpolator's
 // STOP or RESET) turns it again.
@@ -34,6 +36,9 @@ struct SpindleFeedback {
 
 class SpindleControl {
  public:
+  // How long a drive may report not running while commanded to: a command's way to it
+  // (a link round) and its own reaction, well within it.
+  static constexpr double kNotRunningS = 0.5;
   explicit SpindleControl(const config::SpindleConfig& cfg) : cfg_(cfg) {}
 
   // A SPINDLE_CMD. Taken only when `accept` (the bridge follows setpoints) and newer
@@ -69,6 +74,7 @@ class SpindleControl {
   double taken_s_ = 0;        // when the newest change was taken
   double at_speed_s_ = 0;     // and when it was at speed
   int64_t lost_seen_ = 0;
+  double not_running_since_s_ = -1;  // commanded to run, the drive said it does not, since then
   int64_t setup_raised_ = -1;  // the lost_events count of the connection whose setup fault was raised
   bool faulted_ = false;
   std::string fault_;

@@ -498,6 +498,23 @@ TEST(BridgeNode, HuanyangSetUpForItsPanelIsAFaultNamingThePdParameter) {
   EXPECT_EQ(int{c.spindle.state}, int{cnc::lcmt_spindle_status::FAULT});
 }
 
+TEST(BridgeNode, AHuanyangThatTripsWhileItTurnsIsAFault) {
+  // The protocol has no fault code: a trip shows as a status byte that says it does not run.
+  Cell c("sim", true, kHuanyang);
+  c.ticks(40);
+  c.spindle_command(5, 1, 6000);
+  c.hold_stream(10, 10, 5);
+  ASSERT_EQ(c.spindle.at_speed_seq, 5);
+  c.link().vfd(3)->inject_fault(1);
+  c.hold_stream(10, 10, 100);  // 0.4 s: within kNotRunningS
+  EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  c.hold_stream(10, 10, 50);
+  EXPECT_EQ(c.node.state(), State::kFault);
+  EXPECT_NE(c.node.detail().find("spindle: its drive does not run although commanded to"), std::string::npos)
+      << c.node.detail();
+  EXPECT_TRUE(c.alarmed("drive_fault: spindle: its drive does not run"));
+}
+
 TEST(BridgeNode, AHuanyangOverModbusTcpIsRefusedNamingTheKey) {
   const std::string tcp =
       "spindle: {drive: {transport: modbus_tcp, host: 127.0.0.1, port: 1502, unit_id: 3, profile: huanyang}}\n";

@@ -131,5 +131,31 @@ TEST(SpindleControl, TheBridgesOwnStopSpendsTheCommand) {
   EXPECT_EQ(s.direction(), 0);
 }
 
+TEST(SpindleControl, ADriveThatStopsWhileCommandedToRunIsAFault) {
+  SpindleControl s(spindle_cfg());
+  s.on_command(3, 1, 6000, true, 1.0);
+  SpindleFeedback stopped = at_rpm(0);  // the drive's status: not running
+  EXPECT_FALSE(s.update(stopped, 1.0)) << "the command is on its way";
+  EXPECT_FALSE(s.update(at_rpm(6000), 1.2));
+  EXPECT_TRUE(s.at_speed());
+  // Tripped mid-cut (no fault code: a Huanyang's), running down.
+  SpindleFeedback trip = at_rpm(5000);
+  trip.running = false;
+  EXPECT_FALSE(s.update(trip, 5.0));
+  EXPECT_FALSE(s.update(trip, 5.0 + SpindleControl::kNotRunningS));
+  EXPECT_TRUE(s.update(trip, 5.01 + SpindleControl::kNotRunningS));
+  EXPECT_EQ(s.fault_reason(),
+            "spindle: its drive does not run although commanded to (0.5 s): tripped, or stopped at its panel");
+  EXPECT_EQ(s.direction(), 0) << "the fault stops it";
+  // Stopped on purpose: no fault.
+  SpindleControl t(spindle_cfg());
+  t.on_command(1, 1, 6000, true, 0.0);
+  EXPECT_FALSE(t.update(at_rpm(6000), 0.1));
+  t.on_command(2, 0, 0, true, 0.2);
+  EXPECT_FALSE(t.update(stopped, 0.2));
+  EXPECT_FALSE(t.update(stopped, 5.0));
+  EXPECT_FALSE(t.faulted());
+}
+
 }  // namespace
 }  // namespace cnc::bridge
