@@ -49,7 +49,7 @@ constexpr std::string_view kStockKeys[] = {"x_min_mm", "y_min_mm", "x_max_mm", "
 constexpr std::string_view kProgramKeys[] = {
     "subroutine_path", "tool_table",   "var_file",      "probe",         "digital_inputs",
     "analog_inputs",   "digital_outputs", "analog_outputs", "block_delete", "optional_stop",
-    "max_validation_lines", "g64_fit", "g64_fit_max_segment_mm", "g64_fit_max_turn_deg",
+    "max_validation_lines", "dry_run_max_time_s", "g64_fit", "g64_fit_max_segment_mm", "g64_fit_max_turn_deg",
     "default_path_tolerance_mm"};
 constexpr std::string_view kAxisKeys[] = {"name",          "min_mm",  "max_mm",          "max_velocity_mm_s",
                                           "max_accel_mm_s2", "max_jerk_mm_s3", "max_following_error_mm", "home_mm",
@@ -348,6 +348,7 @@ void read_program(MapReader r, ProgramConfig& p) {
   p.block_delete = r.get_bool("block_delete", p.block_delete);
   p.optional_stop = r.get_bool("optional_stop", p.optional_stop);
   p.max_validation_lines = r.get_int("max_validation_lines", p.max_validation_lines, 1000, int64_t{1} << 40);
+  p.dry_run_max_time_s = r.get_double("dry_run_max_time_s", p.dry_run_max_time_s, 1.0, 1e9);
   p.g64_fit = r.get_bool("g64_fit", p.g64_fit);
   p.g64_fit_max_segment_mm = r.get_double("g64_fit_max_segment_mm", p.g64_fit_max_segment_mm, 0.001, 1000.0);
   p.g64_fit_max_turn_deg = r.get_double("g64_fit_max_turn_deg", p.g64_fit_max_turn_deg, 0.0, 90.0);

@@ -257,6 +257,9 @@ struct ProgramConfig {
   bool block_delete = true;                  // '/' lines are skipped
   bool optional_stop = true;                 // M1 stops
   int64_t max_validation_lines = 200'000'000;  // lines interpreted to validate a program at load
+  // The dry run (cnc-plan, the HMI's preview) gives up after this much program time:
+  // a week, so that LinuxCNC's 1,000 mm arc at F1 (17 h) is planned to its end.
+  double dry_run_max_time_s = 7 * 86400.0;
   // G64 P: runs of short G1 moves fitted to splines within P (else only corner blends).
   bool g64_fit = true;
   double g64_fit_max_segment_mm = 2.0;  // longer moves are not part of a fitted run

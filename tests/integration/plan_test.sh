@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The dry run: two runs of the same program give identical files, byte for byte;
-# a malformed program is refused with file:line:column and writes no setpoint.
+# a malformed program is refused with file:line:column and writes no setpoint; the
+# program-time cap is the machine file's.
 #   plan_test.sh BUILD_DIR SOURCE_DIR
 source "$(dirname "$0")/lib.sh"
 BUILD="$1"; SRC="$2"
@@ -44,4 +45,19 @@ printf 'G21 G90\nG10 L2 P1 X5\nG0 X10\nM2\n' >"$WORK/g10.ngc"
   || { cat "$WORK/g10.out" >&2; fail "the G10 program's dry run failed"; }
 cmp -s "$WORK/cell.var" "$WORK/cell.var.before" || { cat "$WORK/cell.var" >&2; fail "the dry run wrote the parameter file"; }
 note "dry run with program.var_file: the parameter file unchanged ($(wc -l <"$WORK/cell.var") line)"
+
+# The dry run's program-time cap is the machine's setting (program.dry_run_max_time_s),
+# and a program beyond it is an error that names it: 10 s here, a 5 s dwell within it,
+# a 30 s one not.
+{ cat "$M"; printf 'program:\n  dry_run_max_time_s: 10\n'; } >"$WORK/cap.yaml"
+printf 'G21 G90\nG0 X1\nG4 P5\nM2\n' >"$WORK/short.ngc"
+printf 'G21 G90\nG0 X1\nG4 P30\nM2\n' >"$WORK/long.ngc"
+"$BUILD/tools/cnc-plan" --machine "$WORK/cap.yaml" --program "$WORK/short.ngc" >"$WORK/short.out" 2>&1 \
+  || { cat "$WORK/short.out" >&2; fail "a 5 s program under a 10 s cap was refused"; }
+rc=0
+"$BUILD/tools/cnc-plan" --machine "$WORK/cap.yaml" --program "$WORK/long.ngc" >"$WORK/long.out" 2>&1 || rc=$?
+[ "$rc" -eq 1 ] || { cat "$WORK/long.out" >&2; fail "a 30 s program under a 10 s cap: exit $rc, expected 1"; }
+grep -q "did not finish within 10 s of program time.*program.dry_run_max_time_s" "$WORK/long.out" \
+  || { cat "$WORK/long.out" >&2; fail "the cap's message does not name program.dry_run_max_time_s"; }
+note "program-time cap: $(grep -o 'did not finish.*' "$WORK/long.out")"
 echo PASS

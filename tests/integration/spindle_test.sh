@@ -185,7 +185,10 @@ G1 X0
 M5
 M30
 NGC
-start socat socat pty,raw,echo=0,link="$WORK/hy-bridge" pty,raw,echo=0,link="$WORK/hy-vfd"
+# socat relays every byte of the "line": real-time like the cell's services when permitted
+# (as bridge_profiles_test.sh: a real RS-485 line has no user-space worker in its path).
+rt=(); chrt -f 39 true 2>/dev/null && rt=(chrt -f 39)
+start socat "${rt[@]}" socat pty,raw,echo=0,link="$WORK/hy-bridge" pty,raw,echo=0,link="$WORK/hy-vfd"
 for ((i = 0; i < 50; i++)); do [ -e "$WORK/hy-vfd" ] && break; sleep 0.1; done
 [ -e "$WORK/hy-vfd" ] || fail "socat made no pseudo-terminal pair"
 start hy-vfd /usr/bin/python3 "$(dirname "$0")/huanyang_vfd.py" --device "$WORK/hy-vfd" --tau 0.15

@@ -92,8 +92,8 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
     std::fputs("cycle,t_s,x_mm,y_mm,z_mm,line,u,feed_mm_min,limit\n", csv.get());
   }
   const int64_t num_blocks = server.num_blocks();
-  // At most a day of program time: a dry run that long is a mistake, not a plan.
-  const int64_t max_cycles = static_cast<int64_t>(std::ceil(86400.0 / cfg.ipo_period_s));
+  // A program that never ends (a loop without exit) must not hold the dry run forever.
+  const int64_t max_cycles = static_cast<int64_t>(std::ceil(cfg.program.dry_run_max_time_s / cfg.ipo_period_s));
   double max_feed = 0;
   const auto t0 = std::chrono::steady_clock::now();
   int64_t cycles = 0;
@@ -158,8 +158,10 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
   account(p_prev);
   account(p_prev);
   if (core.state() != cnc::interp::RunState::kDone) {
-    std::fprintf(stderr, "cnc-plan: program did not finish within %" PRId64 " cycles (a day of program time)\n",
-                 max_cycles);
+    std::fprintf(stderr,
+                 "cnc-plan: program did not finish within %.0f s of program time (%" PRId64
+                 " cycles); the cap is program.dry_run_max_time_s in the machine file\n",
+                 cfg.program.dry_run_max_time_s, max_cycles);
     return 1;
   }
   std::printf("program time %.3f s (%" PRId64 " cycles of %.3f ms), %" PRId64 " blocks, peak feed %.1f mm/min, "
