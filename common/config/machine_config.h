@@ -258,7 +258,7 @@ struct ProgramConfig {
   bool optional_stop = true;                 // M1 stops
   int64_t max_validation_lines = 200'000'000;  // lines interpreted to validate a program at load
   // The dry run (cnc-plan, the HMI's preview) gives up after this much program time:
-  // a week, so that LinuxCNC's 1,000 mm arc at F1 (17 h) is planned to its end.
+  // a week: LinuxCNC's test good-arc.medium (half a circle of r 1,000 mm at F1, 52 h) runs.
   double dry_run_max_time_s = 7 * 86400.0;
   // G64 P: runs of short G1 moves fitted to splines within P (else only corner blends).
   bool g64_fit = true;
