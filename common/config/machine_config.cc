@@ -51,9 +51,10 @@ constexpr std::string_view kProgramKeys[] = {
     "analog_inputs",   "digital_outputs", "analog_outputs", "block_delete", "optional_stop",
     "max_validation_lines", "dry_run_max_time_s", "g64_fit", "g64_fit_max_segment_mm", "g64_fit_max_turn_deg",
     "default_path_tolerance_mm"};
-constexpr std::string_view kAxisKeys[] = {"name",          "min_mm",  "max_mm",          "max_velocity_mm_s",
-                                          "max_accel_mm_s2", "max_jerk_mm_s3", "max_following_error_mm", "home_mm",
-                                          "drive",         "sim",     "home",            "jog_velocity_mm_s"};
+constexpr std::string_view kAxisKeys[] = {"name",          "type",    "wrapped",         "min_mm",
+                                          "max_mm",        "max_velocity_mm_s", "max_accel_mm_s2", "max_jerk_mm_s3",
+                                          "max_following_error_mm", "home_mm", "drive",     "sim",
+                                          "home",          "jog_velocity_mm_s"};
 constexpr std::string_view kDriveKeys[] = {"transport", "host",      "port",    "device",  "baud",
                                            "parity",    "stop_bits", "unit_id", "profile", "response_timeout_s"};
 constexpr std::string_view kSimKeys[] = {"bandwidth_hz",         "damping",          "max_velocity_mm_s",
@@ -190,8 +191,22 @@ AxisConfig read_axis(MapReader r) {
   AxisConfig a;
   a.name = r.require_string("name");
   if (a.name.empty()) r.fail("name", "must not be empty");
-  a.min_mm = r.require_double("min_mm", -1e5, 1e5);
-  a.max_mm = r.require_double("max_mm", -1e5, 1e5);
+  a.rotary = r.get_choice("type", "linear", {"linear", "rotary"}) == "rotary";
+  if (a.rotary && a.name != "A" && a.name != "B" && a.name != "C")
+    r.fail("type", "rotary is for the axes A, B and C only (this one is " + a.name + ")");
+  a.wrapped = r.get_bool("wrapped", false);
+  if (a.wrapped && !a.rotary) r.fail("wrapped", "needs type: rotary");
+  if (a.wrapped) {
+    // LinuxCNC's wrapped rotary axis has no travel limits: a travel far beyond any
+    // program (±kWrappedTravelDeg) keeps every check and clamp finite.
+    for (const char* k : {"min_mm", "max_mm"})
+      if (r.has(k)) r.fail(k, "a wrapped axis has no travel limits");
+    a.min_mm = -kWrappedTravelDeg;
+    a.max_mm = kWrappedTravelDeg;
+  } else {
+    a.min_mm = r.require_double("min_mm", -1e5, 1e5);
+    a.max_mm = r.require_double("max_mm", -1e5, 1e5);
+  }
   if (a.max_mm <= a.min_mm) r.fail("max_mm", "must be greater than min_mm");
   a.max_velocity_mm_s = r.require_double("max_velocity_mm_s", 1e-3, 1e4);
   a.max_accel_mm_s2 = r.require_double("max_accel_mm_s2", 1e-3, 1e6);

@@ -79,8 +79,17 @@ struct HomeConfig {
   int order = 0;                    // homing all: lower first, equal together one after another
 };
 
+// The travel of a wrapped rotary axis (axes[].wrapped): none in effect, finite.
+inline constexpr double kWrappedTravelDeg = 1e9;
+
 struct AxisConfig {
   std::string name;  // X, Y, Z, ...
+  // A rotary axis (A, B or C only) counts in degrees: every `_mm` below is then deg
+  // (deg/s, deg/s², deg/s³), and LinuxCNC's feed rules treat it as rotary.
+  bool rotary = false;
+  // LinuxCNC's WRAPPED_ROTARY (rotary only): G90 words are angles modulo 360 reached in
+  // the direction of the word's sign; no travel limits.
+  bool wrapped = false;
   double min_mm = 0;
   double max_mm = 0;
   double max_velocity_mm_s = 0;

@@ -105,6 +105,30 @@ TEST(MachineConfig, KinematicsTypeIsOneTheFactoryKnows) {
   expect_error_at(sim3_text() + "kinematics: {type: identity, pivot_mm: 1}\n", "kinematics.pivot_mm", "unknown key");
 }
 
+// axes[].type (rotary: A, B, C only, in degrees) and axes[].wrapped (rotary only).
+TEST(MachineConfig, RotaryAxes) {
+  const MachineConfig c = load_machine_config(std::string(CNC_SOURCE_DIR) + "/config/machines/sim4_rotary.yaml");
+  ASSERT_EQ(c.axes.size(), 4u);
+  EXPECT_FALSE(c.axes[0].rotary);
+  EXPECT_TRUE(c.axes[3].rotary);
+  EXPECT_FALSE(c.axes[3].wrapped);
+  EXPECT_DOUBLE_EQ(c.axes[3].max_velocity_mm_s, 180.0);  // deg/s
+  const std::string four = replace_nth(sim3_text(), "axes:\n",
+                                       "axes:\n  - {name: A, type: rotary, wrapped: true, "
+                                       "max_velocity_mm_s: 90, max_accel_mm_s2: 900, max_jerk_mm_s3: 9000, "
+                                       "drive: {unit_id: 9}}\n");
+  const MachineConfig w = parse_machine_config(four, kLabel);
+  EXPECT_TRUE(w.axes[0].rotary);
+  EXPECT_TRUE(w.axes[0].wrapped);
+  expect_error_at(replace_nth(sim3_text(), "  - name: X\n", "  - name: X\n    type: rotary\n"), "axes[0].type",
+                  "A, B and C only");
+  expect_error_at(replace_nth(sim3_text(), "  - name: X\n", "  - name: X\n    type: angular\n"), "axes[0].type",
+                  "'angular' is not one of: linear, rotary");
+  expect_error_at(replace_nth(four, "type: rotary, ", ""), "axes[0].wrapped", "needs type: rotary");
+  expect_error_at(replace_nth(four, "wrapped: true, ", "wrapped: true, min_mm: -1, "), "axes[0].min_mm",
+                  "a wrapped axis has no travel limits");
+}
+
 TEST(MachineConfig, UnknownKeyAtTopLevel) {
   expect_error_at(sim3_text() + "bogus: 1\n", "bogus", "unknown key");
 }
