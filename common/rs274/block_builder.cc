@@ -71,6 +71,29 @@ double BlockBuilder::feed_mm_per_min(const SourceRef& ref) const {
   return f;
 }
 
+// LinuxCNC's feed rules ("G-code overview, Feed rate"; G93): with a linear axis
+// moving, the move takes its linear length over F and the rotary axes arrive with it;
+// with only rotary axes, F is deg/min (no inch scaling). G93 has made F the rate
+// along that same length already (the interpreter). The planner's path is the
+// Euclidean length over all axes, mm and degrees alike: the same time at that rate.
+bool BlockBuilder::rotary_moves(const std::vector<double>& to) const {
+  for (size_t a = 0; a < to.size() && a < position_.size(); ++a)
+    if (rotary(a) && to[a] != position_[a]) return true;
+  return false;
+}
+
+double BlockBuilder::rotary_feed(const SourceRef& ref, const std::vector<double>& to, double lin_len, double f) const {
+  double rot2 = 0;
+  for (size_t a = 0; a < to.size() && a < position_.size(); ++a)
+    if (rotary(a)) rot2 += (to[a] - position_[a]) * (to[a] - position_[a]);
+  if (rot2 == 0) return f;  // no rotary motion: F as it always was
+  if (lin_len > 0) return f * std::sqrt(lin_len * lin_len + rot2) / lin_len;
+  // F as set, deg/min (G20 scales it not); f has passed feed_mm_per_min's checks.
+  const double deg = angular_feed_ * (feed_mode_ == FeedMode::kUnitsPerRev ? speed_rpm_ : 1.0);
+  if (!(deg > 0) || !std::isfinite(deg)) throw Error(ref.column, "a feed move with no feed rate");
+  return deg;
+}
+
 program::Block& BlockBuilder::begin(const SourceRef& ref, program::BlockKind kind) {
   // Whatever comes after a run of G1 moves held for blending ends the run first.
   if (!run_.empty() && !flushing_) flush_run();
@@ -110,7 +133,10 @@ void BlockBuilder::set_g92_offset(const SourceRef&, const Pose& p) {
   for (size_t i = 0; i < p.size(); ++i) g92_[i] = linear(i) ? p[i] * scale_ : p[i];
 }
 void BlockBuilder::set_xy_rotation(const SourceRef&, double deg) { rotation_deg_ = deg; }
-void BlockBuilder::set_feed_rate(const SourceRef&, double rate) { feed_ = rate; }
+void BlockBuilder::set_feed_rate(const SourceRef&, double rate) {
+  feed_ = rate;
+  angular_feed_ = rate;  // LinuxCNC's canon: the angular rate is the number as set, whatever the units later
+}
 void BlockBuilder::set_feed_mode(const SourceRef&, FeedMode m) {
   // Inverse-time rates arrive already as units per minute along each move.
   feed_mode_ = m == FeedMode::kUnitsPerRev ? m : FeedMode::kUnitsPerMinute;
@@ -142,7 +168,10 @@ bool BlockBuilder::blending() const {
 
 void BlockBuilder::straight_feed(const SourceRef& ref, const Pose& end) {
   std::vector<double> e = to_machine(ref, end);
-  const double f = feed_mm_per_min(ref);
+  double lin2 = 0;
+  for (size_t a = 0; a < e.size(); ++a)
+    if (!rotary(a)) lin2 += (e[a] - position_[a]) * (e[a] - position_[a]);
+  const double f = rotary_feed(ref, e, std::sqrt(lin2), feed_mm_per_min(ref));
   if (hold_move(ref, e, f)) return;
   program::Block& b = begin(ref, program::BlockKind::kLine);
   b.end = e;
@@ -468,7 +497,28 @@ void BlockBuilder::arc_feed(const SourceRef& ref, double, double, double first_a
   c[static_cast<size_t>(a1)] = first_axis;
   c[static_cast<size_t>(a2)] = second_axis;
   const std::vector<double> center = to_machine(ref, c);
-  const double f = feed_mm_per_min(ref);
+  double f = feed_mm_per_min(ref);
+  if (rotary_moves(e)) {
+    // Rotary axes turning along the arc: its linear length is the plane's sweep (at the
+    // mean radius: exact for circles and helices) with the other linear axes' travel.
+    program::Block arc;
+    arc.kind = rotation < 0 ? program::BlockKind::kArcCw : program::BlockKind::kArcCcw;
+    arc.start = position_;
+    arc.end = e;
+    arc.arc.center = center;
+    arc.arc.plane = pl;
+    arc.arc.turns = std::abs(rotation) - 1;
+    if (program::check_arc_block(arc).empty()) {
+      const motion::PathSegment seg(arc, static_cast<int>(setup_.axis_names.size()));
+      const size_t i1 = static_cast<size_t>(a1), i2 = static_cast<size_t>(a2);
+      const double r0 = std::hypot(position_[i1] - center[i1], position_[i2] - center[i2]);
+      const double r1 = std::hypot(e[i1] - center[i1], e[i2] - center[i2]);
+      double lin2 = std::pow(0.5 * (r0 + r1) * seg.arc_sweep_rad(), 2);
+      for (size_t a = 0; a < e.size(); ++a)
+        if (!rotary(a) && a != i1 && a != i2) lin2 += (e[a] - position_[a]) * (e[a] - position_[a]);
+      f = rotary_feed(ref, e, std::sqrt(lin2), f);
+    }
+  }
   {
     // Under G64 P an arc joins the run of G1 moves as chords, to be fitted with them.
     program::Block arc;

@@ -21,6 +21,8 @@ namespace cnc::rs274 {
 struct BuilderSetup {
   std::vector<std::string> axis_names;     // machine axes in order, e.g. X Y Z
   std::vector<double> start_position_mm;   // where the machine stands
+  // Per machine axis: rotary (degrees; LinuxCNC's feed rules, rotary_feed). Empty: none.
+  std::vector<bool> rotary;
   double spindle_rpm = 0;                  // speed before any S word
   program::ProcessParams process;          // what a PROCESS directive leaves out
   // G64 P (path blending within P): runs of short G1 moves are fitted to cubic
@@ -108,6 +110,12 @@ class BlockBuilder : public Canon {
   void event(const SourceRef& ref, program::EventKind kind, int32_t number, double value, std::string text = {});
   std::vector<double> to_machine(const SourceRef& ref, const Pose& p) const;
   double feed_mm_per_min(const SourceRef& ref) const;
+  // The block's feed along its path in all axes (mm and degrees, the planner's arc
+  // length) for LinuxCNC's rules: F along the linear axes' length `lin_len` (0: only
+  // rotary axes move, F in deg/min); `f` as feed_mm_per_min gives it.
+  double rotary_feed(const SourceRef& ref, const std::vector<double>& to, double lin_len, double f) const;
+  bool rotary_moves(const std::vector<double>& to) const;
+  bool rotary(size_t axis) const { return axis < setup_.rotary.size() && setup_.rotary[axis]; }
   // G64 P: the G1 moves held back to be blended or fitted, and their emission.
   bool blending() const;
   // Holds a G1 move (e, machine mm; moved from) in the run; false: not blending, or
@@ -142,6 +150,7 @@ class BlockBuilder : public Canon {
   double rotation_deg_ = 0;
   std::vector<double> position_;  // machine mm
   double feed_ = 0;               // program units / min (or / rev)
+  double angular_feed_ = 0;       // deg / min (or / rev): the last rate set, unscaled by G20/G21
   FeedMode feed_mode_ = FeedMode::kUnitsPerMinute;
   double speed_rpm_ = 0;
   int spindle_dir_ = 0;

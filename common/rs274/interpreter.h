@@ -54,6 +54,7 @@ struct ModalState {
 
 struct MachineSetup {
   std::string axes = "XYZ";                // axis letters the machine has (of XYZABCUVW)
+  std::string wrapped;                     // of A B C: LinuxCNC's WRAPPED_ROTARY axes
   Units machine_units = Units::kMm;        // of the tool table and the var file's offsets
   std::vector<std::string> subroutine_path;  // folders searched for o<name> call files (the first 10 that exist)
   std::string tool_table;                  // LinuxCNC tool table; empty: no tools
@@ -191,6 +192,9 @@ class Interpreter {
   void comments_of_line();
   // execute_block's steps, in its order.
   bool continue_nurbs(Words& w);
+  bool wrapped(char axis) const;
+  double unwrap_rotary(const Words& w, char axis, double commanded, double at) const;
+  double unwrap_rotary(int column, char axis, double commanded, double at, double sign_of) const;
   void g93_g95(const Words& w);
   void f_s_t(const Words& w);
   void m62_m68(const Words& w);

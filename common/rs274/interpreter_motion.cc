@@ -58,6 +58,8 @@ Pose Interpreter::axis_target(const Words& w, bool machine) const {
       p[k] = v;  // machine coordinates, turned into program ones below
     } else if (incremental_) {
       p[k] += v;
+    } else if (wrapped(c)) {
+      p[k] = unwrap_rotary(w, c, v, p[k]);
     } else {
       p[k] = v;
     }
@@ -67,9 +69,39 @@ Pose Interpreter::axis_target(const Words& w, bool machine) const {
     Pose m = machine_of(position_, coord_);
     for (int i = 0; i < kNumAxes; ++i)
       if (w.on(kAxisLetters[i])) m[static_cast<size_t>(i)] = p[static_cast<size_t>(i)];
-    return program_of(m, coord_);
+    Pose q = program_of(m, coord_);
+    for (int i = 3; i < 6; ++i) {
+      const char c = kAxisLetters[i];
+      const size_t k = static_cast<size_t>(i);
+      if (w.on(c) && wrapped(c)) q[k] = unwrap_rotary(w.column(c), c, q[k], position_[k], w[c]);
+    }
+    return q;
   }
   return p;
+}
+
+bool Interpreter::wrapped(char axis) const {
+  return (axis == 'A' || axis == 'B' || axis == 'C') && setup_.wrapped.find(axis) != std::string::npos;
+}
+
+// LinuxCNC's wrapped rotary axis (WRAPPED_ROTARY): the word is an angle in (-360, 360),
+// reached from where the axis stands (`at`) forwards for a positive word and
+// backwards for a negative one (its sign, also of -0); `commanded` is the word in
+// program coordinates (G53: with the offsets taken off).
+double Interpreter::unwrap_rotary(const Words& w, char axis, double commanded, double at) const {
+  return unwrap_rotary(w.column(axis), axis, commanded, at, w[axis]);
+}
+
+double Interpreter::unwrap_rotary(int column, char axis, double commanded, double at, double sign_of) const {
+  if (sign_of <= -360.0 || sign_of >= 360.0) {
+    char buf[96];
+    std::snprintf(buf, sizeof buf, "Invalid absolute position %5.2f for wrapped rotary axis %c", sign_of, axis);
+    fail(column, buf);
+  }
+  double r = std::fabs(commanded) + std::floor(at / 360.0) * 360.0;
+  if (!std::signbit(sign_of) && r < at) r += 360.0;
+  if (std::signbit(sign_of) && r > at) r -= 360.0;
+  return r;
 }
 
 void Interpreter::motion(Words& w) {

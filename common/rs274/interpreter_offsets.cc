@@ -197,13 +197,22 @@ void Interpreter::g28_g30(Words& w, bool g30) {
   canon_.straight_traverse(r, program_pose(via));
   position_ = via;
   Pose home_m = machine_of(position_, coord_);
+  std::array<bool, kNumAxes> stored{};
   for (int i = 0; i < kNumAxes; ++i) {
     const size_t k = static_cast<size_t>(i);
     if (w.axes != 0 && !w.on(kAxisLetters[i])) continue;
     if (setup_.axes.find(kAxisLetters[i]) == std::string::npos) continue;
     home_m[k] = param_len(base, i);
+    stored[k] = true;
   }
-  const Pose home = program_of(home_m, coord_);
+  Pose home = program_of(home_m, coord_);
+  for (int i = 3; i < 6; ++i) {
+    // A wrapped axis reaches its stored home the way LinuxCNC's convert_home does: the
+    // way the stored value's sign says, from where the axis stands.
+    const size_t k = static_cast<size_t>(i);
+    if (stored[k] && wrapped(kAxisLetters[i]))
+      home[k] = unwrap_rotary(w.gcol[0], kAxisLetters[i], home[k], position_[k], home_m[k]);
+  }
   const Pose shown = program_pose(home);
   canon_.straight_traverse(r, shown);
   position_ = home;
@@ -385,7 +394,12 @@ void Interpreter::homes_and_offsets(Words& w) {
     const int base = w.g[0] == 281 ? 5161 : 5181;
     for (int i = 0; i < kNumAxes; ++i) {
       const size_t k = static_cast<size_t>(i);
-      set_param_len(base, i, machine_of(position_, coord_)[k]);
+      double v = machine_of(position_, coord_)[k];
+      if (wrapped(kAxisLetters[i])) {
+        v = std::fmod(v, 360.0);  // LinuxCNC stores a wrapped axis's home in [0, 360)
+        if (v < 0) v += 360.0;
+      }
+      set_param_len(base, i, v);
     }
     if (w.axes != 0) fail(w.gcol[0], g_text(w.g[0]) + " takes no axis words");
   }

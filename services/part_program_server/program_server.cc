@@ -58,7 +58,7 @@ uint64_t block_hash(const program::Block& b, uint64_t h) {
 // between samples stays under 1 um (a runtime check in the drive bridge remains).
 // Returns "" or the refusal.
 std::string travel_error(const program::Block& b, const std::vector<std::pair<double, double>>& travel,
-                         const std::vector<std::string>& names) {
+                         const std::vector<std::string>& names, const std::vector<bool>& rotary) {
   if (travel.empty()) return "";
   const bool arc = b.kind == program::BlockKind::kArcCw || b.kind == program::BlockKind::kArcCcw;
   const bool moves = b.kind == program::BlockKind::kRapid || b.kind == program::BlockKind::kLine || arc ||
@@ -71,8 +71,9 @@ std::string travel_error(const program::Block& b, const std::vector<std::pair<do
       const auto [lo, hi] = travel[static_cast<size_t>(a)];
       if (!(p[a] >= lo - 1e-9 && p[a] <= hi + 1e-9)) {
         char buf[200];
-        std::snprintf(buf, sizeof buf, "%s %.4f mm (machine coordinates, %s) is outside the axis's travel [%g, %g]",
-                      names[static_cast<size_t>(a)].c_str(), p[a], where, lo, hi);
+        const bool deg = static_cast<size_t>(a) < rotary.size() && rotary[static_cast<size_t>(a)];
+        std::snprintf(buf, sizeof buf, "%s %.4f %s (machine coordinates, %s) is outside the axis's travel [%g, %g]",
+                      names[static_cast<size_t>(a)].c_str(), p[a], deg ? "deg" : "mm", where, lo, hi);
         return buf;
       }
     }
@@ -237,6 +238,8 @@ ProgramSetup program_setup(const config::MachineConfig& cfg) {
     s.machine.axes += a.name;
     s.builder.axis_names.push_back(a.name);
     s.builder.start_position_mm.push_back(a.home_mm);
+    s.builder.rotary.push_back(a.rotary);
+    if (a.wrapped) s.machine.wrapped += a.name;
   }
   s.machine.machine_units = rs274::Units::kMm;
   s.machine.subroutine_path = cfg.program.subroutine_path;
@@ -368,7 +371,8 @@ bool ProgramServer::validate(Loaded& p, LoadResult& r) const {
           from_start = b.start;
         }
       }
-      if (std::string e = travel_error(b, setup_.travel_mm, setup_.builder.axis_names); !e.empty()) {
+      const std::string e = travel_error(b, setup_.travel_mm, setup_.builder.axis_names, setup_.builder.rotary);
+      if (!e.empty()) {
         r.error = (b.source_file.empty() ? path : b.source_file) + ":" + std::to_string(b.source_line) + ":" +
                   std::to_string(b.source_column) + ": " + e;
         r.file = b.source_file.empty() ? path : b.source_file;
@@ -479,7 +483,7 @@ std::string ProgramServer::make_approach(Loaded& p, const std::vector<double>& t
     b.kind = program::BlockKind::kRapid;
     b.start = cur;
     b.end = to;
-    if (std::string e = travel_error(b, setup_.travel_mm, names); !e.empty()) return e;
+    if (std::string e = travel_error(b, setup_.travel_mm, names, setup_.builder.rotary); !e.empty()) return e;
     add(std::move(b));
     text += (text.empty() ? "" : "; ") + std::string(what) + " to " + where(to);
     cur = to;

@@ -1066,3 +1066,56 @@ TEST(Rs274BlocksNurbs, ACornerInsideANurbsSplitsItIntoBlocksOfTheSameCurve) {
 
 }  // namespace
 }  // namespace cnc::program
+
+namespace cnc::program {
+namespace {
+
+// X Y Z and a rotary A (degrees), wrapped or not, as program_setup makes it from sim4_rotary.
+pps::ProgramSetup xyza_setup(bool wrapped) {
+  pps::ProgramSetup s = test::xyz_setup();
+  s.machine.axes = "XYZA";
+  s.builder.axis_names.push_back("A");
+  s.builder.start_position_mm.push_back(0);
+  s.builder.rotary = {false, false, false, true};
+  if (wrapped) s.machine.wrapped = "A";
+  return s;
+}
+
+std::vector<double> a_ends(const std::vector<Block>& blocks) {
+  std::vector<double> out;
+  for (const Block& b : moves(blocks)) out.push_back(b.end[3]);
+  return out;
+}
+
+// LinuxCNC 2.9's rs274 with [AXIS_A] WRAPPED_ROTARY = 1 prints these A ends for the
+// program (STRAIGHT_TRAVERSE/STRAIGHT_FEED's fourth number).
+TEST(Rs274BlocksRotary, WrappedAxisTakesTheWaySignSaysAsRs274) {
+  const std::string text =
+      "G21 G90\nG0 A10\nG0 A350\nG0 A-10\nG0 A-350\nG1 X1 A90 F100\nG0 A-0\nG0 A0\nG91 G0 A400\nG90 G0 A5\n"
+      "G53 G0 A20\nM2\n";
+  expect_values(a_ends(run(text, xyza_setup(true))), {10, 350, 10, -10, 90, 0, 0, 400, 725, 740});
+  // Not wrapped: the words as they are.
+  expect_values(a_ends(run(text, xyza_setup(false))), {10, 350, -10, -350, 90, 0, 0, 400, 5, 20});
+  expect_error_at("G90 G0 A360\nM2\n", 1, 8, "Invalid absolute position 360.00 for wrapped rotary axis A",
+                  xyza_setup(true));
+}
+
+// LinuxCNC's feed rules in the block's feed (mm/min along the path over X Y Z and A,
+// the planner's length): a mixed move F·L/L_xyz, A alone F in deg/min (also G20),
+// G93 the rate that takes 1/F minutes.
+TEST(Rs274BlocksRotary, FeedAlongThePathOfAllAxes) {
+  const auto b = moves(run("G21 G90 G1 X30 A40 F600\nG1 A130 F900\nG20\nG1 A220 F900\nG21 G93 G1 X60 A0 F2\nM2\n",
+                           xyza_setup(false)));
+  ASSERT_EQ(b.size(), 4u);
+  EXPECT_NEAR(b[0].feed_mm_per_min, 600.0 * 50.0 / 30.0, 1e-9);
+  EXPECT_NEAR(b[1].feed_mm_per_min, 900.0, 1e-9);
+  EXPECT_NEAR(b[2].feed_mm_per_min, 900.0, 1e-9);
+  // 30 mm and 220° in 0.5 min.
+  EXPECT_NEAR(b[3].feed_mm_per_min, std::hypot(30.0, 220.0) * 2.0, 1e-9);
+  // Without rotary motion nothing changes: the old feed bit for bit.
+  const auto plain = moves(run("G21 G90 G1 X30 F600\nM2\n", xyza_setup(false)));
+  EXPECT_EQ(plain[0].feed_mm_per_min, 600.0);
+}
+
+}  // namespace
+}  // namespace cnc::program

@@ -30,11 +30,12 @@ std::vector<std::string> split_path(const std::string& s) {
   return out;
 }
 
-// A key of the [RS274NGC] section of a LinuxCNC INI file (SUBROUTINE_PATH,
-// DISABLE_FANUC_STYLE_SUB); empty when absent. As LinuxCNC's IniFile, which reads
+// A key of a section of a LinuxCNC INI file ([RS274NGC] SUBROUTINE_PATH,
+// DISABLE_FANUC_STYLE_SUB; [AXIS_A] WRAPPED_ROTARY); empty when absent. As LinuxCNC's IniFile, which reads
 // with fgets(line, LINELEN + 1): a line longer than 255 characters is cut there and
 // its rest read as a line of its own (so a long SUBROUTINE_PATH loses its tail).
-std::string ini_rs274ngc(const std::string& ini, const std::string& wanted, bool* cut = nullptr) {
+std::string ini_value(const std::string& ini, const std::string& wanted_section, const std::string& wanted,
+                      bool* cut = nullptr) {
   constexpr size_t kLineLen = 255;
   std::ifstream in(ini);
   std::string physical, section;
@@ -48,7 +49,7 @@ std::string ini_rs274ngc(const std::string& ini, const std::string& wanted, bool
         continue;
       }
       const size_t eq = line.find('=');
-      if (section != "RS274NGC" || eq == std::string::npos) continue;
+      if (section != wanted_section || eq == std::string::npos) continue;
       std::string key = line.substr(b, eq - b);
       while (!key.empty() && (key.back() == ' ' || key.back() == '\t')) key.pop_back();
       if (key != wanted) continue;
@@ -74,7 +75,8 @@ int main(int argc, char** argv) {
   CLI::App app{"the project's RS274NGC interpreter, printing rs274's canonical calls", "cnc-rs274"};
   cnc::util::cli::setup(app);
   app.add_flag("-g", ignored_flags, "ignored (rs274's graphical mode)");
-  app.add_option("-i", ini, "LinuxCNC INI file: [RS274NGC] SUBROUTINE_PATH, DISABLE_FANUC_STYLE_SUB")
+  app.add_option("-i", ini,
+                 "LinuxCNC INI file: [RS274NGC] SUBROUTINE_PATH, DISABLE_FANUC_STYLE_SUB, [AXIS_A/B/C] WRAPPED_ROTARY")
       ->type_name("INI");
   app.add_option("-t", setup.tool_table, "tool table")->type_name("TOOLTABLE");
   app.add_option("-v", setup.var_file, "parameter (var) file")->type_name("VARFILE");
@@ -100,15 +102,20 @@ int main(int argc, char** argv) {
   const bool have_ini = !ini.empty();
   if (have_ini) {
     bool cut = false;
-    const std::string ini_path = ini_rs274ngc(ini, "SUBROUTINE_PATH", &cut);
+    const std::string ini_path = ini_value(ini, "RS274NGC", "SUBROUTINE_PATH", &cut);
     if (cut)
       std::fprintf(stderr, "cnc-rs274: %s: the SUBROUTINE_PATH line is longer than 255 characters; "
                    "as LinuxCNC, only \"%s\" is read\n", ini.c_str(), ini_path.c_str());
     if (sub_path.empty()) sub_path = ini_path;
     // LinuxCNC's findBoolV: 1/0, true/false, yes/no, on/off (any case).
-    std::string v = ini_rs274ngc(ini, "DISABLE_FANUC_STYLE_SUB");
-    for (char& c : v) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-    setup.fanuc_subs = !(v == "1" || v == "true" || v == "yes" || v == "on");
+    auto yes = [&](const std::string& section, const std::string& key) {
+      std::string v = ini_value(ini, section, key);
+      for (char& c : v) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+      return v == "1" || v == "true" || v == "yes" || v == "on";
+    };
+    setup.fanuc_subs = !yes("RS274NGC", "DISABLE_FANUC_STYLE_SUB");
+    for (const char* a : {"A", "B", "C"})
+      if (yes(std::string("AXIS_") + a, "WRAPPED_ROTARY")) setup.wrapped += a;
   }
   setup.subroutine_path = split_path(sub_path);
   std::FILE* out = stdout;
