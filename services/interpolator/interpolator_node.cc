@@ -96,6 +96,7 @@ void InterpolatorNode::on_program_state(const cnc::lcmt_program_state& m) {
   if (m.program_token == token_ && m.approach_pending == 0) approach_pending_ = false;
   // A probing move's result may change the program's length (the server validates the rest again with it).
   if (m.program_token == token_ && token_ != 0 && m.num_blocks > 0) num_blocks_ = m.num_blocks;
+  if (m.state == cnc::lcmt_program_state::REFUSED) program_withdrawn(m);
   if (!loaded || m.program_token == token_) return;
   // In FAULT nothing new is taken; after it, no program loaded before it.
   if (fault_ || m.program_token <= retired_token_) return;
@@ -111,6 +112,24 @@ void InterpolatorNode::on_program_state(const cnc::lcmt_program_state& m) {
   program_path_ = m.program_path;
   reorder_.clear();
   load_pending_ = true;
+}
+
+void InterpolatorNode::program_withdrawn(const cnc::lcmt_program_state& m) {
+  // The program server withdrew the program this core runs (the rest no longer
+  // validates after a probe result or an M66 value, or its file changed): no block
+  // comes after the ones held, so the path would wait at their end until an operator's
+  // STOP. It stops here, as the operator's STOP would (recorded, so a replay does too).
+  if (token_ == 0 || m.program_token != token_ || m.program_path != program_path_) return;
+  const RunState s = core_.state();
+  if (s != RunState::kRunning && s != RunState::kHeld && s != RunState::kStarved) return;
+  const std::string text = "program " + program_path_ + " withdrawn by the program server: " + m.error;
+  spdlog::error("{}: the program stops", text);
+  alarm(cnc::lcmt_alarm::FAULT, "program_withdrawn", text);
+  cnc::lcmt_program_command stop{};
+  stop.command = cnc::lcmt_program_command::STOP;
+  apply_command(Command{Command::Kind::kStop, 1.0, {}}, stop);
+  token_ = 0;
+  reorder_.clear();
 }
 
 void InterpolatorNode::on_block(const cnc::lcmt_program_block& m) {

@@ -64,6 +64,7 @@ class InterpolatorNode {
  private:
   void on_command(const cnc::lcmt_program_command& m);
   void on_program_state(const cnc::lcmt_program_state& m);
+  void program_withdrawn(const cnc::lcmt_program_state& m);
   void on_block(const cnc::lcmt_program_block& m);
   void apply_command(const Command& c, const cnc::lcmt_program_command& m);
   void request_blocks();

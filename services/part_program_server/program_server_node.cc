@@ -90,8 +90,10 @@ void ProgramServerNode::on_interp_state(const cnc::lcmt_interp_state& m) {
       !core_.awaited_result_is_probe()) {
     // An input wait's value (M66): the rest of the program is validated with it, then served.
     const std::string path = core_.path();
+    const int64_t token = core_.token();
     const LoadResult lr = core_.input_result(m.input_block, m.input_value);
     if (!lr.ok) {
+      withdrawn_token_ = token;
       spdlog::error("program {} withdrawn after the input wait (M66) of block {}: {}", path, m.input_block, lr.error);
       last_refusal_ = lr;
       refused_path_ = path;
@@ -112,8 +114,10 @@ void ProgramServerNode::on_interp_state(const cnc::lcmt_interp_state& m) {
     // A probing move's result: the rest of the program is validated with it, then served.
     ProbeResult pr{m.probe_tripped != 0, m.probe_trip_mm, m.probe_rest_mm};
     const std::string path = core_.path();
+    const int64_t token = core_.token();
     const LoadResult lr = core_.probe_result(m.probe_block, pr);
     if (!lr.ok) {
+      withdrawn_token_ = token;
       spdlog::error("program {} withdrawn after the probing move of block {}: {}", path, m.probe_block, lr.error);
       last_refusal_ = lr;
       refused_path_ = path;
@@ -381,6 +385,7 @@ void ProgramServerNode::load_program(const std::string& path, int from_line) {
     spdlog::info("loaded {}: {} blocks (token {})", path, core_.num_blocks(), token);
     for (const std::string& w : r.warnings) spdlog::warn("{}", w);
     state_ = S::LOADED;
+    withdrawn_token_ = 0;
     program_ready_ = true;
     last_refusal_ = LoadResult{};
     sent_.clear();
@@ -389,6 +394,7 @@ void ProgramServerNode::load_program(const std::string& path, int from_line) {
     write_state_file();
   } else {
     spdlog::error("program refused: {}", r.error);
+    withdrawn_token_ = 0;
     last_refusal_ = r;
     refused_path_ = path;
     state_ = S::REFUSED;
@@ -519,6 +525,7 @@ void ProgramServerNode::on_request(const cnc::lcmt_block_request& m) {
     if (b == nullptr) {
       // The file no longer reads as validated: serve nothing more of it.
       spdlog::error("program {} withdrawn: {}", token, core_.serving_error());
+      withdrawn_token_ = token;
       last_refusal_ = LoadResult{};
       last_refusal_.error = core_.serving_error();
       last_refusal_.file = path;
@@ -569,6 +576,7 @@ void ProgramServerNode::publish_state(bool force) {
   s.state = (own_fault_ || interp_fault_) ? cnc::lcmt_program_state::FAULT : state_;
   s.program_token = core_.token();
   s.program_path = state_ == cnc::lcmt_program_state::REFUSED ? refused_path_ : core_.path();
+  if (s.state == cnc::lcmt_program_state::REFUSED && withdrawn_token_ != 0) s.program_token = withdrawn_token_;
   s.num_blocks = core_.num_blocks();
   s.blocks_sent = blocks_sent_;
   s.blocks_resent = blocks_resent_;

@@ -67,6 +67,10 @@ class ProgramServerNode {
   int8_t state_;
   LoadResult last_refusal_;
   std::string refused_path_;
+  // A program withdrawn while it ran (its result left it invalid, its file changed):
+  // its token, which PROGRAM_STATE's REFUSED carries so that the interpolator running
+  // it stops; 0 after a refused LOAD (nothing ran).
+  int64_t withdrawn_token_ = 0;
   int64_t blocks_sent_ = 0;
   int64_t blocks_resent_ = 0;
   // Blocks sent at least once, as disjoint ranges [first, end) keyed by first:

@@ -13,8 +13,11 @@
 #     taken only when #5070 is 0, moves X to 30).
 #  3. G38.2 beside the box: no contact is an error; the program stops (ALARM probe
 #     naming file:line), the line after it is not run.
-#  4. The session replays bit for bit (the trips are recorded inputs).
+#  4. The session replays bit for bit (the trips and 6's stop are recorded inputs).
 #  5. A G1 into the box: the contact stops the machine with a fault naming the probe.
+#  6. A program whose rest leaves the travel with the real result (valid at load, where
+#     the probe is taken to trip at its move's end) is withdrawn by the program server,
+#     and the interpolator stops it at once (ALARM program_withdrawn), not starved.
 #   probe_test.sh BUILD_DIR SOURCE_DIR
 source "$(dirname "$0")/lib.sh"
 enter_private_netns "$@"
@@ -137,6 +140,30 @@ x3, x2 = last[order[1]][0], last[order[2]][0]
 print(f"# X after G38.3's miss {x3:.4f} (want 30), after G38.2's {x2:.4f} (want 20)", file=sys.stderr)
 sys.exit(0 if abs(x3 - 30) < 1e-9 and abs(x2 - 20) < 1e-9 else 1)
 PY
+
+# ---- 6. a program withdrawn after its probe result: stopped, not starved -------------
+# At load the probe is taken to trip at the move's end (#5063 = -21: Z -10 after it);
+# it trips at the top (#5063 ~ -20: Z ~ 990, past the travel's +5).
+cat >"$WORK/withdraw.ngc" <<'NGC'
+G21 G90
+G0 Z-18
+G0 X100 Y100
+G1 Z-19.7 F300
+G38.2 Z-21 F100
+G0 Z[[#5063 + 21] * 1000 - 10]
+G0 X0
+M2
+NGC
+t0=$SECONDS
+if "${CTL[@]}" --do run --program "$WORK/withdraw.ngc" --timeout 20 >"$WORK/ctl6.out" 2>&1; then
+  fail "a program withdrawn after its probe result ran to its end"
+fi
+grep -q "cnc-ctl: the program was withdrawn while it ran: .*withdraw.ngc:6:1: Z 98[0-9.]* mm .* outside the axis's travel" "$WORK/ctl6.out" ||
+  { cat "$WORK/ctl6.out" >&2; fail "cnc-ctl does not say the program was withdrawn, and why"; }
+grep -q "withdraw.ngc withdrawn by the program server: .*withdraw.ngc:6" "$WORK/interpolator.log" ||
+  { cat "$WORK/ctl6.out" >&2; tail -n 20 "$WORK/interpolator.log" "$WORK/program-server.log" >&2; fail "the interpolator did not stop the withdrawn program"; }
+[ $((SECONDS - t0)) -lt 15 ] || fail "the withdrawn program took $((SECONDS - t0)) s to end"
+note "withdrawn after its probe result, ended in $((SECONDS - t0)) s: $(grep -o 'withdrawn by the program server: .*' "$WORK/interpolator.log" | head -1)"
 
 # ---- 4. the session replays bit for bit --------------------------------------------
 "$BUILD/tools/cnc-replay" --log "$WORK/cell.lcmlog" >"$WORK/replay.out" 2>&1 || { cat "$WORK/replay.out" >&2; fail "the session does not replay"; }

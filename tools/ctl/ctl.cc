@@ -753,10 +753,20 @@ int Ctl::watch_to_end(int64_t token) {
     return view_.have_program && view_.program.program_token == token &&
            view_.program.state == cnc::lcmt_program_state::STOPPED;
   };
+  // Withdrawn by the program server while it ran (its rest invalid after a probe result or
+  // an M66 value, or its file changed): REFUSED with this token; the interpolator stops it.
+  auto withdrawn = [&] {
+    return view_.have_program && view_.program.program_token == token &&
+           view_.program.state == cnc::lcmt_program_state::REFUSED;
+  };
   const bool done = wait(timeout_s_, [&] {
-    return bridge_fault() || block_refused() || cell_fault() || peer_lost() || stopped() ||
+    return bridge_fault() || block_refused() || cell_fault() || peer_lost() || stopped() || withdrawn() ||
            (view_.interp.program_token == token && view_.interp.state == 3 /* done */);
   });
+  if (withdrawn()) {
+    std::fprintf(stderr, "cnc-ctl: the program was withdrawn while it ran: %s\n", view_.program.error.c_str());
+    return kExitRefused;
+  }
   if (block_refused()) {
     std::fprintf(stderr, "cnc-ctl: the interpolator refused a block; the program was stopped\n");
     return kExitRefused;
