@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Deterministic replay from a live run's log, and the monitor driven by lcm-logplayer:
-#  * the cell runs three programs (lines only, a NURBS, a roughness-controlled NURBS);
+#  * the cell (sim4_rotary: sim3 with a rotary A) runs three programs (lines only, a
+#    NURBS, a roughness-controlled NURBS) and a short one turning A (rotary_program.ngc);
 #  * cnc-replay re-runs the interpolator core from the log: bit-identical setpoints;
 #  * a changed config and a changed program are detected at a named cycle;
 #  * lcm-logplayer plays the log (less the monitor's own output) to a fresh monitor:
@@ -12,19 +13,35 @@ BUILD="$1"; SRC="$2"
 WORK="$(mktemp -d /tmp/cnc-replay-test.XXXXXX)"
 trap 'cleanup' EXIT
 M="$WORK/machine.yaml"
-make_machine "$SRC/config/machines/sim3.yaml" "$M"
+make_machine "$SRC/config/machines/sim4_rotary.yaml" "$M"
 
 start logger "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/run"
 sleep 0.2
 start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M"
 start_cell
-for p in lines butterfly fig11_valley; do
+for p in config/programs/lines config/programs/butterfly config/programs/fig11_valley tests/integration/rotary_program; do
   rc=0
-  "$BUILD/tools/cnc-ctl" --machine "$M" --do run --program "$SRC/config/programs/$p.ngc" --timeout 90 >"$WORK/ctl.out" 2>&1 || rc=$?
+  "$BUILD/tools/cnc-ctl" --machine "$M" --do run --program "$SRC/$p.ngc" --timeout 90 >"$WORK/ctl.out" 2>&1 || rc=$?
   cat "$WORK/ctl.out" >&2
   [ "$rc" -eq 0 ] || fail "$p did not complete (cnc-ctl exit $rc)"
 done
 for s in interpolator program-server monitor drive-bridge servo-sim logger; do stop "$s" TERM; done
+
+# The rotary A (degrees) went where rotary_program.ngc sent it, commanded and on the drive.
+"$BUILD/tools/cnc-logexport" --log "$WORK/run.lcmlog" --out "$WORK/export" >"$WORK/export.out" 2>&1 \
+  || { cat "$WORK/export.out" >&2; fail "cnc-logexport failed"; }
+python3 - "$WORK/export" >"$WORK/rotary.out" <<'PY' || { cat "$WORK/rotary.out" >&2; fail "the A axis did not turn as programmed"; }
+import csv, sys
+d = sys.argv[1]
+a = [float(r['a_mm']) for r in csv.DictReader(open(d + '/setpoints.csv'))]
+st = list(csv.DictReader(open(d + '/axis_status.csv')))
+act = [float(r['a_actual_mm']) for r in st]
+fe = max(abs(float(r['a_following_error_mm'])) for r in st)
+print(f'A: setpoints to {max(a):.6f} deg and back to {a[-1]:.6f}, drive to {max(act):.4f} deg, '
+      f'largest following error {fe:.4f} deg')
+assert abs(max(a) - 180) < 1e-9 and abs(a[-1]) < 1e-9 and abs(max(act) - 180) < 0.5 and fe < 2.0
+PY
+note "$(cat "$WORK/rotary.out")"
 
 # Bit for bit.
 "$BUILD/tools/cnc-replay" --log "$WORK/run.lcmlog" >"$WORK/replay.out" 2>&1 || { cat "$WORK/replay.out" >&2; fail "replay is not identical"; }

@@ -215,11 +215,18 @@ std::string Ctl::alarm_since(size_t from, std::initializer_list<const char*> cod
   return "";
 }
 
+// A wrapped rotary axis is shown modulo 360, in [0, 360) (its position keeps counting turns).
+static double displayed(const config::AxisConfig& a, double v) {
+  if (!a.wrapped) return v;
+  const double m = std::fmod(v, 360.0);
+  return m < 0 ? m + 360.0 : m;
+}
+
 void Ctl::print_position(const char* what_done) const {
   std::printf("%s:", what_done);
   for (int i = 0; i < view_.interp.num_axes; ++i)
     std::printf(" %s %.4f%s", cfg_.axes[static_cast<size_t>(i)].name.c_str(),
-                view_.interp.position_mm[static_cast<size_t>(i)],
+                displayed(cfg_.axes[static_cast<size_t>(i)], view_.interp.position_mm[static_cast<size_t>(i)]),
                 static_cast<size_t>(i) < view_.interp.homed.size() && view_.interp.homed[static_cast<size_t>(i)]
                     ? " (homed)"
                     : "");
@@ -259,7 +266,8 @@ int Ctl::status() {
   if (view_.have_interp) {
     std::printf("position:");
     for (int i = 0; i < view_.interp.num_axes && static_cast<size_t>(i) < cfg_.axes.size(); ++i)
-      std::printf(" %s %.4f", cfg_.axes[static_cast<size_t>(i)].name.c_str(), view_.interp.position_mm[static_cast<size_t>(i)]);
+      std::printf(" %s %.4f", cfg_.axes[static_cast<size_t>(i)].name.c_str(),
+                  displayed(cfg_.axes[static_cast<size_t>(i)], view_.interp.position_mm[static_cast<size_t>(i)]));
     std::printf("\n");
   }
   if (view_.have_program) std::printf("block delete %s\n", view_.program.block_delete ? "on" : "off");
