@@ -42,6 +42,12 @@ struct CellView {
   std::string approach;
   // "" when the guard door (safety.door) is shut or there is none, else e.g. "the guard door (input door_closed) is open".
   std::string door;
+  // A hard-limit switch that reads 0 (IO_STATUS: on it, tripped or disabled by it): its
+  // axis, its end (-1 the min end, +1 the max end) and its name. A jog towards it is
+  // refused here, before the drive bridge would fault on it; away from it is allowed.
+  int limit_axis = -1;
+  int limit_side = 0;
+  std::string limit_switch;
   // The spindle override's range (spindle.min_override .. max_override).
   double spindle_min_override = 0.5;
   double spindle_max_override = 1.0;
@@ -60,6 +66,8 @@ inline std::string operator_refusal(const cnc::lcmt_program_command& c, const Ce
     return "jog " + std::to_string(c.value) + ": the increment (or direction) must be a non-zero number";
   if (c.command == C::JOG && !(std::isfinite(c.feed_mm_per_min) && c.feed_mm_per_min >= 0))
     return "jog feed " + std::to_string(c.feed_mm_per_min) + " mm/min is not a speed";
+  if (c.command == C::JOG && v.limit_axis >= 0 && c.axis == v.limit_axis && (c.value > 0 ? 1 : -1) == v.limit_side)
+    return "jog towards the limit switch " + v.limit_switch + ", which is open: jog the axis away from it";
   if (c.command == C::TOUCH_OFF && !std::isfinite(c.value)) return "touch-off: the value is not a number";
   if (c.command == C::TOUCH_OFF && c.jog_continuous != 0 && c.jog_continuous != 2)
     return "touch-off: jog_continuous " + std::to_string(c.jog_continuous) +

@@ -45,6 +45,8 @@ ProgramServerNode::ProgramServerNode(const config::MachineConfig& cfg, bus::Bus&
     axes_s_ = util::monotonic_s();
   });
   // The interpolator's fault, by its own words.
+  if (!cfg.safety.hard_limits.empty())
+    bus_.subscribe<cnc::lcmt_io_status>(cfg.channel(ch::kIoStatus), [this](const cnc::lcmt_io_status& m) { on_io(m); });
   bus_.subscribe<cnc::lcmt_alarm>(cfg.channel(ch::kAlarm), [this](const cnc::lcmt_alarm& m) {
     if (m.source == "cnc-interpolator" && (m.code == "interp_fault" || m.code == "publish_failed"))
       interp_fault_text_ = m.text;
@@ -178,6 +180,9 @@ CellView ProgramServerNode::view(double now_s) const {
   } else {
     v.state = CellState::kIdle;
   }
+  v.limit_axis = limit_axis_;
+  v.limit_side = limit_side_;
+  v.limit_switch = limit_switch_;
   if (door_open_)
     v.door = "the guard door (input " + cfg_.io.points[static_cast<size_t>(cfg_.safety.door_input)].name + ") is open";
   if (cfg_.operator_.homing_required) {
@@ -239,6 +244,22 @@ void ProgramServerNode::poll(double now_s) {
     spdlog::error("fault: {}", own_fault_text_);
   }
   health_.report(now_s, "the program server is in FAULT until RESET");
+}
+
+void ProgramServerNode::on_io(const cnc::lcmt_io_status& m) {
+  // The switch a jog must not move towards: the one IO_STATUS names while a limit reads 0.
+  using I = cnc::lcmt_io_status;
+  limit_axis_ = -1;
+  limit_side_ = 0;
+  limit_switch_.clear();
+  if (m.limit != I::LIMIT_ON_SWITCH && m.limit != I::LIMIT_TRIPPED && m.limit != I::LIMIT_DISABLED) return;
+  const int point = cfg_.io.point_index(m.limit_input);
+  for (const auto& h : cfg_.safety.hard_limits) {
+    if (point < 0 || (point != h.min_input && point != h.max_input)) continue;
+    limit_axis_ = h.axis;
+    limit_side_ = point == h.max_input ? 1 : -1;
+    limit_switch_ = m.limit_input;
+  }
 }
 
 void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {

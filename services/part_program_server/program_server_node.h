@@ -5,6 +5,7 @@
 #include "cnc/lcmt_block_request.hpp"
 #include "cnc/lcmt_command_answers.hpp"
 #include "cnc/lcmt_interp_state.hpp"
+#include "cnc/lcmt_io_status.hpp"
 #include "cnc/lcmt_program_command.hpp"
 #include "common/bus/bus.h"
 #include "common/service/bus_health.h"
@@ -51,6 +52,7 @@ class ProgramServerNode {
 
  private:
   void on_command(const cnc::lcmt_program_command& m);
+  void on_io(const cnc::lcmt_io_status& m);
   void on_interp_state(const cnc::lcmt_interp_state& m);
   void refuse(const cnc::lcmt_program_command& m, const std::string& why);
   void on_request(const cnc::lcmt_block_request& m);
@@ -107,6 +109,10 @@ class ProgramServerNode {
   bool approach_pending_ = false;  // loaded from a line: START waits for CONFIRM
   cnc::lcmt_axis_status axes_{};
   bool door_open_ = false;  // INTERP_STATE: the guard door (safety.door) is open
+  // IO_STATUS: the hard-limit switch that reads 0 (its axis, end -1/+1, name; -1: none).
+  int limit_axis_ = -1;
+  int limit_side_ = 0;
+  std::string limit_switch_;
   double axes_s_ = -1e9;
   std::string refusal_;
   int32_t refused_sender_ = 0;

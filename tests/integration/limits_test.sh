@@ -8,7 +8,8 @@
 #     naming the axis, end and input; the bridge brakes from the edge at
 #     timing.stop_decel_mm_s2 within v*t + v^2/(2a) + 2*v*a/(2j) (and no harder than
 #     v^2/(2a)); the drives are disabled at standstill; ENABLE is refused until the
-#     operator's FAULT_RESET; nothing moves until fault-reset and reset. Then a move
+#     operator's FAULT_RESET; nothing moves until fault-reset and reset. A jog towards the
+#     switch is refused by the interlock (naming it). Then a move
 #     further towards the switch is refused (a stop and a fault naming it, X moves
 #     less than 2 um), and a move off it runs.
 #  2. The switch's wire cut at X 80 while X moves away from it: the same trip; ENABLE
@@ -56,6 +57,9 @@ expect_refused enable_latched "the hard limit (axis X's max switch (input x_max_
 echo "hit $(now_us)" >"$WORK/resets"
 ok fault_reset1 "${CTL[@]}" --do fault-reset
 ok reset1 "${CTL[@]}" --do reset --timeout 20
+# On the switch: a jog towards it is refused by the interlock, before anything moves.
+sleep 0.2
+expect_refused jog_towards "jog towards the limit switch x_max_ok, which is open" "${CTL[@]}" --do jog --axis X --value 0.5 --timeout 5
 echo "toward $(now_us)" >"$WORK/toward_from"
 stopped_case toward "$WORK/toward.ngc" "moves the axis towards it"
 echo "toward_end $(now_us)" >>"$WORK/toward_from"

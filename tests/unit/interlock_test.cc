@@ -158,6 +158,30 @@ TEST(Interlock, OperatorCommandsInEveryState) {
   // Allowed here; the program server refuses it without a tool in the spindle (integration.operator).
   EXPECT_EQ(pps::refusal(tool, v), "");
   {
+    // On the max-end limit switch of axis 0: a jog towards it (X+) refused, naming the
+    // switch, before the bridge would fault on it; away from it (X-) and other axes allowed.
+    pps::CellView on = v;
+    on.state = CellState::kIdle;
+    on.limit_axis = 0;
+    on.limit_side = 1;
+    on.limit_switch = "x_max";
+    lcmt_program_command j = cmd(C::JOG);
+    j.axis = 0;
+    j.value = 1;
+    EXPECT_EQ(pps::refusal(j, on), "jog towards the limit switch x_max, which is open: jog the axis away from it");
+    j.jog_continuous = 1;
+    EXPECT_NE(pps::refusal(j, on), "");
+    j.value = -1;
+    EXPECT_EQ(pps::refusal(j, on), "");
+    j.axis = 1;
+    j.value = 1;
+    EXPECT_EQ(pps::refusal(j, on), "");
+    on.limit_axis = 1;
+    on.limit_side = -1;
+    j.value = -0.1;
+    EXPECT_NE(pps::refusal(j, on).find("limit switch x_max"), std::string::npos);
+  }
+  {
     lcmt_program_command r = cmd(C::RAPID_OVERRIDE);
     r.feed_override = 0.25;
     EXPECT_EQ(pps::refusal(r, v), "");
