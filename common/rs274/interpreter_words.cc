@@ -139,6 +139,12 @@ void Interpreter::check_words(const Words& w) {
     if (w.on('R')) not_with('R', "with no G code that uses it (G2/G3, a canned cycle, G10)");
     if (w.on('I') || w.on('J')) not_with(w.on('I') ? 'I' : 'J', "with no G code that uses it (G2/G3, G5, G87)");
   }
+  // LinuxCNC's check_other_codes: no rotary axis word with a canned cycle (also a modal one).
+  if (cyc)
+    for (const char c : {'A', 'B', 'C'})
+      if (w.on(c))
+        fail(w.column(c), c == 'A' ? std::string("Cannot put an a in canned cycle")
+                                   : std::string("Cannot put a ") + static_cast<char>(c - 'A' + 'a') + " in canned cycle");
   const bool synced = motion == 330 || motion == 331 || motion == 760;
   if (w.on('K') && fanuc_closed_line_ > 0 && fanuc_closed_line_ == line_no_ - 1 && w.g[1] < 0)
     fail(w.column('K'),

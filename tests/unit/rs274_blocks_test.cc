@@ -1100,6 +1100,13 @@ TEST(Rs274BlocksRotary, WrappedAxisTakesTheWaySignSaysAsRs274) {
                   xyza_setup(true));
 }
 
+// LinuxCNC's tests/interp/bad/a-in-canned-cycle and a-in-canned-cycle2: rs274 refuses
+// an A word with a canned cycle, on the cycle's line or under its modal motion.
+TEST(Rs274BlocksRotary, NoRotaryWordInACannedCycleAsRs274) {
+  expect_error_at("G81 X0 Y0 Z-1 R0 A90 F12\nM2\n", 1, 18, "Cannot put an a in canned cycle", xyza_setup(false));
+  expect_error_at("G81 X0 Y0 Z-1 R0 F12\nA90\nM2\n", 2, 1, "Cannot put an a in canned cycle", xyza_setup(false));
+}
+
 // LinuxCNC's feed rules in the block's feed (mm/min along the path over X Y Z and A,
 // the planner's length): a mixed move F·L/L_xyz, A alone F in deg/min (also G20),
 // G93 the rate that takes 1/F minutes.
