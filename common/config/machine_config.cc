@@ -713,6 +713,14 @@ int IoConfig::point_index(const std::string& name) const {
   return -1;
 }
 
+std::string IoConfig::point_label(int point) const {
+  if (point < 0 || static_cast<size_t>(point) >= points.size()) return "(no such point)";
+  const IoPointConfig& p = points[static_cast<size_t>(point)];
+  const std::string module =
+      p.module >= 0 && static_cast<size_t>(p.module) < modules.size() ? modules[static_cast<size_t>(p.module)].name : "?";
+  return p.name + " on module " + module;
+}
+
 int MachineConfig::axis_index(const std::string& axis_name) const {
   for (size_t i = 0; i < axes.size(); ++i)
     if (axes[i].name == axis_name) return static_cast<int>(i);

@@ -160,6 +160,8 @@ struct IoConfig {
   std::vector<int> analog_inputs;    // input or holding registers: M66 E n reads the n-th
   std::vector<int> analog_outputs;   // holding registers: M67/M68 E n sets the n-th (value / scale)
   int point_index(const std::string& name) const;
+  // How an alarm names a point: "NAME on module MODULE", the config's names both.
+  std::string point_label(int point) const;
 };
 
 // The hardware safety chain (section `safety:`, optional; needs io:). Inputs are

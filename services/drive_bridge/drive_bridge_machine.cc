@@ -208,7 +208,7 @@ void DriveBridgeNode::spindle_tick(double now_s) {
 
 std::string DriveBridgeNode::limit_name(const LimitInput& l) const {
   return "axis " + cfg_.axes[l.axis].name + "'s " + (l.end < 0 ? "min" : "max") + " switch (input " +
-         cfg_.io.points[static_cast<size_t>(l.point)].name + ")";
+         cfg_.io.point_label(l.point) + ")";
 }
 
 bool DriveBridgeNode::settled(double& since_s, double now_s) const {
@@ -244,8 +244,7 @@ void DriveBridgeNode::limits_tick(double now_s) {
     const std::string text =
         "hard limit: " + limit_name(l) +
         (answering ? " reads 0 (the switch hit, or its wire cut)"
-                   : std::string(" does not answer (module ") + cfg_.io.modules[static_cast<size_t>(l.module)].name +
-                         ": " + mod.rep.last_error.data() + ")") +
+                   : std::string(" is not read: its module does not answer (") + mod.rep.last_error.data() + ")") +
         at + ": controlled stop, drives disabled";
     spdlog::error("{}", text);
     alarm(cnc::lcmt_alarm::FAULT, "hard_limit", text);
@@ -321,9 +320,12 @@ void DriveBridgeNode::safety_tick(double now_s) {
     const bool ok = mod.rep.answering && mod.rep.in.valid && ((mod.rep.in.discrete >> door_.bit) & 1) != 0;
     if (!ok && door_.ok) door_.utime = util::wall_utime();
     if (ok != door_.ok && state_ != State::kStarting) {
-      const std::string& name = cfg_.io.points[static_cast<size_t>(cfg_.safety.door_input)].name;
-      const std::string text = ok ? "guard door: input " + name + " reads 1 (shut): RESUME to go on"
-                                  : "guard door: input " + name + " reads 0 (open): feed hold, motion refused until it is shut";
+      const std::string name = cfg_.io.point_label(cfg_.safety.door_input);
+      const std::string text =
+          ok ? "guard door: input " + name + " reads 1 (shut): RESUME to go on"
+          : mod.rep.answering && mod.rep.in.valid ? "guard door: input " + name + " reads 0 (open): feed hold, motion refused until it is shut"
+                              : "guard door: input " + name + " is not read: its module does not answer (" +
+                                    mod.rep.last_error.data() + "): feed hold, motion refused until it is read shut";
       spdlog::warn("{}", text);
       alarm(ok ? cnc::lcmt_alarm::INFO : cnc::lcmt_alarm::WARNING, ok ? "door_closed" : "door_open", text);
     }
@@ -333,8 +335,10 @@ void DriveBridgeNode::safety_tick(double now_s) {
   const IoModule& mod = io_->modules[static_cast<size_t>(estop_.module)];
   const bool answering = mod.rep.answering && mod.rep.in.valid;
   const bool ok = answering && ((mod.rep.in.discrete >> estop_.bit) & 1) != 0;
-  const std::string& name = cfg_.io.points[static_cast<size_t>(cfg_.safety.estop_input)].name;
+  // Named only where an alarm says it (the tick allocates nothing otherwise).
+  auto label = [&] { return cfg_.io.point_label(cfg_.safety.estop_input); };
   if (ok && !estop_.ok && estop_.latched) {
+    const std::string name = label();
     spdlog::warn("E-stop: input {} reads 1 again; the drives stay disabled until FAULT_RESET and ENABLE", name);
     alarm(cnc::lcmt_alarm::INFO, "estop_released",
           "E-stop input " + name + " reads 1 again: FAULT_RESET, then ENABLE (cnc-ctl --do fault-reset, --do reset)");
@@ -348,10 +352,11 @@ void DriveBridgeNode::safety_tick(double now_s) {
     estop_.at_s = now_s;
     estop_.stop_ms = -1;
     estop_.command_stood_s = -1;
+    const std::string name = label();
     const std::string text =
         answering ? "E-stop: input " + name + " reads 0 (pressed, or its wire cut): controlled stop, drives disabled"
-                  : "E-stop: module " + cfg_.io.modules[static_cast<size_t>(estop_.module)].name + " of input " + name +
-                        " does not answer (" + mod.rep.last_error.data() + "): controlled stop, drives disabled";
+                  : "E-stop: input " + name + " is not read: its module does not answer (" + mod.rep.last_error.data() +
+                        "): controlled stop, drives disabled";
     spdlog::error("{}", text);
     alarm(cnc::lcmt_alarm::FAULT, "estop", text);
     fault(0, text, false);  // brakes in this tick's core step; the spindle and coolant stop in this tick
@@ -363,7 +368,7 @@ void DriveBridgeNode::safety_tick(double now_s) {
     estop_.stood = true;
     estop_.stop_ms = (now_s - estop_.at_s) * 1e3;
     for (auto& a : axes_) a.cmd.goal = drive::Goal::kDisable;
-    spdlog::info("E-stop: the axes stand {:.1f} ms after the E-stop (input {}); drives disabled", estop_.stop_ms, name);
+    spdlog::info("E-stop: the axes stand {:.1f} ms after the E-stop (input {}); drives disabled", estop_.stop_ms, label());
   }
 }
 
@@ -377,7 +382,7 @@ bool DriveBridgeNode::safety_refuses_enable() {
     return true;
   }
   if (estop_.module < 0 || (estop_.ok && !estop_.latched)) return false;
-  const std::string& name = cfg_.io.points[static_cast<size_t>(cfg_.safety.estop_input)].name;
+  const std::string name = cfg_.io.point_label(cfg_.safety.estop_input);
   const std::string text = !estop_.ok ? "ENABLE refused: E-stop input " + name + " reads 0 (or its module does not answer)"
                                       : "ENABLE refused: the E-stop (input " + name +
                                             ") is latched: FAULT_RESET first (cnc-ctl --do fault-reset)";

@@ -356,7 +356,7 @@ void DriveBridgeNode::take_operator_command(double now_s) {
     spdlog::warn("{}", text);
     alarm(cnc::lcmt_alarm::WARNING, "limit_reset_refused", text);
   } else if (c == cnc::lcmt_drive_command::FAULT_RESET && estop_.latched && (!estop_.ok || !estop_.stood)) {
-    const std::string& name = cfg_.io.points[static_cast<size_t>(cfg_.safety.estop_input)].name;
+    const std::string name = cfg_.io.point_label(cfg_.safety.estop_input);
     const std::string text = !estop_.ok ? "FAULT_RESET refused: E-stop input " + name + " still reads 0"
                                         : "FAULT_RESET refused: the axes still brake for the E-stop";
     spdlog::warn("{}", text);

@@ -72,7 +72,7 @@ InterpolatorNode::InterpolatorNode(const config::MachineConfig& cfg, bus::Bus& b
     bus_.subscribe<cnc::lcmt_spindle_status>(cfg.channel(ch::kSpindleStatus), [this](const cnc::lcmt_spindle_status& m) {
       spindle_at_speed_seq_ = std::max(spindle_at_speed_seq_, m.at_speed_seq);
     });
-  if (cfg.safety.door_input >= 0) door_input_ = cfg.io.points[static_cast<size_t>(cfg.safety.door_input)].name;
+  if (cfg.safety.door_input >= 0) door_input_ = cfg.io.point_label(cfg.safety.door_input);
   io_msg_.num_analog = static_cast<int32_t>(std::min<size_t>(cfg.io.analog_outputs.size(), 64));
   io_msg_.analog.assign(static_cast<size_t>(io_msg_.num_analog), 0.0);  // sized once: the publish allocates nothing
   if (cfg.io.enabled)
@@ -767,6 +767,12 @@ void InterpolatorNode::publish_state(bool force) {
   m.input_results = static_cast<int32_t>(iw.results);
   m.input_block = iw.results > 0 ? iw.block_index : -1;
   m.input_value = iw.results > 0 ? iw.value : 0;
+  m.input_waiting = iw.waiting ? 1 : 0;
+  m.input_wait = iw.waiting ? iw.wait.number() : 0;
+  m.input_wait_left_s =
+      iw.waiting && iw.timeout_cycles > 0
+          ? static_cast<double>(std::max<int64_t>(0, iw.timeout_cycles - (now - iw.start_cycle))) * cfg_.ipo_period_s
+          : -1.0;
   bus_.publish(ch_state_, m);
 }
 

@@ -37,14 +37,13 @@ void InterpolatorNode::input_cycle() {
     return;
   }
   const auto point = static_cast<size_t>(list[static_cast<size_t>(w.wait.index)]);
-  const std::string& name = cfg_.io.points[point].name;
   const double now = util::monotonic_s();
   const bool read = now - io_status_s_ <= kIoStatusFresh_s && point < io_status_.valid.size() && io_status_.valid[point];
   if (!read) {
     if (input_watch_.unread_s < 0) input_watch_.unread_s = now;
     if (now - input_watch_.unread_s >= kInputStale_s) {
       const std::string text = program_path_ + ":" + std::to_string(core_.last().source_line) + ": M66 " + letter +
-                               std::to_string(w.wait.index) + " waits on input " + name +
+                               std::to_string(w.wait.index) + " waits on input " + cfg_.io.point_label(static_cast<int>(point)) +
                                ", which is not read (no fresh IO_STATUS, or its module does not answer)";
       spdlog::error("{}: the program stops", text);
       alarm(cnc::lcmt_alarm::FAULT, "input", text);

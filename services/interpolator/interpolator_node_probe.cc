@@ -60,7 +60,7 @@ void InterpolatorNode::probe_cycle() {
   if (!have) {
     const ProbeMove& pm = core_.probe_move();
     if (token_ != 0 && pm.block_index >= 0 && !pm.done && active(core_.state()) && !probe_.decided)
-      probe_stop("the probe input " + cfg_.io.points[static_cast<size_t>(cfg_.probe.input)].name +
+      probe_stop("the probe input " + cfg_.io.point_label(cfg_.probe.input) +
                  " is not read (no fresh AXIS_STATUS, or its module does not answer)");
     return;
   }
@@ -119,7 +119,7 @@ void InterpolatorNode::probe_cycle() {
     return;
   }
   if (rise && running && core_.last().feed_mm_per_min > 0)
-    fault("probe input " + cfg_.io.points[static_cast<size_t>(cfg_.probe.input)].name +
+    fault("probe input " + cfg_.io.point_label(cfg_.probe.input) +
           ": contact during a move that is not a probing move (line " + std::to_string(core_.last().source_line) + ")");
 }
 

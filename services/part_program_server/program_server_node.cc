@@ -184,7 +184,7 @@ CellView ProgramServerNode::view(double now_s) const {
   v.limit_side = limit_side_;
   v.limit_switch = limit_switch_;
   if (door_open_)
-    v.door = "the guard door (input " + cfg_.io.points[static_cast<size_t>(cfg_.safety.door_input)].name + ") is open";
+    v.door = "the guard door (input " + cfg_.io.point_label(cfg_.safety.door_input) + ") is open";
   if (cfg_.operator_.homing_required) {
     for (size_t a = 0; a < cfg_.axes.size() && v.unhomed.empty(); ++a)
       if (cfg_.axes[a].home.method != "none" && (a >= interp_homed_.size() || interp_homed_[a] == 0))

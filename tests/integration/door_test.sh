@@ -35,7 +35,7 @@ echo "at X 100 input door_closed 0" >&7
 RUN=$!
 wait_state held
 sleep 0.3
-expect_refused resume_open "the guard door (input door_closed) is open" "${CTL[@]}" --do resume --timeout 5
+expect_refused resume_open "the guard door (input door_closed on module io1) is open" "${CTL[@]}" --do resume --timeout 5
 echo "input door_closed 1" >&7
 sleep 0.5
 echo "resume $(now_us)" >"$WORK/resumes"
@@ -47,9 +47,9 @@ note "the program ran to its end after the door was shut and the operator resume
 # ---- 2. open with the cell idle ---------------------------------------------------------
 echo "input door_closed 0" >&7
 sleep 0.3
-expect_refused start_open "the guard door (input door_closed) is open" "${CTL[@]}" --do run --program "$WORK/idle.ngc" --timeout 10
-expect_refused jog_open "the guard door (input door_closed) is open" "${CTL[@]}" --do jog --axis Y --value 1 --timeout 5
-expect_refused mdi_open "the guard door (input door_closed) is open" "${CTL[@]}" --do mdi --line "G0 Y20" --timeout 5
+expect_refused start_open "the guard door (input door_closed on module io1) is open" "${CTL[@]}" --do run --program "$WORK/idle.ngc" --timeout 10
+expect_refused jog_open "the guard door (input door_closed on module io1) is open" "${CTL[@]}" --do jog --axis Y --value 1 --timeout 5
+expect_refused mdi_open "the guard door (input door_closed on module io1) is open" "${CTL[@]}" --do mdi --line "G0 Y20" --timeout 5
 echo "input door_closed 1" >&7
 sleep 0.3
 ok mdi_shut "${CTL[@]}" --do mdi --line "G0 Y20" --timeout 20
@@ -87,7 +87,7 @@ for line in lines:
     if m: spindle.append((stamp(m.group(1), ref), m.group(2)))
 holds = []
 for line in open(interplog):
-    m = re.match(r"([0-9:.]+) .*the guard door \(input door_closed\) opened: feed hold", line)
+    m = re.match(r"([0-9:.]+) .*the guard door \(input door_closed on module io1\) opened: feed hold", line)
     if m: holds.append(stamp(m.group(1), ref))
 t_resume = int(open(resumes).read().split()[1])
 axis, io = read_io_status(log, prefix)

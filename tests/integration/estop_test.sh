@@ -63,9 +63,14 @@ stopped_case() {
 echo "at X 100 input estop_ok 0" >&7
 stopped_case press "$WORK/out.ngc"
 sleep 0.3
-expect_refused enable_pressed "E-stop input estop_ok reads 0" "${CTL[@]}" --do enable --timeout 5
-expect_refused reset_pressed "E-stop input estop_ok still reads 0" "${CTL[@]}" --do fault-reset
-sleep 0.5
+expect_refused enable_pressed "E-stop input estop_ok on module io1 reads 0" "${CTL[@]}" --do enable --timeout 5
+expect_refused reset_pressed "E-stop input estop_ok on module io1 still reads 0" "${CTL[@]}" --do fault-reset
+# The operator's view of the chain (listening 0.5 s: the pause the release waits anyway).
+"${CTL[@]}" --do status --timeout 0.5 >"$WORK/status.out" 2>&1 || { cat "$WORK/status.out" >&2; fail "cnc-ctl --do status failed"; }
+grep -E "^(E-stop|io estop_ok)" "$WORK/status.out" >&2 || true
+grep -qE "^E-stop: TRIPPED, drives disabled, input estop_ok reads 0, last trip stood in [0-9]+\.[0-9] ms\$" "$WORK/status.out" &&
+  grep -qE "^io estop_ok +digital in +0 +io1 \(E-stop\)\$" "$WORK/status.out" ||
+  { cat "$WORK/status.out" >&2; fail "cnc-ctl --do status does not show the E-stop tripped with its input"; }
 echo "input estop_ok 1" >&7
 sleep 0.3
 expect_refused enable_released "is latched: FAULT_RESET first" "${CTL[@]}" --do enable --timeout 5
@@ -76,10 +81,10 @@ ok reset1 "${CTL[@]}" --do reset --timeout 20
 # ---- 2. the wire cut mid-move -----------------------------------------------------------
 echo "at X 50 input estop_ok 0" >&7
 stopped_case cut "$WORK/back.ngc"
-expect_refused enable_cut "E-stop input estop_ok reads 0" "${CTL[@]}" --do enable --timeout 5
+expect_refused enable_cut "E-stop input estop_ok on module io1 reads 0" "${CTL[@]}" --do enable --timeout 5
 sleep 1
-expect_refused reset_cut "E-stop input estop_ok still reads 0" "${CTL[@]}" --do fault-reset
-expect_refused cnc_reset_cut "E-stop input estop_ok reads 0" "${CTL[@]}" --do reset --timeout 5
+expect_refused reset_cut "E-stop input estop_ok on module io1 still reads 0" "${CTL[@]}" --do fault-reset
+expect_refused cnc_reset_cut "E-stop input estop_ok on module io1 reads 0" "${CTL[@]}" --do reset --timeout 5
 echo "input estop_ok 1" >&7
 sleep 0.3
 echo "cut $(now_us)" >>"$WORK/resets"

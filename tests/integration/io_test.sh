@@ -67,7 +67,17 @@ for ((i = 0; i < 300; i++)); do
   grep -q "io io1: lamp_green on" "$WORK/servo-sim.log" && break
   sleep 0.1
 done
-sleep 0.5
+# The operator's view during the wait (cnc-ctl --do status listening 0.5 s): the wait
+# with its input, mode and time left, the coolant, every point by its config name.
+"${CTL[@]}" --do status --timeout 0.5 >"$WORK/status.out" 2>&1 || { cat "$WORK/status.out" >&2; fail "cnc-ctl --do status failed"; }
+grep -E "^(M66|coolant|io|spindle)" "$WORK/status.out" >&2
+for want in "^M66: waiting on P0 \(clamp_closed, reads 0\), mode rise, 1[0-9]\.[0-9] s left of its timeout\$" \
+    "^coolant: mist off \(coolant_mist reads 0\), flood on \(coolant_flood reads 1\)\$" \
+    "^io module io1: answering, " "^io air_pressure_bar +analog in +6\.12 +io1 \(M66 E0\)\$" \
+    "^io lamp_green +digital out 1 +io1 \(M62-M65 P2\)\$" "^io clamp_closed +digital in +0 +io1 \(M66 P0\)\$" \
+    "^spindle: "; do
+  grep -qE "$want" "$WORK/status.out" || { cat "$WORK/status.out" >&2; fail "cnc-ctl --do status during the M66 wait: no line $want"; }
+done
 echo "input clamp_closed 1" >&7
 wait "$ctl_pid" || { cat "$WORK/ctl1.out" >&2; fail "the I/O program did not run to its end"; }
 sleep 1

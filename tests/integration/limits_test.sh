@@ -51,9 +51,9 @@ stopped_case() {
 }
 
 # ---- 1. X runs into its max switch ---------------------------------------------------
-stopped_case hit "$WORK/into.ngc" "axis X's max switch (input x_max_ok) reads 0"
+stopped_case hit "$WORK/into.ngc" "axis X's max switch (input x_max_ok on module io1) reads 0"
 sleep 0.3
-expect_refused enable_latched "the hard limit (axis X's max switch (input x_max_ok)) is latched" "${CTL[@]}" --do enable --timeout 5
+expect_refused enable_latched "the hard limit (axis X's max switch (input x_max_ok on module io1)) is latched" "${CTL[@]}" --do enable --timeout 5
 echo "hit $(now_us)" >"$WORK/resets"
 ok fault_reset1 "${CTL[@]}" --do fault-reset
 ok reset1 "${CTL[@]}" --do reset --timeout 20
@@ -69,7 +69,7 @@ ok off "${CTL[@]}" --do run --program "$WORK/off.ngc" --timeout 60
 
 # ---- 2. its wire cut while X moves away from it ------------------------------------------
 echo "at X 80 cut x_max_ok" >&7
-stopped_case cut "$WORK/back.ngc" "axis X's max switch (input x_max_ok) reads 0"
+stopped_case cut "$WORK/back.ngc" "axis X's max switch (input x_max_ok on module io1) reads 0"
 sleep 0.3
 expect_refused enable_cut "is latched: FAULT_RESET first" "${CTL[@]}" --do enable --timeout 5
 echo "cut $(now_us)" >>"$WORK/resets"

@@ -75,6 +75,11 @@ t0=$(date +%s.%N)
 "${CTL[@]}" --do run --program "$WORK/repeat.ngc" --timeout 60 >"$WORK/ctl1.out" 2>&1 ||
   { cat "$WORK/ctl1.out" >&2; tail -n 20 "$WORK/interpolator.log" >&2; fail "the probing program did not run to its end"; }
 note "20 probes in $(python3 -c "print(f'{$(date +%s.%N) - $t0:.1f}')") s"
+# The operator's view of the last probing move (G38.4 off the top, Z about -20).
+"${CTL[@]}" --do status --timeout 0.3 >"$WORK/status.out" 2>&1 || { cat "$WORK/status.out" >&2; fail "cnc-ctl --do status failed"; }
+grep "^probe:" "$WORK/status.out" >&2 || true
+grep -qE "^probe: input probe_tip 0; 22 probing moves, the last \(block [0-9]+\) tripped at X 100\.0000 Y 100\.0000 Z -(19\.9|20\.0)[0-9]{3}, rest at X 100\.0000 Y 100\.0000 Z -" "$WORK/status.out" ||
+  { cat "$WORK/status.out" >&2; fail "cnc-ctl --do status does not show the last probing result"; }
 /usr/bin/python3 - "$WORK/interpolator.log" "$WORK/servo-sim.log" <<'PY' || fail "the probe's trip positions are off the surface"
 import re, statistics, sys
 log = open(sys.argv[1]).read()
@@ -173,7 +178,7 @@ grep "^identical" "$WORK/replay.out" >&2 || fail "no verdict from cnc-replay"
 if "${CTL[@]}" --do run --program "$WORK/plunge.ngc" --timeout 30 >"$WORK/ctl5.out" 2>&1; then
   fail "a G1 into the fixture ran to its end"
 fi
-grep -q "fault: probe input probe_tip: contact during a move that is not a probing move (line 5)" "$WORK/interpolator.log" ||
+grep -q "fault: probe input probe_tip on module io1: contact during a move that is not a probing move (line 5)" "$WORK/interpolator.log" ||
   { tail -n 20 "$WORK/interpolator.log" >&2; fail "no fault naming the probe"; }
 sleep 0.3
 "${CTL[@]}" --do status --timeout 0.3 >"$WORK/status5.out" 2>&1 || true

@@ -804,7 +804,7 @@ TEST(BridgeNode, EstopBrakesThenDisablesAndStaysLatchedUntilResetAndEnable) {
   }
   ASSERT_GT(braking, 0u);
   EXPECT_LE(braking - edge, 2u) << "the input is read in the link's round and acted on in the next tick";
-  EXPECT_TRUE(c.alarmed("estop: E-stop: input estop_ok reads 0")) << ::testing::PrintToString(c.alarms);
+  EXPECT_TRUE(c.alarmed("estop: E-stop: input estop_ok on module io1 reads 0")) << ::testing::PrintToString(c.alarms);
   EXPECT_FALSE(c.link().vfd(3)->running()) << "the spindle stops with the E-stop";
   // A controlled stop within the stop deceleration and the jerk limit, never reversing.
   double vmax_after = 0;
@@ -824,7 +824,7 @@ TEST(BridgeNode, EstopBrakesThenDisablesAndStaysLatchedUntilResetAndEnable) {
   EXPECT_GT(dist, v0 * v0 / (2 * 2000)) << "no harder than the stop deceleration";
   // Standing: the drives disabled, the state published, nothing follows the setpoints.
   EXPECT_EQ(c.node.state(), State::kFault) << c.node.detail();
-  EXPECT_NE(c.node.detail().find("E-stop: input estop_ok reads 0"), std::string::npos) << c.node.detail();
+  EXPECT_NE(c.node.detail().find("E-stop: input estop_ok on module io1 reads 0"), std::string::npos) << c.node.detail();
   EXPECT_FALSE(c.link().drive(1)->follows());
   EXPECT_FALSE(c.link().drive(2)->follows());
   EXPECT_EQ(int{c.status.drive_state[0]}, kFault);
@@ -839,10 +839,10 @@ TEST(BridgeNode, EstopBrakesThenDisablesAndStaysLatchedUntilResetAndEnable) {
   // ENABLE and FAULT_RESET are refused while the input reads 0.
   c.command(cnc::lcmt_drive_command::ENABLE);
   c.hold_stream(rest, 10, 20);
-  EXPECT_TRUE(c.alarmed("enable_refused: ENABLE refused: E-stop input estop_ok reads 0"));
+  EXPECT_TRUE(c.alarmed("enable_refused: ENABLE refused: E-stop input estop_ok on module io1 reads 0"));
   c.command(cnc::lcmt_drive_command::FAULT_RESET);
   c.hold_stream(rest, 10, 5);
-  EXPECT_TRUE(c.alarmed("estop_reset_refused: FAULT_RESET refused: E-stop input estop_ok still reads 0"));
+  EXPECT_TRUE(c.alarmed("estop_reset_refused: FAULT_RESET refused: E-stop input estop_ok on module io1 still reads 0"));
   EXPECT_EQ(c.node.state(), State::kFault);
   EXPECT_FALSE(c.link().drive(1)->follows());
   // Released: still latched until the operator resets; ENABLE alone is refused.
@@ -853,7 +853,7 @@ TEST(BridgeNode, EstopBrakesThenDisablesAndStaysLatchedUntilResetAndEnable) {
   EXPECT_EQ(int{c.io.estop}, int{cnc::lcmt_io_status::ESTOP_RELEASED});
   c.command(cnc::lcmt_drive_command::ENABLE);
   c.hold_stream(rest, 10, 20);
-  EXPECT_TRUE(c.alarmed("enable_refused: ENABLE refused: the E-stop (input estop_ok) is latched"));
+  EXPECT_TRUE(c.alarmed("enable_refused: ENABLE refused: the E-stop (input estop_ok on module io1) is latched"));
   EXPECT_EQ(c.node.state(), State::kFault);
   EXPECT_FALSE(c.link().drive(1)->follows());
   EXPECT_NEAR(c.drive_mm(1), rest, 1e-9) << "nothing moved";
@@ -875,8 +875,8 @@ TEST(BridgeNode, EstopWireCutAtStartUpEnablesNothing) {
   c.ticks(40);
   EXPECT_EQ(c.node.state(), State::kFault) << c.node.detail();
   EXPECT_TRUE(c.node.ready());
-  EXPECT_TRUE(c.alarmed("enable_refused: ENABLE refused: E-stop input estop_ok reads 0"));
-  EXPECT_TRUE(c.alarmed("estop: E-stop: input estop_ok reads 0"));
+  EXPECT_TRUE(c.alarmed("enable_refused: ENABLE refused: E-stop input estop_ok on module io1 reads 0"));
+  EXPECT_TRUE(c.alarmed("estop: E-stop: input estop_ok on module io1 reads 0"));
   EXPECT_FALSE(c.link().drive(1)->follows());
   EXPECT_EQ(int{c.io.estop}, int{cnc::lcmt_io_status::ESTOP_DISABLED});
   c.command(cnc::lcmt_drive_command::ENABLE);
@@ -902,7 +902,34 @@ TEST(BridgeNode, EstopModuleThatStopsAnsweringIsAnEstop) {
   // Every transaction times out: the module (and the drives) stop answering.
   c.link().inject_timeouts(1000000);
   c.hold_stream(10, 10, 30);
-  EXPECT_TRUE(c.alarmed("estop: E-stop: module io1 of input estop_ok does not answer")) << ::testing::PrintToString(c.alarms);
+  EXPECT_TRUE(c.alarmed("estop: E-stop: input estop_ok on module io1 is not read: its module does not answer")) << ::testing::PrintToString(c.alarms);
+  c.link().inject_timeouts(0);
+}
+
+// The guard door's switch (1: shut): its alarms name the input and its module, and say
+// when the module does not answer rather than calling the door open.
+TEST(BridgeNode, DoorAlarmsNameTheInputAndItsModule) {
+  std::string y = kIo;
+  y.replace(y.find("  digital_inputs: [door]\n"), std::string("  digital_inputs: [door]\n").size(), "");
+  Cell c("sim", true, y + "safety: {door: {input: door}}\n");
+  drive::IoEmulator* m = c.link().io_module(4);
+  ASSERT_NE(m, nullptr);
+  ASSERT_TRUE(m->set_point("door", 1));
+  c.ticks(40);
+  ASSERT_EQ(int{c.io.door}, int{cnc::lcmt_io_status::DOOR_CLOSED});
+  ASSERT_TRUE(m->set_point("door", 0));
+  c.ticks(10);
+  EXPECT_EQ(int{c.io.door}, int{cnc::lcmt_io_status::DOOR_OPEN});
+  EXPECT_TRUE(c.alarmed("door_open: guard door: input door on module io1 reads 0 (open): feed hold"))
+      << ::testing::PrintToString(c.alarms);
+  ASSERT_TRUE(m->set_point("door", 1));
+  c.ticks(10);
+  EXPECT_TRUE(c.alarmed("door_closed: guard door: input door on module io1 reads 1 (shut)"))
+      << ::testing::PrintToString(c.alarms);
+  c.link().inject_timeouts(1000000);
+  c.ticks(400);
+  EXPECT_TRUE(c.alarmed("door_open: guard door: input door on module io1 is not read: its module does not answer"))
+      << ::testing::PrintToString(c.alarms);
   c.link().inject_timeouts(0);
 }
 
@@ -951,7 +978,7 @@ TEST(BridgeNode, HardLimitStopsDisablesAndOnlyAMoveAwayIsAllowedOnIt) {
   }
   ASSERT_GT(braking, 0u);
   EXPECT_LE(braking - edge, 2u) << "read in the link's round, acted on in the next tick";
-  EXPECT_TRUE(c.alarmed("hard_limit: hard limit: axis X's max switch (input x_max_ok) reads 0"))
+  EXPECT_TRUE(c.alarmed("hard_limit: hard limit: axis X's max switch (input x_max_ok on module io1) reads 0"))
       << ::testing::PrintToString(c.alarms);
   for (size_t i = braking + 1; i < mo.x.size(); ++i) {
     EXPECT_GE(mo.v(i), -1e-9) << "tick " << i;
@@ -963,7 +990,7 @@ TEST(BridgeNode, HardLimitStopsDisablesAndOnlyAMoveAwayIsAllowedOnIt) {
   EXPECT_GT(dist, v0 * v0 / (2 * 2000)) << "no harder than the stop deceleration";
   // Standing: a fault naming the axis, the end and the input; the drives disabled.
   EXPECT_EQ(c.node.state(), State::kFault) << c.node.detail();
-  EXPECT_NE(c.node.detail().find("axis X's max switch (input x_max_ok)"), std::string::npos) << c.node.detail();
+  EXPECT_NE(c.node.detail().find("axis X's max switch (input x_max_ok on module io1)"), std::string::npos) << c.node.detail();
   EXPECT_FALSE(c.link().drive(1)->follows());
   EXPECT_FALSE(c.link().drive(2)->follows());
   EXPECT_EQ(int{c.io.limit}, int{cnc::lcmt_io_status::LIMIT_DISABLED});
@@ -977,7 +1004,7 @@ TEST(BridgeNode, HardLimitStopsDisablesAndOnlyAMoveAwayIsAllowedOnIt) {
   // ENABLE alone is refused: latched until the operator's FAULT_RESET (allowed on the switch).
   c.command(cnc::lcmt_drive_command::ENABLE);
   c.hold_stream(rest, 10, 20);
-  EXPECT_TRUE(c.alarmed("enable_refused: ENABLE refused: the hard limit (axis X's max switch (input x_max_ok)) is latched"))
+  EXPECT_TRUE(c.alarmed("enable_refused: ENABLE refused: the hard limit (axis X's max switch (input x_max_ok on module io1)) is latched"))
       << ::testing::PrintToString(c.alarms);
   EXPECT_FALSE(c.link().drive(1)->follows());
   EXPECT_NEAR(c.drive_mm(1), rest, 1e-9) << "nothing moved";
@@ -997,7 +1024,7 @@ TEST(BridgeNode, HardLimitStopsDisablesAndOnlyAMoveAwayIsAllowedOnIt) {
   EXPECT_FALSE(c.alarmed("hard_limit")) << ::testing::PrintToString(c.alarms);
   // Towards it again while it still reads 0: refused at the first setpoint, a stop and a fault.
   c.move_x_smooth(away, away + 0.5);
-  EXPECT_TRUE(c.alarmed("hard_limit_refused: hard limit: axis X's max switch (input x_max_ok) reads 0: setpoint cycle"))
+  EXPECT_TRUE(c.alarmed("hard_limit_refused: hard limit: axis X's max switch (input x_max_ok on module io1) reads 0: setpoint cycle"))
       << ::testing::PrintToString(c.alarms);
   EXPECT_NE(c.node.state(), State::kEnabled) << c.node.detail();
   EXPECT_LE(c.node.core().commanded()[0], away + 1e-3) << "nothing of the move towards it was followed";
@@ -1026,7 +1053,7 @@ TEST(BridgeNode, HardLimitWireCutWhileMovingAwayIsATrip) {
   ASSERT_TRUE(c.link().io_module(4)->set_point("x_min_ok", 0));
   x = c.move_x(x, x + 1);
   c.hold_stream(x, 10, 60);
-  EXPECT_TRUE(c.alarmed("hard_limit: hard limit: axis X's min switch (input x_min_ok) reads 0"))
+  EXPECT_TRUE(c.alarmed("hard_limit: hard limit: axis X's min switch (input x_min_ok on module io1) reads 0"))
       << ::testing::PrintToString(c.alarms);
   EXPECT_EQ(c.node.state(), State::kFault) << c.node.detail();
   EXPECT_FALSE(c.link().drive(1)->follows());
@@ -1039,7 +1066,7 @@ TEST(BridgeNode, HardLimitSetpointsTheBridgeWaitsOnSetNoBound) {
   c.ticks(40);
   ASSERT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
   c.hold_stream(10.5, 10, 10);  // towards the switch: not joined, no fault
-  EXPECT_TRUE(c.alarmed("hard_limit_not_joined: hard limit: axis X's max switch (input x_max_ok) reads 0: a setpoint "
+  EXPECT_TRUE(c.alarmed("hard_limit_not_joined: hard limit: axis X's max switch (input x_max_ok on module io1) reads 0: a setpoint "
                         "stream at 10.5000 mm, towards it from 10.0000 mm, is not joined"))
       << ::testing::PrintToString(c.alarms);
   c.hold_stream(9.5, 10, 10);    // away from it: waited on (too far to join), no bound

@@ -310,6 +310,9 @@ TEST(MachineConfig, SafetySection) {
   const MachineConfig c = parse_machine_config(sim3_text() + io + "safety: {estop: {input: estop_ok}}\n", kLabel);
   ASSERT_TRUE(c.safety.enabled());
   EXPECT_EQ(c.io.points[static_cast<size_t>(c.safety.estop_input)].name, "estop_ok");
+  // How alarms name it: the point and its module, both by their config names.
+  EXPECT_EQ(c.io.point_label(c.safety.estop_input), "estop_ok on module " + c.io.modules[0].name);
+  EXPECT_EQ(c.io.point_label(-1), "(no such point)");
   EXPECT_FALSE(parse_machine_config(sim3_text() + io + "safety: {}\n", kLabel).safety.enabled());
   EXPECT_TRUE(load_machine_config(std::string(CNC_SOURCE_DIR) + "/config/machines/sim3_safety.yaml").safety.enabled());
   const MachineConfig g = load_machine_config(std::string(CNC_SOURCE_DIR) + "/config/machines/sim3_guarded.yaml");

@@ -14,6 +14,7 @@
 #include "common/util/clock.h"
 #include "common/util/install.h"
 #include "common/util/signals.h"
+#include "common/service/machine_status.h"
 
 namespace cnc::ctl {
 
@@ -73,6 +74,17 @@ Ctl::Ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& args)
       }
     }
   });
+  // The machine's devices, for status (their channels exist with their config sections).
+  if (what_ == "status") {
+    bus_.subscribe<cnc::lcmt_spindle_status>(cfg.channel(ch::kSpindleStatus), [this](const auto& m) {
+      view_.spindle = m;
+      view_.have_spindle = true;
+    });
+    bus_.subscribe<cnc::lcmt_io_status>(cfg.channel(ch::kIoStatus), [this](const auto& m) {
+      view_.io = m;
+      view_.have_io = true;
+    });
+  }
   bus_.subscribe<cnc::lcmt_alarm>(cfg.channel(ch::kAlarm), [this](const auto& m) {
     view_.alarms.push_back(m);
     std::fprintf(stderr, "ALARM %s [%s] %s\n", m.source.c_str(), m.code.c_str(), m.text.c_str());
@@ -271,6 +283,12 @@ int Ctl::status() {
     std::printf("\n");
   }
   if (view_.have_program) std::printf("block delete %s\n", view_.program.block_delete ? "on" : "off");
+  cnc::service::MachineView machine;
+  machine.spindle = view_.have_spindle ? &view_.spindle : nullptr;
+  machine.io = view_.have_io ? &view_.io : nullptr;
+  machine.axes = view_.have_axes ? &view_.axes : nullptr;
+  machine.interp = view_.have_interp ? &view_.interp : nullptr;
+  std::fputs(cnc::service::machine_status(cfg_, machine).c_str(), stdout);
   std::printf("cnc-ctl %s: %zu services heard in %.1f s\n", cnc::util::version(), view_.heartbeats.size(), now - t0);
   return view_.heartbeats.empty() ? kExitTimeout : 0;
 }

@@ -12,7 +12,9 @@
 #include "cnc/lcmt_heartbeat.hpp"
 #include "cnc/lcmt_interp_state.hpp"
 #include "cnc/lcmt_command_answers.hpp"
+#include "cnc/lcmt_io_status.hpp"
 #include "cnc/lcmt_program_state.hpp"
+#include "cnc/lcmt_spindle_status.hpp"
 #include "common/bus/bus.h"
 #include "common/config/machine_config.h"
 #include "common/service/service.h"
@@ -31,6 +33,10 @@ struct CellView {
   bool have_interp = false;
   cnc::lcmt_axis_status axes{};
   bool have_axes = false;
+  cnc::lcmt_spindle_status spindle{};
+  bool have_spindle = false;
+  cnc::lcmt_io_status io{};
+  bool have_io = false;
   std::vector<cnc::lcmt_alarm> alarms;
 };
 
