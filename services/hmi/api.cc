@@ -14,6 +14,7 @@
 #include "cnc/lcmt_program_block.hpp"
 #include "cnc/lcmt_program_command.hpp"
 #include "common/motion/feed_override.h"
+#include "common/service/machine_status.h"
 #include "common/util/clock.h"
 #include "common/util/install.h"
 #include "services/hmi/programs.h"
@@ -384,6 +385,16 @@ void Api::subscribe() {
     setpoint_ = m;
     have_setpoint_ = true;
   });
+  if (cfg_.spindle.enabled)
+    bus_.subscribe<lcmt_spindle_status>(cfg_.channel(ch::kSpindleStatus), [this](const auto& m) {
+      spindle_ = m;
+      have_spindle_ = true;
+    });
+  if (cfg_.io.enabled)
+    bus_.subscribe<lcmt_io_status>(cfg_.channel(ch::kIoStatus), [this](const auto& m) {
+      io_ = m;
+      have_io_ = true;
+    });
   bus_.subscribe<lcmt_heartbeat>(cfg_.channel(ch::kHeartbeat),
                                  [this](const auto& m) { services_[m.service] = Seen{m, util::monotonic_s()}; });
   bus_.subscribe<lcmt_program_block>(cfg_.channel(ch::kProgramBlocks), [this](const auto& m) {
@@ -449,7 +460,8 @@ void Api::open(uint64_t client, bool may_control, const std::string& user) {
                         {"unavailable", json::array()},
                         {"status_rate_hz", cfg_.hmi.status_rate_hz},
                         // The feed slider's top: the largest override the cell accepts.
-                        {"max_feed_override", motion::kMaxFeedOverride}});
+                        {"max_feed_override", motion::kMaxFeedOverride},
+                        {"devices", devices()}});
   out_.send_to(client, program_msg_);
   if (!preview_msg_.is_null()) out_.send_to(client, preview_msg_);
   json list = json::array();
@@ -728,9 +740,106 @@ json Api::status(double now, int64_t login_refusals, int clients) const {
                 {"age", std::round((now - seen.at_s) * 100) / 100},
                 {"lost", now - seen.at_s > cfg_.heartbeat_timeout_s}};
   s["services"] = sv;
+  if (cfg_.spindle.enabled || cfg_.io.enabled) s["machine"] = machine();
   s["login_refusals"] = login_refusals;
   s["clients"] = clients;
   return s;
+}
+
+// What the machine has, from the config: the spindle's override range, every I/O point
+// with its module and role (status sends their values in this order), the safety
+// chain's and the probe's inputs.
+json Api::devices() const {
+  json d = json::object();
+  if (cfg_.spindle.enabled)
+    d["spindle"] = {{"max_rpm", cfg_.spindle.max_rpm},
+                    {"min_override", cfg_.spindle.min_override},
+                    {"max_override", cfg_.spindle.max_override}};
+  if (!cfg_.io.enabled) return d;
+  static const char* const kKinds[] = {"digital out", "digital in", "analog in", "analog out"};
+  const std::vector<std::string> roles = service::point_roles(cfg_);
+  json points = json::array();
+  for (size_t p = 0; p < cfg_.io.points.size(); ++p) {
+    const auto& pc = cfg_.io.points[p];
+    points.push_back({{"name", pc.name},
+                      {"kind", kKinds[static_cast<int>(pc.kind)]},
+                      {"module", cfg_.io.modules[static_cast<size_t>(pc.module)].name},
+                      {"role", roles[p]}});
+  }
+  d["points"] = points;
+  d["coolant"] = {{"mist", cfg_.io.coolant_mist >= 0}, {"flood", cfg_.io.coolant_flood >= 0}};
+  auto label = [&](int point) { return point >= 0 ? json(cfg_.io.point_label(point)) : json(nullptr); };
+  d["estop_input"] = label(cfg_.safety.estop_input);
+  d["door_input"] = label(cfg_.safety.door_input);
+  d["hard_limits"] = !cfg_.safety.hard_limits.empty();
+  d["probe_input"] = label(cfg_.probe.input);
+  return d;
+}
+
+// Where the devices stand: the spindle, the coolant, each point's value (null: not
+// read), the safety chain, the probe and its last result, an M66 wait.
+json Api::machine() const {
+  json m = json::object();
+  if (have_spindle_) {
+    static const char* const kStates[] = {"starting", "stopped", "running", "fault"};
+    m["spindle"] = {{"state", spindle_.state >= 0 && spindle_.state <= 3 ? kStates[spindle_.state] : "?"},
+                    {"direction", spindle_.direction},
+                    {"commanded_rpm", fin(spindle_.commanded_rpm)},
+                    {"actual_rpm", fin(spindle_.actual_rpm)},
+                    {"at_speed", spindle_.command_seq > 0 && spindle_.at_speed_seq == spindle_.command_seq},
+                    {"load_a", fin(spindle_.current_a)},
+                    {"error_code", spindle_.error_code},
+                    {"fault", spindle_.fault}};
+  }
+  if (have_io_) {
+    m["coolant"] = {{"mist", (io_.coolant & 1) != 0}, {"flood", (io_.coolant & 2) != 0}};
+    json values = json::array();
+    for (int p = 0; p < io_.num_points; ++p) {
+      const size_t i = static_cast<size_t>(p);
+      values.push_back(io_.valid[i] ? json(fin(io_.value[i])) : json(nullptr));
+    }
+    m["points"] = values;
+    json modules = json::array();
+    for (int k = 0; k < io_.num_modules; ++k)
+      modules.push_back({{"name", io_.module[static_cast<size_t>(k)]}, {"answering", io_.answering[static_cast<size_t>(k)] != 0}});
+    m["modules"] = modules;
+    static const char* const kEstop[] = {"none", "ok", "tripped", "disabled", "released"};
+    static const char* const kLimit[] = {"none", "ok", "tripped", "disabled", "on_switch"};
+    static const char* const kDoor[] = {"none", "closed", "open"};
+    m["estop"] = io_.estop >= 0 && io_.estop <= 4 ? kEstop[io_.estop] : "?";
+    m["estop_stop_ms"] = fin(io_.estop_stop_ms);
+    m["limit"] = io_.limit >= 0 && io_.limit <= 4 ? kLimit[io_.limit] : "?";
+    m["limit_input"] = io_.limit_input;
+    m["door"] = io_.door >= 0 && io_.door <= 2 ? kDoor[io_.door] : "?";
+  }
+  if (cfg_.probe.enabled() && have_axes_) m["probe"] = axes_.probe;
+  if (have_interp_) {
+    if (interp_.probe_results > 0) {
+      json trip = json::array(), rest = json::array();
+      for (int a = 0; a < interp_.num_probe_axes; ++a) {
+        trip.push_back(fin(interp_.probe_trip_mm[static_cast<size_t>(a)]));
+        rest.push_back(fin(interp_.probe_rest_mm[static_cast<size_t>(a)]));
+      }
+      m["probe_result"] = {{"results", interp_.probe_results},
+                           {"block", interp_.probe_block},
+                           {"tripped", interp_.probe_tripped != 0},
+                           {"trip", trip},
+                           {"rest", rest}};
+    }
+    if (interp_.input_waiting) {
+      const program::InputWait w = program::InputWait::of(interp_.input_wait);
+      static const char* const kModes[] = {"immediate", "rise", "fall", "high", "low"};
+      const std::vector<int>& list = w.analog ? cfg_.io.analog_inputs : cfg_.io.digital_inputs;
+      const int point = static_cast<size_t>(w.index) < list.size() ? list[static_cast<size_t>(w.index)] : -1;
+      m["input_wait"] = {{"input", (w.analog ? "E" : "P") + std::to_string(w.index)},
+                         {"name", point >= 0 ? cfg_.io.points[static_cast<size_t>(point)].name : "?"},
+                         {"mode", w.mode >= 0 && w.mode <= 4 ? kModes[w.mode] : "?"},
+                         {"left_s", fin(interp_.input_wait_left_s)}};
+    } else if (interp_.input_results > 0) {
+      m["input_result"] = {{"block", interp_.input_block}, {"value", fin(interp_.input_value)}};
+    }
+  }
+  return m;
 }
 
 }  // namespace cnc::hmi

@@ -19,8 +19,10 @@
 #include "cnc/lcmt_axis_status.hpp"
 #include "cnc/lcmt_heartbeat.hpp"
 #include "cnc/lcmt_interp_state.hpp"
+#include "cnc/lcmt_io_status.hpp"
 #include "cnc/lcmt_program_state.hpp"
 #include "cnc/lcmt_setpoint.hpp"
+#include "cnc/lcmt_spindle_status.hpp"
 #include "common/bus/bus.h"
 #include "common/config/machine_config.h"
 #include "common/program/block.h"
@@ -111,6 +113,9 @@ class Api {
   };
 
   void subscribe();
+  // The machine's devices: what they are (hello) and where they stand (status).
+  nlohmann::json devices() const;
+  nlohmann::json machine() const;
   void on_alarm(const nlohmann::json& a);
 
   // The handlers of the table.
@@ -159,6 +164,10 @@ class Api {
   bool have_program_ = false;
   lcmt_setpoint setpoint_{};
   bool have_setpoint_ = false;
+  lcmt_spindle_status spindle_{};
+  bool have_spindle_ = false;
+  lcmt_io_status io_{};
+  bool have_io_ = false;
   std::map<std::string, Seen> services_;
   std::vector<nlohmann::json> alarm_history_;  // every alarm (its index matters), the newest kAlarmsKept shown
   size_t alarms_total_ = 0;

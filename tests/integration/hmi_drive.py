@@ -278,6 +278,33 @@ try:
         wait_result(n0, "rapid_override sent", 10)
         # The cell reports it back (INTERP_STATE.rapid_override), shown beside the slider.
         wait("the cell's rapid override %d %%" % pct, lambda: text("rapid-override-cell") == "%d %%" % pct, 5)
+    # 8c. The machine panel (a spindle, the I/O module io1 with the E-stop and the door):
+    #     the program's M3 S6000 M8 shown; the spindle override slider sends
+    #     SPINDLE_OVERRIDE (80 %: 4800 rpm commanded, back to 100 %); the safety chain
+    #     and every I/O point by its config name with its value.
+    wait("the spindle at 6000 rpm", lambda: text("spindle-dir") == "forward (M3)" and text("spindle-cmd") == "6000"
+         and abs((num("spindle-actual") or 0) - 6000) < 150, 10)
+    wait("flood coolant on", lambda: text("coolant-flood") == "on" and text("coolant-mist") == "off", 5)
+    for pct, rpm in ((80, "4800"), (100, "6000")):
+        n0 = n_results()
+        driver.execute_script("const s = document.getElementById('spindle-override'); s.value = arguments[0];"
+                              "s.dispatchEvent(new Event('input')); s.dispatchEvent(new Event('change'));", pct)
+        wait_result(n0, "spindle_override sent", 10)
+        wait("the cell's spindle override %d %%" % pct, lambda: text("spindle-override-cell") == "%d %%" % pct, 5)
+        wait("the spindle commanded %s rpm" % rpm, lambda: text("spindle-cmd") == rpm, 5)
+    for el_id, want in (("safety-estop", "E-stop ok"), ("safety-door", "door closed")):
+        if text(el_id) != want:
+            fail(f"the machine panel's {el_id} reads {text(el_id)!r}, expected {want!r}")
+    io = driver.execute_script("return [...document.querySelectorAll('#io-body tr')].map("
+                               "r => [...r.children].map(c => c.textContent));")
+    rows = {r[0]: r for r in io}
+    if len(io) != 4 or rows.get("estop_ok", [None] * 5)[1:] != ["digital in", "1", "io1", "E-stop"] or \
+            rows.get("coolant_flood", [None] * 5)[1:] != ["digital out", "1", "io1", "M8 flood"] or \
+            rows.get("door_closed", [None] * 5)[4] != "door":
+        fail(f"the I/O points on the page: {io}")
+    note(f"machine panel: spindle {text('spindle-actual')} rpm {text('spindle-at-speed')}, load {text('spindle-load')} A,"
+         f" override 80 % -> 4800 rpm and back, flood on, {len(io)} I/O points named, safety chain shown")
+    shot("05b-machine")
 
     # 9. Stop.
     effect("stop_click_to_stopped", "btn-stop", "state-program", "contains", "stopped", timeout_s=10)

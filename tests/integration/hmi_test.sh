@@ -10,7 +10,8 @@
 # outside (DRIVE_CMD DISABLE) shown in the alarm list, reset; the session's run listed
 # (programs, alarms) and its report made and opened from the page; a second cnc-hmi
 # with read_only_without_login: the page without a login shows the machine and
-# refuses actions. Timings from the click to the change on the page and the position
+# refuses actions; the machine panel (a spindle and an I/O module: the program's M3 S6000
+# M8, the spindle override slider, the E-stop and door, every I/O point by name). Timings from the click to the change on the page and the position
 # display rate, measured in the page; screenshots in
 # BUILD/test-output/hmi/ (timings.json beside them).
 #   hmi_test.sh BUILD_DIR SOURCE_DIR
@@ -24,7 +25,30 @@ trap 'cleanup' EXIT
 /usr/bin/python3 -c 'import selenium' 2>/dev/null || fail "python3-selenium is not installed (./cnc installs it: PACKAGES)"
 rm -rf "$OUT" && mkdir -p "$OUT"
 
-make_machine "$SRC/config/machines/sim3.yaml" "$WORK/base.yaml"
+# sim3 with a spindle and a small I/O module (the coolant, the E-stop, the guard door)
+# for the page's machine panel: few points, so that IO_STATUS (every T_ipo) adds
+# little to the session's log, which the runs list and the report read.
+{ cat "$SRC/config/machines/sim3.yaml"; cat <<'EOF3'
+
+spindle:
+  drive: {transport: modbus_tcp, host: 127.0.0.1, port: 1502, unit_id: 4, profile: delta_vfd}
+  at_speed_tolerance: 0.02
+  sim: {time_constant_s: 0.1}   # each start's at-speed wait about 0.4 s
+io:
+  modules:
+    - {name: io1, transport: modbus_tcp, host: 127.0.0.1, port: 1502, unit_id: 5}
+  points:
+    - {name: coolant_mist, module: io1, kind: coil, address: 0}
+    - {name: coolant_flood, module: io1, kind: coil, address: 1}
+    - {name: door_closed, module: io1, kind: discrete_input, address: 1}
+    - {name: estop_ok, module: io1, kind: discrete_input, address: 2}
+  coolant: {mist: coolant_mist, flood: coolant_flood}
+safety:
+  estop: {input: estop_ok}
+  door: {input: door_closed}
+EOF3
+} >"$WORK/src.yaml"
+make_machine "$WORK/src.yaml" "$WORK/base.yaml"
 M="$WORK/machine.yaml"
 # Home switches on the simulated axes (X homes on its switch from the page), homing not required.
 /usr/bin/python3 "$SRC/tests/integration/operator_machine.py" "$WORK/base.yaml" "$M" "$WORK/mdi"
@@ -32,7 +56,7 @@ sed -i 's/homing_required: true/homing_required: false/' "$M"
 mkdir -p "$WORK/programs" "$WORK/mdi"
 cat >"$WORK/programs/square.ngc" <<'NGC'
 G21 G90 G17 G54
-G0 X20 Y10 Z2
+G0 X20 Y10 Z2 M3 S6000 M8
 G1 Z-1 F600
 G1 X40
 G1 Y50
@@ -100,6 +124,11 @@ grep -q "login refused for user 'operator'" "$WORK/up.log" || fail "the refused 
 grep -q "login refused for user 'nobody'" "$WORK/up.log" || fail "the refused unknown user is not in the log"
 "$BUILD/tools/cnc-ctl" --machine "$M" --do status >"$WORK/status.out" 2>&1 || true
 grep -q '^cnc-hmi ' "$WORK/status.out" || { cat "$WORK/status.out" >&2; fail "cnc-ctl --do status does not list cnc-hmi"; }
+# ... and the machine's devices: the spindle, the safety chain by its inputs.
+for want in '^spindle: ' '^E-stop: OK, input estop_ok reads 1$' '^door: shut, input door_closed reads 1$' \
+    '^io coolant_flood +digital out 0 +io1 \(M8 flood\)$'; do
+  grep -qE "$want" "$WORK/status.out" || { cat "$WORK/status.out" >&2; fail "cnc-ctl --do status: no line $want"; }
+done
 stop hmi-view TERM
 stop up TERM
 grep -q "cnc-hmi: stopped (1 logins, 2 refused)" "$WORK/up.log" || { grep cnc-hmi "$WORK/up.log" >&2; fail "cnc-hmi's count of logins is not 1 accepted, 2 refused"; }

@@ -50,6 +50,7 @@ const handlers = {
   hello(m) {
     S.axes = m.axes; S.mayControl = m.may_control; S.unavailable = m.unavailable || [];
     if (typeof m.max_feed_override === 'number') $('feed-override').max = Math.round(m.max_feed_override * 100);
+    buildMachine(m.devices || {});
     $('machine').textContent = `${m.machine} · cnc-hmi ${m.version}`;
     $('who').textContent = m.may_control ? (m.login ? `user ${m.user}` : 'local') : 'view only';
     $('logout').hidden = !m.login;
@@ -119,6 +120,7 @@ const handlers = {
       ['sw-block-delete', pg.block_delete]]) {
       if (typeof on === 'boolean' && document.activeElement !== $(id)) $(id).checked = on;
     }
+    showMachine(m.machine, it);
     const line = typeof m.line === 'number' && m.line_in_program !== false ? m.line : -1;
     $('line-no').textContent = line >= 0 ? line : '—';
     highlight(line);
@@ -214,6 +216,89 @@ const handlers = {
     }
   },
 };
+
+// The machine panel (spindle, coolant, safety chain, probe, M66, I/O points): built from
+// hello's devices, filled from each status's machine.
+function buildMachine(d) {
+  S.devices = d;
+  $('machine-panel').hidden = !d.spindle && !d.points;
+  $('spindle-box').hidden = !d.spindle;
+  if (d.spindle) {
+    $('spindle-override').min = Math.round(d.spindle.min_override * 100);
+    $('spindle-override').max = Math.round(d.spindle.max_override * 100);
+  }
+  $('coolant-box').hidden = !(d.coolant && (d.coolant.mist || d.coolant.flood));
+  $('probe-box').hidden = !d.probe_input;
+  const body = $('io-body'); body.innerHTML = '';
+  (d.points || []).forEach((p, i) => {
+    const tr = document.createElement('tr'); tr.id = `io-${p.name}`;
+    for (const [k, v] of [['name', p.name], ['kind', p.kind], ['value', '—'], ['module', p.module], ['role', p.role]]) {
+      const td = document.createElement('td'); td.textContent = v;
+      if (k === 'value') td.id = `io-value-${i}`;
+      tr.appendChild(td);
+    }
+    body.appendChild(tr);
+  });
+}
+
+function showMachine(mc, it) {
+  const d = S.devices || {};
+  if (!mc) return;
+  const sp = mc.spindle;
+  if (sp) {
+    $('spindle-dir').textContent = sp.direction > 0 ? 'forward (M3)' : sp.direction < 0 ? 'reverse (M4)' : 'off (M5)';
+    $('spindle-state').textContent = sp.fault ? `fault: ${sp.fault}` : sp.state;
+    $('spindle-state').className = 'badge ' + (sp.state === 'fault' ? 'bad' : sp.state === 'running' ? 'ok' : '');
+    $('spindle-actual').textContent = sp.actual_rpm.toFixed(0);
+    $('spindle-cmd').textContent = sp.commanded_rpm.toFixed(0);
+    $('spindle-at-speed').textContent = sp.at_speed ? 'at speed' : 'not at speed';
+    $('spindle-load').textContent = sp.load_a.toFixed(2);
+  }
+  if (typeof it.spindle_override === 'number') {
+    const pct = Math.round(it.spindle_override * 100);
+    $('spindle-override-cell').textContent = `${pct} %${it.spindle_override_enabled === false ? ' (off: M51 P0)' : ''}`;
+    if (document.activeElement !== $('spindle-override')) {
+      $('spindle-override').value = pct;
+      $('spindle-override-out').textContent = `${pct} %`;
+    }
+  }
+  if (mc.coolant) {
+    $('coolant-mist').textContent = mc.coolant.mist ? 'on' : 'off';
+    $('coolant-flood').textContent = mc.coolant.flood ? 'on' : 'off';
+  }
+  const sf = $('safety-box'); sf.innerHTML = '';
+  const badge = (id, text, cls, title) => {
+    const b = document.createElement('b'); b.id = id; b.textContent = text; b.className = 'badge ' + cls;
+    if (title) b.title = title;
+    sf.appendChild(b);
+  };
+  if (d.estop_input && mc.estop) badge('safety-estop', `E-stop ${mc.estop}`, mc.estop === 'ok' ? 'ok' : 'bad', d.estop_input);
+  if (d.door_input && mc.door) badge('safety-door', `door ${mc.door}`, mc.door === 'closed' ? 'ok' : 'warn', d.door_input);
+  if (d.hard_limits && mc.limit) {
+    badge('safety-limit', `limits ${mc.limit}${mc.limit_input ? ' (' + mc.limit_input + ')' : ''}`,
+      mc.limit === 'ok' ? 'ok' : 'bad');
+  }
+  if (d.probe_input) {
+    $('probe-input').textContent = `${d.probe_input} ${mc.probe === 1 ? 'touching' : mc.probe === 0 ? 'open' : 'not read'}`;
+    const r = mc.probe_result;
+    const at = (v) => v.map((x, i) => `${(S.axes[i] || {}).name || i} ${x.toFixed(4)}`).join(' ');
+    $('probe-result').textContent = !r ? 'no probing result'
+      : `last probing (block ${r.block}, ${r.results} in all): ${r.tripped ? 'tripped at ' + at(r.trip) : 'no contact'}, rest at ${at(r.rest)}`;
+  }
+  const w = mc.input_wait;
+  $('input-wait').hidden = !w && !mc.input_result;
+  $('input-wait').textContent = w
+    ? `M66 waits on ${w.input} (${w.name}), mode ${w.mode}, ${w.left_s >= 0 ? w.left_s.toFixed(1) + ' s left' : 'no timeout'}`
+    : mc.input_result ? `M66 last read (block ${mc.input_result.block}): #5399 = ${mc.input_result.value}` : '';
+  (mc.points || []).forEach((v, i) => {
+    const td = $(`io-value-${i}`);
+    if (!td) return;
+    const p = d.points[i];
+    const digital = p.kind.startsWith('digital');
+    td.textContent = v === null ? '?' : digital ? String(v) : String(Number(Number(v).toPrecision(4)));
+    td.className = v === null ? 'unread' : digital && v ? 'on' : '';
+  });
+}
 
 function addAlarm(a) {
   const tr = document.createElement('tr');
@@ -402,6 +487,9 @@ function wire() {
   const rapid = $('rapid-override');
   rapid.addEventListener('input', () => { $('rapid-override-out').textContent = `${rapid.value} %`; });
   rapid.addEventListener('change', () => send('rapid_override', { value: Number(rapid.value) / 100 }));
+  const spindle = $('spindle-override');
+  spindle.addEventListener('input', () => { $('spindle-override-out').textContent = `${spindle.value} %`; });
+  spindle.addEventListener('change', () => send('spindle_override', { value: Number(spindle.value) / 100 }));
 }
 
 window.addEventListener('DOMContentLoaded', () => { wire(); drawPreview(null); connect(); });
