@@ -124,7 +124,11 @@ void InterpolatorNode::program_withdrawn(const cnc::lcmt_program_state& m) {
   if (s != RunState::kRunning && s != RunState::kHeld && s != RunState::kStarved) return;
   const std::string text = "program " + program_path_ + " withdrawn by the program server: " + m.error;
   spdlog::error("{}: the program stops", text);
-  alarm(cnc::lcmt_alarm::FAULT, "program_withdrawn", text);
+  stop_program("program_withdrawn", text);
+}
+
+void InterpolatorNode::stop_program(const char* code, const std::string& text) {
+  alarm(cnc::lcmt_alarm::FAULT, code, text);
   cnc::lcmt_program_command stop{};
   stop.command = cnc::lcmt_program_command::STOP;
   apply_command(Command{Command::Kind::kStop, 1.0, {}}, stop);

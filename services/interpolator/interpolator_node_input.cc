@@ -46,12 +46,7 @@ void InterpolatorNode::input_cycle() {
                                std::to_string(w.wait.index) + " waits on input " + cfg_.io.point_label(static_cast<int>(point)) +
                                ", which is not read (no fresh IO_STATUS, or its module does not answer)";
       spdlog::error("{}: the program stops", text);
-      alarm(cnc::lcmt_alarm::FAULT, "input", text);
-      cnc::lcmt_program_command stop{};
-      stop.command = cnc::lcmt_program_command::STOP;
-      apply_command(Command{Command::Kind::kStop, 1.0, {}}, stop);
-      token_ = 0;
-      reorder_.clear();
+      stop_program("input", text);
     }
     return;
   }

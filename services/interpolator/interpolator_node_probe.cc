@@ -19,12 +19,7 @@ bool active(RunState s) { return s == RunState::kRunning || s == RunState::kHeld
 void InterpolatorNode::probe_stop(const std::string& why) {
   const std::string text = probe_.file + ":" + std::to_string(probe_.line) + ": " + why;
   spdlog::error("probe: {}: the program stops", text);
-  alarm(cnc::lcmt_alarm::FAULT, "probe", text);
-  cnc::lcmt_program_command stop{};
-  stop.command = cnc::lcmt_program_command::STOP;
-  apply_command(Command{Command::Kind::kStop, 1.0, {}}, stop);
-  token_ = 0;
-  reorder_.clear();
+  stop_program("probe", text);
   probe_.decided = true;
 }
 

@@ -132,7 +132,14 @@ svc logger
 sleep 1
 [ "$(ls /var/lib/cnc/runs/*.lcmlog | wc -l)" -ge 2 ] || fail "the restarted logger wrote no new file: $(ls /var/lib/cnc/runs)"
 # The interpolator (Restart=on-failure) comes back into a state where nothing moves until RESET.
+# systemd starts it again RestartSec after the crash (the unit's 1 s): the drive bridge's
+# watchdog has stopped the axes and faulted by then, so START is refused until RESET.
+# Started again at once (no RestartSec), the new interpolator's stream came 44 ms after
+# the old one's last setpoint, within the 50 ms watchdog, and the bridge joined it.
+restart_s=$(sed -n 's/^RestartSec=//p' /usr/lib/systemd/system/cnc@.service)
+[ -n "$restart_s" ] || fail "cnc@.service sets no RestartSec"
 kill_hard interpolator
+sleep "$restart_s"
 svc interpolator
 sleep 1.5
 rc=0; ctl --do run --program /usr/share/cnc/config/programs/lines.ngc --timeout 30 >"$WORK/after-kill.txt" 2>&1 || rc=$?
