@@ -61,9 +61,14 @@ def main():
     # Rest: the first tick from which the command moves less than 1 um in 50 ticks (the
     # limiter's last approach onto the stop point creeps).
     rest = next(k for k in range(k_cause, len(x) - 50) if all(abs(x[m] - x[k]) < 1e-3 for m in range(k, k + 50)))
-    # The onset: the earliest tick from which the speed falls monotonically to rest.
+    # The onset: the earliest tick from which the speed falls monotonically to rest, and
+    # not before the cause (20 ticks for the two clocks' offset): a cruise whose speed the
+    # playback's rate slewed down by hundredths of a mm/s is no stop, yet the search from
+    # 200 ticks back walked into one and took a playback dip there for the onset (braking
+    # "began -182 ms after the cause", distance 49.9 mm: fault_reset and three_hosts in a
+    # fresh clone, each once, where the stop itself was 12.4 mm from 200 mm/s, as bound).
     onset = rest
-    while onset > k_cause - 200 and s[onset - 1] >= s[onset] - 1e-9:
+    while onset > k_cause - 20 and s[onset - 1] >= s[onset] - 1e-9:
         onset -= 1
     while onset < rest and not is_onset(onset):
         onset += 1
