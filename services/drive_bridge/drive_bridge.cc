@@ -363,6 +363,41 @@ bool BridgeCore::hold() {
   return true;
 }
 
+double BridgeCore::catch_up_cap() const {
+  // Played back at rate r, the stream's velocity becomes r·v and its acceleration
+  // r²·a + ṙ·v. A rate above 1 must come back to 1 (at kRateSlewPerTick) before the
+  // stream reaches its limits, so it is allowed only where, over that time T, the
+  // stream (its jerk within the axis's limit J) stays below them: |v| + |a|·T + J·T²/2
+  // for the velocity, |a| + J·T for the acceleration. Made up at 5 % while a stop
+  // braked at the limit, the reference asked 1.1 times the deceleration the limiter
+  // may command, and an A axis stopped 0.63 deg past its end point.
+  const double T = (kRateMax - 1.0) / kRateSlewPerTick * servo_s_;
+  const double slew = kRateSlewPerTick / servo_s_;
+  double cap = kRateMax;
+  for (int a = 0; a < naxes_; ++a) {
+    const auto& ax = cfg_.axes[static_cast<size_t>(a)];
+    const double jmax = ax.max_jerk_mm_s3 > 0 ? ax.max_jerk_mm_s3 : 0.0;
+    // The points from the playback on (the first one is at or before τ) to the newest.
+    double v = 0, acc = 0;
+    for (int k = 0; k < p_size_; ++k) {
+      const Point& q = point(k);
+      v = std::max(v, std::fabs(q.vel[a]));
+      if (k > 0) {
+        const Point& b = point(k - 1);
+        const double dt = static_cast<double>(q.cycle - b.cycle) * ipo_s_;
+        acc = std::max(acc, std::fabs(q.vel[a] - b.vel[a]) / dt);
+      }
+    }
+    const double v_t = v + acc * T + 0.5 * jmax * T * T;
+    const double a_t = acc + jmax * T;
+    if (v_t > 0) cap = std::min(cap, ax.max_velocity_mm_s / v_t);
+    const double room = ax.max_accel_mm_s2 - slew * v_t * kRateMax;
+    if (room <= 0) return 1.0;
+    if (a_t > 0) cap = std::min(cap, std::sqrt(room / a_t));
+  }
+  return cap;
+}
+
 const AxisArray& BridgeCore::tick() {
   ++ticks_since_setpoint_;
   switch (mode_) {
@@ -406,13 +441,7 @@ const AxisArray& BridgeCore::tick() {
   lead_i_ = (lead_i_ + 1) % lead_window_;
   const double lead_avg = lead_sum_ / lead_window_;
   double want = std::clamp(1.0 + 0.1 * (lead_avg - lead_cycles_), kRateMin, kRateMax);
-  if (want > 1.0) {
-    // Never faster than an axis's velocity limit.
-    for (int a = 0; a < naxes_; ++a) {
-      const double v = std::fabs(sp_vel_[a]);
-      if (v > 0) want = std::min(want, std::max(1.0, cfg_.axes[a].max_velocity_mm_s / v));
-    }
-  }
+  if (want > 1.0) want = std::min(want, std::max(1.0, catch_up_cap()));
   rate_ += std::clamp(want - rate_, -kRateSlewPerTick, kRateSlewPerTick);
   const double tau = tau_ + rate_ / n_;
   if (tau > static_cast<double>(last_cycle_) + 1.0) {

@@ -129,6 +129,8 @@ class BridgeCore {
     AxisArray vel;  // the stream's velocity over the step that ends here
   };
   static constexpr int kPoints = 64;
+  // The largest playback rate above 1 the buffered stream leaves room for (see tick()).
+  double catch_up_cap() const;
   const Point& point(int i) const { return points_[static_cast<size_t>((p_head_ + i) % kPoints)]; }
   void push(const Point& p);
   // Forget the stream followed so far: the next setpoint joins where the axes stand.
