@@ -120,5 +120,4 @@ sys.exit(0 if worst <= 1e-3 else 1)
 PY
   note "$profile over $TRANSPORT: $(grep 'program done' "$WORK/ctl.out")"
 done
-rm -rf "$WORK"
 echo "PASS"

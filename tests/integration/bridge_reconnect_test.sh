@@ -118,5 +118,4 @@ for m in re.finditer(r"axis [XYZ]: \d+ transactions, (\d+) timeouts, (\d+) excep
 print(f"# counted: {tot['exceptions']} exceptions (20 injected), {tot['timeouts']} timeouts, reconnects per axis {per_axis_reconnects}", file=sys.stderr)
 sys.exit(0 if tot["exceptions"] == 20 and tot["timeouts"] >= 1 and per_axis_reconnects == [2, 2, 2] else 1)
 PY
-rm -rf "$WORK"
 echo "PASS"

@@ -96,5 +96,4 @@ sp3=$(awk -v c="${TEST_PREFIX}SETPOINTS" '/ events in /{exit} $1 == c {print $2}
 sp2=$(awk -v c="${TEST_PREFIX}SETPOINTS" '/ events in /{exit} $1 == c {print $2}' "$WORK/replayed.out")
 [ "${sp2:-0}" -eq "$sp" ] || fail "lcm-logplayer delivered ${sp2:-0} of $sp setpoints"
 note "lcm-logplayer played back all $sp setpoints"
-rm -rf "$WORK"
 echo "PASS"

@@ -185,5 +185,4 @@ PY
   "$JERK_X" "$SERVO_T" 50 "$FE_X" || fail "X did not come to a controlled stop after Y's drive fault"
 "$BUILD/tools/cnc-replay" --log "$WORK/cell.lcmlog" >"$WORK/replay.out" 2>&1 || { cat "$WORK/replay.out" >&2; fail "the run does not replay"; }
 cat "$WORK/replay.out" >&2
-rm -rf "$WORK"
 echo "PASS"

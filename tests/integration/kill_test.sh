@@ -364,5 +364,4 @@ monitor)
   ;;
 *) fail "unknown WHO '$WHO'" ;;
 esac
-rm -rf "$WORK"
 echo "PASS"

@@ -280,5 +280,4 @@ stop logger TERM
 #    keepalive's STOP, MDI) reproduce bit for bit from the log.
 "$BUILD/tools/cnc-replay" --log "$WORK/run.lcmlog" >"$WORK/replay.out" 2>&1 || { cat "$WORK/replay.out" >&2; fail "replay is not identical"; }
 grep "^identical: " "$WORK/replay.out" >&2 || fail "no verdict from cnc-replay"
-rm -rf "$WORK"
 echo "PASS"

@@ -132,5 +132,4 @@ for png in feed following_error path; do
 done
 # REPORT_EXAMPLE_OUT=FILE keeps the screenshot (docs/img/report_example.png comes from here).
 if [ -n "${REPORT_EXAMPLE_OUT:-}" ]; then cp "$WORK/report.png" "$REPORT_EXAMPLE_OUT"; fi
-rm -rf "$WORK"
 echo "PASS"

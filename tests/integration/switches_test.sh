@@ -127,5 +127,4 @@ stop logger TERM
 # 7. Replay: the switches are recorded inputs; the session reproduces bit for bit.
 "$BUILD/tools/cnc-replay" --log "$WORK/run.lcmlog" >"$WORK/replay.out" 2>&1 || { cat "$WORK/replay.out" >&2; fail "replay is not identical"; }
 grep "^identical: " "$WORK/replay.out" >&2 || fail "no verdict from cnc-replay"
-rm -rf "$WORK"
 echo "PASS"
