@@ -36,10 +36,14 @@ d = sys.argv[1]
 a = [float(r['a_mm']) for r in csv.DictReader(open(d + '/setpoints.csv'))]
 st = list(csv.DictReader(open(d + '/axis_status.csv')))
 act = [float(r['a_actual_mm']) for r in st]
+cmd = [float(r['a_commanded_mm']) for r in st]
 fe = max(abs(float(r['a_following_error_mm'])) for r in st)
-print(f'A: setpoints to {max(a):.6f} deg and back to {a[-1]:.6f}, drive to {max(act):.4f} deg, '
-      f'largest following error {fe:.4f} deg')
-assert abs(max(a) - 180) < 1e-9 and abs(a[-1]) < 1e-9 and abs(max(act) - 180) < 0.5 and fe < 2.0
+print(f'A: setpoints to {max(a):.6f} deg and back to {a[-1]:.6f}, the bridge\'s command to {max(cmd):.4f} deg, '
+      f'the drive to {max(act):.4f} deg, largest following error {fe:.4f} deg')
+# The command never passes the turn at 180 (it did by 0.63 deg, and 0.93 in CI, while the
+# bridge made up a hold's lag braking at the limit); the drive follows it within its error.
+assert abs(max(a) - 180) < 1e-9 and abs(a[-1]) < 1e-9 and fe < 2.0
+assert max(cmd) - 180 < 0.01 and abs(max(act) - 180) < 0.01 + fe
 PY
 note "$(cat "$WORK/rotary.out")"
 
