@@ -41,33 +41,6 @@ constexpr double kJerkShare = 0.5;
 constexpr double kStandstillVel = 1e-4;   // mm/s
 constexpr double kStandstillAcc = 1e-2;   // mm/s^2
 
-// How far an axis at velocity v and acceleration a travels until it rests, braking
-// time-optimally within amax and jmax: the deceleration ramped to its peak (amax, or
-// less for a short stop), held, and ramped back to zero as the velocity reaches it.
-double stop_distance(double v, double a, double amax, double jmax) {
-  if (v < 0) return -stop_distance(-v, -a, amax, jmax);
-  double x = 0;
-  auto phase = [&](double j, double t) {
-    x += v * t + a * t * t / 2 + j * t * t * t / 6;
-    v += a * t + j * t * t / 2;
-    a += j * t;
-  };
-  if (a < 0 && v <= a * a / (2 * jmax)) {  // releasing the braking at once stops it
-    phase(jmax, -a / jmax);
-    return x;
-  }
-  double peak = std::sqrt(v * jmax + a * a / 2);
-  double hold = 0;
-  if (peak > amax) {
-    peak = amax;
-    hold = std::max(0.0, (v + a * a / (2 * jmax) - amax * amax / jmax) / amax);
-  }
-  phase(-jmax, (a + peak) / jmax);
-  phase(0.0, hold);
-  phase(jmax, peak / jmax);
-  return x;
-}
-
 std::string fmt(const char* f, auto... args) {
   char buf[256];
   std::snprintf(buf, sizeof buf, f, args...);
@@ -101,7 +74,6 @@ void BridgeCore::restart_stream() {
   braking_ = false;
   last_sp_ = cmd_;
   sp_vel_.fill(0.0);
-  recent_n_ = 0;
   p_size_ = 0;
   reset_smoothing(cmd_);
   seg_cycle_ = -1;
@@ -223,7 +195,6 @@ BridgeCore::Verdict BridgeCore::on_setpoint(int64_t cycle, const AxisArray& p, c
   }
   gaps_ += gap - 1;
   last_gap_ = gap;
-  update_rest_bound(p, gap);
   sp_vel_ = v;
   last_sp_ = p;
   last_cycle_ = cycle;
@@ -296,60 +267,6 @@ void BridgeCore::smooth(const AxisArray& p) {
   ref_fresh_ = false;
 }
 
-void BridgeCore::update_rest_bound(const AxisArray& p, int64_t gap) {
-  if (gap != 1) recent_n_ = 0;  // the differences below need equal steps
-  if (recent_n_ == 4) {
-    for (int k = 0; k < 3; ++k) recent_[static_cast<size_t>(k)] = recent_[static_cast<size_t>(k + 1)];
-    recent_n_ = 3;
-  }
-  recent_[static_cast<size_t>(recent_n_++)] = p;
-  if (recent_n_ < 4) return;
-  // Velocity and acceleration at the newest setpoint from the cubic through the last
-  // four (Newton's backward differences: exact for a stream of constant jerk).
-  const double T = ipo_s_;
-  for (int i = 0; i < naxes_; ++i) {
-    const auto& ax = cfg_.axes[static_cast<size_t>(i)];
-    const double d1 = recent_[3][i] - recent_[2][i], d2 = recent_[2][i] - recent_[1][i];
-    const double d3 = recent_[1][i] - recent_[0][i];
-    const double b2 = d1 - d2, b3 = d1 - 2 * d2 + d3;
-    const double v = (d1 + b2 / 2 + b3 / 3) / T;
-    const double acc = (b2 + b3) / (T * T);
-    const double jmax = ax.max_jerk_mm_s3 > 0 ? ax.max_jerk_mm_s3 : 1e12;
-    // Only while the stream brakes (or stands): where it speeds up, a jerk beyond the
-    // limit (a stream the bridge accepts) would move the bound back under a command
-    // that cannot follow it, and the bound would brake that command for nothing.
-    braking_to_rest_[i] = v * acc < 0 || std::fabs(v) < kStandstillVel;
-    rest_bound_[i] = recent_[3][i] + stop_distance(v, acc, ax.max_accel_mm_s2, jmax);
-  }
-}
-
-double BridgeCore::keep_behind_rest_bound(int i, double a_new, double a_floor, double a_ceil, double amax,
-                                          double jmax) const {
-  // A feasible stream's earliest resting point never moves back (braking at the
-  // limits, it stands still), and the command, following the stream a few cycles
-  // later, rests at the earliest no further than the stream's newest setpoint would.
-  // Only a command that trails the reference and catches up where it has no
-  // deceleration to spare goes past it: at all of X's limits the feedback carried the
-  // command 0.10 mm past the end of an S-curve move (live: a G0 0.09 mm past X0).
-  constexpr double kSlack = 1e-7;  // mm: the bound's own rounding
-  const double t = servo_s_;
-  const double x = cmd_[i], v = vel_[i], bound = rest_bound_[i];
-  const double side = x <= bound ? 1.0 : -1.0;
-  auto excess = [&](double an) {
-    const double vn = v + an * t;
-    return side * (x + vn * t + stop_distance(vn, an, amax, jmax) - bound);
-  };
-  if (excess(a_new) <= kSlack) return a_new;
-  const double a_far = side > 0 ? a_floor : a_ceil;  // the most braking the limits allow
-  if (excess(a_far) > kSlack) return a_far;
-  double ok = a_far, bad = a_new;  // the excess grows with the acceleration toward the bound
-  for (int it = 0; it < 30; ++it) {
-    const double mid = 0.5 * (ok + bad);
-    (excess(mid) > kSlack ? bad : ok) = mid;
-  }
-  return ok;
-}
-
 void BridgeCore::limit_step(bool follow) {
   const double t = servo_s_;
   for (int i = 0; i < naxes_; ++i) {
@@ -394,10 +311,6 @@ void BridgeCore::limit_step(bool follow) {
     // Jerk first, then acceleration (|a| <= amax already, so both hold together).
     a_new = std::max(std::min(a_new, a + jmax * t), a - jmax * t);
     a_new = std::max(std::min(a_new, amax), -amax);
-    if (follow && recent_n_ == 4 && braking_to_rest_[i]) {
-      a_new = keep_behind_rest_bound(i, a_new, std::max({a - jmax * t, -amax, a_lo}),
-                                     std::min({a + jmax * t, amax, a_hi}), amax, jmax);
-    }
     double v_new = v + a_new * t;
     double x_new = cmd_[i] + v_new * t;
     if (!follow && std::fabs(v_new) < kStandstillVel && std::fabs(a_new) < kStandstillAcc) {

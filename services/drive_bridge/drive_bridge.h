@@ -131,10 +131,6 @@ class BridgeCore {
   static constexpr int kPoints = 64;
   // The largest playback rate above 1 the buffered stream leaves room for (see tick()).
   double catch_up_cap() const;
-  // With the reference braking at the limits, the acceleration (a_new, within the
-  // limits, as the limiter chose it) that keeps axis i's own stopping point on its
-  // side of rest_bound_.
-  double keep_behind_rest_bound(int i, double a_new, double a_floor, double a_ceil, double amax, double jmax) const;
   const Point& point(int i) const { return points_[static_cast<size_t>((p_head_ + i) % kPoints)]; }
   void push(const Point& p);
   // Forget the stream followed so far: the next setpoint joins where the axes stand.
@@ -190,14 +186,6 @@ class BridgeCore {
   AxisArray acc_{};      // commanded acceleration of the last tick, mm/s^2
   AxisArray last_sp_{};  // last accepted setpoint
   AxisArray sp_vel_{};   // velocity of the last accepted coarse step
-  // The last four setpoints of the stream (oldest first; fewer after a restart or a
-  // gap) and, from them, where each axis would rest at the earliest if the stream
-  // braked from its newest setpoint at the axis's limits (valid with four).
-  std::array<AxisArray, 4> recent_{};
-  int recent_n_ = 0;
-  AxisArray rest_bound_{};
-  std::array<bool, program::kMaxAxes> braking_to_rest_{};  // the stream slows down or stands
-  void update_rest_bound(const AxisArray& p, int64_t gap);
   int64_t last_cycle_ = -1;
   int64_t last_gap_ = 1;  // cycles the last accepted step spanned
   int64_t engagement_ = 0;
