@@ -103,7 +103,10 @@ void ToolTable::put(const Tool& t) {
 void write_tool_table(const std::string& path, const std::vector<Tool>& tools) {
   static const char kAxes[] = "XYZABCUVW";
   std::string data;
-  char buf[64];
+  // Room for the longest line part: " I%+.6f J%+.6f Q%d" of two doubles near 1e308 (309
+  // digits each). 64 bytes cut a diameter of 3.3e101 to 60 characters, silently: the
+  // table read back held another number (fuzz_tables).
+  char buf[800];
   for (const Tool& t : tools) {
     std::snprintf(buf, sizeof buf, "T%d P%d", t.number, t.pocket);
     data += buf;
