@@ -7,16 +7,18 @@ namespace cnc::service {
 
 std::optional<int8_t> program_command_by_name(const std::string& name) {
   using C = lcmt_program_command;
-  static const std::map<std::string, int8_t> kNames = {
-      {"load", C::LOAD},   {"start", C::START},   {"hold", C::HOLD},       {"resume", C::RESUME},
-      {"stop", C::STOP},   {"override", C::OVERRIDE}, {"rapid-override", C::RAPID_OVERRIDE},
-      {"spindle-override", C::SPINDLE_OVERRIDE}, {"reset", C::RESET}, {"home", C::HOME},
-      {"jog", C::JOG},     {"jog-keepalive", C::JOG_KEEPALIVE},            {"touch-off", C::TOUCH_OFF},
-      {"mdi", C::MDI},     {"single-block", C::SINGLE_BLOCK}, {"optional-stop", C::OPTIONAL_STOP},
-      {"block-delete", C::BLOCK_DELETE}, {"confirm", C::CONFIRM}};
+  // The constants by value (+): a pair binding LCM's in-class constants by reference
+  // needs their definitions, which lcm-gen does not emit (clang -O1 would not link).
+  static const std::map<std::string, int> kNames = {
+      {"load", +C::LOAD},   {"start", +C::START},   {"hold", +C::HOLD},       {"resume", +C::RESUME},
+      {"stop", +C::STOP},   {"override", +C::OVERRIDE}, {"rapid-override", +C::RAPID_OVERRIDE},
+      {"spindle-override", +C::SPINDLE_OVERRIDE}, {"reset", +C::RESET}, {"home", +C::HOME},
+      {"jog", +C::JOG},     {"jog-keepalive", +C::JOG_KEEPALIVE},            {"touch-off", +C::TOUCH_OFF},
+      {"mdi", +C::MDI},     {"single-block", +C::SINGLE_BLOCK}, {"optional-stop", +C::OPTIONAL_STOP},
+      {"block-delete", +C::BLOCK_DELETE}, {"confirm", +C::CONFIRM}};
   const auto it = kNames.find(name);
   if (it == kNames.end()) return std::nullopt;
-  return it->second;
+  return static_cast<int8_t>(it->second);
 }
 
 int64_t send_program_command(bus::Bus& bus, const config::MachineConfig& cfg, const OperatorCommand& op) {
