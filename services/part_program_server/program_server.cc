@@ -285,6 +285,15 @@ ProgramSetup program_setup(const config::MachineConfig& cfg) {
   return s;
 }
 
+ProgramSetup dry_run_setup(const config::MachineConfig& cfg, const DryRunFiles& files) {
+  config::MachineConfig c = cfg;
+  if (!files.subroutine_path.empty()) c.program.subroutine_path = files.subroutine_path;
+  if (!files.tool_table.empty()) c.program.tool_table = files.tool_table;
+  ProgramSetup s = program_setup(c);
+  s.machine.write_var_file = false;  // also keeps the tool table as it is (Interpreter::persist)
+  return s;
+}
+
 ProgramServer::ProgramServer(const config::MachineConfig& cfg, ServerLimits limits)
     : ProgramServer(program_setup(cfg), limits) {}
 

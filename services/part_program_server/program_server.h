@@ -71,6 +71,17 @@ struct ProgramSetup {
 
 ProgramSetup program_setup(const config::MachineConfig& cfg);
 
+// The dry run's setup (cnc-plan, which the HMI's preview runs): the cell's, from the
+// same machine file, with the language's files the command line names in place of the
+// config's, and the var file and the tool table read but never written (they are the
+// machine's, kept by the runs that move it). dry_run_agreement_test holds the two
+// alike on every shipped machine file.
+struct DryRunFiles {
+  std::vector<std::string> subroutine_path;  // empty: program.subroutine_path
+  std::string tool_table;                    // empty: program.tool_table
+};
+ProgramSetup dry_run_setup(const config::MachineConfig& cfg, const DryRunFiles& files = {});
+
 class ProgramServer {
  public:
   // Probing and input waits: the validation takes each G38.x move as tripped at its

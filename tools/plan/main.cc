@@ -31,23 +31,16 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
     return cnc::service::kExitBadInput;
   }
   // The language's files from the command line, over the machine config's.
-  cnc::config::MachineConfig program_cfg = cfg;
-  if (!args.option("subroutine-path").empty()) {
-    program_cfg.program.subroutine_path.clear();
-    const std::string dirs = args.option("subroutine-path");
-    for (size_t b = 0; b < dirs.size();) {
-      size_t e = dirs.find(':', b);
-      if (e == std::string::npos) e = dirs.size();
-      if (e > b) program_cfg.program.subroutine_path.push_back(dirs.substr(b, e - b));
-      b = e + 1;
-    }
+  cnc::pps::DryRunFiles files;
+  const std::string dirs = args.option("subroutine-path");
+  for (size_t b = 0; b < dirs.size();) {
+    size_t e = dirs.find(':', b);
+    if (e == std::string::npos) e = dirs.size();
+    if (e > b) files.subroutine_path.push_back(dirs.substr(b, e - b));
+    b = e + 1;
   }
-  if (!args.option("tool-table").empty()) program_cfg.program.tool_table = args.option("tool-table");
-  // A dry run reads the parameters (program.var_file) but never writes them: the
-  // parameters are the machine's, kept by the runs that move it (the HMI's preview
-  // is a dry run of every program loaded).
-  cnc::pps::ProgramSetup setup = cnc::pps::program_setup(program_cfg);
-  setup.machine.write_var_file = false;
+  files.tool_table = args.option("tool-table");
+  cnc::pps::ProgramSetup setup = cnc::pps::dry_run_setup(cfg, files);
   cnc::pps::ProgramServer server(std::move(setup), cnc::pps::ServerLimits{});
   const cnc::pps::LoadResult loaded = server.load(program_path, 1);
   if (!loaded.ok) {
