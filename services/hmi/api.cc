@@ -141,7 +141,11 @@ void Api::message(uint64_t client, bool may_control, const std::string& text) {
   try {
     j = json::parse(text);
   } catch (const json::exception& ex) {
-    out_.send_to(client, {{"t", "result"}, {"id", nullptr}, {"ok", false}, {"text", std::string("not JSON: ") + ex.what()}});
+    // The parser's message quotes the bytes it last read, which need not be UTF-8
+    // (fuzz_hmi_api: a message that is not JSON could not be answered).
+    const std::string why = json(std::string(ex.what())).dump(-1, ' ', false, json::error_handler_t::replace);
+    out_.send_to(client, {{"t", "result"}, {"id", nullptr}, {"ok", false},
+                          {"text", "not JSON: " + json::parse(why).get<std::string>()}});
     return;
   }
   if (!j.is_object() || (j.contains("action") && !j["action"].is_string())) {

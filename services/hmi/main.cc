@@ -86,12 +86,13 @@ int run_hmi(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
     if (inbound.size() < 4096) inbound.push_back(std::move(e));
   });
   cnc::hmi::Outbox out;
-  out.broadcast = [&](const json& j, bool droppable) {
-    web.broadcast(std::make_shared<const std::string>(j.dump()), droppable);
+  // A string that is not UTF-8 (a program's file name on disk, say) is sent with U+FFFD
+  // in its place: dump() would otherwise throw out of the API.
+  auto text = [](const json& j) {
+    return std::make_shared<const std::string>(j.dump(-1, ' ', false, json::error_handler_t::replace));
   };
-  out.send_to = [&](uint64_t client, const json& j) {
-    web.send_to(client, std::make_shared<const std::string>(j.dump()));
-  };
+  out.broadcast = [&](const json& j, bool droppable) { web.broadcast(text(j), droppable); };
+  out.send_to = [&](uint64_t client, const json& j) { web.send_to(client, text(j)); };
   cnc::hmi::ApiOptions aopt;
   aopt.machine_file = args.machine_file;
   aopt.plan_exe = sibling_tool("cnc-plan");
