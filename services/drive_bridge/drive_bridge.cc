@@ -20,8 +20,9 @@ constexpr double kRateSlewPerTick = 0.002;
 // less half a period late (plus one bridged) unnoticed.
 // The most a stalled link's hold may let the newest setpoint lead the playback:
 // 4 cycles over the usual lead (16 ms at T_ipo = 4 ms). The lag a hold adds is made
-// up only at the playback's 5 % over real time (and not at all at an axis's velocity
-// limit); a link that is slow again and again (a drive emulated in Python) would
+// up only at the playback's 5 % over real time, and only where the stream leaves room
+// for it (catch_up_cap: not at an axis's velocity limit, nor braking at its
+// acceleration limit); a link that is slow again and again (a drive emulated in Python) would
 // otherwise pile up lag until the end of a program came 100 ms late, and a stop of
 // the interpolator right after it ended the path short of its end point.
 constexpr double kMaxHoldOverLead = 4.0;
