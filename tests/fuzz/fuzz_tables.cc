@@ -112,7 +112,15 @@ void var_file(const std::string& in, const uint8_t* p, size_t n) {
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (size == 0) return 0;
-  static const bool made = [] { return ::mkdir(dir().c_str(), 0700) == 0 || errno == EEXIST; }();
+  static const bool made = [] {
+    const bool ok = ::mkdir(dir().c_str(), 0700) == 0 || errno == EEXIST;
+    // The folder goes with the process (the suite's replay runs it at every test run).
+    std::atexit([] {
+      for (const char* f : {"/tbl", "/tbl.a", "/tbl.b", "/var", "/var.a", "/var.b"}) std::remove((dir() + f).c_str());
+      ::rmdir(dir().c_str());
+    });
+    return ok;
+  }();
   if (!made) std::abort();
   if (data[0] & 1) {
     var_file(dir() + "/var", data + 1, size - 1);
