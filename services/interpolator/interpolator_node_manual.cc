@@ -9,6 +9,7 @@
 
 #include "cnc/lcmt_alarm.hpp"
 #include "common/program/block_msg.h"
+#include "common/service/open_limit.h"
 #include "common/util/clock.h"
 #include "services/interpolator/interpolator_node.h"
 
@@ -180,6 +181,11 @@ void InterpolatorNode::on_manual_command(const cnc::lcmt_program_command& m) {
     target = std::clamp(target, lo, hi);
     if (std::fabs(target - here) < 1e-6)
       return manual_refuse(what, "axis " + ax.name + " stands at its soft limit " + mm(dir > 0 ? hi : lo) + " mm");
+  }
+  if (cfg_.io.enabled && util::monotonic_s() - io_status_s_ < 1.0) {
+    const service::OpenLimit o = service::open_limit(cfg_, io_status_);
+    if (o.axis == m.axis && o.side == (dir > 0 ? 1 : -1))
+      return manual_refuse(what, "jog towards the limit switch " + o.name + ", which is open: jog the axis away from it");
   }
   const double vmax = ax.max_velocity_mm_s * 60.0;
   const double feed = m.feed_mm_per_min > 0 ? std::min(m.feed_mm_per_min, vmax) : ax.jog_velocity_mm_s * 60.0;

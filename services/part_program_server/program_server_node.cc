@@ -1,5 +1,7 @@
 #include "services/part_program_server/program_server_node.h"
 
+#include "common/service/open_limit.h"
+
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -247,19 +249,10 @@ void ProgramServerNode::poll(double now_s) {
 }
 
 void ProgramServerNode::on_io(const cnc::lcmt_io_status& m) {
-  // The switch a jog must not move towards: the one IO_STATUS names while a limit reads 0.
-  using I = cnc::lcmt_io_status;
-  limit_axis_ = -1;
-  limit_side_ = 0;
-  limit_switch_.clear();
-  if (m.limit != I::LIMIT_ON_SWITCH && m.limit != I::LIMIT_TRIPPED && m.limit != I::LIMIT_DISABLED) return;
-  const int point = cfg_.io.point_index(m.limit_input);
-  for (const auto& h : cfg_.safety.hard_limits) {
-    if (point < 0 || (point != h.min_input && point != h.max_input)) continue;
-    limit_axis_ = h.axis;
-    limit_side_ = point == h.max_input ? 1 : -1;
-    limit_switch_ = m.limit_input;
-  }
+  const service::OpenLimit o = service::open_limit(cfg_, m);
+  limit_axis_ = o.axis;
+  limit_side_ = o.side;
+  limit_switch_ = o.name;
 }
 
 void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {
