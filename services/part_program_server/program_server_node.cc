@@ -1,6 +1,5 @@
 #include "services/part_program_server/program_server_node.h"
 
-#include "common/service/open_limit.h"
 
 #include <spdlog/spdlog.h>
 
@@ -182,9 +181,9 @@ CellView ProgramServerNode::view(double now_s) const {
   } else {
     v.state = CellState::kIdle;
   }
-  v.limit_axis = limit_axis_;
-  v.limit_side = limit_side_;
-  v.limit_switch = limit_switch_;
+  v.limit_axis = open_limit_.axis;
+  v.limit_side = open_limit_.side;
+  v.limit_switch = open_limit_.name;
   if (door_open_)
     v.door = "the guard door (input " + cfg_.io.point_label(cfg_.safety.door_input) + ") is open";
   if (cfg_.operator_.homing_required) {
@@ -249,10 +248,7 @@ void ProgramServerNode::poll(double now_s) {
 }
 
 void ProgramServerNode::on_io(const cnc::lcmt_io_status& m) {
-  const service::OpenLimit o = service::open_limit(cfg_, m);
-  limit_axis_ = o.axis;
-  limit_side_ = o.side;
-  limit_switch_ = o.name;
+  open_limit_ = service::open_limit(cfg_, m);
 }
 
 void ProgramServerNode::on_command(const cnc::lcmt_program_command& m) {

@@ -7,6 +7,7 @@
 #include "cnc/lcmt_interp_state.hpp"
 #include "cnc/lcmt_io_status.hpp"
 #include "cnc/lcmt_program_command.hpp"
+#include "common/service/open_limit.h"
 #include "common/bus/bus.h"
 #include "common/service/bus_health.h"
 #include "services/part_program_server/interlock.h"
@@ -110,9 +111,7 @@ class ProgramServerNode {
   cnc::lcmt_axis_status axes_{};
   bool door_open_ = false;  // INTERP_STATE: the guard door (safety.door) is open
   // IO_STATUS: the hard-limit switch that reads 0 (its axis, end -1/+1, name; -1: none).
-  int limit_axis_ = -1;
-  int limit_side_ = 0;
-  std::string limit_switch_;
+  service::OpenLimit open_limit_;
   double axes_s_ = -1e9;
   std::string refusal_;
   int32_t refused_sender_ = 0;

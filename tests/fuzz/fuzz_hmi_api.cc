@@ -19,6 +19,7 @@
 #include "common/config/machine_config.h"
 #include "common/util/clock.h"
 #include "services/hmi/api.h"
+#include "tests/hmi_offline_options.h"
 
 namespace {
 using nlohmann::json;
@@ -48,12 +49,7 @@ struct World {
       check(j);
       ++sent;
     };
-    cnc::hmi::ApiOptions opt;
-    opt.machine_file = "/nonexistent.yaml";
-    opt.plan_exe = "/nonexistent/cnc-plan";
-    opt.logexport_exe = "/nonexistent/cnc-logexport";
-    opt.make_report = "/nonexistent/make_report.py";
-    opt.runs_dir = "/nonexistent";
+    const cnc::hmi::ApiOptions opt = cnc::hmi::offline_api_options();
     api = std::make_unique<cnc::hmi::Api>(cfg, bus, opt, out);
     api->open(7, true, "fuzz");
   }

@@ -12,6 +12,7 @@
 
 #include "common/config/machine_config.h"
 #include "services/hmi/api.h"
+#include "tests/hmi_offline_options.h"
 
 using cnc::hmi::Api;
 using json = nlohmann::json;
@@ -96,12 +97,7 @@ class HmiApi : public ::testing::Test {
       EXPECT_EQ(client, 7u);
       sent_.push_back(j);
     };
-    cnc::hmi::ApiOptions opt;
-    opt.machine_file = "/nonexistent.yaml";
-    opt.plan_exe = "/nonexistent/cnc-plan";
-    opt.logexport_exe = "/nonexistent/cnc-logexport";
-    opt.make_report = "/nonexistent/make_report.py";
-    opt.runs_dir = "/nonexistent";
+    const cnc::hmi::ApiOptions opt = cnc::hmi::offline_api_options();
     api_ = std::make_unique<Api>(cfg_, bus_, opt, out);
   }
   ~HmiApi() override { api_->stop(); }
