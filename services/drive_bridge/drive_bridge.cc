@@ -112,10 +112,22 @@ BridgeCore::Verdict BridgeCore::on_setpoint(int64_t cycle, const AxisArray& p, c
     return Verdict::kStale;
   }
   if (from.stream > stream_ && last_cycle_ >= 0) {
-    // A new stream (the interpolator was reset or restarted): joined where the
-    // axes stand, once the playback of the old one has come to rest (a limiter
-    // steering back onto a stream that broke its limits approaches rest only
-    // asymptotically; what is left of it, it takes into the new stream's start).
+    // A new stream (the interpolator was reset or restarted). RESET is taken only
+    // where the path stands, so an old stream whose newest setpoint still moved was
+    // cut off: its interpolator died and a new one began within the watchdog's
+    // timeout, or a second one publishes. Neither is joined: a controlled stop.
+    for (int a = 0; a < naxes_; ++a) {
+      if (std::fabs(sp_vel_[a]) <= kStillVelocity) continue;
+      fault(fmt("setpoint stream %lld began where stream %lld had left off moving (axis %s at %.2f mm/s at its "
+                "cycle %lld): a restarted or second interpolator is not followed; controlled stop",
+                static_cast<long long>(from.stream), static_cast<long long>(stream_), cfg_.axes[a].name.c_str(),
+                std::fabs(sp_vel_[a]), static_cast<long long>(last_cycle_)));
+      return Verdict::kFault;
+    }
+    // Otherwise joined where the axes stand, once the playback of the old one has
+    // come to rest (a limiter steering back onto a stream that broke its limits
+    // approaches rest only asymptotically; what is left of it, it takes into the
+    // new stream's start).
     // Whether the playback brakes for the old stream does not count: once a brake
     // has begun only a setpoint of the old stream ends it, and a quiet old stream
     // (the interpolator resetting) then held the new one off until the watchdog.

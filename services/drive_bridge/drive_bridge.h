@@ -38,7 +38,9 @@
 // datagram queued across a fault and a reset) is dropped and counted, never joined.
 // A setpoint of a stream older than the one followed is dropped and counted too; a
 // newer stream (the interpolator's RESET or restart) is joined like a first one,
-// where the axes stand, once the old one has come to rest.
+// where the axes stand, once the old one has come to rest; a newer stream while the
+// old one's newest setpoint still moved (an interpolator restarted within the
+// watchdog's timeout, or a second one) is a fault.
 #include <array>
 #include <cstdint>
 #include <string>

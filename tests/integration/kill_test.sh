@@ -7,6 +7,12 @@
 #                   within setpoint_timeout + 50 ms of the kill, over v^2/(2a) + v*a/(2j) (the
 #                   braking measured by stop_trace.py on the simulated world's time); the bridge and the program server
 #                   raise peer_lost naming cnc-interpolator; cnc-ctl exits 5 with the reason.
+#   interpolator-restart
+#                   the interpolator killed mid-move and started again at once, before the
+#                   bridge's setpoint watchdog (raised to 2 s here so the restart surely beats
+#                   it): the bridge does not take the new process's stream for a RESET's,
+#                   it faults naming the stream that broke off moving; the axes stop within
+#                   the same braking bound as above, cnc-ctl exits 5 with the reason.
 #   drive-bridge    the drives stop by their own communication watchdog (the simulator's,
 #                   comm_timeout_s 0.1 s, 2000 mm/s^2) within v*(timeout + 40 ms) + v^2/(2a),
 #                   braking at no more than 1.25 a, and fault (0x8130); the interpolator
@@ -216,6 +222,32 @@ interpolator)
   reset_then_run
   alarm_latency cnc-drive-bridge peer_lost "cnc-interpolator" "$kill_utime"
   alarm_latency cnc-program-server peer_lost "cnc-interpolator" "$kill_utime"
+  ;;
+interpolator-restart)
+  sed -i -E 's#setpoint_timeout_s: [0-9.]+#setpoint_timeout_s: 2.0#' "$M"
+  grep -q 'setpoint_timeout_s: 2.0' "$M" || fail "cannot set the setpoint watchdog in $M"
+  run_cell
+  sim_world_steady "$WORK/trace.csv"
+  "$CTL" --machine "$M" --do run --program "$WORK/long.ngc" --timeout 30 >"$WORK/ctl.out" 2>&1 &
+  ctl_pid=$!
+  wait_for "X past 100 mm" 20 x_over 100
+  kill_wall=$(date +%s.%N)
+  kill_hard interpolator
+  kill_after=$(date +%s.%N)
+  start interpolator "$BUILD/services/cnc-interpolator" --machine "$M"
+  wait_for "the bridge's fault for the broken-off stream" 10 in_log drive-bridge "had left off moving"
+  grep -h "had left off moving" "$WORK/drive-bridge.log" | head -n 1 | sed 's/^/# /' >&2
+  # Before the watchdog: the fault came from the new stream, not from the silence.
+  ! in_log drive-bridge "no setpoint for" || fail "the bridge's watchdog tripped first: the restart was too slow to test"
+  rc=0; wait "$ctl_pid" || rc=$?
+  cat "$WORK/ctl.out" >&2
+  [ "$rc" -eq 5 ] || fail "cnc-ctl exit $rc after the interpolator was killed and restarted, expected 5"
+  wait_for "the axes stand" 10 standing
+  decel=$(awk '/stop_decel_mm_s2:/ {print $2}' "$M")
+  # The bridge brakes once the stream has run dry (one period past its newest setpoint).
+  /usr/bin/python3 "$HERE/stop_trace.py" "interpolator killed and restarted" "$WORK/trace.csv" "$kill_wall" \
+    "$kill_after" "$decel" "$JERK_X" 150 0.75 0.1 || fail "the axes did not stop within the bound"
+  reset_then_run
   ;;
 drive-bridge)
   # The simulated drives' communication watchdog: 0.1 s, braking at 2000 mm/s^2.

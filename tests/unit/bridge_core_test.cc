@@ -674,17 +674,16 @@ TEST(BridgeCore, ASetpointQueuedAcrossAFaultAndAResetIsDroppedNotFollowed) {
 }
 
 TEST(BridgeCore, ANewStreamIsJoinedOnlyOnceTheOldOneStands) {
-  // The interpolator reset or restarted while the bridge follows: its new stream
-  // (cycles from anywhere) is joined where the axes stand, and not while they move.
+  // The interpolator reset while the bridge follows (a RESET is taken only where the
+  // path stands): its new stream (cycles from anywhere) is joined where the axes
+  // stand, and not while the playback of the old one still moves.
   const config::MachineConfig cfg = machine();
   Runner r(cfg);
   r.core.engage(at(0), 7);
   const std::vector<double> xs = smooth_stream(100.0, 2000.0, 60);
   int64_t k = 0;
   for (; k < 60; ++k) r.cycle(k, at(xs[static_cast<size_t>(k)]), true, {1, 7});
-  EXPECT_EQ(r.core.on_setpoint(0, at(xs[59]), {2, 7}), BridgeCore::Verdict::kWaiting);  // X moving
-  EXPECT_NE(r.core.waiting_reason().find("still move"), std::string::npos);
-  // The old stream comes to rest, then the new one stands there: joined, its cycles restart at 0.
+  // The old stream comes to rest; the new one arrives with the playback still braking.
   double x = xs[59], v = (xs[59] - xs[58]) / 0.004;
   EXPECT_GT(v, 50.0);
   for (; v > 0; ++k) {
@@ -692,6 +691,9 @@ TEST(BridgeCore, ANewStreamIsJoinedOnlyOnceTheOldOneStands) {
     x += v * 0.004;
     r.cycle(k, at(x), true, {1, 7});
   }
+  EXPECT_GT(std::fabs(r.core.velocity()[0]), 0.1);
+  EXPECT_EQ(r.core.on_setpoint(0, at(x), {2, 7}), BridgeCore::Verdict::kWaiting);  // the playback moves
+  EXPECT_NE(r.core.waiting_reason().find("still move"), std::string::npos);
   for (int j = 0; j < 100; ++j, ++k) r.cycle(k, at(x), true, {1, 7});  // standing until the RESET
   EXPECT_FALSE(r.core.faulted()) << r.core.fault_reason();
   for (int64_t j = 0; j < 5; ++j) r.cycle(j, at(x), true, {2, 7});
@@ -700,6 +702,41 @@ TEST(BridgeCore, ANewStreamIsJoinedOnlyOnceTheOldOneStands) {
   EXPECT_FALSE(r.core.faulted()) << r.core.fault_reason();
   EXPECT_EQ(r.core.on_setpoint(k, at(x), {1, 7}), BridgeCore::Verdict::kStale);
   r.expect_limits("a new stream after the old one stood");
+}
+
+TEST(BridgeCore, AStreamThatBeginsWhereAnotherLeftOffMovingIsAFault) {
+  // The interpolator killed mid-move and started again before the setpoint watchdog's
+  // timeout (or a second interpolator on the channel): the new process's stream
+  // stands (at its own start, here where the axes will come to rest). Following it
+  // would turn a dead interpolator into a brake and a silent hand-over, with no fault
+  // and no RESET. It is a controlled stop within the limits and a fault that names it.
+  const config::MachineConfig cfg = machine();
+  for (const int silent_cycles : {0, 3, 8}) {
+    SCOPED_TRACE("new stream after " + std::to_string(silent_cycles) + " silent cycles");
+    Runner r(cfg);
+    r.core.engage(at(0), 7);
+    const std::vector<double> xs = smooth_stream(100.0, 2000.0, 60);
+    for (int64_t k = 0; k < 60; ++k) r.cycle(k, at(xs[static_cast<size_t>(k)]), true, {1, 7});
+    for (int j = 0; j < silent_cycles; ++j) r.cycle(0, at(0), false);  // the old one silent
+    const double x_then = r.core.commanded()[0];
+    EXPECT_EQ(r.core.on_setpoint(0, at(x_then + 5.0), {2, 7}), BridgeCore::Verdict::kFault);
+    ASSERT_TRUE(r.core.faulted());
+    EXPECT_NE(r.core.fault_reason().find("stream 2 began where stream 1 had left off moving (axis X at"),
+              std::string::npos)
+        << r.core.fault_reason();
+    for (int j = 0; j < 100; ++j) r.cycle(j, at(x_then + 5.0), true, {2, 7});  // neither stream is followed
+    EXPECT_EQ(r.core.mode(), BridgeCore::Mode::kStopped);
+    EXPECT_EQ(r.core.velocity()[0], 0.0);
+    const double x_rest = r.core.commanded()[0];
+    // The jerk-limited stop from 100 mm/s: v^2/(2a) + v a/(2j), plus one period of reaction.
+    const double a = std::min(cfg.stop_decel_mm_s2, cfg.axes[0].max_accel_mm_s2), j = cfg.axes[0].max_jerk_mm_s3;
+    const double stop = 100.0 * 100.0 / (2 * a) + 100.0 * a / (2 * j) + 100.0 * cfg.ipo_period_s;
+    EXPECT_GT(x_rest, x_then);
+    EXPECT_LT(x_rest, x_then + stop) << "a controlled stop, not a jump to the new stream";
+    r.expect_limits("the stop for a stream that broke off moving");
+    std::printf("[ figures  ] after %d silent cycles: stopped %.3f mm past the fault (bound %.3f mm)\n",
+                silent_cycles, x_rest - x_then, stop);
+  }
 }
 
 TEST(BridgeCore, ANewStreamAfterTheOldOneWentQuietIsJoined) {

@@ -747,13 +747,23 @@ int Ctl::watch_to_end(int64_t token) {
   // heartbeat_timeout_s, or its last one said it stopped. The program server may be
   // away for a while: the interpolator stops at the end of the blocks it has and
   // goes on when the server is back (warned once, bounded by --timeout).
+  // The interpolator or the bridge with a new pid restarted within the timeout: what it
+  // knew of the run is gone (the program server comes back with its --state).
   std::string lost;
   bool server_warned = false;
+  std::map<std::string, int32_t> pid_at_start;
+  for (const auto& [name, hb] : view_.heartbeats) pid_at_start[name] = hb.pid;
   auto peer_lost = [&] {
     const double now = cnc::util::monotonic_s();
     for (const char* s : {"cnc-interpolator", "cnc-drive-bridge", "cnc-program-server"}) {
       const auto it = view_.heartbeats.find(s);
       if (it == view_.heartbeats.end()) continue;
+      const auto was = pid_at_start.find(s);
+      if (std::string(s) != "cnc-program-server" && was != pid_at_start.end() && was->second != it->second.pid) {
+        lost = std::string(s) + " restarted during the run (pid " + std::to_string(was->second) + ", now " +
+               std::to_string(it->second.pid) + ")";
+        return true;
+      }
       const double silent = now - view_.heartbeat_s[s];
       const bool stopped = it->second.state == cnc::lcmt_heartbeat::STOPPING;
       if (!stopped && silent <= cfg_.heartbeat_timeout_s) continue;
