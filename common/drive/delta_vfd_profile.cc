@@ -12,11 +12,7 @@ constexpr uint16_t kSwRunning = 0x03;
 constexpr uint16_t kSwDecelerating = 0x01;
 constexpr uint16_t kSwReverse = kDeltaVfdTurnsReverse | kDeltaVfdCommandedReverse;
 
-// EmulatedDrive::state for the drive side: bit 0 run commanded, bit 1 reverse.
-constexpr int kStRun = 1;
-constexpr int kStReverse = 2;
-
-class DeltaVfdLogic final : public ProfileLogic {
+class DeltaVfdLogic final : public VfdLogic {
  public:
   const char* name() const override { return "delta_vfd"; }
   std::vector<Role> required_roles() const override {
@@ -37,8 +33,6 @@ class DeltaVfdLogic final : public ProfileLogic {
     if (goal == Goal::kFaultReset) return ControlWrite{Role::kFaultReset, kDeltaVfdFaultReset};
     return std::nullopt;
   }
-
-  void drive_power_up(EmulatedDrive& d) const override { d = EmulatedDrive{}; }
 
   void drive_write(EmulatedDrive& d, Role role, uint16_t v, const DriveProfile&) const override {
     if (role == Role::kFaultReset && (v & kDeltaVfdFaultReset)) {
@@ -61,16 +55,6 @@ class DeltaVfdLogic final : public ProfileLogic {
     uint16_t sw = (d.state & kStRun) ? kSwRunning : 0;
     if (d.state & kStReverse) sw |= kSwReverse;
     return sw;
-  }
-
-  bool drive_follows(const EmulatedDrive& d, const DriveProfile&) const override {
-    return !d.fault && (d.state & kStRun) != 0;
-  }
-
-  void drive_fault(EmulatedDrive& d, uint16_t code) const override {
-    d.fault = true;
-    d.error_code = code;
-    d.state &= ~kStRun;
   }
 };
 

@@ -4,21 +4,12 @@
 
 namespace cnc::drive::huanyang {
 
-uint16_t crc16(const uint8_t* p, int n) {
-  uint16_t crc = 0xFFFF;
-  for (int i = 0; i < n; ++i) {
-    crc ^= p[i];
-    for (int b = 0; b < 8; ++b) crc = (crc & 1) ? static_cast<uint16_t>((crc >> 1) ^ 0xA001) : static_cast<uint16_t>(crc >> 1);
-  }
-  return crc;
-}
-
 int encode(uint8_t unit, uint8_t function, const uint8_t* data, int n, uint8_t* frame) {
   frame[0] = unit;
   frame[1] = function;
   frame[2] = static_cast<uint8_t>(n);
   for (int i = 0; i < n; ++i) frame[3 + i] = data[i];
-  const uint16_t crc = crc16(frame, 3 + n);
+  const uint16_t crc = rtu_crc16(frame, 3 + n);
   frame[3 + n] = static_cast<uint8_t>(crc & 0xFF);
   frame[4 + n] = static_cast<uint8_t>(crc >> 8);
   return 5 + n;
@@ -31,9 +22,7 @@ int frame_length(const uint8_t* p, int have) {
 }
 
 bool crc_ok(const uint8_t* frame, int n) {
-  if (n < kMinFrame) return false;
-  const uint16_t crc = crc16(frame, n - 2);
-  return frame[n - 2] == (crc & 0xFF) && frame[n - 1] == (crc >> 8);
+  return n >= kMinFrame && rtu_crc_ok(frame, n);
 }
 
 namespace {

@@ -15,6 +15,8 @@
 // (Link::exchange_frame). Pure functions: no allocation, no I/O.
 #include <cstdint>
 
+#include "common/drive/rtu_crc.h"
+
 namespace cnc::drive::huanyang {
 
 enum Function : uint8_t {
@@ -29,8 +31,6 @@ inline constexpr int kMaxData = 8;
 inline constexpr int kMaxFrame = 3 + kMaxData + 2;
 inline constexpr int kMinFrame = 3 + 1 + 2;
 
-// Modbus RTU's CRC-16 (polynomial 0xA001, initial 0xFFFF).
-uint16_t crc16(const uint8_t* p, int n);
 // A frame of `n` data bytes into `frame` (kMaxFrame bytes); returns its length.
 int encode(uint8_t unit, uint8_t function, const uint8_t* data, int n, uint8_t* frame);
 // The whole frame's length from its first `have` bytes: 0 while fewer than three

@@ -7,11 +7,7 @@ constexpr uint8_t kCmdRunForward = 0x01;
 constexpr uint8_t kCmdRunReverse = 0x11;
 constexpr uint8_t kCmdStop = 0x08;
 
-// EmulatedDrive::state for the drive side: bit 0 run commanded, bit 1 reverse.
-constexpr int kStRun = 1;
-constexpr int kStReverse = 2;
-
-class HuanyangLogic final : public ProfileLogic {
+class HuanyangLogic final : public VfdLogic {
  public:
   const char* name() const override { return "huanyang"; }
   // No registers: the profile's huanyang: section is its map (drive_profile.cc requires it).
@@ -29,8 +25,6 @@ class HuanyangLogic final : public ProfileLogic {
     return std::nullopt;
   }
 
-  void drive_power_up(EmulatedDrive& d) const override { d = EmulatedDrive{}; }
-
   void drive_write(EmulatedDrive& d, Role role, uint16_t v, const DriveProfile&) const override {
     if (role != Role::kControlword) return;
     d.last_control = v;
@@ -46,16 +40,6 @@ class HuanyangLogic final : public ProfileLogic {
     uint16_t s = (d.state & kStRun) ? (kHyRunCommanded | kHyRunning) : 0;
     if (d.state & kStReverse) s |= kHyReverseCommanded;
     return s;
-  }
-
-  bool drive_follows(const EmulatedDrive& d, const DriveProfile&) const override {
-    return !d.fault && (d.state & kStRun) != 0;
-  }
-
-  void drive_fault(EmulatedDrive& d, uint16_t code) const override {
-    d.fault = true;
-    d.error_code = code;
-    d.state &= ~kStRun;
   }
 };
 

@@ -64,6 +64,24 @@ class ProfileLogic {
   virtual void drive_fault(EmulatedDrive& d, uint16_t code) const = 0;
 };
 
+// The drive side every VFD's logic shares: EmulatedDrive::state bit 0 is run
+// commanded, bit 1 reverse; the output runs while commanded and not faulted, and a
+// fault stops it.
+class VfdLogic : public ProfileLogic {
+ public:
+  static constexpr int kStRun = 1;
+  static constexpr int kStReverse = 2;
+  void drive_power_up(EmulatedDrive& d) const override { d = EmulatedDrive{}; }
+  bool drive_follows(const EmulatedDrive& d, const DriveProfile&) const override {
+    return !d.fault && (d.state & kStRun) != 0;
+  }
+  void drive_fault(EmulatedDrive& d, uint16_t code) const override {
+    d.fault = true;
+    d.error_code = code;
+    d.state &= ~kStRun;
+  }
+};
+
 // The logic of a state machine by name; nullptr when there is none of that name.
 const ProfileLogic* find_profile_logic(const std::string& state_machine);
 const ProfileLogic& profile_logic(const DriveProfile& p);

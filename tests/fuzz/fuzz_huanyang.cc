@@ -59,7 +59,7 @@ class FuzzLink final : public Link {
     *got = len % (cap + 1);
     for (int i = 0; i < *got; ++i) reply[i] = in_.byte();
     if ((len & 0x80) && *got >= huanyang::kMinFrame) {
-      const uint16_t crc = huanyang::crc16(reply, *got - 2);
+      const uint16_t crc = rtu_crc16(reply, *got - 2);
       reply[*got - 2] = static_cast<uint8_t>(crc & 0xFF);
       reply[*got - 1] = static_cast<uint8_t>(crc >> 8);
     }
@@ -100,7 +100,7 @@ void drive(Input& in) {
     const int n = in.byte() % 20;
     for (int i = 0; i < n; ++i) request[i] = in.byte();
     if (n >= huanyang::kMinFrame && (in.byte() & 1)) {
-      const uint16_t crc = huanyang::crc16(request, n - 2);
+      const uint16_t crc = rtu_crc16(request, n - 2);
       request[n - 2] = static_cast<uint8_t>(crc & 0xFF);
       request[n - 1] = static_cast<uint8_t>(crc >> 8);
     }

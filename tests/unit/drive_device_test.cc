@@ -442,7 +442,7 @@ namespace hy = huanyang;
 TEST(HuanyangFrame, EncodesWithModbusCrcLowByteFirstAndFramesByItsLengthByte) {
   // Modbus RTU's CRC on its textbook request 01 03 00 00 00 01: 0x0A84, on the wire 84 0A.
   const uint8_t modbus[] = {0x01, 0x03, 0x00, 0x00, 0x00, 0x01};
-  EXPECT_EQ(hy::crc16(modbus, 6), 0x0A84);
+  EXPECT_EQ(cnc::drive::rtu_crc16(modbus, 6), 0x0A84);
   uint8_t f[hy::kMaxFrame];
   const uint8_t freq[] = {0x5D, 0xC0};  // 240.00 Hz in 0.01 Hz
   ASSERT_EQ(hy::encode(0x01, hy::kWriteFrequency, freq, 2, f), 7);
@@ -451,7 +451,7 @@ TEST(HuanyangFrame, EncodesWithModbusCrcLowByteFirstAndFramesByItsLengthByte) {
   EXPECT_EQ(f[2], 0x02);
   EXPECT_EQ(f[3], 0x5D);
   EXPECT_EQ(f[4], 0xC0);
-  const uint16_t crc = hy::crc16(f, 5);
+  const uint16_t crc = cnc::drive::rtu_crc16(f, 5);
   EXPECT_EQ(f[5], crc & 0xFF);
   EXPECT_EQ(f[6], crc >> 8);
   EXPECT_TRUE(hy::crc_ok(f, 7));

@@ -1,5 +1,7 @@
 #include "tools/servo_sim/rtu_frame.h"
 
+#include "common/drive/rtu_crc.h"
+
 namespace cnc::servo_sim {
 
 int rtu_request_length(const uint8_t* buf, int n) {
@@ -12,19 +14,6 @@ int rtu_request_length(const uint8_t* buf, int n) {
   }
 }
 
-uint16_t modbus_crc16(const uint8_t* buf, int n) {
-  uint16_t crc = 0xFFFF;
-  for (int i = 0; i < n; ++i) {
-    crc ^= buf[i];
-    for (int b = 0; b < 8; ++b) crc = (crc & 1) ? static_cast<uint16_t>((crc >> 1) ^ 0xA001) : static_cast<uint16_t>(crc >> 1);
-  }
-  return crc;
-}
-
-bool rtu_crc_ok(const uint8_t* frame, int n) {
-  if (n < 4) return false;
-  const uint16_t crc = modbus_crc16(frame, n - 2);
-  return frame[n - 2] == (crc & 0xFF) && frame[n - 1] == (crc >> 8);
-}
+bool rtu_crc_ok(const uint8_t* frame, int n) { return n >= 4 && drive::rtu_crc_ok(frame, n); }
 
 }  // namespace cnc::servo_sim

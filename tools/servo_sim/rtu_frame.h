@@ -11,8 +11,8 @@ namespace cnc::servo_sim {
 // from the bytes there; 0 while more bytes are needed; -1 for a function the
 // simulator does not frame.
 int rtu_request_length(const uint8_t* buf, int n);
-uint16_t modbus_crc16(const uint8_t* buf, int n);
-// The frame's last two bytes are the CRC of the rest (low byte first).
+// A whole request (at least unit, function and CRC) whose last two bytes are the
+// CRC-16 of the rest (low byte first).
 bool rtu_crc_ok(const uint8_t* frame, int n);
 
 }  // namespace cnc::servo_sim
