@@ -740,10 +740,11 @@ void Interpolator::at_stop_block(bool pausing) {
   out_.block_index = p.block.index;
   out_.source_line = p.block.source_line;
   if (p.block.kind == program::BlockKind::kEnd) {
+    const bool program_end = p.block.event.number != program::kEndOfOperatorLine;
     pop_block();
     ++blocks_done_;
     state_ = RunState::kDone;
-    spindle_off();
+    if (program_end) spindle_off();
   } else if (stopping_) {
     // STOP at rest before a dwell or an event: the program ends here.
     clear_blocks();
@@ -861,13 +862,17 @@ void Interpolator::door_spindle_stop() {
   spindle_.program_rpm = 0;
 }
 
-void Interpolator::spindle_off() {
-  outputs_.end();  // the coolant stops with the spindle
+void Interpolator::program_start_modes() {
   spindle_wait_ = false;
   door_hold_ = false;
   door_resume_ = false;
   door_spindle_ = SpindleState{};
   spindle_override_on_ = true;  // M48 is in effect at a program's start (LinuxCNC's)
+}
+
+void Interpolator::spindle_off() {
+  outputs_.end();  // the coolant stops with the spindle
+  program_start_modes();
   if (spindle_.direction == 0 && spindle_.rpm == 0) return;
   ++spindle_.seq;
   spindle_.direction = 0;

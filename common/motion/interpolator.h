@@ -294,7 +294,7 @@ class Interpolator {
   // Recomputes p.v_min after p.v_bw changed in [from, end).
   static void update_suffix_min(Planned& p, size_t from, size_t end);
   void clear_blocks();
-  void clear_program();  // LOAD and RESET: clear_blocks() and the program's counts and motion state
+  void clear_program(bool stop_spindle);  // LOAD (false) and RESET (true): clear_blocks() and the program's counts and motion state
   void pop_block();
   bool check_block(const program::Block& block);
   // Speed limit at arc length s of block p: programmed feed × override and the
@@ -369,6 +369,8 @@ class Interpolator {
   // A spindle event at the front, reached: the change taken (and waited for).
   void take_spindle_event(const Planned& p);
   void spindle_off();
+  // What a program starts with: M48 on, no door hold or at-speed wait carried over.
+  void program_start_modes();
   // The speed the spindle turns at for the program's S: under the override, at most spindle.max_rpm.
   double overridden_rpm(double program_rpm) const;
   // After the override or its enable changed: the spindle turning takes the new speed (a change, not waited for).

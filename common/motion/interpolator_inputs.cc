@@ -100,8 +100,10 @@ bool Interpolator::apply_block(const program::Block& block) {
   return submit_block(std::make_unique<program::Block>(block));
 }
 
-// Nothing of a program left: no block, no counts, the path at rest.
-void Interpolator::clear_program() {
+// Nothing of a program left: no block, no counts, the path at rest; the spindle and
+// the coolant stopped too after a fault (RESET), left as they are by a LOAD (an MDI
+// line's M3 or M8 keeps them on for the next, as LinuxCNC's MDI does).
+void Interpolator::clear_program(bool stop_spindle) {
   clear_blocks();
   next_index_ = 0;
   blocks_done_ = 0;
@@ -114,14 +116,18 @@ void Interpolator::clear_program() {
   probe_serial_ = UINT64_MAX;
   input_ = InputWaitState{};
   input_serial_ = UINT64_MAX;
-  spindle_off();
+  if (stop_spindle) {
+    spindle_off();
+  } else {
+    program_start_modes();
+  }
 }
 
 bool Interpolator::apply_command(const Command& cmd) {
   switch (cmd.kind) {
     case Command::Kind::kLoad:
       if (state_ == RunState::kRunning || state_ == RunState::kHeld || state_ == RunState::kStarved) return true;
-      clear_program();
+      clear_program(false);
       state_ = RunState::kIdle;
       // No block of the new program is under way until its first step: the
       // setpoints until then name none (they carried the last path's block and u,
@@ -181,7 +187,7 @@ bool Interpolator::apply_command(const Command& cmd) {
       break;
     case Command::Kind::kReset:
       // After a fault: nothing of the program is left, the path rests where the drives are.
-      clear_program();
+      clear_program(true);
       hold_ = false;
       single_block_held_ = false;
       stopping_ = false;

@@ -63,6 +63,12 @@ struct Event {
   }
 };
 
+// A kEnd block's event.number: the end of a program (M2, M30: the spindle and the
+// coolant stop) or of an operator's line or move (MDI, jog, home: they stay as they
+// are, as LinuxCNC's MDI leaves them).
+constexpr int32_t kEndOfProgram = 0;
+constexpr int32_t kEndOfOperatorLine = 1;
+
 // Limits shared by the config, the program's PROCESS directive and the network check.
 constexpr int kMaxFlutes = 64;
 

@@ -107,6 +107,11 @@ std::string from_msg(const cnc::lcmt_program_block& m, int num_axes, Block* out)
     b.event.value = m.event_value;
     b.event.text = m.event_text;
   }
+  if (m.kind == static_cast<int8_t>(BlockKind::kEnd)) {
+    if (m.event_number != kEndOfProgram && m.event_number != kEndOfOperatorLine)
+      return "bad end (" + std::to_string(m.event_number) + ": 0 a program's, 1 an operator line's)";
+    b.event.number = m.event_number;
+  }
   if (m.kind == static_cast<int8_t>(BlockKind::kLine) && m.event_kind == kProbeWire) {
     if (m.event_number < 2 || m.event_number > 5) return "bad probing move (G38." + std::to_string(m.event_number) + ")";
     b.probe = static_cast<int8_t>(m.event_number);

@@ -58,6 +58,11 @@ class BlockBuilder : public Canon {
   // Blocks made so far and not yet taken, oldest first; the caller pops them.
   std::deque<program::Block>& blocks() { return out_; }
   int64_t blocks_made() const { return next_index_; }
+  void restore_spindle_and_coolant(const SourceRef&, int spindle, double s, bool mist, bool flood) override {
+    spindle_dir_ = spindle;
+    if (s > 0) speed_rpm_ = s;  // no S word yet: the machine's speed before any (setup.spindle_rpm)
+    coolant_ = (mist ? 1 : 0) | (flood ? 2 : 0);
+  }
   bool ended() const { return ended_; }
 
   void use_length_units(const SourceRef&, Units) override;

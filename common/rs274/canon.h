@@ -59,6 +59,10 @@ class Canon {
   virtual void set_naivecam_tolerance(const SourceRef&, double /*Q*/) {}
   virtual void use_tool_length_offset(const SourceRef&, const Pose&) {}
   virtual void on_reset(const SourceRef&) {}
+  // An MDI line starts with the spindle and coolant the line before left: the state
+  // as it is, no change to make (LinuxCNC's MDI shares one interpreter between lines).
+  virtual void restore_spindle_and_coolant(const SourceRef&, int /*spindle: 1 cw, -1 ccw, 0 off*/, double /*S*/,
+                                           bool /*mist*/, bool /*flood*/) {}
 
   // Motion. `end` in program coordinates and units.
   virtual void straight_traverse(const SourceRef&, const Pose& end) = 0;

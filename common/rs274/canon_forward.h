@@ -27,6 +27,9 @@ class CanonForward : public Canon {
   void set_naivecam_tolerance(const SourceRef& r, double q) override { next_.set_naivecam_tolerance(r, q); }
   void use_tool_length_offset(const SourceRef& r, const Pose& p) override { next_.use_tool_length_offset(r, p); }
   void on_reset(const SourceRef& r) override { next_.on_reset(r); }
+  void restore_spindle_and_coolant(const SourceRef& r, int spindle, double s, bool mist, bool flood) override {
+    next_.restore_spindle_and_coolant(r, spindle, s, mist, flood);
+  }
 
   void straight_traverse(const SourceRef& r, const Pose& end) override { next_.straight_traverse(r, end); }
   void straight_feed(const SourceRef& r, const Pose& end) override { next_.straight_feed(r, end); }

@@ -144,6 +144,11 @@ void Interpreter::open(const std::string& path) {
       canon_.set_feed_rate(r0, feed_);
     }
     if (m.coord >= 1 && m.coord <= 9 && m.coord != coord_) set_coord_system(m.coord);
+    speed_ = m.speed;
+    spindle_ = m.spindle;
+    mist_ = m.mist;
+    flood_ = m.flood;
+    canon_.restore_spindle_and_coolant(r0, spindle_, speed_, mist_, flood_);
     if (m.tool_length != 490) {  // G43 (H: the offset then), G43.1, G43.2 stay in effect
       tool_length_ = m.tool_length;
       tool_offset_ = m.tool_offset;

@@ -81,6 +81,7 @@ void InterpolatorNode::start_move(int axis, double target_mm, double feed_mm_per
   program::Block end;
   end.index = 1;
   end.kind = program::BlockKind::kEnd;
+  end.event.number = program::kEndOfOperatorLine;
   end.source_file = label;
   end.start = line.end;
   end.end = line.end;

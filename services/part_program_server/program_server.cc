@@ -318,7 +318,7 @@ std::unique_ptr<ProgramServer::Run> ProgramServer::start_run(const Loaded& p, bo
   auto run = std::make_unique<Run>(setup_, p.start, p.block_delete, validating, p.modes_in);
   run->set_results(&p.results, !live_probing_);
   if (p.from_line > 0) run->watch(p.from_line);
-  if (p.line) run->watch(2);  // MDI: the state after the line (before its M2)
+  if (p.line) run->watch(3);  // MDI: the state after the line (at its closing '%')
   run->open(p.path);
   return run;
 }
@@ -547,7 +547,13 @@ const program::Block* ProgramServer::block(int64_t index) {
     renumbered_.index = index;
     return &renumbered_;
   }
-  return full_block(index);
+  const program::Block* b = full_block(index);
+  if (b != nullptr && program_->line && b->kind == program::BlockKind::kEnd) {
+    renumbered_ = *b;  // the MDI file's closing '%' (or an M2 of the line's own)
+    renumbered_.event.number = program::kEndOfOperatorLine;
+    return &renumbered_;
+  }
+  return b;
 }
 
 int64_t ProgramServer::awaited_result_block() const {

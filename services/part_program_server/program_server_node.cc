@@ -424,7 +424,9 @@ void ProgramServerNode::load_line(const cnc::lcmt_program_command& m, const std:
                                std::to_string(m.seq) + ".ngc");
   {
     std::ofstream out(file);
-    out << line << "\nM2\n";
+    // Between '%' lines, not ended by M2: M2's stops (spindle, coolant) and resets are a
+    // program's end, and LinuxCNC's MDI leaves the spindle and coolant as the line set them.
+    out << "%\n" << line << "\n%\n";
     if (!out) {
       refuse(m, "cannot write " + file.string());
       return;

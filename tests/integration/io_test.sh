@@ -18,8 +18,10 @@
 #     The scaled analog input is on IO_STATUS. The run replays bit for bit.
 #  2. mbpoll, a third-party Modbus client, reads the module's coils: 0 0 for the
 #     coolant, 1 0 1 0 for the four outputs; and the analog output's register: 550.
-#  3. The interpolator killed while the coolant runs in a dwell: the bridge's
-#     setpoint watchdog faults and the bridge turns the coolant off itself.
+#  3. The operator's commands (cnc-ctl --do coolant flood|off, --do output lamp_red on,
+#     coolant_valve_pct 12.5) switch the module's points; an input named as an output is
+#     refused with the outputs listed. Then the interpolator killed while the coolant runs
+#     in a dwell: the bridge's setpoint watchdog faults and turns the coolant off itself.
 #   io_test.sh BUILD_DIR SOURCE_DIR
 source "$(dirname "$0")/lib.sh"
 enter_private_netns "$@"
@@ -237,6 +239,31 @@ M30
 NGC
 start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M"
 start_cell
+# First the operator's own commands (cnc-ctl --do coolant|output, by MDI), on the module.
+sim_says() {  # sim_says PATTERN WHAT: the module's log shows PATTERN within 5 s
+  local i
+  for ((i = 0; i < 50; i++)); do grep -qE "$1" "$WORK/servo-sim.log" && return 0; sleep 0.1; done
+  fail "$2: the module's log has no '$1'"
+}
+op() {
+  # shellcheck disable=SC2086
+  "${CTL[@]}" --do $1 --timeout 20 >"$WORK/ctl-op.out" 2>&1 || { cat "$WORK/ctl-op.out" >&2; fail "cnc-ctl --do $1 failed"; }
+}
+op "coolant --value flood"
+sim_says "io io1: coolant_flood on" "--do coolant --value flood"
+# The MDI line's end is no program end: the flood stays on through the next commands.
+op "output --point lamp_red --value on"
+sim_says "io io1: lamp_red on" "--do output --point lamp_red --value on"
+op "output --point coolant_valve_pct --value 12.5"
+sim_says "io io1: coolant_valve_pct = 12\.5 \(raw 125\)" "--do output --point coolant_valve_pct --value 12.5"
+! grep -q "io io1: coolant_flood off" "$WORK/servo-sim.log" || fail "the flood went off before the operator turned it off"
+op "coolant --value off"
+sim_says "io io1: coolant_flood off" "--do coolant --value off"
+grep -E "io io1: (coolant_flood|lamp_red|coolant_valve_pct)" "$WORK/servo-sim.log" | sed 's/^/# operator: /' >&2
+rc=0; "${CTL[@]}" --do output --point door_closed --value on >"$WORK/ctl-op.out" 2>&1 || rc=$?
+cat "$WORK/ctl-op.out" >&2
+[ "$rc" -eq 2 ] && grep -q "'door_closed' is no output of the machine file (io.digital_outputs, io.analog_outputs: clamp, air_blast, lamp_green, lamp_red, coolant_valve_pct)" "$WORK/ctl-op.out" ||
+  fail "an input named as an output: cnc-ctl exit $rc, expected 2 with the outputs listed"
 "${CTL[@]}" --do run --program "$WORK/dwell.ngc" --timeout 60 >"$WORK/ctl3.out" 2>&1 &
 ctl_pid=$!
 for ((i = 0; i < 100; i++)); do

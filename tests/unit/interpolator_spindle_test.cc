@@ -1,7 +1,8 @@
 // The core's spindle: a spindle event (M3, M4, M5, S) is taken when the path
 // reaches it, in order with motion; on a machine with a spindle the path stands at a
 // change to a speed until the recorded at-speed input names that change (through
-// inputs.cc, as replay applies it); program end and STOP turn the spindle off; a
+// inputs.cc, as replay applies it); program end and STOP turn the spindle off, the
+// end of an operator's line or move (MDI, jog) does not; a
 // machine without one, and the dry run, never wait. The spindle override (a recorded
 // input, SPINDLE_OVERRIDE) scales the commanded speed at once, within its configured
 // range and spindle.max_rpm, with no at-speed wait; M51 P0 disables it, M51 P1 again.
@@ -198,6 +199,55 @@ TEST(InterpolatorSpindle, ProgramEndAndStopTurnItOff) {
   EXPECT_EQ(core.state(), RunState::kDone);
   EXPECT_EQ(core.spindle().direction, 0);
   EXPECT_EQ(core.spindle().seq, 4);
+}
+
+TEST(InterpolatorSpindle, AnOperatorLinesEndLeavesTheSpindleAndCoolantOnAProgramsEndTurnsThemOff) {
+  // MDI "M3 S1000" and "M8", then a jog (each ends in a kEnd of an operator line): the
+  // spindle turns on and the flood stays on, as LinuxCNC's MDI leaves them; before,
+  // every such end was a program end (M2), so MDI M3 stopped again at once and a jog
+  // stopped a spindle the operator had started. A program's end (M2) turns both off.
+  const config::MachineConfig cfg = load("sim3_spindle.yaml");
+  Interpolator core(cfg);
+  auto run = [&](std::vector<program::Block> blocks, int32_t end_kind) {
+    core.apply_command({Command::Kind::kLoad, 1.0, {}});
+    const std::vector<double> here{core.machine_position(0), 0, 0};
+    program::Block end;
+    end.kind = program::BlockKind::kEnd;
+    end.event.number = end_kind;
+    blocks.push_back(end);
+    for (size_t i = 0; i < blocks.size(); ++i) {
+      blocks[i].index = static_cast<int64_t>(i);
+      if (blocks[i].start.empty()) blocks[i].start = blocks[i].end = i > 0 ? blocks[i - 1].end : here;
+      ASSERT_TRUE(core.apply_block(blocks[i])) << core.last_refusal();
+    }
+    core.apply_command({Command::Kind::kStart, 1.0, {}});
+    for (int i = 0; i < 5000 && core.state() != RunState::kDone; ++i) {
+      core.step();
+      if (core.spindle_waiting()) core.apply_command(Command{Command::Kind::kSpindleAtSpeed, 1.0, {}, -1, double(core.spindle().seq)});
+    }
+    ASSERT_EQ(core.state(), RunState::kDone);
+  };
+  program::Block m3;
+  m3.kind = program::BlockKind::kEvent;
+  m3.event.kind = program::EventKind::kSpindle;
+  m3.event.number = 1;
+  m3.event.value = 1000;
+  run({m3}, program::kEndOfOperatorLine);
+  EXPECT_EQ(core.spindle().direction, 1) << "MDI M3 S1000";
+  EXPECT_EQ(core.spindle().rpm, 1000);
+  program::Block m8;
+  m8.kind = program::BlockKind::kEvent;
+  m8.event.kind = program::EventKind::kCoolant;
+  m8.event.number = 2;
+  run({m8}, program::kEndOfOperatorLine);
+  EXPECT_EQ(core.outputs().coolant, 2) << "MDI M8";
+  EXPECT_EQ(core.spindle().direction, 1);
+  run({line_block(0, {core.machine_position(0), 0, 0}, core.machine_position(0) + 5)}, program::kEndOfOperatorLine);
+  EXPECT_EQ(core.spindle().direction, 1) << "a jog";
+  EXPECT_EQ(core.outputs().coolant, 2);
+  run({line_block(0, {core.machine_position(0), 0, 0}, core.machine_position(0) + 5)}, program::kEndOfProgram);
+  EXPECT_EQ(core.spindle().direction, 0) << "a program's M2";
+  EXPECT_EQ(core.outputs().coolant, 0);
 }
 
 TEST(InterpolatorSpindle, NoSpindleOrADryRunNeverWaits) {

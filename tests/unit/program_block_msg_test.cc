@@ -200,6 +200,21 @@ TEST(BlockMsgRefuses, CommonFields) {
   expect_refused(arc_msg(), [](auto& m) { m.block_index = -1; }, "negative block index");
 }
 
+TEST(BlockMsg, AnEndSaysWhoseEndItIs) {
+  // A program's (M2, M30: the spindle and coolant stop) or an operator line's (MDI,
+  // jog: they stay): the interpolator reads it off the wire; anything else is refused.
+  Block end = program_blocks().back();
+  ASSERT_EQ(end.kind, BlockKind::kEnd);
+  EXPECT_EQ(end.event.number, kEndOfProgram);
+  for (const int32_t kind : {kEndOfProgram, kEndOfOperatorLine}) {
+    end.event.number = kind;
+    Block wire;
+    ASSERT_EQ(from_msg(over_the_wire(to_msg(end, 7)), 3, &wire), "");
+    EXPECT_EQ(wire.event.number, kind);
+  }
+  expect_refused(to_msg(end, 7), [](auto& m) { m.event_number = 2; }, "bad end (2: 0 a program's, 1 an operator line's)");
+}
+
 TEST(BlockMsgRefuses, Events) {
   const auto message = [] {
     for (const Block& b : program_blocks())

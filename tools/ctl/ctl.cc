@@ -432,13 +432,14 @@ int Ctl::program_switch() {
 
 // Plain program commands: sent, and refused at once with the server's reason.
 int Ctl::plain() {
-  static const std::map<std::string, int8_t> kPlain = {{"start", lcmt_program_command::START},
-                                                       {"hold", lcmt_program_command::HOLD},
-                                                       {"resume", lcmt_program_command::RESUME},
-                                                       {"stop", lcmt_program_command::STOP},
-                                                       {"override", lcmt_program_command::OVERRIDE},
-                                                       {"rapid-override", lcmt_program_command::RAPID_OVERRIDE},
-                                                       {"spindle-override", lcmt_program_command::SPINDLE_OVERRIDE}};
+  // By value: the pair would bind a reference to the constants, which LCM declares
+  // and never defines (an undefined symbol where the sanitizers keep the reference).
+  using PC = lcmt_program_command;
+  static const std::map<std::string, int8_t> kPlain = {
+      {"start", int8_t{PC::START}},       {"hold", int8_t{PC::HOLD}},
+      {"resume", int8_t{PC::RESUME}},     {"stop", int8_t{PC::STOP}},
+      {"override", int8_t{PC::OVERRIDE}}, {"rapid-override", int8_t{PC::RAPID_OVERRIDE}},
+      {"spindle-override", int8_t{PC::SPINDLE_OVERRIDE}}};
   wait(0.5, [&] { return view_.have_program && view_.have_interp; });  // the states first
   const double value = what_ == "override" || what_ == "rapid-override" || what_ == "spindle-override"
                            ? args_.number("value", 1.0)
@@ -590,7 +591,17 @@ int Ctl::home_or_jog() {
 // run, load, mdi and touch-off: the program (or the line's program) loaded, and for
 // all but load started, watched to its end and checked where the axes stand.
 int Ctl::run() {
-  const bool line_cmd = what_ == "mdi" || what_ == "touch-off";
+  const bool io_cmd = what_ == "coolant" || what_ == "output";
+  const bool line_cmd = what_ == "mdi" || what_ == "touch-off" || io_cmd;
+  if (what_ == "mdi") mdi_line_ = args_.option("line");
+  if (io_cmd) {
+    std::string why;
+    mdi_line_ = io_line(&why);
+    if (mdi_line_.empty()) {
+      std::fprintf(stderr, "cnc-ctl: --do %s: %s\n", what_.c_str(), why.c_str());
+      return cnc::service::kExitBadInput;
+    }
+  }
   const std::string program_arg = line_cmd ? std::string("(") + what_ + ")" : args_.option("program");
   if (program_arg.empty()) {
     std::fprintf(stderr, "cnc-ctl: --program FILE is required\n");
@@ -611,6 +622,53 @@ int Ctl::run() {
   const double t0 = cnc::util::monotonic_s();
   if (const int rc = watch_to_end(token); rc != 0) return rc;
   return check_at_end(t0);
+}
+
+std::string Ctl::io_line(std::string* why) const {
+  const auto& io = cfg_.io;
+  const std::string value = args_.option("value");
+  if (what_ == "coolant") {
+    const bool mist = value == "mist", flood = value == "flood";
+    if (!mist && !flood && value != "off") {
+      *why = "--value must be flood, mist or off, not '" + value + "'";
+      return "";
+    }
+    if ((mist && io.coolant_mist < 0) || (flood && io.coolant_flood < 0)) {
+      *why = "the machine file switches no " + value + " coolant (io.coolant." + value + ")";
+      return "";
+    }
+    return mist ? "M7" : flood ? "M8" : "M9";
+  }
+  const std::string name = args_.option("point");
+  const int p = io.point_index(name);
+  auto find = [&](const std::vector<int>& list) {
+    const auto it = std::find(list.begin(), list.end(), p);
+    return it == list.end() ? -1 : static_cast<int>(it - list.begin());
+  };
+  if (const int n = p < 0 ? -1 : find(io.digital_outputs); n >= 0) {
+    if (value != "on" && value != "off") {
+      *why = "--value must be on or off for the digital output " + name + ", not '" + value + "'";
+      return "";
+    }
+    return (value == "on" ? "M64 P" : "M65 P") + std::to_string(n);  // immediate, as from the panel
+  }
+  if (const int n = p < 0 ? -1 : find(io.analog_outputs); n >= 0) {
+    char* end = nullptr;
+    const double v = std::strtod(value.c_str(), &end);
+    if (value.empty() || *end != '\0' || !std::isfinite(v)) {
+      *why = "--value must be a number for the analog output " + name + ", not '" + value + "'";
+      return "";
+    }
+    char line[64];
+    std::snprintf(line, sizeof line, "M68 E%d Q%.17g", n, v);
+    return line;
+  }
+  std::string outputs;
+  for (const int i : io.digital_outputs) outputs += (outputs.empty() ? "" : ", ") + io.points[static_cast<size_t>(i)].name;
+  for (const int i : io.analog_outputs) outputs += (outputs.empty() ? "" : ", ") + io.points[static_cast<size_t>(i)].name;
+  *why = "--point '" + name + "' is no output of the machine file (io.digital_outputs, io.analog_outputs: " +
+         (outputs.empty() ? std::string("none") : outputs) + ")";
+  return "";
 }
 
 // The services must be up first.
@@ -652,8 +710,8 @@ int Ctl::load(const std::string& program, bool line_cmd) {
   };
   bool got = false;
   for (int attempt = 0; attempt < 5 && !got; ++attempt) {
-    if (what_ == "mdi") {
-      send_op(lcmt_program_command::MDI, -1, 0.0, 0.0, 0, args_.option("line"));
+    if (!mdi_line_.empty()) {
+      send_op(lcmt_program_command::MDI, -1, 0.0, 0.0, 0, mdi_line_);
     } else if (what_ == "touch-off") {
       const int axis = axis_arg();
       if (axis < 0) {
@@ -906,6 +964,8 @@ constexpr Verb kVerbs[] = {
     {"jog", &Ctl::home_or_jog},
     {"touch-off", &Ctl::run},
     {"mdi", &Ctl::run},
+    {"coolant", &Ctl::run},
+    {"output", &Ctl::run},
     {"status", &Ctl::status},
     {"single-block", &Ctl::program_switch},
     {"optional-stop", &Ctl::program_switch},

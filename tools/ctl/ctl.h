@@ -77,6 +77,9 @@ class Ctl {
   int enable_drives(double limit_s);
   int confirm_approach();
   int axis_arg() const;
+  // coolant and output: the line of codes an operator would give MDI for them; "" and
+  // *why when the machine file has no such point.
+  std::string io_line(std::string* why) const;
   void send_op(int8_t command, int axis, double value, double feed, int8_t flag, const std::string& text);
   bool interp_active() const;
   std::string alarm_since(size_t from, std::initializer_list<const char*> codes) const;
@@ -97,6 +100,7 @@ class Ctl {
   CellView view_;
   double largest_fe_ = 0;
   std::string largest_fe_axis_;
+  std::string mdi_line_;  // mdi, coolant, output: the line sent
   int64_t sent_seq_ = -1;  // the last program command sent: the server names it when it refuses it
   int from_line_ = 0;
 };

@@ -16,6 +16,9 @@
 //                                                  50 ms; SIGINT/SIGTERM releases it), then STOP
 //   cnc-ctl --machine M --do touch-off --axis X --value V   G10 L20 P0 (--tool: G10 L10, the length of the tool in the spindle)
 //   cnc-ctl --machine M --do mdi --line "G0 X10"   one line through the program server's interpreter
+//   cnc-ctl --machine M --do coolant --value flood|mist|off        M8, M7, M9 by MDI
+//   cnc-ctl --machine M --do output --point NAME --value on|off|V  a digital output (M64/M65 P n) or an
+//                                                  analog one (M68 E n Q V) of the machine file's io:, by MDI
 //   cnc-ctl --machine M --do status [--timeout S]  the cell's services (host, pid, version, state)
 //   cnc-ctl --machine M --do run|load --program P --from N [--confirm]
 //                                                  run from line N: the approach is printed; run waits
@@ -40,15 +43,17 @@ int main(int argc, char** argv) {
                           {{"do", "CMD",
                             "run (default), load, start, hold, resume, stop, override, rapid-override, spindle-override, enable, disable, "
                             "fault-reset, "
-                            "reset, home, jog, touch-off, mdi, status, single-block, optional-stop, block-delete, confirm"},
+                            "reset, home, jog, touch-off, mdi, coolant, output, status, single-block, optional-stop, block-delete, confirm"},
                            {"program", "FILE", "the part program of run and load"},
                            {"value", "X",
-                            "override factor, jog distance or direction (+1|-1), touch-off value; on|off for the switches"},
+                            "override factor, jog distance or direction (+1|-1), touch-off value; on|off for the switches and "
+                            "outputs; flood|mist|off for coolant"},
                            {"timeout", "S", "how long run, enable, reset and status wait (default 600)", true},
                            {"axis", "NAME", "the axis of home, jog and touch-off"},
                            {"feed", "F", "jog feed, mm/min", true},
                            {"hold", "S", "continuous jog held for S s, then STOP", true},
                            {"line", "TEXT", "the line of mdi (e.g. \"G0 X10\")"},
+                           {"point", "NAME", "the I/O point of output (io.points[].name)"},
                            {"from", "N", "run or load from line N (an approach first, confirmed before START)", true}},
                           {{"tool", "", "touch-off of the tool (refused: not available yet)"},
                            {"confirm", "", "run --from: confirm the approach itself"}}};
