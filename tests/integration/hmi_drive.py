@@ -298,8 +298,9 @@ try:
     io = driver.execute_script("return [...document.querySelectorAll('#io-body tr')].map("
                                "r => [...r.children].map(c => c.textContent));")
     rows = {r[0]: r for r in io}
-    if len(io) != 4 or rows.get("estop_ok", [None] * 5)[1:] != ["digital in", "1", "io1", "E-stop"] or \
-            rows.get("coolant_flood", [None] * 5)[1:] != ["digital out", "1", "io1", "M8 flood"] or \
+    if len(io) != 5 or rows.get("estop_ok", [None] * 6)[1:5] != ["digital in", "1", "io1", "E-stop"] or \
+            rows.get("coolant_flood", [None] * 6)[1:5] != ["digital out", "1", "io1", "M8 flood"] or \
+            rows.get("lamp", [None] * 6)[1:6] != ["digital out", "0", "io1", "M62-M65 P0", "toggle"] or \
             rows.get("door_closed", [None] * 5)[4] != "door":
         fail(f"the I/O points on the page: {io}")
     note(f"machine panel: spindle {text('spindle-actual')} rpm {text('spindle-at-speed')}, load {text('spindle-load')} A,"
@@ -309,6 +310,22 @@ try:
     # 9. Stop.
     effect("stop_click_to_stopped", "btn-stop", "state-program", "contains", "stopped", timeout_s=10)
     wait("the interpolator stands", lambda: state("interp") in ("idle", "done"), 10)
+    # 9a. Coolant and an output from the machine panel (MDI M8, M9; M64, M65 P0): the
+    #     STOP turned the flood off; the flood button turns it on and it stays on (an MDI
+    #     line's end is no program end) until the off button; the lamp's toggle twice.
+    wait("the flood off after STOP", lambda: text("coolant-flood") == "off", 10)
+    for button, el, want in (("btn-coolant-flood", "coolant-flood", "on"), ("btn-coolant-off", "coolant-flood", "off")):
+        n0 = n_results()
+        driver.find_element(By.ID, button).click()
+        wait_result(n0, "mdi started", 10)
+        wait(f"{el} {want}", lambda: text(el) == want, 10)
+    lamp = driver.execute_script("return [...document.querySelectorAll('#io-body tr')].findIndex(r => r.id === 'io-lamp');")
+    for want in ("1", "0"):
+        n0 = n_results()
+        driver.find_element(By.ID, "io-toggle-lamp").click()
+        wait_result(n0, "mdi started", 10)
+        wait(f"the lamp reads {want}", lambda: text(f"io-value-{lamp}") == want, 10)
+    note("machine panel: flood on and off, the lamp output on and off, each by MDI from the page")
 
     # 9b. Single block from the page: switched on (the cell confirms it in INTERP_STATE),
     #     the program loaded again; START runs one line and holds, each RESUME one more:

@@ -42,7 +42,9 @@ io:
     - {name: coolant_flood, module: io1, kind: coil, address: 1}
     - {name: door_closed, module: io1, kind: discrete_input, address: 1}
     - {name: estop_ok, module: io1, kind: discrete_input, address: 2}
+    - {name: lamp, module: io1, kind: coil, address: 8}
   coolant: {mist: coolant_mist, flood: coolant_flood}
+  digital_outputs: [lamp]
 safety:
   estop: {input: estop_ok}
   door: {input: door_closed}

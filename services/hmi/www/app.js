@@ -228,6 +228,8 @@ function buildMachine(d) {
     $('spindle-override').max = Math.round(d.spindle.max_override * 100);
   }
   $('coolant-box').hidden = !(d.coolant && (d.coolant.mist || d.coolant.flood));
+  $('btn-coolant-mist').hidden = !(d.coolant && d.coolant.mist);
+  $('btn-coolant-flood').hidden = !(d.coolant && d.coolant.flood);
   $('probe-box').hidden = !d.probe_input;
   const body = $('io-body'); body.innerHTML = '';
   (d.points || []).forEach((p, i) => {
@@ -237,6 +239,17 @@ function buildMachine(d) {
       if (k === 'value') td.id = `io-value-${i}`;
       tr.appendChild(td);
     }
+    // A digital output (M62-M65 P n) switched from here by MDI M64/M65 P n, as an operator would type it.
+    const td = document.createElement('td');
+    const out = /M62-M65 P(\d+)/.exec(p.role || '');
+    if (out) {
+      const b = document.createElement('button');
+      b.id = `io-toggle-${p.name}`; b.dataset.control = ''; b.textContent = 'toggle';
+      b.title = `MDI M64/M65 P${out[1]}`;
+      b.onclick = () => send('mdi', { line: `${S.ioValues && S.ioValues[i] ? 'M65' : 'M64'} P${out[1]}` });
+      td.appendChild(b);
+    }
+    tr.appendChild(td);
     body.appendChild(tr);
   });
 }
@@ -290,6 +303,7 @@ function showMachine(mc, it) {
   $('input-wait').textContent = w
     ? `M66 waits on ${w.input} (${w.name}), mode ${w.mode}, ${w.left_s >= 0 ? w.left_s.toFixed(1) + ' s left' : 'no timeout'}`
     : mc.input_result ? `M66 last read (block ${mc.input_result.block}): #5399 = ${mc.input_result.value}` : '';
+  S.ioValues = mc.points || [];
   (mc.points || []).forEach((v, i) => {
     const td = $(`io-value-${i}`);
     if (!td) return;
@@ -469,6 +483,8 @@ function wire() {
   }
   $('btn-runs').onclick = () => send('runs');
   $('btn-play-stop').onclick = () => { S.play = null; S.playAt = null; $('btn-play-stop').disabled = true; $('playback').textContent = ''; };
+  for (const [id, line] of [['btn-coolant-mist', 'M7'], ['btn-coolant-flood', 'M8'], ['btn-coolant-off', 'M9']])
+    $(id).onclick = () => send('mdi', { line });
   $('btn-touch-off').onclick = () => send('touch_off', { axis: $('to-axis').value, value: Number($('to-value').value) });
   $('mdi-form').onsubmit = (e) => {
     e.preventDefault();
