@@ -75,6 +75,7 @@ void BridgeCore::restart_stream() {
   braking_ = false;
   last_sp_ = cmd_;
   sp_vel_.fill(0.0);
+  stream_vel_.fill(0.0);
   p_size_ = 0;
   reset_smoothing(cmd_);
   seg_cycle_ = -1;
@@ -117,11 +118,11 @@ BridgeCore::Verdict BridgeCore::on_setpoint(int64_t cycle, const AxisArray& p, c
     // cut off: its interpolator died and a new one began within the watchdog's
     // timeout, or a second one publishes. Neither is joined: a controlled stop.
     for (int a = 0; a < naxes_; ++a) {
-      if (std::fabs(sp_vel_[a]) <= kStillVelocity) continue;
+      if (std::fabs(stream_vel_[a]) <= kStillVelocity) continue;
       fault(fmt("setpoint stream %lld began where stream %lld had left off moving (axis %s at %.2f mm/s at its "
                 "cycle %lld): a restarted or second interpolator is not followed; controlled stop",
                 static_cast<long long>(from.stream), static_cast<long long>(stream_), cfg_.axes[a].name.c_str(),
-                std::fabs(sp_vel_[a]), static_cast<long long>(last_cycle_)));
+                std::fabs(stream_vel_[a]), static_cast<long long>(last_cycle_)));
       return Verdict::kFault;
     }
     // Otherwise joined where the axes stand, once the playback of the old one has
@@ -209,6 +210,11 @@ BridgeCore::Verdict BridgeCore::on_setpoint(int64_t cycle, const AxisArray& p, c
   gaps_ += gap - 1;
   last_gap_ = gap;
   sp_vel_ = v;
+  if (first) {
+    stream_vel_.fill(0.0);
+  } else {
+    stream_vel_ = v;
+  }
   last_sp_ = p;
   last_cycle_ = cycle;
   stream_ = from.stream;

@@ -188,6 +188,9 @@ class BridgeCore {
   AxisArray acc_{};      // commanded acceleration of the last tick, mm/s^2
   AxisArray last_sp_{};  // last accepted setpoint
   AxisArray sp_vel_{};   // velocity of the last accepted coarse step
+  // The same between the stream's own two newest setpoints (0 until it has two: the
+  // step a join takes from where the axes stand is not the stream moving).
+  AxisArray stream_vel_{};
   int64_t last_cycle_ = -1;
   int64_t last_gap_ = 1;  // cycles the last accepted step spanned
   int64_t engagement_ = 0;

@@ -739,6 +739,27 @@ TEST(BridgeCore, AStreamThatBeginsWhereAnotherLeftOffMovingIsAFault) {
   }
 }
 
+TEST(BridgeCore, AJoinsStepIsNotTheOldStreamMoving) {
+  // The soak (epoch 1, after a route cut): cnc-ctl --do reset enabled the drives, the
+  // faulted interpolator's standing stream was joined with a step (Z 31 um from where
+  // Z stood after the bridge's own stop: within the join's a*T^2), and its RESET's new
+  // stream came 4 ms later. The join's step read as the old stream "moving at 7.76
+  // mm/s" and the reset faulted. One setpoint of a stream is no motion of it.
+  const config::MachineConfig cfg = machine();
+  Runner r(cfg);
+  r.start(at(100, 50, -10));
+  r.core.engage(at(100, 50, -10), 9);
+  r.cycle(74497, at(100, 50, -10.031), true, {1, 9});
+  ASSERT_EQ(r.last, BridgeCore::Verdict::kAccepted) << r.core.waiting_reason();
+  for (int64_t k = 0; k < 40; ++k) {
+    r.cycle(74498 + k, at(100, 50, -10.031), true, {2, 9});
+    ASSERT_FALSE(r.core.faulted()) << r.core.fault_reason();
+  }
+  EXPECT_EQ(r.core.stream(), 2);
+  EXPECT_NEAR(r.core.commanded()[2], -10.031, 1e-3);  // the limiter settles the step within 1 um
+  r.expect_limits("a RESET's stream right after a join");
+}
+
 TEST(BridgeCore, ANewStreamAfterTheOldOneWentQuietIsJoined) {
   // fault_reset under two busy loops (run 13 of a 50-run): ENABLE engaged the bridge, two
   // setpoints of the interpolator's standing stream (from before its RESET) were
