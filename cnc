@@ -138,10 +138,11 @@ build() {
 }
 
 # up --machine FILE [--only a,b] [--log-out BASE] [--sim-final-state FILE] [--sim-trace CSV]
+#    [--sim-control FIFO]: the simulator reads commands from FIFO ("input clamp_closed 1", cnc-servo-sim --help)
 # Runs in the foreground; SIGINT/SIGTERM stop every service in reverse start order.
 # Exit status: 0 when every service exited 0.
 cmd_up() {
-  local machine="" only="" log_out="" final_state="" sim_trace=""
+  local machine="" only="" log_out="" final_state="" sim_trace="" sim_control=""
   while [ $# -gt 0 ]; do
     case "$1" in
       --machine) machine="$2"; shift 2 ;;
@@ -149,6 +150,7 @@ cmd_up() {
       --log-out) log_out="$2"; shift 2 ;;
       --sim-final-state) final_state="$2"; shift 2 ;;
       --sim-trace) sim_trace="$2"; shift 2 ;;
+      --sim-control) sim_control="$2"; shift 2 ;;
       *) die "up: unknown argument '$1' (expected --machine FILE [--only SERVICE,...])" ;;
     esac
   done
@@ -190,6 +192,7 @@ cmd_up() {
     [ "$s" = logger ] && [ -n "$log_out" ] && args+=(--out "$log_out")
     [ "$s" = servo-sim ] && [ -n "$final_state" ] && args+=(--final-state "$final_state")
     [ "$s" = servo-sim ] && [ -n "$sim_trace" ] && args+=(--trace "$sim_trace")
+    [ "$s" = servo-sim ] && [ -n "$sim_control" ] && args+=(--control "$sim_control")
     # The loaded program survives a restart of the program server (README, Killed
     # processes): its state file beside the machine config (like its key; git-ignored),
     # or in $CNC_STATE_DIR.
