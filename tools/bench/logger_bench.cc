@@ -168,7 +168,7 @@ int run_bench(const cnc::config::MachineConfig&, const cnc::service::Args& args)
   as.commanded_mm.assign(3, 0.0);
   as.actual_mm.assign(3, 0.0);
   as.following_error_mm.assign(3, 0.0);
-  as.drive_state.assign(3, cnc::lcmt_axis_status::ENABLED);
+  as.drive_state.assign(3, int8_t{cnc::lcmt_axis_status::ENABLED});  // by value: LCM never defines the constant
   as.fault.assign(3, "");
   for (auto* v : {&as.transactions, &as.timeouts, &as.exceptions, &as.crc_errors, &as.reconnects}) v->assign(3, 0);
   std::printf("cnc-bench-logger: %.0f s at %.0f Hz per channel, messages of %d B (setpoint) and %d B (axis status), "
