@@ -97,6 +97,7 @@ void InterpolatorNode::on_program_state(const cnc::lcmt_program_state& m) {
   // A probing move's result may change the program's length (the server validates the rest again with it).
   if (m.program_token == token_ && token_ != 0 && m.num_blocks > 0) num_blocks_ = m.num_blocks;
   if (m.state == cnc::lcmt_program_state::REFUSED) program_withdrawn(m);
+  else if (m.program_token != token_) program_lost(m);
   if (!loaded || m.program_token == token_) return;
   // In FAULT nothing new is taken; after it, no program loaded before it.
   if (fault_ || m.program_token <= retired_token_) return;
@@ -125,6 +126,28 @@ void InterpolatorNode::program_withdrawn(const cnc::lcmt_program_state& m) {
   const std::string text = "program " + program_path_ + " withdrawn by the program server: " + m.error;
   spdlog::error("{}: the program stops", text);
   stop_program("program_withdrawn", text);
+}
+
+void InterpolatorNode::program_lost(const cnc::lcmt_program_state& m) {
+  // The program server serves another program, or none, while this core runs one: it was
+  // started again without its state file (or with an older one). Blocks not held yet
+  // never come; the run would wait at the last one held until an operator's STOP.
+  if (token_ == 0 || manual_ != Manual::kNone) return;
+  const RunState s = core_.state();
+  if (s != RunState::kRunning && s != RunState::kHeld && s != RunState::kStarved) return;
+  if (num_blocks_ > 0 && core_.next_block_index() >= num_blocks_) return;  // every block held: it ends
+  std::string text = "program " + program_path_ + " lost: the program server ";
+  if (m.program_token == 0) {
+    text += "has no program loaded (started again without its --state?)";
+  } else {
+    text += "serves another program (";
+    text += m.program_path;
+    text += ", token " + std::to_string(m.program_token) + ")";
+  }
+  text += " and block " + std::to_string(core_.next_block_index()) + " of " + std::to_string(num_blocks_) +
+          " was not served yet; load it again";
+  spdlog::error("{}: the program stops", text);
+  stop_program("program_lost", text);
 }
 
 void InterpolatorNode::stop_program(const char* code, const std::string& text) {

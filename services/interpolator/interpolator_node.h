@@ -65,6 +65,7 @@ class InterpolatorNode {
   void on_command(const cnc::lcmt_program_command& m);
   void on_program_state(const cnc::lcmt_program_state& m);
   void program_withdrawn(const cnc::lcmt_program_state& m);
+  void program_lost(const cnc::lcmt_program_state& m);
   // The program cannot go on (a probing error, an M66 input not read, a withdrawal): an
   // ALARM (FAULT, code) naming why, and a STOP as the operator's (recorded: a replay stops too).
   void stop_program(const char* code, const std::string& text);

@@ -22,6 +22,10 @@
 #                   last one (a programmed point; no fault, no axis over 1.5x its acceleration),
 #                   raises peer_lost naming cnc-program-server, and goes on when the server is
 #                   restarted (--state): the program reaches its end, cnc-ctl exits 0.
+#   program-server-stateless
+#                   the same kill, the server started again without --state: the
+#                   interpolator stops the program it can no longer be served (ALARM
+#                   program_lost naming it), cnc-ctl exits 5 at once, loaded again it runs.
 #   logger          the killed logger's file reads to its last whole event (cnc-logstat,
 #                   lcm-logplayer), a restarted logger writes a new file next to it (the old
 #                   one unchanged), the program is unaffected.
@@ -336,6 +340,35 @@ for r in faults: print(f"# FAULT {r['source']} [{r['code']}] {r['text']}", file=
 sys.exit(0 if n > 1000 and max(worst.values()) <= 3000 * 1.001 and not faults else 1)
 PY
   alarm_latency cnc-interpolator peer_lost "cnc-program-server" "$kill_utime"
+  ;;
+program-server-stateless)
+  # Restarted without its state file: the interpolator stops the program it can no longer
+  # be served (not a starved wait until an operator's STOP), naming why; cnc-ctl exits 5.
+  run_cell
+  "$CTL" --machine "$M" --do run --program "$WORK/many.ngc" --timeout 60 >"$WORK/ctl.out" 2>&1 &
+  ctl_pid=$!
+  wait_for "X past 60 mm (first row)" 30 x_over 60
+  kill_hard program-server
+  wait_for "the interpolator's peer_lost alarm" 10 in_log interpolator "\[peer_lost\] no heartbeat from cnc-program-server"
+  t_back=$SECONDS
+  start program-server "$BUILD/services/cnc-program-server" --machine "$M"
+  rc=0; wait "$ctl_pid" || rc=$?
+  t_stop=$((SECONDS - t_back))
+  cat "$WORK/ctl.out" >&2
+  [ "$rc" -eq 5 ] || fail "cnc-ctl exit $rc (want 5) after the server came back without the program"
+  grep -q "cnc-ctl: the program stopped: program .*many.ngc lost: the program server has no program loaded" "$WORK/ctl.out" ||
+    fail "cnc-ctl does not say the program was lost, and why"
+  grep -q "many.ngc lost: .* block [0-9]* of [0-9]* was not served yet" "$WORK/interpolator.log" ||
+    { tail -n 20 "$WORK/interpolator.log" >&2; fail "the interpolator did not stop the lost program"; }
+  [ "$t_stop" -lt 10 ] || fail "the lost program took $t_stop s to stop"
+  wait_for "the axes stand" 20 standing
+  # Loaded again, the program runs to its end.
+  rc=$(ctl_rc --do run --program "$WORK/many.ngc" --timeout 60)
+  [ "$rc" -eq 0 ] || fail "loaded again, the program did not run to its end (cnc-ctl exit $rc)"
+  settle_at "$WORK/trace.csv" $END_XY 0
+  stop_cell
+  final_at "$WORK/final.json" $END_XY 0 || fail "the program did not end at its end point"
+  note "stopped within $t_stop s of the server's start: $(grep -o 'lost: .*' "$WORK/interpolator.log" | head -1)"
   ;;
 logger)
   run_cell

@@ -773,6 +773,10 @@ int Ctl::start(int64_t token) {
     send(lcmt_program_command::START);
     got = wait(1.0, [&] { return started() || !refused().empty(); });
   }
+  // A START sent again after one that took effect late is refused because the program
+  // runs: the run is the answer, not the refusal (the soak's false exit 3).
+  if (!refused().empty()) wait(0.5, started);
+  if (started()) return 0;
   if (const std::string why = refused(); !why.empty()) {
     std::fprintf(stderr, "cnc-ctl: %s\n", why.c_str());
     return kExitRefused;
@@ -853,13 +857,24 @@ int Ctl::watch_to_end(int64_t token) {
     return view_.have_program && view_.program.program_token == token &&
            view_.program.state == cnc::lcmt_program_state::REFUSED;
   };
+  // The program server came back without the program (no --state): the interpolator stops it.
+  auto program_lost = [&]() -> std::string {
+    for (const auto& a : view_.alarms)
+      if (a.source == "cnc-interpolator" && a.code == "program_lost") return a.text;
+    return "";
+  };
   const bool done = wait(timeout_s_, [&] {
     return bridge_fault() || block_refused() || cell_fault() || peer_lost() || stopped() || withdrawn() ||
+           !program_lost().empty() ||
            (view_.interp.program_token == token && view_.interp.state == 3 /* done */);
   });
   if (withdrawn()) {
     std::fprintf(stderr, "cnc-ctl: the program was withdrawn while it ran: %s\n", view_.program.error.c_str());
     return kExitRefused;
+  }
+  if (const std::string why = program_lost(); !why.empty()) {
+    std::fprintf(stderr, "cnc-ctl: the program stopped: %s\n", why.c_str());
+    return kExitFault;
   }
   if (block_refused()) {
     std::fprintf(stderr, "cnc-ctl: the interpolator refused a block; the program was stopped\n");

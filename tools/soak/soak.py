@@ -87,6 +87,8 @@ class Soak:
         return os.path.join(self.build, rel)
 
     def start(self, name, extra=()):
+        if name == "program-server" and not extra:  # as ./cnc up and the package start it
+            extra = ["--state", os.path.join(self.epoch_dir, "program-server.state")]
         log = open(os.path.join(self.epoch_dir, f"{name}.log"), "a")
         p = subprocess.Popen([self.bin(self.exe(name)), "--machine", self.machine, *extra], stdout=log,
                              stderr=subprocess.STDOUT)
@@ -175,6 +177,10 @@ class Soak:
             self.procs[name].kill()
             self.procs[name].wait()
             time.sleep(self.rng.uniform(0.2, 1.5))
+            if name == "program-server" and self.rng.random() < 0.3:
+                # Its state file lost too: the interpolator stops the program it runs (program_lost).
+                self.start(name, ["--state", os.path.join(self.epoch_dir, "program-server.lost.state")])
+                return "kill program-server, state lost"
             self.start(name)
             return f"kill {name}"
         if kind == "loss":
