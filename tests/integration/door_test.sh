@@ -91,11 +91,8 @@ for line in open(interplog):
     if m: holds.append(stamp(m.group(1), ref))
 t_resume = int(open(resumes).read().split()[1])
 axis, io = read_io_status(log, prefix)
-ok = True
-def check(cond, what):
-    global ok
-    print(("# " if cond else "# FAILED: ") + what, file=sys.stderr)
-    ok = ok and cond
+from checks import Checks
+check = Checks()
 check(len(edges) == 2, f"two openings in the simulator's log ({len(edges)})")
 t0, x0, _ = edges[0]
 seen = sorted({s["door_utime"] for s in io if t0 <= s["door_utime"] < t0 + 1e6})
@@ -103,14 +100,14 @@ check(len(seen) == 1, "IO_STATUS: the bridge saw the door open")
 if seen: print(f"# the bridge saw the door open {(seen[0] - t0) * 1e-3:.2f} ms after the edge", file=sys.stderr)
 hold = [h for h in holds if t0 - 1e3 <= h < t0 + 1e6]
 check(len(hold) == 1, "the interpolator held the feed once for the opening")
-if not ok: sys.exit(1)
+if not check.ok: sys.exit(1)
 # The interpolator's log stamps to the millisecond: the hold at most 1 ms later than logged.
 t_hold = max(hold[0], t0) + 1e3
 # The drives' command brakes about the bridge's playback lead after the path: lead_cycles
 # (2) + half a period + the smoothing's period.
 lead = 3.5 * ipo
-ok = stop_figures("door opened", t0, x0, t_hold, float("nan"), t_resume, axis, power, accel, jerk, check,
-                  disabled=False, lead_s=lead) and ok
+check.ok = stop_figures("door opened", t0, x0, t_hold, float("nan"), t_resume, axis, power, accel, jerk, check,
+                  disabled=False, lead_s=lead) and check.ok
 stops = [t for t, w in spindle if w == "stop" and t0 < t < t_resume]
 runs = [t for t, w in spindle if w == "run" and t > t_resume]
 check(bool(stops), f"the spindle stopped {(stops[0] - t0) * 1e-3 if stops else float('nan'):.0f} ms after the edge")
@@ -123,7 +120,7 @@ if runs and moved:
     check(moved[0] - runs[0] >= 0.9 * 3.91 * tau * 1e6,
           f"X moved again {(moved[0] - runs[0]) * 1e-3:.0f} ms after the spindle was switched on (at speed after "
           f"about {3.91 * tau * 1e3:.0f} ms; {(moved[0] - t_resume) * 1e-3:.0f} ms after the RESUME's send)")
-sys.exit(0 if ok else 1)
+sys.exit(0 if check.ok else 1)
 PY
 grep -q "spindle: stop" "$WORK/servo-sim.log" || fail "the spindle did not stop"
 echo "PASS"

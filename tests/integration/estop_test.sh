@@ -110,13 +110,10 @@ edges, power = safety_figures.sim_edges(open(simlog), "estop_ok")
 resets = [int(l.split()[1]) for l in open(resets_file)]
 axis, statuses = safety_figures.read_io_status(log, prefix)
 io = [(s["ts"], s["estop"], s["estop_utime"], s["estop_stop_ms"]) for s in statuses]
-ok = True
-def check(cond, what):
-    global ok
-    print(("# " if cond else "# FAILED: ") + what, file=sys.stderr)
-    ok = ok and cond
+from checks import Checks
+check = Checks()
 check(len(edges) == 2, f"two E-stop edges in the simulator's log ({len(edges)})")
-if not ok: sys.exit(1)
+if not check.ok: sys.exit(1)
 def interp(t, k):
     return safety_figures.interp(axis, t, k)
 for (name, (t0, x0, _)), t_reset in zip((("pressed", edges[0]), ("wire cut", edges[1])), resets):
@@ -128,7 +125,7 @@ for (name, (t0, x0, _)), t_reset in zip((("pressed", edges[0]), ("wire cut", edg
     v = max(abs(axis[i][1] - axis[i - 1][1]) / 0.004 for i in range(k - 4, k + 1))
     trips = sorted({s[2] for s in io if s[2] > t0 and s[2] < t0 + 1e6})
     check(len(trips) == 1, f"{name}: the bridge's trip stamp follows the edge")
-    if not trips: ok = False; continue
+    if not trips: check.ok = False; continue
     trip = trips[0]
     stood_ms = next((s[3] for s in io if s[2] == trip and s[3] > 0), float("nan"))
     t_react = (trip - t0) * 1e-6
@@ -169,7 +166,7 @@ for (name, (t0, x0, _)), t_reset in zip((("pressed", edges[0]), ("wire cut", edg
     check(not on_early, f"{name}: no drive enabled again before the operator's reset")
     moved = max(abs(s[2] - act_rest) for s in before if still and s[0] >= still[0])
     check(moved <= 1e-3, f"{name}: X stood still ({moved * 1e3:.2f} um) until the reset")
-sys.exit(0 if ok else 1)
+sys.exit(0 if check.ok else 1)
 PY
 grep -q "spindle: stop" "$WORK/servo-sim.log" || fail "the spindle did not stop"
 grep -q "io io1: coolant_flood off" "$WORK/servo-sim.log" || fail "the coolant did not go off"

@@ -128,11 +128,8 @@ for ts, ch, b in events(log):
     elif ch == prefix + "SETPOINTS":
         _, _, _, cycle, _, n, x = fields(b, "qqiqdid")
         xs.append((ts, x))
-ok = True
-def check(cond, what):
-    global ok
-    print(("# " if cond else "# FAILED: ") + what, file=sys.stderr)
-    ok = ok and cond
+from checks import Checks
+check = Checks()
 def x_at(t):
     before = [x for x in xs if x[0] <= t]
     return before[-1][1] if before else float("nan")
@@ -144,7 +141,7 @@ clamp_on = first_cmd(lambda c: c[3] & 1)
 air_off = first_cmd(lambda c: air_on and c[0] > air_on[0] and not c[3] & 2)
 lamp_on = first_cmd(lambda c: c[3] & 4)
 check(all((flood, air_on, clamp_on, air_off, lamp_on)), "IO_CMD: flood, air_blast on and off, clamp, lamp_green")
-if not ok: sys.exit(1)
+if not check.ok: sys.exit(1)
 x0 = xs[0][1]
 move1 = next(x for x in xs if x[1] > x0 + 1e-6)
 move2 = next(x for x in xs if x[0] > air_on[0] and x[1] > 10 + 1e-6)
@@ -191,7 +188,7 @@ check(seen_flood is not None, "IO_STATUS: flood read back on")
 if seen_flood:
     print(f"# IO_CMD flood to IO_STATUS reading it back: {(seen_flood[0] - flood[0]) * 1e-3:.1f} ms", file=sys.stderr)
     check(seen_flood[0] - flood[0] < 20e3, "...within 20 ms (a servo tick, a link round, a status period)")
-sys.exit(0 if ok else 1)
+sys.exit(0 if check.ok else 1)
 PY
 # The module's own view: each coil's change with where the simulated axis stood. The
 # bridge plays back drive_bridge.lead_cycles (8 ms, more after a delivery stall) behind

@@ -96,25 +96,22 @@ a = min(decel, accel)
 edges, power = safety_figures.sim_edges(open(simlog), "x_max_ok")
 resets = [int(l.split()[1]) for l in open(resets_file)]
 axis, io = read_io_status(log, prefix)
-ok = True
-def check(cond, what):
-    global ok
-    print(("# " if cond else "# FAILED: ") + what, file=sys.stderr)
-    ok = ok and cond
+from checks import Checks
+check = Checks()
 check(len(edges) == 2, f"two falling edges of x_max_ok in the simulator's log ({len(edges)})")
-if not ok: sys.exit(1)
+if not check.ok: sys.exit(1)
 for (name, (t0, x0, _)), t_reset in zip((("hit", edges[0]), ("wire cut", edges[1])), resets):
     trips = sorted({s["limit_utime"] for s in io if t0 < s["limit_utime"] < t0 + 1e6})
     check(len(trips) == 1, f"{name}: the bridge's trip stamp follows the edge")
-    if not trips: ok = False; continue
+    if not trips: check.ok = False; continue
     trip = trips[0]
     stood_ms = next((s["limit_stop_ms"] for s in io if s["limit_utime"] == trip and s["limit_stop_ms"] > 0), float("nan"))
-    ok = stop_figures(name, t0, x0, trip, stood_ms, t_reset, axis, power, a, jerk, check) and ok
+    check.ok = stop_figures(name, t0, x0, trip, stood_ms, t_reset, axis, power, a, jerk, check) and check.ok
 # The refused move towards the switch: X moved less than 2 um towards it.
 t_from, t_to = [int(l.split()[1]) for l in open(toward_file)]
 xs = [s[2] for s in axis if t_from <= s[0] <= t_to]
 check(bool(xs) and max(xs) - xs[0] < 2e-3,
       f"a move towards the switch refused: X went {1e3 * (max(xs) - xs[0]) if xs else float('nan'):.2f} um towards it")
-sys.exit(0 if ok else 1)
+sys.exit(0 if check.ok else 1)
 PY
 echo "PASS"

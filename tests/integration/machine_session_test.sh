@@ -71,11 +71,8 @@ import re, sys
 run1, full, log, prefix, here = sys.argv[1:6]
 sys.path.insert(0, here)
 from lcmlog import events, Fields
-ok = True
-def check(cond, what):
-    global ok
-    print(("# " if cond else "# FAILED: ") + what, file=sys.stderr)
-    ok = ok and cond
+from checks import Checks
+check = Checks()
 def events_of(path):
     out = []
     for line in open(path):
@@ -120,7 +117,7 @@ if press:
 def show(n, s, x):
     return f"{n} {s}" + ("" if x is None else f" at {'Z' if n == 'probe' else 'X'} {x:.3f}")
 print("# run 1's devices: " + ", ".join(show(*x) for x in e1), file=sys.stderr)
-sys.exit(0 if ok else 1)
+sys.exit(0 if check.ok else 1)
 PY
 
 # ---- 3. the session replays bit for bit ------------------------------------------------

@@ -65,11 +65,8 @@ for ts, ch, b in events(log):
     elif ch == prefix + "SETPOINTS":
         _, _, _, cycle, _, n, x = fields(b, "qqiqdid")
         xs.append((ts, x))
-ok = True
-def check(cond, what):
-    global ok
-    print(("# " if cond else "# FAILED: ") + what, file=sys.stderr)
-    ok = ok and cond
+from checks import Checks
+check = Checks()
 m3 = next((c for c in cmds if c[2] == 1 and c[3] == 6000), None)
 check(m3 is not None, "SPINDLE_CMD clockwise 6000 rpm sent")
 if not m3: sys.exit(1)
@@ -100,7 +97,7 @@ if m5:
 last = stats[-1]
 print(f"# last SPINDLE_STATUS: state {last[1]}, commanded {last[5]:.0f} rpm, actual {last[6]:.0f} rpm", file=sys.stderr)
 check(last[5] == 0 and abs(last[6]) < 0.05 * 6000, "stopped after M30 (commanded 0, below 5 % of the speed 3 s on)")
-sys.exit(0 if ok else 1)
+sys.exit(0 if check.ok else 1)
 PY
 "$BUILD/tools/cnc-replay" --log "$WORK/cell.lcmlog" >"$WORK/replay.out" 2>&1 || { cat "$WORK/replay.out" >&2; fail "the run does not replay"; }
 grep "^identical" "$WORK/replay.out" >&2 || fail "no verdict from cnc-replay"
@@ -230,23 +227,20 @@ for ts, ch, b in events(log):
     elif ch == prefix + "SETPOINTS":
         _, _, _, cycle, _, n, x = fields(b, "qqiqdid")
         xs.append((ts, x))
-ok = True
-def check(cond, what):
-    global ok
-    print(("# " if cond else "# FAILED: ") + what, file=sys.stderr)
-    ok = ok and cond
+from checks import Checks
+check = Checks()
 m3 = next((c for c in cmds if c[2] == 1 and c[3] == 6000), None)
 ov = next((c for c in cmds if c[2] == 1 and c[3] == 4800), None)
 m4 = next((c for c in cmds if c[2] == -1 and c[3] == 2400), None)
 m5 = next((c for c in cmds if m4 and c[0] > m4[0] and c[2] == 0), None)
 check(m3 is not None and ov is not None and m4 is not None and m5 is not None,
       "SPINDLE_CMD M3 6000, the override's 4800, M4 2400 (3000 at 0.8) and M5 sent")
-if not ok: sys.exit(1)
+if not check.ok: sys.exit(1)
 def at_speed(c):
     return next((s for s in stats if s[3] >= c[1] and s[0] >= c[0]), None)
 a3, a4, aov = at_speed(m3), at_speed(m4), at_speed(ov)
 check(a3 is not None and a4 is not None and aov is not None, "SPINDLE_STATUS reports M3, the override and M4 at speed")
-if not ok: sys.exit(1)
+if not check.ok: sys.exit(1)
 first_ov = next(s for s in stats if s[0] >= ov[0] and s[2] >= ov[1])
 print(f"# override 0.8: SPINDLE_STATUS commanded {first_ov[5]:.0f} rpm {(first_ov[0] - ov[0]) * 1e-6:.3f} s after the "
       f"SPINDLE_CMD; actual {aov[6]:.0f} rpm at speed {(aov[0] - ov[0]) * 1e-6:.3f} s after it", file=sys.stderr)
@@ -267,7 +261,7 @@ check(max(s[7] for s in stats if m3[0] <= s[0] <= a3[0]) > 0, "a load figure (ou
 last = stats[-1]
 print(f"# last SPINDLE_STATUS: commanded {last[5]:.0f} rpm, actual {last[6]:.0f} rpm; {len(stats)} messages", file=sys.stderr)
 check(last[5] == 0 and last[4] == 0, "M5: commanded 0")
-sys.exit(0 if ok else 1)
+sys.exit(0 if check.ok else 1)
 PY
 "$BUILD/tools/cnc-replay" --log "$WORK/hy.lcmlog" >"$WORK/replay4.out" 2>&1 || { cat "$WORK/replay4.out" >&2; fail "the run with the override does not replay"; }
 grep "^identical" "$WORK/replay4.out" >&2 || fail "no verdict from cnc-replay"
