@@ -79,7 +79,7 @@ constexpr std::string_view kSafetyLimitKeys[] = {"axis", "min", "max"};
 constexpr std::string_view kSafetyEstopKeys[] = {"input"};
 constexpr std::string_view kSafetyDoorKeys[] = {"input"};
 constexpr std::string_view kKinematicsKeys[] = {"type"};
-constexpr std::string_view kProbeKeys[] = {"input", "sim_box"};
+constexpr std::string_view kProbeKeys[] = {"input", "latch", "sim_box"};
 constexpr std::string_view kProbeBoxKeys[] = {"x_min_mm", "x_max_mm", "y_min_mm", "y_max_mm", "z_min_mm", "z_max_mm"};
 constexpr std::string_view kDriveBridgeKeys[] = {"enable_on_start", "profile_dir",     "enable_timeout_s",
                                                  "link_loss_timeout_s", "reconnect_min_s", "reconnect_max_s",
@@ -622,6 +622,7 @@ void read_probe(MapReader r, MachineConfig& c) {
     for (const int i : {h.min_input, h.max_input})
       if (i >= 0) taken.insert(i);
   c.probe.input = io_role(r, path, name, c.io, {IoKind::kDiscreteInput}, taken);
+  c.probe.drive_latch = r.get_choice("latch", "input", {"input", "drives"}) == "drives";
   c.program.probe = true;
   if (r.has("sim_box")) {
     MapReader box = r.map("sim_box", kProbeBoxKeys);

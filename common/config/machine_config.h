@@ -184,6 +184,10 @@ struct SafetyConfig {
 // input changes, and a contact during any other move stops the machine with a fault.
 struct ProbeConfig {
   int input = -1;  // probe.input: a discrete-input point (index into io.points), 1 while touching; -1: none
+  // probe.latch: "drives": every axis drive latches its own position at the probe's
+  // edges (its touch-probe function); "input" (default): the drives' positions of the
+  // I/O round that sampled the edge.
+  bool drive_latch = false;
   // The servo simulator's fixture (probe.sim_box): an axis-aligned box in machine
   // coordinates of the first three axes; the input reads 1 while the tool tip is in it.
   bool sim_box = false;

@@ -19,6 +19,8 @@ TxResult ModbusAxisDrive::exchange(std::span<const std::byte> outputs, std::span
   in.has_home_latch = io_.has_home_latch();
   in.home_latch_mm = io_.home_latch_mm();
   in.home_latch_count = io_.home_latch_count();
+  in.has_probe_latch = io_.has_probe_latch();
+  in.probe = io_.probe_latches();
   put_pdo(inputs, in);
   return r;
 }

@@ -31,6 +31,8 @@ struct AxisInputs {
   bool has_home_latch = false;  // the profile maps a home switch latch
   double home_latch_mm = 0;
   int64_t home_latch_count = 0;
+  bool has_probe_latch = false;  // the profile maps the touch probe's latches
+  ProbeLatches probe;
 };
 
 inline constexpr PdoLayout kAxisLayout{sizeof(AxisInputs), sizeof(AxisOutputs)};

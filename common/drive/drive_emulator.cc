@@ -87,6 +87,13 @@ void DriveEmulator::set_home_latch(double position_mm, int64_t count) {
   }
 }
 
+void DriveEmulator::set_probe_latch(bool rising, double position_mm, int64_t count) {
+  const Role pos = rising ? Role::kProbeRisePosition : Role::kProbeFallPosition;
+  const Role cnt = rising ? Role::kProbeRiseCount : Role::kProbeFallCount;
+  if (profile_.has(pos)) profile_.field(pos).encode(position_mm, reg(profile_.field(pos).address));
+  if (profile_.has(cnt)) profile_.field(cnt).encode_raw(count & 0xFFFF, reg(profile_.field(cnt).address));
+}
+
 void DriveEmulator::inject_fault(uint16_t code) {
   logic_.drive_fault(drive_, code);
   refresh_status();

@@ -39,6 +39,8 @@ class DriveEmulator {
   void set_following_error(double fe_mm);
   // Where the profile maps them: the home switch latch (position and edge count).
   void set_home_latch(double position_mm, int64_t count);
+  // The touch probe's latch of an edge (rising: true) at `position_mm`, its counter at `count`.
+  void set_probe_latch(bool rising, double position_mm, int64_t count);
   void inject_fault(uint16_t code);
   void power_up();  // back to the power-up state (the simulator restarted)
   const DriveProfile& profile() const { return profile_; }

@@ -15,14 +15,17 @@ DriveIo::DriveIo(const DriveProfile& profile, int unit, Link& link)
   };
   std::vector<Want> want;
   for (Role r : {Role::kStatusword, Role::kActualPosition, Role::kActualVelocity, Role::kErrorCode,
-                 Role::kFollowingError, Role::kHomeLatchPosition, Role::kHomeLatchCount}) {
+                 Role::kFollowingError, Role::kHomeLatchPosition, Role::kHomeLatchCount, Role::kProbeRisePosition,
+                 Role::kProbeRiseCount, Role::kProbeFallPosition, Role::kProbeFallCount}) {
     if (!profile.has(r)) continue;
     const Field& f = profile.field(r);
     // The drive's following error, where the profile has it, is read every exchange:
-    // the bridge checks the limit on it. So is the home latch (homing waits on it).
+    // the bridge checks the limit on it. So are the home and probe latches (homing and
+    // probing wait on them).
+    const bool latch = r == Role::kHomeLatchPosition || r == Role::kHomeLatchCount || r == Role::kProbeRisePosition ||
+                       r == Role::kProbeRiseCount || r == Role::kProbeFallPosition || r == Role::kProbeFallCount;
     want.push_back({{f.address, f.words},
-                    r == Role::kStatusword || r == Role::kActualPosition || r == Role::kFollowingError ||
-                        r == Role::kHomeLatchPosition || r == Role::kHomeLatchCount});
+                    r == Role::kStatusword || r == Role::kActualPosition || r == Role::kFollowingError || latch});
   }
   std::sort(want.begin(), want.end(), [](const Want& a, const Want& b) { return a.r.addr < b.r.addr; });
   std::vector<Want> merged;
@@ -94,6 +97,12 @@ TxResult DriveIo::exchange(const double* target_mm, LinkCounters& c) {
   if (profile_.has(Role::kHomeLatchPosition) && profile_.has(Role::kHomeLatchCount)) {
     home_latch_mm_ = profile_.field(Role::kHomeLatchPosition).decode(value(Role::kHomeLatchPosition));
     home_latch_count_ = profile_.field(Role::kHomeLatchCount).decode_raw(value(Role::kHomeLatchCount));
+  }
+  if (has_probe_latch()) {
+    probe_.rise_mm = profile_.field(Role::kProbeRisePosition).decode(value(Role::kProbeRisePosition));
+    probe_.rises = profile_.field(Role::kProbeRiseCount).decode_raw(value(Role::kProbeRiseCount));
+    probe_.fall_mm = profile_.field(Role::kProbeFallPosition).decode(value(Role::kProbeFallPosition));
+    probe_.falls = profile_.field(Role::kProbeFallCount).decode_raw(value(Role::kProbeFallCount));
   }
   have_status_ = true;
   // The drive's error code, for the fault report: once per fault when the cyclic reads do not carry it.

@@ -14,6 +14,13 @@
 
 namespace cnc::drive {
 
+// A drive's touch-probe latches as last read: the positions at the input's last rising
+// and falling edges, and the edge counters (the drive's, wrapping at its field's width).
+struct ProbeLatches {
+  double rise_mm = 0, fall_mm = 0;
+  int64_t rises = 0, falls = 0;
+};
+
 class DriveIo {
  public:
   DriveIo(const DriveProfile& profile, int unit, Link& link);
@@ -37,6 +44,12 @@ class DriveIo {
   bool has_home_latch() const { return profile_.has(Role::kHomeLatchPosition) && profile_.has(Role::kHomeLatchCount); }
   double home_latch_mm() const { return home_latch_mm_; }
   int64_t home_latch_count() const { return home_latch_count_; }
+  // The touch probe's latches, where the profile maps all four fields (read with every exchange).
+  bool has_probe_latch() const {
+    return profile_.has(Role::kProbeRisePosition) && profile_.has(Role::kProbeRiseCount) &&
+           profile_.has(Role::kProbeFallPosition) && profile_.has(Role::kProbeFallCount);
+  }
+  const ProbeLatches& probe_latches() const { return probe_; }
   // The last target written, as the drive has it (rounded to its counts).
   double written_mm() const { return written_mm_; }
   uint16_t error_code() const;
@@ -72,6 +85,7 @@ class DriveIo {
   double drive_fe_mm_ = 0;
   double home_latch_mm_ = 0;
   int64_t home_latch_count_ = 0;
+  ProbeLatches probe_;
   double written_mm_ = 0;
 };
 

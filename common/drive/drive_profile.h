@@ -39,8 +39,14 @@ enum class Role : int8_t {
   kSpeedSetpoint,   // frequency command (written)
   kActualSpeed,     // output frequency (read)
   kOutputCurrent,   // output current, the drive's load figure (read)
+  // The touch probe (CiA-402 0x60BA/0x60BB positions, 0x60D5/0x60D6 edge counters; read):
+  // the position at the probe input's last rising / falling edge, and the edges so far (wrapping).
+  kProbeRisePosition,
+  kProbeRiseCount,
+  kProbeFallPosition,
+  kProbeFallCount,
 };
-inline constexpr int kRoleCount = 15;
+inline constexpr int kRoleCount = 19;
 const char* role_name(Role r);
 
 enum class WordOrder : int8_t { kLowFirst, kHighFirst };

@@ -139,6 +139,10 @@ void DriveBridgeNode::make_io(std::map<std::string, LinkWorker*>& by_link) {
     bit_of(cfg_.probe.input, probe_.module, probe_.bit);
     probe_.rise_mm.assign(cfg_.axes.size(), 0.0);
     probe_.fall_mm.assign(cfg_.axes.size(), 0.0);
+    for (int d : {0, 1}) {
+      probe_.edge[d].sampled_mm.assign(cfg_.axes.size(), 0.0);
+      probe_.counter[d].assign(cfg_.axes.size(), ProbeLatch::DriveCounter{});
+    }
   }
   bus_.subscribe<cnc::lcmt_io_command>(cfg_.channel(ch::kIoCmd), [this](const auto& c) {
     Io& io = *io_;
@@ -393,6 +397,8 @@ bool DriveBridgeNode::safety_refuses_enable() {
 
 void DriveBridgeNode::probe_tick() {
   if (probe_.module < 0) return;
+  ++probe_.tick;
+  if (cfg_.probe.drive_latch) probe_drive_counters();
   const IoModule& mod = io_->modules[static_cast<size_t>(probe_.module)];
   if (!(mod.rep.answering && mod.rep.in.valid)) {
     probe_.value = -1;
@@ -402,13 +408,72 @@ void DriveBridgeNode::probe_tick() {
   if (probe_.value >= 0 && v != probe_.value) {
     // The positions read in the round that sampled the edge: accurate to the speed
     // times the time between two samples (a servo period) and the round's spread.
-    std::vector<double>& at = v ? probe_.rise_mm : probe_.fall_mm;
-    for (size_t i = 0; i < axes_.size(); ++i) at[i] = axes_[i].rep.actual_mm;
-    (v ? probe_.rise_cycle : probe_.fall_cycle) =
+    const double cycle =
         core_.mode() == BridgeCore::Mode::kFollowing && core_.last_cycle() >= 0 ? core_.playback_cycle() : -1.0;
-    ++(v ? probe_.rises : probe_.falls);
+    if (cfg_.probe.drive_latch) {
+      ProbeLatch::Edge& e = probe_.edge[v];
+      if (e.pending) probe_settle(v, true);  // a bounce within the wait: the earlier edge first
+      e.pending = true;
+      e.tick = probe_.tick;
+      e.cycle = cycle;
+      for (size_t i = 0; i < axes_.size(); ++i) e.sampled_mm[i] = axes_[i].rep.actual_mm;
+    } else {
+      std::vector<double>& at = v ? probe_.rise_mm : probe_.fall_mm;
+      for (size_t i = 0; i < axes_.size(); ++i) at[i] = axes_[i].rep.actual_mm;
+      (v ? probe_.rise_cycle : probe_.fall_cycle) = cycle;
+      ++(v ? probe_.rises : probe_.falls);
+    }
   }
   probe_.value = v;
+  if (cfg_.probe.drive_latch)
+    for (int d : {0, 1})
+      if (probe_.edge[d].pending) probe_settle(d, false);
+}
+
+// Each drive's touch-probe counters: when they changed, and the position latched then.
+void DriveBridgeNode::probe_drive_counters() {
+  for (size_t i = 0; i < axes_.size(); ++i) {
+    const AxisReport& r = axes_[i].rep;
+    for (int d : {0, 1}) {
+      ProbeLatch::DriveCounter& c = probe_.counter[d][i];
+      if (!(r.answering && r.have_status && r.has_probe_latch)) {
+        c.known = false;
+        continue;
+      }
+      const int64_t count = d ? r.probe.rises : r.probe.falls;
+      if (c.known && count != c.count) {
+        c.changed = probe_.tick;
+        c.mm = d ? r.probe.rise_mm : r.probe.fall_mm;
+      }
+      c.known = true;  // the first read after (re)connection is the baseline, not an edge
+      c.count = count;
+    }
+  }
+}
+
+// An input edge waiting for the drives' latches: taken with them once every drive has
+// latched it, else with the sampled positions after kLatchTicks (or at the next edge).
+void DriveBridgeNode::probe_settle(int rising, bool force) {
+  ProbeLatch::Edge& e = probe_.edge[rising];
+  std::vector<ProbeLatch::DriveCounter>& cs = probe_.counter[rising];
+  const int64_t w = ProbeLatch::kLatchTicks;
+  bool all = true;
+  for (const ProbeLatch::DriveCounter& c : cs)
+    all = all && c.changed > c.taken && c.changed >= e.tick - w && c.changed <= e.tick + w;
+  if (!all && !force && probe_.tick - e.tick < w) return;
+  std::vector<double>& at = rising ? probe_.rise_mm : probe_.fall_mm;
+  for (size_t i = 0; i < cs.size(); ++i) {
+    at[i] = all ? cs[i].mm : e.sampled_mm[i];
+    cs[i].taken = cs[i].changed;
+  }
+  if (!all) {
+    ++probe_.fallbacks;
+    spdlog::warn("probe {} edge: not every drive latched it within {} servo periods: the positions sampled with "
+                 "the input are used ({} so far)", rising ? "rising" : "falling", w, probe_.fallbacks);
+  }
+  (rising ? probe_.rise_cycle : probe_.fall_cycle) = e.cycle;
+  ++(rising ? probe_.rises : probe_.falls);
+  e.pending = false;
 }
 
 void DriveBridgeNode::io_tick() {

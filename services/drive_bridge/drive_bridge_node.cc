@@ -67,6 +67,16 @@ DriveBridgeNode::DriveBridgeNode(const config::MachineConfig& cfg, bus::Bus& bus
     ax.worker->add_axis(static_cast<int>(i), *profile, d.unit_id);
     axes_.push_back(ax);
   }
+  if (cfg.probe.enabled() && cfg.probe.drive_latch)
+    for (size_t i = 0; i < axes_.size(); ++i) {
+      const drive::DriveProfile& p = *axes_[i].profile;
+      if (!(p.has(drive::Role::kProbeRisePosition) && p.has(drive::Role::kProbeRiseCount) &&
+            p.has(drive::Role::kProbeFallPosition) && p.has(drive::Role::kProbeFallCount)))
+        throw config::ConfigError(cfg.source_file, "probe.latch",
+                                  "drives: axis " + cfg.axes[i].name + "'s drive profile '" + p.name + "' (" + p.file +
+                                      ") maps no touch-probe latch (registers probe_rise_position, probe_rise_count, "
+                                      "probe_fall_position, probe_fall_count)");
+    }
   if (cfg.spindle.enabled) make_spindle(by_link);
   if (cfg_.io.enabled) make_io(by_link);
   pace_.assign(workers_.size(), LinkPace{});

@@ -264,8 +264,31 @@ class DriveBridgeNode {
     int32_t rises = 0, falls = 0;
     std::vector<double> rise_mm, fall_mm;
     double rise_cycle = -1, fall_cycle = -1;
+    // probe.latch: drives. The input's edge (its tick, sampled positions and cycle) waits
+    // for every drive's latch of it: a drive counter that changed within kLatchTicks of
+    // the edge, before or after, and not taken for an earlier edge. [0] falling, [1] rising.
+    static constexpr int64_t kLatchTicks = 5;
+    int64_t tick = 0;
+    struct Edge {
+      bool pending = false;
+      int64_t tick = 0;
+      double cycle = -1;
+      std::vector<double> sampled_mm;
+    };
+    Edge edge[2];
+    struct DriveCounter {
+      bool known = false;  // read since the drive last (re)started answering
+      int64_t count = 0;
+      int64_t changed = -1000000;  // tick of its last change
+      int64_t taken = -1000000;    // tick of the change an edge took
+      double mm = 0;
+    };
+    std::vector<DriveCounter> counter[2];  // [direction][axis]
+    int64_t fallbacks = 0;                 // edges no drive latched in time: sampled positions
   };
   ProbeLatch probe_;
+  void probe_drive_counters();
+  void probe_settle(int rising, bool force);
   std::string ch_io_status_;
   cnc::lcmt_io_status io_msg_{};  // reused by every status publish
   std::string ch_status_;

@@ -246,6 +246,8 @@ void LinkWorker::round(double now_s) {
       s.work.has_home_latch = in.has_home_latch;
       s.work.home_latch_mm = in.home_latch_mm;
       s.work.home_latch_count = in.home_latch_count;
+      s.work.has_probe_latch = in.has_probe_latch;
+      s.work.probe = in.probe;
       if (write && c.follow && probe_) probe_(axis_index_[i], c.cmd_cycle, now_s);
       s.last_answer_s = now_s;
       if (s.lost) {

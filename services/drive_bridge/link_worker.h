@@ -64,6 +64,8 @@ struct AxisReport {
   bool has_home_latch = false;  // the profile maps a home switch latch
   double home_latch_mm = 0;     // its position and edge count, as last read
   int64_t home_latch_count = 0;
+  bool has_probe_latch = false;  // the profile maps the touch probe's latches
+  drive::ProbeLatches probe;     // as last read
   drive::LinkCounters counters;
   std::array<char, 96> last_error{};  // fixed size: reports are copied every tick
 };

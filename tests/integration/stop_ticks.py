@@ -18,7 +18,8 @@ under two busy loops). The axis is checked beside it, by what the drive reports 
 every tick: its following error, and where it comes to rest.
 
   * the onset: the first tick from which the commanded speed falls monotonically to
-    rest and decelerates by more than 5 % of a somewhere in its first 5 ticks; on the
+    rest and decelerates by more than 5 % of a (and more than the playback's rate slew
+    could) somewhere in its first 5 ticks; on the
     wall clock (the tick's time) within ONSET_S of CAUSE_AFTER (default 0.1 s);
   * every tick's deceleration (second difference) within a, its jerk within j
     (1e-6 relative, and the trace's nanometres differenced), and no tick faster than the speed at the onset;
@@ -55,8 +56,12 @@ def main():
     sign = 1.0 if v[k_cause] >= 0 else -1.0
     s = [sign * w for w in v]
 
+    # Braking, not the playback's rate slewing down as its buffer drains (0.002 of the speed
+    # per tick at most, drive_bridge.cc's kRateSlewPerTick: 0.42 mm/s a tick at 210 mm/s,
+    # which a 5 %-of-a threshold took for the onset 21 ms before a link cut and so counted
+    # 6 mm of slowing cruise as braking: 18.6 mm against 18.1, three_hosts in a fresh clone).
     def is_onset(k):
-        return any(s[m] - s[m + 1] > 0.05 * a * T for m in range(k, min(k + 5, len(s) - 1)))
+        return any(s[m] - s[m + 1] > max(0.05 * a * T, 1.5 * 0.002 * s[m]) for m in range(k, min(k + 5, len(s) - 1)))
 
     # Rest: the first tick from which the command moves less than 1 um in 50 ticks (the
     # limiter's last approach onto the stop point creeps).

@@ -933,6 +933,85 @@ TEST(BridgeNode, DoorAlarmsNameTheInputAndItsModule) {
   c.link().inject_timeouts(0);
 }
 
+// A touch probe on the I/O module's input 6; `latch` is probe.latch.
+std::string with_probe(const std::string& latch) {
+  std::string y = kIo;
+  y.insert(y.find("    - {name: door"), "    - {name: probe_tip, kind: discrete_input, address: 6}\n");
+  return y + "probe: {input: probe_tip, latch: " + latch + "}\n";
+}
+
+// probe.latch: drives. An edge of the input takes every drive's own latch of it, come
+// before or after the input's sample; an edge no drive latched takes, after 5 servo
+// periods, the positions sampled with the input (a warning, counted).
+TEST(BridgeNode, ProbeEdgesTakeTheDrivesLatches) {
+  Cell c("sim", true, with_probe("drives"));
+  drive::IoEmulator* m = c.link().io_module(4);
+  ASSERT_NE(m, nullptr);
+  ASSERT_TRUE(m->set_point("probe_tip", 0));
+  c.ticks(40);
+  ASSERT_EQ(c.status.num_probe_axes, 2);
+  ASSERT_EQ(c.status.probe_rises, 0);
+  // The drives latch first (12.3456, 20.5) and the input follows two ticks later.
+  c.link().drive(1)->set_probe_latch(true, 12.3456, 1);
+  c.link().drive(2)->set_probe_latch(true, 20.5, 1);
+  c.ticks(2);
+  EXPECT_EQ(c.status.probe_rises, 0);  // no edge without the input's
+  ASSERT_TRUE(m->set_point("probe_tip", 1));
+  c.ticks(3);
+  ASSERT_EQ(c.status.probe_rises, 1);
+  EXPECT_NEAR(c.status.probe_rise_mm[0], 12.3456, 1e-9);
+  EXPECT_NEAR(c.status.probe_rise_mm[1], 20.5, 1e-9);
+  // The input first; X's drive latches at once, Y's three ticks later: taken when both have.
+  ASSERT_TRUE(m->set_point("probe_tip", 0));
+  c.link().drive(1)->set_probe_latch(false, 12.4, 1);
+  c.ticks(2);
+  EXPECT_EQ(c.status.probe_falls, 0);
+  c.link().drive(2)->set_probe_latch(false, 20.25, 1);
+  // (The loopback link reads a device every few ticks: up to 4 ticks until Y's latch is seen.)
+  c.ticks(5);
+  ASSERT_EQ(c.status.probe_falls, 1);
+  EXPECT_NEAR(c.status.probe_fall_mm[0], 12.4, 1e-9);
+  EXPECT_NEAR(c.status.probe_fall_mm[1], 20.25, 1e-9);
+  // An edge neither drive latches: the sampled positions (the drives stand at their
+  // start, home_mm 10), 5 periods after the input's sample, not before.
+  ASSERT_TRUE(m->set_point("probe_tip", 1));
+  int waited = 0;
+  while (c.status.probe_rises == 1 && waited < 50) {
+    c.tick();
+    ++waited;
+  }
+  ASSERT_EQ(c.status.probe_rises, 2);
+  EXPECT_GE(waited, 6);
+  EXPECT_NEAR(c.status.probe_rise_mm[0], c.drive_mm(1), 1e-4);
+  EXPECT_NEAR(c.status.probe_rise_mm[1], c.drive_mm(2), 1e-4);
+  // A drive's old latch is not taken for a later edge: Y's rise (count 2) 20 ms before
+  // the next edge, X's with it; the edge falls back to the sampled positions.
+  c.link().drive(2)->set_probe_latch(true, 99.0, 2);
+  c.ticks(10);
+  ASSERT_TRUE(m->set_point("probe_tip", 0));
+  c.ticks(10);
+  ASSERT_TRUE(m->set_point("probe_tip", 1));
+  c.link().drive(1)->set_probe_latch(true, 55.0, 2);
+  c.ticks(15);
+  ASSERT_EQ(c.status.probe_rises, 3);
+  EXPECT_NEAR(c.status.probe_rise_mm[0], c.drive_mm(1), 1e-4);
+  EXPECT_NEAR(c.status.probe_rise_mm[1], c.drive_mm(2), 1e-4);
+}
+
+// probe.latch: drives on a drive whose profile maps no touch probe: refused at start.
+TEST(BridgeNode, ProbeDriveLatchWithoutTheRegistersIsAConfigErrorNamingTheKey) {
+  const config::MachineConfig cfg =
+      config::parse_machine_config(machine_yaml("leadshine_el", true) + with_probe("drives"), "lb.yaml");
+  bus::Bus bus("memq://");
+  try {
+    DriveBridgeNode node(cfg, bus, DriveBridgeNode::Options{false});
+    FAIL() << "constructed with probe.latch: drives on drives without a touch probe";
+  } catch (const config::ConfigError& e) {
+    EXPECT_EQ(e.key_path(), "probe.latch");
+    EXPECT_NE(std::string(e.what()).find("axis X's drive profile 'leadshine_el'"), std::string::npos) << e.what();
+  }
+}
+
 // X's max limit switch, normally closed, on the I/O module.
 std::string with_limit() {
   std::string y = kIo;

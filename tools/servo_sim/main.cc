@@ -341,10 +341,15 @@ class Simulator {
   void poll_triggers();
   // The probe's fixture (probe.sim_box): the probe input 1 while the tool tip (the
   // first three axes' positions) is inside the box, evaluated on every grid step.
+  // Every drive's touch probe is wired to the probe too: at each edge it latches its own
+  // position where the tip crossed the box's face (the drive's capture, exact here but
+  // for its counts' resolution) and counts the edge.
   void probe_fixture();
   bool probe_in_ = false;
   bool probe_seen_ = false;
   double probe_prev_[3] = {0, 0, 0};
+  std::vector<double> probe_prev_all_;  // every drive's position at the last grid step
+  int64_t probe_rises_ = 0, probe_falls_ = 0;
   struct Trigger {
     size_t drive;
     double at_mm;
@@ -523,6 +528,7 @@ Simulator::Simulator(const cnc::config::MachineConfig& cfg, const cnc::service::
     ios_.push_back(std::move(io));
   }
   if (all_.empty() && !vfd_ && ios_.empty() && !cfg.spindle.enabled) throw std::runtime_error("no axis uses transport modbus_tcp or modbus_rtu");
+  probe_prev_all_.assign(all_.size(), 0.0);
   for (const auto& h : cfg.safety.hard_limits) {
     const auto& ax = cfg.axes[static_cast<size_t>(h.axis)];
     for (int end : {-1, 1}) {
@@ -697,6 +703,11 @@ void Simulator::probe_fixture() {
         if (t >= 0 && t <= 1) t_cross = std::min(t_cross, t);
       }
     }
+    const int64_t count = in ? ++probe_rises_ : ++probe_falls_;
+    for (size_t d = 0; d < all_.size(); ++d) {
+      const double a = probe_prev_all_[d], b = all_[d]->position_mm();
+      all_[d]->emulator().set_probe_latch(in, a + t_cross * (b - a), count);
+    }
     spdlog::info("cnc-servo-sim: probe {} {}: crossed at X {:.6f} Y {:.6f} Z {:.6f}, step ended at X {:.6f} Y {:.6f} Z {:.6f}",
                  name, in ? "contact" : "released", probe_prev_[0] + t_cross * (p[0] - probe_prev_[0]),
                  probe_prev_[1] + t_cross * (p[1] - probe_prev_[1]), probe_prev_[2] + t_cross * (p[2] - probe_prev_[2]),
@@ -709,6 +720,7 @@ void Simulator::probe_fixture() {
   probe_seen_ = true;
   probe_in_ = in;
   for (int i = 0; i < 3; ++i) probe_prev_[i] = p[i];
+  for (size_t d = 0; d < all_.size(); ++d) probe_prev_all_[d] = all_[d]->position_mm();
 }
 
 bool Simulator::arm_trigger(const std::string& line) {
