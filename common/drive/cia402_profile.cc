@@ -24,6 +24,9 @@ constexpr const char* kStateNames[] = {"not ready to switch on", "switch on disa
                                        "switched on", "operation enabled", "quick stop active",
                                        "fault reaction active", "fault"};
 constexpr uint16_t kSwRemote = 1u << 9;
+// 0x60B8: bit 0 TP1 on, bit 1 continuous (every edge, not the first only), bits 2-3 the
+// TP1 input as trigger (0), bit 4 latch at the rising edge, bit 5 at the falling edge.
+constexpr uint16_t kTouchProbeBothEdges = 0x0033;
 
 class Cia402Logic final : public ProfileLogic {
  public:
@@ -55,6 +58,7 @@ class Cia402Logic final : public ProfileLogic {
       return std::nullopt;
     }
     if (!m.mode_written) return ControlWrite{Role::kMode, static_cast<uint16_t>(static_cast<int16_t>(p.mode_of_operation))};
+    if (p.has(Role::kProbeFunction) && !m.probe_armed) return ControlWrite{Role::kProbeFunction, kTouchProbeBothEdges};
     switch (st) {
       case kSwitchOnDisabled: return ControlWrite{Role::kControlword, kCwShutdown};
       case kReadyToSwitchOn: return ControlWrite{Role::kControlword, kCwSwitchOn};

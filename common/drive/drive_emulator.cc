@@ -88,6 +88,12 @@ void DriveEmulator::set_home_latch(double position_mm, int64_t count) {
 }
 
 void DriveEmulator::set_probe_latch(bool rising, double position_mm, int64_t count) {
+  // A drive whose touch probe is switched by a function register latches only when armed
+  // for that edge (CiA 402 0x60B8: bit 0 on, bit 4 rising, bit 5 falling).
+  if (profile_.has(Role::kProbeFunction)) {
+    const uint16_t f = *reg(profile_.field(Role::kProbeFunction).address);
+    if (!(f & 0x01) || !(f & (rising ? 0x10 : 0x20))) return;
+  }
   const Role pos = rising ? Role::kProbeRisePosition : Role::kProbeFallPosition;
   const Role cnt = rising ? Role::kProbeRiseCount : Role::kProbeFallCount;
   if (profile_.has(pos)) profile_.field(pos).encode(position_mm, reg(profile_.field(pos).address));

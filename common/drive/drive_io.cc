@@ -127,6 +127,7 @@ TxResult DriveIo::control(Goal goal, LinkCounters& c) {
   if (r == TxResult::kOk) {
     if (w->role == Role::kControlword) memory_.last_control = w->value;
     if (w->role == Role::kMode) memory_.mode_written = true;
+    if (w->role == Role::kProbeFunction) memory_.probe_armed = true;
   }
   return r;
 }

@@ -17,7 +17,7 @@ constexpr std::array<const char*, kRoleCount> kRoleNames = {
     "controlword", "statusword", "mode", "mode_display", "target_position",
     "actual_position", "actual_velocity", "error_code", "fault_reset", "following_error",
     "home_latch_position", "home_latch_count", "speed_setpoint", "actual_speed", "output_current",
-    "probe_rise_position", "probe_rise_count", "probe_fall_position", "probe_fall_count"};
+    "probe_rise_position", "probe_rise_count", "probe_fall_position", "probe_fall_count", "probe_function"};
 
 // The keys a profile file may hold: its top level, `registers:` (one per role) and each field.
 constexpr std::string_view kProfileKeys[] = {"name",         "description",       "state_machine", "write_and_read",

@@ -45,8 +45,11 @@ enum class Role : int8_t {
   kProbeRiseCount,
   kProbeFallPosition,
   kProbeFallCount,
+  // The touch probe's function (CiA-402 0x60B8; written once before enabling, where mapped):
+  // TP1 on, continuous, on the TP1 input, latching at both edges (0x0033).
+  kProbeFunction,
 };
-inline constexpr int kRoleCount = 19;
+inline constexpr int kRoleCount = 20;
 const char* role_name(Role r);
 
 enum class WordOrder : int8_t { kLowFirst, kHighFirst };

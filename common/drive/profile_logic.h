@@ -31,6 +31,7 @@ struct ControlWrite {
 struct MasterMemory {
   uint16_t last_control = 0;
   bool mode_written = false;
+  bool probe_armed = false;  // the touch probe's function written (kProbeFunction)
 };
 
 // The emulated drive's internal state.

@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <fstream>
 #include <string>
 #include <vector>
 
@@ -996,6 +997,60 @@ TEST(BridgeNode, ProbeEdgesTakeTheDrivesLatches) {
   ASSERT_EQ(c.status.probe_rises, 3);
   EXPECT_NEAR(c.status.probe_rise_mm[0], c.drive_mm(1), 1e-4);
   EXPECT_NEAR(c.status.probe_rise_mm[1], c.drive_mm(2), 1e-4);
+}
+
+// A CiA-402 drive's touch probe latches only once armed (0x60B8): the bridge writes the
+// function (TP1, continuous, both edges: 0x0033) before it enables the drive (as the mode
+// of operation: forgotten with a lost link, so written again at the next enable); the
+// latch then reaches AXIS_STATUS through an edge of the input.
+// cia402_modbus.yaml (object index = register) cannot hold the adjacent 32-bit 0x60BA and
+// 0x60BB: the test's profile puts the probe's objects where a gateway's table would.
+TEST(BridgeNode, ACia402DrivesTouchProbeIsArmedBeforeEnablingAndLatches) {
+  const std::string file = ::testing::TempDir() + "cia402_tp.yaml";
+  {
+    std::ofstream out(file);
+    out << "name: cia402_tp\nstate_machine: cia402\nwrite_and_read: true\nread_gap_max: 0\nmode_of_operation: 8\n"
+           "registers:\n"
+           "  error_code:      {address: 0x603F}\n"
+           "  controlword:     {address: 0x6040}\n"
+           "  statusword:      {address: 0x6041}\n"
+           "  mode:            {address: 0x6060, signed: true}\n"
+           "  mode_display:    {address: 0x6061, signed: true}\n"
+           "  actual_position: {address: 0x6064, words: 2, signed: true, word_order: low_first, scale: 26214.4}\n"
+           "  target_position: {address: 0x607A, words: 2, signed: true, word_order: low_first, scale: 26214.4}\n"
+           "  probe_function:  {address: 0x60B8}\n"
+           "  probe_rise_position: {address: 0x2000, words: 2, signed: true, word_order: low_first, scale: 26214.4}\n"
+           "  probe_fall_position: {address: 0x2002, words: 2, signed: true, word_order: low_first, scale: 26214.4}\n"
+           "  probe_rise_count: {address: 0x2004}\n"
+           "  probe_fall_count: {address: 0x2005}\n";
+  }
+  Cell c(file, false, with_probe("drives"));
+  drive::DriveEmulator* x = c.link().drive(1);
+  auto function = [&] {
+    uint16_t v = 0;
+    x->read(0x60B8, 1, &v);
+    return v;
+  };
+  c.ticks(40);
+  EXPECT_EQ(function(), 0);  // not armed before ENABLE
+  x->set_probe_latch(true, 7.0, 1);
+  uint16_t count = 0;
+  x->read(0x2004, 1, &count);
+  EXPECT_EQ(count, 0);  // an unarmed drive latches nothing
+  c.command(cnc::lcmt_drive_command::ENABLE);
+  c.ticks(40);
+  ASSERT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  EXPECT_EQ(function(), 0x0033);
+  drive::IoEmulator* m = c.link().io_module(4);
+  ASSERT_TRUE(m->set_point("probe_tip", 0));
+  c.ticks(20);
+  x->set_probe_latch(true, 12.5, 1);
+  c.link().drive(2)->set_probe_latch(true, 3.25, 1);
+  ASSERT_TRUE(m->set_point("probe_tip", 1));
+  c.ticks(10);
+  ASSERT_EQ(c.status.probe_rises, 1);
+  EXPECT_NEAR(c.status.probe_rise_mm[0], 12.5, 1e-4);
+  EXPECT_NEAR(c.status.probe_rise_mm[1], 3.25, 1e-4);
 }
 
 // probe.latch: drives on a drive whose profile maps no touch probe: refused at start.
