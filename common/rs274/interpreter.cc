@@ -94,6 +94,7 @@ void Interpreter::open(const std::string& path) {
   units_ = Units::kMm;
   coord_ = static_cast<int>(std::lround(params_.get(5220)));
   if (coord_ < 1 || coord_ > 9) coord_ = 1;
+  params_.set(5220, coord_);  // read as 1 in G54 without a var file (it read 0), as LinuxCNC's
   for (int i = 0; i < kNumAxes; ++i) g92_[static_cast<size_t>(i)] = param_len(5211, i);
   g92_active_ = params_.get(5210) != 0;
   if (!g92_active_) g92_.fill(0);

@@ -4,7 +4,10 @@
 # (probe.latch: drives): o<probe_z> finds the top, o<probe_boss> the four side faces
 # (through o<probe_edge_x> and o<probe_edge_y>), the centre and the size. Every touch
 # (fast and slow) within 1 um of its face; the program then moves to the centre plus a
-# tenth of the size, 5 mm above the top it found: (110, 110, -15) within 1 um.
+# tenth of the size, 5 mm above the top it found: (110, 110, -15) within 1 um. Then
+# o<tool_length> takes the fixture for a tool setter (reference Z -25: the tool is 5 mm
+# long), under a G54 Z offset of -3 and a G92 offset of 2: the tool table's T1 gets Z 5
+# (0.1 um), and the program ends at X 100 + the length, at the safe Z 0: (105, 100, 0).
 #   probe_cycles_test.sh BUILD_DIR SOURCE_DIR
 source "$(dirname "$0")/lib.sh"
 enter_private_netns "$@"
@@ -14,7 +17,8 @@ trap 'cleanup $?' EXIT
 M="$WORK/machine.yaml"
 make_machine "$SRC/config/machines/sim3_probe.yaml" "$M"
 sed -i 's/^  input: probe_tip .*/  input: probe_tip\n  latch: drives/' "$M"
-printf '\nprogram:\n  subroutine_path: %s\n' "$SRC/config/subroutines" >>"$M"
+printf 'T1 P1 Z0 D6 ;\n' >"$WORK/tools.tbl"
+printf '\nprogram:\n  subroutine_path: %s\n  tool_table: %s\n' "$SRC/config/subroutines" "$WORK/tools.tbl" >>"$M"
 grep -q "^  latch: drives" "$M" || fail "could not set probe.latch: drives in $M"
 CTL=("$BUILD/tools/cnc-ctl" --machine "$M")
 
@@ -54,9 +58,42 @@ worst = max(errs, default=float("nan")) * 1e3
 print(f"# every touch against its face: largest error {worst:.4f} um (bound 1 um)", file=sys.stderr)
 sys.exit(0 if ok and worst <= 1.0 else 1)
 PY
-settle_at "$WORK/trace.csv" 110 110 -15
+# The simulator's axes at the end (its trace's last whole row; settled within 0.5 um).
+/usr/bin/python3 - "$WORK/trace.csv" <<'PY' || fail "the program did not end at the centre plus a tenth of the size, 5 mm above the top (110, 110, -15)"
+import sys, time
+end = (110.0, 110.0, -15.0)
+for _ in range(250):
+    lines = open(sys.argv[1]).read().splitlines()
+    f = lines[-2].split(",") if len(lines) > 2 else []
+    pos = [float(f[1]), float(f[4]), float(f[7])] if len(f) >= 10 else [float("nan")] * 3
+    worst = max(abs(p - e) for p, e in zip(pos, end))
+    if worst < 5e-4: break
+    time.sleep(0.02)
+print(f"# at the end: X {pos[0]:.4f} Y {pos[1]:.4f} Z {pos[2]:.4f}, {worst * 1e3:.4f} um from (110, 110, -15)", file=sys.stderr)
+sys.exit(0 if worst <= 1e-3 else 1)
+PY
+
+cat >"$WORK/length.ngc" <<'NGC'
+G21 G90
+M61 Q1
+G10 L2 P1 Z-3
+G92 Z1
+o<tool_length> call [100] [100] [-25] [0] [25] [300] [50] [0.5]
+G92.1
+G43 H1
+G0 X[100 + #<_value>] Y100
+M2
+NGC
+"${CTL[@]}" --do run --program "$WORK/length.ngc" --timeout 90 >"$WORK/ctl2.out" 2>&1 ||
+  { cat "$WORK/ctl2.out" >&2; tail -n 20 "$WORK/interpolator.log" "$WORK/program-server.log" >&2; fail "the tool setter's program did not run to its end"; }
+cat "$WORK/tools.tbl" >&2
+len=$(sed -n 's/^T1 .*Z\([-+0-9.]*\).*/\1/p' "$WORK/tools.tbl")
+awk -v z="$len" 'BEGIN { exit !(z != "" && z - 5 < 1e-4 && 5 - z < 1e-4) }' ||
+  fail "the tool table's T1 has Z '$len', not 5 (the setter's trip at -20 less the reference -25)"
+note "tool_length wrote T1 Z $len to the tool table (want 5)"
+settle_at "$WORK/trace.csv" 105 100 0
 stop_cell_services() { for s in interpolator program-server monitor drive-bridge logger servo-sim; do [ -n "${TEST_PIDS[$s]:-}" ] && stop "$s" TERM; done; return 0; }
 stop_cell_services
-final_at "$WORK/final.json" 110 110 -15 ||
-  fail "the program did not end at the centre plus a tenth of the size, 5 mm above the top (110, 110, -15)"
+final_at "$WORK/final.json" 105 100 0 ||
+  fail "the tool setter's program did not end at X 100 + the length, at the safe Z: (105, 100, 0)"
 echo "PASS"

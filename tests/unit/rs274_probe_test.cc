@@ -83,6 +83,21 @@ TEST(Rs274Probe, CanonicalCallsAndRs274sSimulatedResultWithoutAMachine) {
   EXPECT_EQ(rec.calls, want);
 }
 
+// The probing subroutines take machine Z from #5063 and the coordinate system's offset,
+// #[5203 + 20 * #5220]: #5220 reads 1 in G54 from the start, without a var file, as
+// LinuxCNC's (it read 0, and the tool setter wrote a length 3 mm off under a G54 Z -3).
+TEST(Rs274Probe, TheCoordinateSystemNumberReadsOneInG54WithoutAVarFile) {
+  TempDir dir;
+  const std::string path = dir.write("main.ngc", "G21\n(debug, #5220)\nG55\n(debug, #5220)\nM2\n");
+  Recorder rec;
+  Interpreter in(probe_setup(false), rec);
+  in.open(path);
+  while (in.execute_next()) {
+  }
+  const std::vector<std::string> want = {"MSG  1.000000", "MSG  2.000000"};
+  EXPECT_EQ(rec.calls, want);
+}
+
 TEST(Rs274Probe, Rs274sSimulatedMachineBacksOffFromTheEnd) {
   // saicanon's STRAIGHT_PROBE leaves the machine 0.254 mm (0.01 in) back from the
   // move's end towards its start: a relative move after it starts there (LinuxCNC's
