@@ -47,7 +47,7 @@ constexpr std::string_view kCuttingKeys[] = {"tool",          "material",       
                                              "disc_height_mm", "angles_per_tooth"};
 constexpr std::string_view kStockKeys[] = {"x_min_mm", "y_min_mm", "x_max_mm", "y_max_mm", "top_z_mm", "pitch_mm"};
 constexpr std::string_view kProgramKeys[] = {
-    "subroutine_path", "tool_table",   "var_file",      "probe",         "digital_inputs",
+    "subroutine_path", "m6_remap",     "tool_table",    "var_file",      "probe",         "digital_inputs",
     "analog_inputs",   "digital_outputs", "analog_outputs", "block_delete", "optional_stop",
     "max_validation_lines", "dry_run_max_time_s", "g64_fit", "g64_fit_max_segment_mm", "g64_fit_max_turn_deg",
     "default_path_tolerance_mm"};
@@ -351,6 +351,15 @@ void read_program(MapReader r, ProgramConfig& p) {
   }
   for (const std::string& d : p.subroutine_path)
     if (!std::filesystem::is_directory(d)) r.fail("subroutine_path", "'" + d + "' is not a folder");
+  p.m6_remap = r.get_string("m6_remap", "");
+  if (!p.m6_remap.empty()) {
+    bool found = false;
+    for (const std::string& d : p.subroutine_path)
+      found = found || std::filesystem::is_regular_file(std::filesystem::path(d) / (p.m6_remap + ".ngc"));
+    if (!found)
+      r.fail("m6_remap", "no " + p.m6_remap + ".ngc in program.subroutine_path (" +
+                             (p.subroutine_path.empty() ? std::string("not set") : sub) + ")");
+  }
   p.tool_table = beside(r, r.get_string("tool_table", ""));
   if (!p.tool_table.empty() && !std::filesystem::is_regular_file(p.tool_table))
     r.fail("tool_table", "'" + p.tool_table + "' is not a file");

@@ -262,6 +262,8 @@ struct CuttingConfig {
 // section and tool/var files). Paths are relative to the config file's folder.
 struct ProgramConfig {
   std::vector<std::string> subroutine_path;  // folders searched for o<name> call files
+  // program.m6_remap: M6 calls o<NAME> (LinuxCNC's REMAP=M6 ngc=NAME); "" = the built-in M6.
+  std::string m6_remap;
   std::string tool_table;                    // LinuxCNC tool table (mm); "" = no tools
   std::string var_file;                      // LinuxCNC var file (mm); "" = parameters not kept
   bool probe = false;                        // G38.x needs a probe input

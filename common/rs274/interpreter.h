@@ -82,6 +82,11 @@ struct MachineSetup {
   bool optional_stop = true;               // M1 stops
   Pose start_position{};                   // machine coordinates where the program starts
   int64_t max_call_depth = 100;
+  // M6 remapped (LinuxCNC's REMAP=M6 ... ngc=NAME): M6 calls o<NAME> with the locals
+  // #<selected_tool>, #<tool_in_spindle>, #<selected_pocket>, #<current_pocket>; an M6 in
+  // it is the built-in change; a negative return value aborts; the rest of the M6's block
+  // runs after the return. "" = the built-in M6.
+  std::string m6_remap;
   // Fanuc-style subprograms (LinuxCNC 2.9): a bare O-word heads one, M98 P<n> L<k>
   // calls it k times, M99 returns. LinuxCNC's [RS274NGC]DISABLE_FANUC_STYLE_SUB = 1
   // is fanuc_subs = false (M98, M99 in a call and bare O-words are then refused).
@@ -189,6 +194,7 @@ class Interpreter {
   void check_words(const Words& w);
   void apply_settings();
   void execute_block(Words& w);
+  void execute_block_after_m6(Words& w);
   void comments_of_line();
   // execute_block's steps, in its order.
   bool continue_nurbs(Words& w);
@@ -304,6 +310,7 @@ class Interpreter {
   int spindle_ = 0;               // 0 off, 1 cw, -1 ccw
   bool mist_ = false, flood_ = false;
   bool feed_override_ = true, speed_override_ = true, adaptive_feed_ = false, feed_hold_ = true;
+  bool remap_called_ = false;     // M6 called its remap: the rest of the block waits for the return
   int tool_ = 0;                  // in the spindle
   bool tools_changed_ = false;    // G10 L1/L10/L11 changed the table
   int selected_tool_ = -1;        // T word given

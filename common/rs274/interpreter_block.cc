@@ -14,6 +14,14 @@ void Interpreter::execute_block(Words& w) {
   if ((w.has & (bit('F') | bit('S') | bit('T'))) != 0) f_s_t(w);
   if (w.m[5] >= 0) m62_m68(w);
   if (w.m[6] >= 0) m6_m61(w);
+  if (remap_called_) {
+    remap_called_ = false;
+    return;  // into M6's remap: the rest when it returns
+  }
+  execute_block_after_m6(w);
+}
+
+void Interpreter::execute_block_after_m6(Words& w) {
   if (w.m[7] >= 0) m3_m5(w);
   if (w.m[10] >= 0) m70_m73(w);
   if (w.m[8] >= 0) m7_m9(w);

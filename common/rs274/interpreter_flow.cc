@@ -352,6 +352,13 @@ void Interpreter::return_from_call(double value, bool has_value, int column) {
   file_ = fr.return_file;
   files_[static_cast<size_t>(file_)]->seek(fr.return_offset);
   line_no_ = fr.return_line;
+  if (fr.remap_rest) {
+    // The remapped M6 returned: a negative value aborts it (LinuxCNC's change_epilog),
+    // else its block goes on after the M6 step.
+    if (has_value && value < 0)
+      fail(fr.call_column, "M6 aborted (o<" + fr.sub + "> returned " + std::to_string(value) + ")");
+    execute_block_after_m6(*fr.remap_rest);
+  }
 }
 
 // ---- Fanuc-style subprograms (M98 / M99) ------------------------------------------------

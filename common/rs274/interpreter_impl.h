@@ -8,7 +8,9 @@
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <algorithm>
 #include <cstring>
+#include <memory>
 
 #include "common/rs274/interpreter.h"
 
@@ -114,6 +116,8 @@ struct Interpreter::Frame {
   bool fanuc = false;      // an M98 call: ends with M99, shares #1..#30
   bool again = false;      // M98 L: M99 goes back to the M98 line, which runs again
   int64_t call_start = 0;  // the M98 line's start in return_file
+  // A remapped M6's call: the rest of its block, run after the return.
+  std::shared_ptr<Words> remap_rest;
 };
 
 struct Interpreter::Loop {

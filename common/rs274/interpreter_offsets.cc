@@ -277,7 +277,26 @@ void Interpreter::g92(Words& w) {
 
 // Tool change (M6), and the tool in the spindle set (M61).
 void Interpreter::m6_m61(Words& w) {
-  if (w.m[6] == 6) {
+  const bool in_remap = std::any_of(frames_.begin(), frames_.end(), [](const Frame& f) { return f.remap_rest != nullptr; });
+  if (w.m[6] == 6 && !setup_.m6_remap.empty() && !in_remap) {
+    // LinuxCNC's REMAP=M6 with an ngc body: its change_prolog's locals, the call, and
+    // the rest of this block after the return (return_from_call).
+    const std::string& name = setup_.m6_remap;
+    if (static_cast<int64_t>(frames_.size()) >= setup_.max_call_depth)
+      fail(w.mcol[6], "M6 (remapped to o<" + name + ">): calls nested deeper than " + std::to_string(setup_.max_call_depth));
+    const SubDef def = find_sub(name, w.mcol[6], false);
+    Frame fr = call_frame(name, w.mcol[6]);
+    fr.remap_rest = std::make_shared<Words>(w);
+    fr.remap_rest->m[6] = -1;
+    params_.push_call();
+    const int selected = selected_tool_ < 0 ? tool_ : selected_tool_;
+    params_.set_named("selected_tool", selected);
+    params_.set_named("tool_in_spindle", tool_);
+    params_.set_named("selected_pocket", selected);
+    params_.set_named("current_pocket", tool_);
+    enter_sub(std::move(fr), def);
+    remap_called_ = true;
+  } else if (w.m[6] == 6) {
     tool_change(w);
   } else if (w.m[6] == 61) {
     if (!w.on('Q')) fail(w.mcol[6], "M61 needs a Q word (the tool number)");

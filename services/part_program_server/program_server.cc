@@ -243,6 +243,7 @@ ProgramSetup program_setup(const config::MachineConfig& cfg) {
   }
   s.machine.machine_units = rs274::Units::kMm;
   s.machine.subroutine_path = cfg.program.subroutine_path;
+  s.machine.m6_remap = cfg.program.m6_remap;
   s.machine.tool_table = cfg.program.tool_table;
   s.machine.var_file = cfg.program.var_file;
   // The tool in the spindle stays there across programs (#5400 in the var file), and a

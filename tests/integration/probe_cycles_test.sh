@@ -8,6 +8,9 @@
 # o<tool_length> takes the fixture for a tool setter (reference Z -25: the tool is 5 mm
 # long), under a G54 Z offset of -3 and a G92 offset of 2: the tool table's T1 gets Z 5
 # (0.1 um), and the program ends at X 100 + the length, at the safe Z 0: (105, 100, 0).
+# Last, M6 remapped to o<change_and_measure> (program.m6_remap): T2 M6 G0 X60 Y60 goes to
+# the change position, holds for the change until RESUME, measures T2 on the setter
+# (T2 Z +5 in the tool table), applies it, and the block's G0 ends at (60, 60, 0).
 #   probe_cycles_test.sh BUILD_DIR SOURCE_DIR
 source "$(dirname "$0")/lib.sh"
 enter_private_netns "$@"
@@ -17,8 +20,9 @@ trap 'cleanup $?' EXIT
 M="$WORK/machine.yaml"
 make_machine "$SRC/config/machines/sim3_probe.yaml" "$M"
 sed -i 's/^  input: probe_tip .*/  input: probe_tip\n  latch: drives/' "$M"
-printf 'T1 P1 Z0 D6 ;\n' >"$WORK/tools.tbl"
-printf '\nprogram:\n  subroutine_path: %s\n  tool_table: %s\n' "$SRC/config/subroutines" "$WORK/tools.tbl" >>"$M"
+printf 'T1 P1 Z0 D6 ;\nT2 P2 Z0 D6 ;\n' >"$WORK/tools.tbl"
+printf '\nprogram:\n  subroutine_path: %s\n  tool_table: %s\n  m6_remap: change_and_measure\n' \
+  "$SRC/config/subroutines" "$WORK/tools.tbl" >>"$M"
 grep -q "^  latch: drives" "$M" || fail "could not set probe.latch: drives in $M"
 CTL=("$BUILD/tools/cnc-ctl" --machine "$M")
 
@@ -92,8 +96,26 @@ awk -v z="$len" 'BEGIN { exit !(z != "" && z - 5 < 1e-4 && 5 - z < 1e-4) }' ||
   fail "the tool table's T1 has Z '$len', not 5 (the setter's trip at -20 less the reference -25)"
 note "tool_length wrote T1 Z $len to the tool table (want 5)"
 settle_at "$WORK/trace.csv" 105 100 0
+
+printf 'G21 G90\nT2 M6 G0 X60 Y60\nM2\n' >"$WORK/change.ngc"
+"${CTL[@]}" --do run --program "$WORK/change.ngc" --timeout 90 >"$WORK/ctl3.out" 2>&1 &
+TEST_PIDS[change]=$!
+for ((i = 0; i < 150; i++)); do
+  "${CTL[@]}" --do status --timeout 0.2 >"$WORK/status3.out" 2>&1 || true
+  grep -q "^interpolator: held," "$WORK/status3.out" && break
+done
+grep -q "^interpolator: held," "$WORK/status3.out" || { cat "$WORK/status3.out" >&2; fail "the remapped M6 did not hold for the change"; }
+"${CTL[@]}" --do resume >"$WORK/resume3.out" 2>&1 || { cat "$WORK/resume3.out" >&2; fail "RESUME after the change failed"; }
+rc=0; wait "${TEST_PIDS[change]}" || rc=$?; unset "TEST_PIDS[change]"
+[ "$rc" -eq 0 ] || { cat "$WORK/ctl3.out" >&2; tail -n 20 "$WORK/interpolator.log" >&2; fail "the remapped M6's program did not run to its end ($rc)"; }
+cat "$WORK/tools.tbl" >&2
+len2=$(sed -n 's/^T2 .*Z\([-+0-9.]*\).*/\1/p' "$WORK/tools.tbl")
+awk -v z="$len2" 'BEGIN { exit !(z != "" && z - 5 < 1e-4 && 5 - z < 1e-4) }' ||
+  fail "the remapped M6 left T2 with Z '$len2' in the tool table, not 5"
+note "M6 remapped to o<change_and_measure>: held for the change, then T2 Z $len2 (want 5)"
+settle_at "$WORK/trace.csv" 60 60 0
 stop_cell_services() { for s in interpolator program-server monitor drive-bridge logger servo-sim; do [ -n "${TEST_PIDS[$s]:-}" ] && stop "$s" TERM; done; return 0; }
 stop_cell_services
-final_at "$WORK/final.json" 105 100 0 ||
-  fail "the tool setter's program did not end at X 100 + the length, at the safe Z: (105, 100, 0)"
+final_at "$WORK/final.json" 60 60 0 ||
+  fail "the remapped M6's block did not end at (60, 60, 0) with T2's length applied"
 echo "PASS"

@@ -443,5 +443,48 @@ TEST(Rs274Subprogram, RepeatCountBeyondInt32IsRefused) {
   EXPECT_NE(e.detail().find("repeat count is at most 2147483647"), std::string::npos) << e.what();
 }
 
+// ---- M6 remapped (program.m6_remap; LinuxCNC's REMAP=M6 ngc=NAME) ---------------------
+
+// A remapped M6 calls its subroutine with change_prolog's locals; an M6 in it is the
+// built-in change; the rest of the M6's block (G0 X9 here) runs after the return.
+// LinuxCNC 2.9's rs274 with REMAP=M6 modalgroup=6 ngc=change makes the same calls
+// (without a Python prolog its locals are unset).
+TEST(Rs274Subprogram, ARemappedM6CallsItsSubroutineAndTheBlockGoesOnAfter) {
+  TempDir dir;
+  dir.dir("subs");
+  dir.write("subs/change.ngc",
+            "o<change> sub\n(debug, #<selected_tool> #<tool_in_spindle> #<selected_pocket> #<current_pocket>)\n"
+            "G0 Z5\nM6\nG0 X1\no<change> endsub [1]\nM2\n");
+  MachineSetup s;
+  s.subroutine_path = {(dir.path() / "subs").string()};
+  s.m6_remap = "change";
+  Outcome r;
+  run(r, "G21 G90 G0 X2 Y0 Z0\nT3 M6 G0 X9\nT3 M6\nM2\n", s, 100000, &dir);
+  EXPECT_TRUE(r.ended);
+  EXPECT_EQ(r.canon.moves(), (std::vector<std::string>{"G0 2 0 0", "G0 2 0 5", "G0 1 0 5", "G0 9 0 5", "G0 9 0 5",
+                                                         "G0 1 0 5"}));
+  EXPECT_EQ(r.canon.messages(), (std::vector<std::string>{" 3.000000 0.000000 3.000000 0.000000",
+                                                            " 3.000000 3.000000 3.000000 3.000000"}));
+}
+
+TEST(Rs274Subprogram, ARemappedM6ThatReturnsANegativeValueAborts) {
+  TempDir dir;
+  dir.dir("subs");
+  dir.write("subs/change.ngc", "o<change> sub\no<change> endsub [-2]\nM2\n");
+  MachineSetup s;
+  s.subroutine_path = {(dir.path() / "subs").string()};
+  s.m6_remap = "change";
+  Outcome r;
+  try {
+    run(r, "G21 G90\nT1 M6 G0 X9\nM2\n", s, 100000, &dir);
+    FAIL() << "accepted";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.where().line, 2) << e.what();
+    EXPECT_NE(e.file_name().find("main.ngc"), std::string::npos) << e.what();
+    EXPECT_NE(e.detail().find("M6 aborted (o<change> returned -2"), std::string::npos) << e.what();
+  }
+  EXPECT_TRUE(r.canon.moves().empty());
+}
+
 }  // namespace
 }  // namespace cnc::rs274

@@ -76,7 +76,7 @@ int main(int argc, char** argv) {
   cnc::util::cli::setup(app);
   app.add_flag("-g", ignored_flags, "ignored (rs274's graphical mode)");
   app.add_option("-i", ini,
-                 "LinuxCNC INI file: [RS274NGC] SUBROUTINE_PATH, DISABLE_FANUC_STYLE_SUB, [AXIS_A/B/C] WRAPPED_ROTARY")
+                 "LinuxCNC INI file: [RS274NGC] SUBROUTINE_PATH, DISABLE_FANUC_STYLE_SUB, REMAP=M6 ngc=, [AXIS_A/B/C] WRAPPED_ROTARY")
       ->type_name("INI");
   app.add_option("-t", setup.tool_table, "tool table")->type_name("TOOLTABLE");
   app.add_option("-v", setup.var_file, "parameter (var) file")->type_name("VARFILE");
@@ -114,6 +114,12 @@ int main(int argc, char** argv) {
       return v == "1" || v == "true" || v == "yes" || v == "on";
     };
     setup.fanuc_subs = !yes("RS274NGC", "DISABLE_FANUC_STYLE_SUB");
+    // REMAP=M6 ... ngc=NAME (an ngc body; a Python prolog or epilog is not read).
+    const std::string remap = ini_value(ini, "RS274NGC", "REMAP");
+    if (remap.rfind("M6 ", 0) == 0 || remap.rfind("m6 ", 0) == 0) {
+      const size_t at = remap.find("ngc=");
+      if (at != std::string::npos) setup.m6_remap = remap.substr(at + 4, remap.find_first_of(" \t", at) - at - 4);
+    }
     for (const char* a : {"A", "B", "C"})
       if (yes(std::string("AXIS_") + a, "WRAPPED_ROTARY")) setup.wrapped += a;
   }
