@@ -230,11 +230,7 @@ NGC
 TEST_PIDS[tool]=$!
 # The tool change holds until RESUME (RESUME while it runs is allowed and does nothing:
 # wait for the hold).
-for ((i = 0; i < 150; i++)); do
-  "${CTL[@]}" --do status --timeout 0.2 >"$WORK/tool_status.out" 2>&1 || true
-  grep -q "^interpolator: held," "$WORK/tool_status.out" && break
-done
-grep -q "^interpolator: held," "$WORK/tool_status.out" || { cat "$WORK/tool_status.out" >&2; fail "the tool change did not hold"; }
+wait_held "$WORK/tool_status.out" || fail "the tool change did not hold"
 ok tool_resume "${CTL[@]}" --do resume
 rc=0; wait "${TEST_PIDS[tool]}" || rc=$?; unset "TEST_PIDS[tool]"
 [ "$rc" -eq 0 ] || { cat "$WORK/tool_run.out" >&2; fail "the program with G43 H1 did not complete ($rc)"; }

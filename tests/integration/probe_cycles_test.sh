@@ -90,29 +90,26 @@ M2
 NGC
 "${CTL[@]}" --do run --program "$WORK/length.ngc" --timeout 90 >"$WORK/ctl2.out" 2>&1 ||
   { cat "$WORK/ctl2.out" >&2; tail -n 20 "$WORK/interpolator.log" "$WORK/program-server.log" >&2; fail "the tool setter's program did not run to its end"; }
-cat "$WORK/tools.tbl" >&2
-len=$(sed -n 's/^T1 .*Z\([-+0-9.]*\).*/\1/p' "$WORK/tools.tbl")
-awk -v z="$len" 'BEGIN { exit !(z != "" && z - 5 < 1e-4 && 5 - z < 1e-4) }' ||
-  fail "the tool table's T1 has Z '$len', not 5 (the setter's trip at -20 less the reference -25)"
+# length_is_5 TOOL: the tool's Z in the table (into $len) is 5: the setter's trip at -20
+# less the reference -25.
+length_is_5() {
+  len=$(sed -n "s/^T$1 .*Z\([-+0-9.]*\).*/\1/p" "$WORK/tools.tbl")
+  awk -v z="$len" 'BEGIN { exit !(z != "" && z - 5 < 1e-4 && 5 - z < 1e-4) }' ||
+    { cat "$WORK/tools.tbl" >&2; fail "the tool table's T$1 has Z '$len', not 5"; }
+}
+length_is_5 1
 note "tool_length wrote T1 Z $len to the tool table (want 5)"
 settle_at "$WORK/trace.csv" 105 100 0
 
 printf 'G21 G90\nT2 M6 G0 X60 Y60\nM2\n' >"$WORK/change.ngc"
 "${CTL[@]}" --do run --program "$WORK/change.ngc" --timeout 90 >"$WORK/ctl3.out" 2>&1 &
 TEST_PIDS[change]=$!
-for ((i = 0; i < 150; i++)); do
-  "${CTL[@]}" --do status --timeout 0.2 >"$WORK/status3.out" 2>&1 || true
-  grep -q "^interpolator: held," "$WORK/status3.out" && break
-done
-grep -q "^interpolator: held," "$WORK/status3.out" || { cat "$WORK/status3.out" >&2; fail "the remapped M6 did not hold for the change"; }
+wait_held "$WORK/status3.out" || fail "the remapped M6 did not hold for the change"
 "${CTL[@]}" --do resume >"$WORK/resume3.out" 2>&1 || { cat "$WORK/resume3.out" >&2; fail "RESUME after the change failed"; }
 rc=0; wait "${TEST_PIDS[change]}" || rc=$?; unset "TEST_PIDS[change]"
 [ "$rc" -eq 0 ] || { cat "$WORK/ctl3.out" >&2; tail -n 20 "$WORK/interpolator.log" >&2; fail "the remapped M6's program did not run to its end ($rc)"; }
-cat "$WORK/tools.tbl" >&2
-len2=$(sed -n 's/^T2 .*Z\([-+0-9.]*\).*/\1/p' "$WORK/tools.tbl")
-awk -v z="$len2" 'BEGIN { exit !(z != "" && z - 5 < 1e-4 && 5 - z < 1e-4) }' ||
-  fail "the remapped M6 left T2 with Z '$len2' in the tool table, not 5"
-note "M6 remapped to o<change_and_measure>: held for the change, then T2 Z $len2 (want 5)"
+length_is_5 2
+note "M6 remapped to o<change_and_measure>: held for the change, then T2 Z $len (want 5)"
 settle_at "$WORK/trace.csv" 60 60 0
 stop_cell_services() { for s in interpolator program-server monitor drive-bridge logger servo-sim; do [ -n "${TEST_PIDS[$s]:-}" ] && stop "$s" TERM; done; return 0; }
 stop_cell_services
