@@ -65,18 +65,6 @@ start() {
   TEST_PIDS[$name]=$!
 }
 
-# wait_held OUT: polls `${CTL[@]} --do status` (into OUT) until the interpolator holds (a
-# tool change waiting for RESUME), at most 150 times; the last status on stderr if not.
-wait_held() {
-  local i
-  for ((i = 0; i < 150; i++)); do
-    "${CTL[@]}" --do status --timeout 0.2 >"$1" 2>&1 || true
-    grep -q "^interpolator: held," "$1" && return 0
-  done
-  cat "$1" >&2
-  return 1
-}
-
 # sim_world_steady TRACE: waits (at most 15 s) until the simulator's world clock has run
 # at 0.95 of the wall's or better over the trace's last half second. A measurement on
 # the simulated world's time needs it: in a cell's first second the world stands up to

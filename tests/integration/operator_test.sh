@@ -230,7 +230,7 @@ NGC
 TEST_PIDS[tool]=$!
 # The tool change holds until RESUME (RESUME while it runs is allowed and does nothing:
 # wait for the hold).
-wait_held "$WORK/tool_status.out" || fail "the tool change did not hold"
+wait_state held  # the tool change waits for RESUME
 ok tool_resume "${CTL[@]}" --do resume
 rc=0; wait "${TEST_PIDS[tool]}" || rc=$?; unset "TEST_PIDS[tool]"
 [ "$rc" -eq 0 ] || { cat "$WORK/tool_run.out" >&2; fail "the program with G43 H1 did not complete ($rc)"; }
