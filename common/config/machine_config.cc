@@ -65,7 +65,8 @@ constexpr std::string_view kHomeKeys[] = {"method",      "search_velocity_mm_s",
                                           "direction",   "switch_position_mm",   "position_mm",
                                           "backoff_mm",  "order"};
 constexpr std::string_view kSpindleKeys[] = {"drive",        "max_rpm",      "rpm_per_hz", "at_speed_tolerance",
-                                             "at_speed_timeout_s", "min_override", "max_override", "sim"};
+                                             "at_speed_timeout_s", "min_override", "max_override", "encoder_counts_per_rev",
+                                             "sim"};
 constexpr std::string_view kSpindleSimKeys[] = {"time_constant_s", "load_current_a", "inertia_current_a"};
 constexpr std::string_view kIoKeys[] = {"modules",        "points",        "coolant",       "digital_outputs",
                                         "digital_inputs", "analog_inputs", "analog_outputs"};
@@ -438,6 +439,7 @@ void read_spindle(MapReader r, MachineConfig& c) {
   s.at_speed_timeout_s = r.get_double("at_speed_timeout_s", s.at_speed_timeout_s, 0.1, 600.0);
   s.min_override = r.get_double("min_override", s.min_override, 0.0, 1.0);
   s.max_override = r.get_double("max_override", s.max_override, 1.0, 10.0);
+  s.encoder_counts_per_rev = r.get_int("encoder_counts_per_rev", s.encoder_counts_per_rev, 0, 1 << 24);
   if (c.drive_bridge.link_loss_timeout_s < s.drive.response_timeout_s)
     r.fail("drive", "drive.response_timeout_s must not exceed drive_bridge.link_loss_timeout_s");
   MapReader m = r.map("sim", kSpindleSimKeys);

@@ -124,6 +124,11 @@ struct SpindleConfig {
   // MAX_SPINDLE_OVERRIDE, whose defaults these are).
   double min_override = 0.5;
   double max_override = 1.0;
+  // The spindle's encoder (a servo spindle, or a VFD with an encoder input): counts per
+  // revolution, 0 none. With one, G33, G33.1 and M19 run: the path follows the
+  // spindle's measured position.
+  int64_t encoder_counts_per_rev = 0;
+  bool measured_position() const { return enabled && encoder_counts_per_rev > 0; }
   SpindleSimConfig sim;
 };
 

@@ -30,6 +30,7 @@ const char* to_string(EventKind kind) {
     case EventKind::kAnalogOutput: return "analog_output";
     case EventKind::kOverrides: return "overrides";
     case EventKind::kWaitInput: return "wait_input";
+    case EventKind::kSpindleOrient: return "spindle_orient";
   }
   return "?";
 }

@@ -29,7 +29,9 @@ enum class EventKind : int8_t {
   kAnalogOutput = 9,   // M67/M68: number = index (+1000 with the next motion, M67), value
   kOverrides = 10,     // M48-M53: number = bits feed, speed, adaptive, hold
   kWaitInput = 11,     // M66: number = InputWait::number(), value = timeout, s (0: none)
-  kLast = kWaitInput,
+  kSpindleOrient = 12,  // M19: number = P (0 shortest way, 1 clockwise, 2 counterclockwise), value = R
+                        // (degrees); Block::dwell_s = Q, the wait for it (0: not waited for)
+  kLast = kSpindleOrient,
 };
 
 // M66's input and wait mode, packed in an event's number as index + 1000 x mode
@@ -124,6 +126,15 @@ struct Block {
   // at rest and stops where the probe input changes (the machine's result, not the
   // block's end, is where the next block starts). On the wire: event_kind kProbeWire.
   int8_t probe = 0;
+  // kLine: spindle-synchronised motion (kSyncG33, kSyncRigidTap), kSyncNone otherwise.
+  // The path advances sync_pitch_mm per spindle revolution; a rigid tap goes to `end`,
+  // reverses the spindle (turning tap_retract_scale times as fast) and comes back to
+  // `start` synchronised. feed_mm_per_min is the pitch times the programmed S (what the
+  // dry run takes). On the wire: event_kind kSyncWire + sync, event_value the pitch,
+  // dwell_s the retract scale.
+  int8_t sync = 0;
+  double sync_pitch_mm = 0;
+  double tap_retract_scale = 1;
   // The program reads the machine's answer to this block before its next line: a
   // probing move's result (#5061-#5070) or an M66's input value (#5399).
   bool awaits_result() const { return probe != 0 || (kind == BlockKind::kEvent && event.kind == EventKind::kWaitInput); }
@@ -131,6 +142,9 @@ struct Block {
 
 // The event_kind a LINE block carries on the wire when it is a probing move (not an EventKind).
 inline constexpr int8_t kProbeWire = 100;
+inline constexpr int8_t kSyncNone = 0, kSyncG33 = 1, kSyncRigidTap = 2;
+// ...and when it is synchronised with the spindle: kSyncWire + Block::sync.
+inline constexpr int8_t kSyncWire = 110;
 
 // How a path tolerance P (G64 P) is shared: the interpolation's chords take at most
 // a quarter of it (never more than the machine's chord tolerance), the fit and the

@@ -67,6 +67,11 @@ cnc::lcmt_program_block to_msg(const Block& b, int64_t program_token) {
     m.event_kind = kProbeWire;
     m.event_number = b.probe;
   }
+  if (b.kind == BlockKind::kLine && b.sync != kSyncNone) {
+    m.event_kind = static_cast<int8_t>(kSyncWire + b.sync);
+    m.event_value = b.sync_pitch_mm;
+    m.dwell_s = b.tap_retract_scale;
+  }
   return m;
 }
 
@@ -95,6 +100,9 @@ std::string from_msg(const cnc::lcmt_program_block& m, int num_axes, Block* out)
         (w.analog && w.mode != InputWait::kImmediate) || m.event_value < 0)
       return "bad input wait (M66)";
   }
+  if (m.kind == static_cast<int8_t>(BlockKind::kEvent) && m.event_kind == static_cast<int8_t>(EventKind::kSpindleOrient) &&
+      (m.event_number < 0 || m.event_number > 2))
+    return "bad spindle orientation (M19 P" + std::to_string(m.event_number) + ")";
   if (m.source_file.size() > 4096 || m.event_text.size() > 4096) return "source file or event text too long";
   Block b;
   b.index = m.block_index;
@@ -116,11 +124,18 @@ std::string from_msg(const cnc::lcmt_program_block& m, int num_axes, Block* out)
     if (m.event_number < 2 || m.event_number > 5) return "bad probing move (G38." + std::to_string(m.event_number) + ")";
     b.probe = static_cast<int8_t>(m.event_number);
   }
+  if (m.kind == static_cast<int8_t>(BlockKind::kLine) && (m.event_kind == kSyncWire + kSyncG33 || m.event_kind == kSyncWire + kSyncRigidTap)) {
+    if (!std::isfinite(m.event_value) || !(m.event_value > 0)) return "bad spindle-synchronised move (pitch)";
+    if (m.event_kind == kSyncWire + kSyncRigidTap && !(m.dwell_s >= 1)) return "bad rigid tap (retract scale below 1)";
+    b.sync = static_cast<int8_t>(m.event_kind - kSyncWire);
+    b.sync_pitch_mm = m.event_value;
+    b.tap_retract_scale = m.event_kind == kSyncWire + kSyncRigidTap ? m.dwell_s : 1.0;
+  }
   b.kind = static_cast<BlockKind>(m.kind);
   b.start = m.start;
   b.end = m.end;
   b.feed_mm_per_min = m.feed_mm_per_min;
-  b.dwell_s = m.dwell_s;
+  b.dwell_s = b.sync != kSyncNone ? 0.0 : m.dwell_s;  // a synchronised move's dwell_s is its retract scale
   b.spindle_rpm = m.spindle_rpm;
   b.process = ProcessParams{m.ball_radius_mm, m.flutes, m.pick_feed_mm, m.target_rmax_um};
   b.path_tolerance_mm = m.path_tolerance_mm;

@@ -167,6 +167,10 @@ bool BlockBuilder::blending() const {
 }
 
 void BlockBuilder::straight_feed(const SourceRef& ref, const Pose& end) {
+  if (sync_pitch_mm_ > 0) {
+    synced_line(ref, end, program::kSyncG33, 1.0);
+    return;
+  }
   std::vector<double> e = to_machine(ref, end);
   double lin2 = 0;
   for (size_t a = 0; a < e.size(); ++a)
@@ -828,14 +832,51 @@ void BlockBuilder::straight_probe(const SourceRef& ref, const Pose& end, int kin
   position_ = std::move(e);
 }
 
+void BlockBuilder::start_speed_feed_sync(const SourceRef& ref, double feed_per_rev, bool velocity_mode) {
+  if (velocity_mode) throw Error(ref.column, "spindle-synchronised motion in velocity mode is not supported");
+  sync_pitch_mm_ = feed_per_rev * scale_;
+}
+void BlockBuilder::stop_speed_feed_sync(const SourceRef&) { sync_pitch_mm_ = 0; }
+
+void BlockBuilder::synced_line(const SourceRef& ref, const Pose& end, int8_t sync, double retract_scale) {
+  if (!setup_.spindle_sync)
+    throw Error(ref.column, "spindle-synchronised motion (G33, G33.1): this machine's spindle has no encoder");
+  std::vector<double> e = to_machine(ref, end);
+  for (size_t a = 0; a < e.size(); ++a)
+    if (rotary(a) && e[a] != position_[a]) throw Error(ref.column, "a rotary axis moves in spindle-synchronised motion");
+  if (spindle_dir_ == 0 || !(speed_rpm_ > 0)) throw Error(ref.column, "spindle-synchronised motion with the spindle stopped");
+  program::Block& b = begin(ref, program::BlockKind::kLine);
+  b.end = e;
+  b.sync = sync;
+  b.sync_pitch_mm = sync_pitch_mm_;
+  b.tap_retract_scale = retract_scale;
+  b.feed_mm_per_min = sync_pitch_mm_ * speed_rpm_;  // the nominal rate; the spindle's position decides
+  if (sync == program::kSyncG33) position_ = std::move(e);  // a rigid tap comes back to its start
+}
+void BlockBuilder::rigid_tap(const SourceRef& ref, const Pose& end, double retract_scale) {
+  if (!(sync_pitch_mm_ > 0)) throw Error(ref.column, "RIGID_TAP outside START_SPEED_FEED_SYNCH");
+  synced_line(ref, end, program::kSyncRigidTap, retract_scale);
+}
+void BlockBuilder::wait_orient_complete(const SourceRef&, double timeout_s) {
+  // M19 Q: the orientation's event (just made) waits for it.
+  if (!out_.empty() && out_.back().kind == program::BlockKind::kEvent &&
+      out_.back().event.kind == program::EventKind::kSpindleOrient)
+    out_.back().dwell_s = timeout_s;
+}
+
 void BlockBuilder::dwell(const SourceRef& ref, double seconds) {
   program::Block& b = begin(ref, program::BlockKind::kDwell);
   b.dwell_s = seconds;
 }
 
-void BlockBuilder::orient_spindle(const SourceRef& ref, double, int) {
-  // G87 (back boring) needs it: without an oriented stop the boring bar would crash.
-  throw Error(ref.column, "spindle orientation (G87 back boring, M19): this machine's spindle has no orientation");
+void BlockBuilder::orient_spindle(const SourceRef& ref, double degrees, int mode) {
+  // G87 (back boring) needs it too: without an oriented stop the boring bar would crash.
+  if (!setup_.spindle_sync)
+    throw Error(ref.column, "spindle orientation (G87 back boring, M19): this machine's spindle has no encoder");
+  // M19's P (0 shortest way, 1 clockwise, 2 counterclockwise); G87 passes the turning
+  // direction (2, 3), where the shortest way serves as well.
+  spindle_dir_ = 0;  // an oriented spindle stands
+  event(ref, program::EventKind::kSpindleOrient, mode >= 0 && mode <= 2 ? mode : 0, degrees);
 }
 void BlockBuilder::change_tool(const SourceRef& ref, int tool) { event(ref, program::EventKind::kToolChange, tool, 0); }
 void BlockBuilder::set_spindle_speed(const SourceRef& ref, double rpm) {

@@ -48,6 +48,9 @@ struct BuilderSetup {
   double chord_tolerance_mm = 0.001;
   // G64 without P (and the start, in G64): this P, mm; 0 keeps the lines exactly.
   double default_path_tolerance_mm = 0;
+  // The spindle's position is measured (spindle.encoder_counts_per_rev): G33, G33.1,
+  // M19 and G87's oriented stops make blocks; otherwise they are refused.
+  bool spindle_sync = false;
 };
 
 class BlockBuilder : public Canon {
@@ -82,6 +85,10 @@ class BlockBuilder : public Canon {
                   const Pose& end) override;
   void dwell(const SourceRef&, double seconds) override;
   void straight_probe(const SourceRef&, const Pose& end, int kind) override;
+  void start_speed_feed_sync(const SourceRef&, double feed_per_rev, bool velocity_mode) override;
+  void stop_speed_feed_sync(const SourceRef&) override;
+  void rigid_tap(const SourceRef&, const Pose& end, double retract_scale) override;
+  void wait_orient_complete(const SourceRef&, double timeout_s) override;
   // Where the machine came to rest after a probing move (machine mm, one per axis):
   // the next block starts there.
   void set_position(const std::vector<double>& machine_mm) { position_ = machine_mm; }
@@ -158,6 +165,8 @@ class BlockBuilder : public Canon {
   double angular_feed_ = 0;       // deg / min (or / rev): the last rate set, unscaled by G20/G21
   FeedMode feed_mode_ = FeedMode::kUnitsPerMinute;
   double speed_rpm_ = 0;
+  double sync_pitch_mm_ = 0;  // between START_ and STOP_SPEED_FEED_SYNCH: G33's K in mm; 0 otherwise
+  void synced_line(const SourceRef& ref, const Pose& end, int8_t sync, double retract_scale);
   int spindle_dir_ = 0;
   int coolant_ = 0;
   int overrides_ = 0xF;

@@ -83,6 +83,14 @@ class Canon {
   virtual void turn_probe_on(const SourceRef&) {}
   virtual void straight_probe(const SourceRef&, const Pose& /*end*/, int /*kind*/) {}
   virtual void turn_probe_off(const SourceRef&) {}
+  // G33, G33.1 (LinuxCNC's START_SPEED_FEED_SYNCH ... STOP_SPEED_FEED_SYNCH): the
+  // moves between them advance `feed_per_rev` program units along the path per
+  // spindle revolution, following the spindle's measured position.
+  virtual void start_speed_feed_sync(const SourceRef&, double /*feed_per_rev*/, bool /*velocity_mode*/) {}
+  virtual void stop_speed_feed_sync(const SourceRef&) {}
+  // G33.1: synchronised to `end`, the spindle reversed (turning `retract_scale` times
+  // as fast), synchronised back to the start; the position after it is the start.
+  virtual void rigid_tap(const SourceRef&, const Pose& /*end*/, double /*retract_scale*/) {}
 
   // Tool.
   virtual void select_tool(const SourceRef&, int /*pocket's tool*/) {}
@@ -104,6 +112,8 @@ class Canon {
   // LinuxCNC's ORIENT_SPINDLE(spindle, degrees, mode): G87 calls it with 0 degrees and
   // the turning direction as LinuxCNC's CANON_DIRECTION (2 clockwise, 3 counterclockwise).
   virtual void orient_spindle(const SourceRef&, double /*degrees*/, int /*mode*/) {}
+  // M19 Q: the motion waits for the orientation at most `timeout_s`.
+  virtual void wait_orient_complete(const SourceRef&, double /*timeout_s*/) {}
   virtual void set_spindle_mode(const SourceRef&, double /*G96 max rpm; 0: G97*/) {}
   virtual void mist_on(const SourceRef&) {}
   virtual void mist_off(const SourceRef&) {}

@@ -45,6 +45,10 @@ class CanonForward : public Canon {
   void turn_probe_on(const SourceRef& r) override { next_.turn_probe_on(r); }
   void straight_probe(const SourceRef& r, const Pose& end, int kind) override { next_.straight_probe(r, end, kind); }
   void turn_probe_off(const SourceRef& r) override { next_.turn_probe_off(r); }
+  void start_speed_feed_sync(const SourceRef& r, double k, bool v) override { next_.start_speed_feed_sync(r, k, v); }
+  void stop_speed_feed_sync(const SourceRef& r) override { next_.stop_speed_feed_sync(r); }
+  void rigid_tap(const SourceRef& r, const Pose& end, double scale) override { next_.rigid_tap(r, end, scale); }
+  void wait_orient_complete(const SourceRef& r, double t) override { next_.wait_orient_complete(r, t); }
 
   void select_tool(const SourceRef& r, int t) override { next_.select_tool(r, t); }
   void start_change(const SourceRef& r) override { next_.start_change(r); }

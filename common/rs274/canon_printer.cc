@@ -95,6 +95,13 @@ void CanonPrinter::straight_probe(const SourceRef&, const Pose& p, int) {
   line("STRAIGHT_PROBE(%.4f, %.4f, %.4f, %.4f, %.4f, %.4f)", p[0], p[1], p[2], p[3], p[4], p[5]);
 }
 void CanonPrinter::turn_probe_off(const SourceRef&) { line("TURN_PROBE_OFF()"); }
+// saicanon's spellings, the missing H of the first included.
+void CanonPrinter::start_speed_feed_sync(const SourceRef&, double k, bool v) {
+  line("START_SPEED_FEED_SYNC(%f,%d)", k, v ? 1 : 0);
+}
+void CanonPrinter::stop_speed_feed_sync(const SourceRef&) { line("STOP_SPEED_FEED_SYNCH()"); }
+void CanonPrinter::rigid_tap(const SourceRef&, const Pose& p, double) { line("RIGID_TAP(%.4f, %.4f, %.4f)", p[0], p[1], p[2]); }
+void CanonPrinter::wait_orient_complete(const SourceRef&, double t) { line("SPINDLE.0.WAIT_ORIENT_COMPLETE(%.4f)", t); }
 void CanonPrinter::select_tool(const SourceRef&, int t) { line("SELECT_TOOL(%d)", t); }
 // saicanon prints no diameter.
 void CanonPrinter::set_tool_table_entry(const SourceRef&, int index, int tool, const Pose& o, double, double front,

@@ -38,6 +38,10 @@ class CanonPrinter : public Canon {
   void turn_probe_on(const SourceRef&) override;
   void straight_probe(const SourceRef&, const Pose& end, int kind) override;
   void turn_probe_off(const SourceRef&) override;
+  void start_speed_feed_sync(const SourceRef&, double feed_per_rev, bool velocity_mode) override;
+  void stop_speed_feed_sync(const SourceRef&) override;
+  void rigid_tap(const SourceRef&, const Pose& end, double retract_scale) override;
+  void wait_orient_complete(const SourceRef&, double timeout_s) override;
   void select_tool(const SourceRef&, int) override;
   void set_tool_table_entry(const SourceRef&, int, int, const Pose&, double, double, double, int) override;
   void start_change(const SourceRef&) override;

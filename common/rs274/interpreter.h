@@ -68,6 +68,8 @@ struct MachineSetup {
   // var file, when write_var_file), atomically, as LinuxCNC writes its table.
   bool write_tool_table = false;
   bool has_probe = false;                  // G38.x needs one
+  // G33, G33.1 and M19 need a spindle whose position the machine measures (an encoder).
+  bool spindle_sync = false;
   // What the program reads from the machine: G38.x's result (#5061-#5070 and where the
   // machine stopped) and M66's input (#5399). false, the interpreter takes them as
   // LinuxCNC's rs274 does (the probe at the move's end, #5070 = 0; #5399 as it was,
@@ -243,6 +245,7 @@ class Interpreter {
   void cycle(Words& w);
   void spline(Words& w, bool cubic, int col);
   void straight_probe(Words& w, int g, int col);
+  void synced_move(Words& w, int g, int col);  // G33, G33.1
   void wait_input(const Words& w);
   void set_coord_system(int index);
   void end_program(bool m30);

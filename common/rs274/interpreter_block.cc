@@ -95,14 +95,31 @@ void Interpreter::m62_m68(const Words& w) {
   }
 }
 
-// Spindle (M3, M4, M5; M19 refused).
+// Spindle (M3, M4, M5, M19).
 void Interpreter::m3_m5(const Words& w) {
   const SourceRef r = ref(w.mcol[7]);
   switch (w.m[7]) {
     case 3: spindle_ = 1; canon_.start_spindle_clockwise(r); break;
     case 4: spindle_ = -1; canon_.start_spindle_counterclockwise(r); break;
     case 5: spindle_ = 0; canon_.stop_spindle_turning(r); break;
-    default: fail(w.mcol[7], "M19 (spindle orientation) is not supported: this machine has no spindle encoder");
+    default: {
+      // M19 R (angle) Q (timeout, s) P (0 shortest, 1 clockwise, 2 counterclockwise):
+      // LinuxCNC's orientation, which leaves the spindle counted as stopped and, with
+      // neither R nor P, orients nothing.
+      if (!setup_.spindle_sync)
+        fail(w.mcol[7], "M19 (spindle orientation) needs a spindle whose position the machine measures "
+                        "(spindle.encoder_counts_per_rev)");
+      spindle_ = 0;
+      if (w.on('P')) {
+        const double p = w['P'];
+        if (p != 0 && p != 1 && p != 2) fail(w.column('P'), "P with M19 must be 0, 1 or 2");
+      }
+      if (w.on('R') || w.on('P')) canon_.orient_spindle(r, w.on('R') ? w['R'] : 0.0, w.on('P') ? static_cast<int>(w['P']) : 0);
+      if (w.on('Q')) {
+        if (w['Q'] <= 0) fail(w.column('Q'), "Q word with M19 requires a value > 0");
+        canon_.wait_orient_complete(r, w['Q']);
+      }
+    }
   }
 }
 

@@ -154,12 +154,44 @@ void Interpreter::motion(Words& w) {
     spline(w, m == 50, col);
     return;
   }
-  if (m == 330 || m == 331 || m == 760) fail(col, g_text(m) + " needs spindle synchronisation, which this machine lacks");
+  if (m == 330 || m == 331) {
+    synced_move(w, m, col);
+    return;
+  }
+  if (m == 760) fail(col, g_text(m) + " (threading cycle) is not supported");
   if (m >= 382 && m <= 385) {
     straight_probe(w, m, col);
     return;
   }
   fail(col, "motion " + g_text(m) + " is not supported");
+}
+
+// G33 (spindle-synchronised motion) and G33.1 (rigid tapping): K is the distance along
+// the move per spindle revolution. G33.1 goes to the end and back to where it started.
+void Interpreter::synced_move(Words& w, int g, int col) {
+  const std::string name = g_text(g);
+  if (!setup_.spindle_sync)
+    fail(col, name + " needs a spindle whose position the machine measures (spindle.encoder_counts_per_rev)");
+  if (!w.on('K')) fail(col, "K word missing with g33/g33.1");
+  if (w.on('F')) fail(w.column('F'), "F word used with a g33/g33.1");
+  if (w['K'] <= 0) fail(w.column('K'), "K (distance per revolution) must be > 0 with " + name);
+  if (spindle_ == 0) fail(col, "Spindle not turning in " + name);
+  if (comp_ != 400) fail(col, name + " with cutter radius compensation on is not supported");
+  if (w.g[0] == 530) fail(w.gcol[0], "G53 is only allowed with G0 or G1");
+  const Pose end = axis_target(w, false);
+  for (size_t i = 3; i < 6; ++i)
+    if (end[i] != position_[i]) fail(col, "cannot move rotary axes with " + name);
+  comp_filter_->flush();
+  const SourceRef r = ref(col);
+  const Pose shown = program_pose(end);
+  canon_.start_speed_feed_sync(r, w['K'], false);
+  if (g == 330) {
+    canon_.straight_feed(r, shown);
+    position_ = end;
+  } else {
+    canon_.rigid_tap(r, shown, w.on('I') ? std::max(1.0, w['I']) : 1.0);  // back at the start afterwards
+  }
+  canon_.stop_speed_feed_sync(r);
 }
 
 void Interpreter::arc(Words& w, bool cw, const Pose& end) {

@@ -135,9 +135,11 @@ void Interpreter::check_words(const Words& w) {
   const bool arc = motion == 20 || motion == 30;
   const bool cyc = motion >= 730 && motion != 800 && (motion <= 890);
   const bool nurbs_g = motion == 52 || motion == 62 || motion == 50 || motion == 51;
+  const bool m19 = w.m[7] == 19;
   if (!arc && !cyc && !nurbs_g && g0 != 100) {
-    if (w.on('R')) not_with('R', "with no G code that uses it (G2/G3, a canned cycle, G10)");
-    if (w.on('I') || w.on('J')) not_with(w.on('I') ? 'I' : 'J', "with no G code that uses it (G2/G3, G5, G87)");
+    if (w.on('R') && !m19) not_with('R', "with no G code that uses it (G2/G3, a canned cycle, G10, M19)");
+    if (w.on('I') && motion != 331) not_with('I', "with no G code that uses it (G2/G3, G5, G33.1, G87)");
+    if (w.on('J')) not_with('J', "with no G code that uses it (G2/G3, G5, G87)");
   }
   // LinuxCNC's check_other_codes: no rotary axis word with a canned cycle (also a modal one).
   if (cyc)
@@ -152,9 +154,9 @@ void Interpreter::check_words(const Words& w) {
              std::to_string(fanuc_closed_line_));
   if (!arc && !cyc && g0 != 100 && !nurbs_g && !synced && w.on('K')) not_with('K', "with no G code that uses it (G2/G3, G33, G73/G83 ...)");
   if (w.on('P') && !(g0 == 40 || g0 == 100 || arc || cyc || nurbs_g || w.g[13] == 640 || w.g[7] == 410 ||
-                     w.g[7] == 420 || w.m[5] >= 0 || w.g[8] == 432))
+                     w.g[7] == 420 || w.m[5] >= 0 || w.g[8] == 432 || m19))
     not_with('P', "with no G code or M code that uses it");
-  if (w.on('Q') && !(cyc || nurbs_g || w.g[13] == 640 || w.m[5] >= 0 || w.m[6] == 61 || g0 == 100))
+  if (w.on('Q') && !(cyc || nurbs_g || w.g[13] == 640 || w.m[5] >= 0 || w.m[6] == 61 || g0 == 100 || m19))
     not_with('Q', "with no G code or M code that uses it");
   if (w.on('L') && !(g0 == 100 || cyc || nurbs_g || w.m[5] == 66)) not_with('L', "with no G code or M code that uses it (G10, canned cycles, M66)");
   if (w.on('H') && !(w.g[8] == 430 || w.g[8] == 432 || g0 == 100)) not_with('H', "with no G43 that uses it");
