@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <numbers>
 #include <stdexcept>
@@ -273,6 +274,8 @@ bool Interpolator::apply_plans_exact(int n) {
 std::string Interpolator::take_plan_failure() {
   std::string f;
   f.swap(failure_);
+  if (f.empty() && sync_failure_[0] != 0) f = sync_failure_.data();
+  sync_failure_[0] = 0;
   return f;
 }
 
@@ -283,6 +286,8 @@ bool Interpolator::rapid_at_full_speed(const Planned& p) const {
 }
 
 double Interpolator::programmed_speed(const Planned& p) const {
+  // A synchronised move runs at the spindle's rate, no override (LinuxCNC's G33).
+  if (p.block.sync != program::kSyncNone) return p.serial == sync_serial_ ? sync_speed_ : 0.0;
   // Override above 1 speeds up feed moves only; a rapid already runs at its axes' limit.
   return p.v_prog *
          (p.block.kind == program::BlockKind::kRapid ? std::min(override_, 1.0) * rapid_override_ : override_);
@@ -658,7 +663,11 @@ const Setpoint& Interpolator::step() {
     hold_at_line_start();
     track_probe_move();
     if (probe_braking_ && v_ == 0) end_probe_move();
-    const bool pausing = hold_ || stopping_ || door_resume_ || probe_braking_;
+    update_sync();
+    // A feed hold waits for the end of a synchronised move that has started (the
+    // tool is in the thread); a STOP does not.
+    const bool in_sync = sync_.phase == SyncMove::kAcquire || sync_.phase == SyncMove::kTrack;
+    const bool pausing = (hold_ && !in_sync) || stopping_ || door_resume_ || probe_braking_;
     if (!blocks_.empty() && blocks_.front().stop_block() && v_ == 0) {
       at_stop_block(pausing);
     } else if (blocks_.empty() || (stopping_ && v_ == 0 && a_ == 0)) {
@@ -676,6 +685,15 @@ const Setpoint& Interpolator::step() {
     }
   }
   if (door_hold_ && state_ == RunState::kHeld) door_spindle_stop();
+  if (sync_.phase == SyncMove::kTrack && !blocks_.empty() && blocks_.front().serial == sync_serial_) {
+    // The step's error against the spindle, counted until the end's brake may begin (it
+    // leaves the spindle).
+    const Planned& f = blocks_.front();
+    sync_.error_mm = sync_target_ - s_;
+    const double A = f.live_accel, J = f.live_jerk;
+    if (f.length - s_ > v_ * v_ / (2 * A) + v_ * A / J + v_ * period_s_)
+      sync_.max_error_mm = std::max(sync_.max_error_mm, std::fabs(sync_.error_mm));
+  }
   if (probe_.block_index >= 0 && !probe_.done && (blocks_.empty() || blocks_.front().serial != probe_serial_)) {
     probe_.done = true;  // ran to its end (or the program was dropped)
     probe_.end_cycle = cycle_;
@@ -683,6 +701,7 @@ const Setpoint& Interpolator::step() {
   output_position();
   if (out_.feed_mm_per_min > 0) outputs_.motion();
   out_.state = state_;
+  if (auto_resume_pauses_) ideal_rev_ += spindle_.direction * spindle_.rpm / 60.0 * period_s_;
   ++cycle_;
   if (retire_pending_) {
     // The planner may free what the path has left behind.
@@ -690,6 +709,92 @@ const Setpoint& Interpolator::step() {
     link_->retire(retired_below_);
   }
   return out_;
+}
+
+bool Interpolator::wants_spindle_position() const {
+  for (size_t b = 0; b < blocks_.size(); ++b)
+    if (blocks_[b].block.sync != program::kSyncNone) return true;
+  return false;
+}
+
+bool Interpolator::spindle_position(double* rev, double* rps) const {
+  if (auto_resume_pauses_) {
+    *rev = ideal_rev_;
+    *rps = spindle_.direction * spindle_.rpm / 60.0;
+    return true;
+  }
+  // Samples come every cycle while a synchronised move is queued; 25 cycles (0.1 s
+  // at 4 ms) without one is a lost spindle feedback, not a late datagram.
+  constexpr int64_t kStaleCycles = 25;
+  if (sp_applied_ < 0 || cycle_ - sp_applied_ > kStaleCycles) return false;
+  // Where the spindle will be when this cycle's setpoint is played.
+  *rps = sp_rps_;
+  *rev = sp_rev_ + sp_rps_ * (static_cast<double>(cycle_) - sp_cycle_) * period_s_;
+  return true;
+}
+
+void Interpolator::update_sync() {
+  if (blocks_.empty() || blocks_.front().block.sync == program::kSyncNone) {
+    sync_.phase = SyncMove::kNone;
+    sync_speed_ = 0;
+    return;
+  }
+  const Planned& f = blocks_.front();
+  const double pitch = f.block.sync_pitch_mm;
+  const double dir = spindle_.direction < 0 ? -1.0 : 1.0;
+  double rev = 0, rps = 0;
+  const bool have = spindle_position(&rev, &rps);
+  if (f.serial != sync_serial_) {
+    if (s_ != 0 || v_ != 0) return;  // not yet at rest on its start
+    sync_serial_ = f.serial;
+    sync_ = SyncMove{f.block.index, SyncMove::kWaitIndex, 0, 0, 0, 0};
+    sync_speed_ = 0;
+    if (!have) {
+      std::snprintf(sync_failure_.data(), sync_failure_.size(),
+                    "spindle-synchronised move at block %lld: no measured spindle position (is the spindle's "
+                    "encoder configured and answering?)", static_cast<long long>(f.block.index));
+      stopping_ = true;
+      return;
+    }
+    sync_.index_rev = std::floor(dir * rev) + 1.0;  // the next index ahead
+  }
+  if (!have) {
+    if (sync_.phase != SyncMove::kNone && !stopping_) {
+      std::snprintf(sync_failure_.data(), sync_failure_.size(),
+                    "spindle-synchronised move at block %lld: the spindle's measured position stopped arriving",
+                    static_cast<long long>(f.block.index));
+      stopping_ = true;
+    }
+    sync_speed_ = 0;
+    return;
+  }
+  const double u = dir * rev, w = dir * rps;  // along the turning direction
+  const double v_sync = std::max(0.0, pitch * w);
+  switch (sync_.phase) {
+    case SyncMove::kWaitIndex:
+      if (u < sync_.index_rev) {
+        sync_speed_ = 0;
+        break;
+      }
+      sync_.phase = SyncMove::kAcquire;
+      [[fallthrough]];
+    case SyncMove::kAcquire:
+      sync_speed_ = v_sync;
+      if (v_ < v_sync * (1 - 1e-3)) break;
+      // Where this cycle's step takes the path at its speed is where the spindle is.
+      sync_.lock_rev = u - (s_ + v_ * period_s_) / pitch;
+      sync_.phase = SyncMove::kTrack;
+      [[fallthrough]];
+    case SyncMove::kTrack: {
+      // Where the spindle says the path should be at the end of this cycle, and a
+      // correction of the speed that closes the gap in about 8 cycles.
+      sync_target_ = pitch * (u - sync_.lock_rev);
+      const double gap = sync_target_ - (s_ + v_sync * period_s_);
+      sync_speed_ = std::clamp(v_sync + gap / (8 * period_s_), 0.0, 1.5 * v_sync);
+      break;
+    }
+    case SyncMove::kNone: break;
+  }
 }
 
 void Interpolator::track_probe_move() {

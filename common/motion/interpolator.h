@@ -84,7 +84,13 @@ struct Command {
     // program's S times it (at most spindle.max_rpm) while M51 has not disabled it.
     // A change of speed it makes is a new spindle change, not waited for (LinuxCNC's
     // motion scales the spindle at once and waits for at speed only after M3/M4/S).
-    kSpindleOverride = 22
+    kSpindleOverride = 22,
+    // The spindle's measured position (the drive bridge's SPINDLE_STATUS), for the
+    // synchronised move (G33) ahead: position_mm[0] revolutions (positive clockwise,
+    // M3), [1] revolutions per second, [2] the bridge's playback cycle of the sample
+    // (the setpoint cycle being played when it was read). The node applies one per
+    // cycle while wants_spindle_position(), recorded like every input.
+    kSpindlePosition = 23
   };
   Kind kind = Kind::kStart;
   double feed_override = 1.0;  // kOverride: 0.0 .. kMaxFeedOverride; kRapidOverride: 0.0 .. 1.0; kSpindleOverride
@@ -128,6 +134,22 @@ struct WorkCounters {
   int64_t look_fallbacks = 0;  // tries outside what was gathered (full check instead)
   int64_t curve_evals = 0;     // curve points (with derivatives) computed in the step
   int64_t curve_reuses = 0;    // ...and taken from the one before instead
+};
+
+// A spindle-synchronised move (G33) at the front: it waits at rest for the spindle's
+// index (a whole revolution), then speeds up to the spindle's rate times the pitch
+// as fast as the limits allow, locks its phase when it gets there (LinuxCNC's way:
+// every pass of a thread at the same speed locks at the same angle) and from then on
+// follows the spindle's position, predicted for the cycle its setpoint is played.
+// The brake at its end leaves the spindle (as LinuxCNC's).
+struct SyncMove {
+  enum Phase : int8_t { kNone = 0, kWaitIndex = 1, kAcquire = 2, kTrack = 3 };
+  int64_t block_index = -1;
+  Phase phase = kNone;
+  double index_rev = 0;  // the index the move starts at (revolutions along the turning direction)
+  double lock_rev = 0;   // tracking: where the path's s = pitch x (rev - lock_rev)
+  double error_mm = 0;   // tracking: the spindle's position x pitch less the path's, last cycle
+  double max_error_mm = 0;  // ...its largest magnitude over the move while tracking
 };
 
 // The spindle as the program has it where the path stands: each spindle event
@@ -242,6 +264,9 @@ class Interpolator {
   const WorkCounters& work() const { return work_; }
   const SpindleState& spindle() const { return spindle_; }
   const ProbeMove& probe_move() const { return probe_; }
+  const SyncMove& sync_move() const { return sync_; }
+  // A synchronised move is queued: the node applies the spindle's position each cycle.
+  bool wants_spindle_position() const;
   const InputWaitState& input_wait() const { return input_; }
   // Coolant and digital outputs where the path stands (machine_outputs.h).
   const MachineOutputs& outputs() const { return outputs_; }
@@ -465,6 +490,18 @@ class Interpolator {
   } last_eval_;
 
   SpindleState spindle_;
+  SyncMove sync_;
+  uint64_t sync_serial_ = UINT64_MAX;  // the block sync_ belongs to
+  double sync_speed_ = 0;  // the synchronised move's speed command this cycle, mm/s
+  double sync_target_ = 0;  // ...and where the spindle puts the path at its end (tracking)
+  // The spindle's last measured position (kSpindlePosition), and the dry run's own
+  // spindle (auto_resume_pauses_: it turns exactly as commanded).
+  double sp_rev_ = 0, sp_rps_ = 0, sp_cycle_ = 0;
+  int64_t sp_applied_ = -1;  // the cycle it was applied at (-1: none)
+  double ideal_rev_ = 0;
+  std::array<char, 200> sync_failure_{};  // why a synchronised move stopped (no allocation in the cycle)
+  bool spindle_position(double* rev, double* rps) const;
+  void update_sync();
   ProbeMove probe_;
   uint64_t probe_serial_ = UINT64_MAX;  // the front block ProbeMove describes
   bool probe_braking_ = false;          // tripped: braking to rest in the probing move

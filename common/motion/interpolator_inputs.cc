@@ -47,6 +47,18 @@ bool Interpolator::check_block(const program::Block& block) {
     refusal_ = "block " + std::to_string(block.index) + ": feed or dwell time out of range";
     return false;
   }
+  if (block.sync != program::kSyncNone) {
+    // A rigid tap (G33.1) follows the spindle through its reversal: not run yet.
+    if (block.sync != program::kSyncG33 || block.kind != program::BlockKind::kLine || !(block.sync_pitch_mm > 0)) {
+      refusal_ = "block " + std::to_string(block.index) + ": only G33 lines are run synchronised with the spindle";
+      return false;
+    }
+    if (!cfg_.spindle.measured_position()) {
+      refusal_ = "block " + std::to_string(block.index) +
+                 ": a spindle-synchronised move (G33) on a machine without spindle.encoder_counts_per_rev";
+      return false;
+    }
+  }
   return true;
 }
 
@@ -116,6 +128,9 @@ void Interpolator::clear_program(bool stop_spindle) {
   probe_serial_ = UINT64_MAX;
   input_ = InputWaitState{};
   input_serial_ = UINT64_MAX;
+  sync_ = SyncMove{};
+  sync_serial_ = UINT64_MAX;
+  sync_speed_ = 0;
   if (stop_spindle) {
     spindle_off();
   } else {
@@ -228,6 +243,14 @@ bool Interpolator::apply_command(const Command& cmd) {
       if (spindle_wait_ && std::isfinite(cmd.value) && cmd.value >= static_cast<double>(spindle_.seq))
         spindle_wait_ = false;
       if (!spindle_wait_) door_resume_ = false;
+      break;
+    case Command::Kind::kSpindlePosition:
+      if (!std::isfinite(cmd.position_mm[0]) || !std::isfinite(cmd.position_mm[1]) || !std::isfinite(cmd.position_mm[2]))
+        return false;
+      sp_rev_ = cmd.position_mm[0];
+      sp_rps_ = cmd.position_mm[1];
+      sp_cycle_ = cmd.position_mm[2];
+      sp_applied_ = cycle_;
       break;
     case Command::Kind::kSpindleOverride:
       if (!std::isfinite(cmd.feed_override)) return false;

@@ -271,8 +271,9 @@ void Planner::plan_block(Planned& p) {
   // 1 % below the tolerance: the circle formula is exact for constant curvature;
   // where the curvature changes within a step the error runs up to ~0.5 % over it.
   w.eps = 0.99 * program::chord_tolerance_mm(b.path_tolerance_mm, cfg_.chord_tolerance_mm);
-  // The roughness law is for cutting moves; a rapid does not cut.
-  w.rough = b.process.active() && b.spindle_rpm > 0 && b.kind != program::BlockKind::kRapid;
+  // The roughness law is for cutting moves with a ball end mill; a rapid does not cut, and a
+  // thread's speed is the spindle's.
+  w.rough = b.process.active() && b.spindle_rpm > 0 && b.kind != program::BlockKind::kRapid && b.sync == program::kSyncNone;
   w.law = process::RoughnessLaw{b.process.ball_radius_mm, b.process.flutes, b.process.pick_feed_mm,
                                 b.process.target_rmax_um * 1e-3};
   if (w.rough) {
@@ -699,9 +700,10 @@ bool Planner::close_in_on_low_ends(const Planned& p, BlockWork& w) const {
 
 void Planner::plan_junction(const Planned& prev, Planned& next) const {
   next.entry_free_ok = true;  // a stop; otherwise decided below
-  // A probing move starts and ends at rest (the next block starts where it stopped).
+  // A probing move starts and ends at rest (the next block starts where it stopped);
+  // so does a spindle-synchronised one (it starts at the spindle's index).
   if (prev.stop_block() || next.stop_block() || prev.path.degenerate() || next.path.degenerate() ||
-      prev.block.probe != 0 || next.block.probe != 0) {
+      prev.block.probe != 0 || next.block.probe != 0 || prev.block.sync != 0 || next.block.sync != 0) {
     next.v_entry = 0;
     return;
   }

@@ -33,6 +33,15 @@ bool to_core_command(const cnc::lcmt_program_command& m, Command* out) {
       out->kind = Command::Kind::kSpindleAtSpeed;
       out->value = m.value;
       return true;
+    case C::SPINDLE_POSITION:
+      if (m.num_axes != 3 || m.position_mm.size() != 3) return false;
+      *out = Command{};
+      out->kind = Command::Kind::kSpindlePosition;
+      for (size_t i = 0; i < 3; ++i) {
+        if (!std::isfinite(m.position_mm[i])) return false;
+        out->position_mm[i] = m.position_mm[i];
+      }
+      return true;
     case C::INPUT_VALUE:
       if (!std::isfinite(m.value)) return false;
       *out = Command{};

@@ -491,9 +491,14 @@ void InterpolatorNode::apply_pending_command(const cnc::lcmt_program_command& m)
     approach_pending_ = false;
     return;
   }
-  if (m.command == PC::HOMED || m.command == PC::SPINDLE_AT_SPEED || m.command == PC::PROBE_TRIP) {
+  if (m.command == PC::HOMED || m.command == PC::SPINDLE_AT_SPEED || m.command == PC::PROBE_TRIP ||
+      m.command == PC::SPINDLE_POSITION) {
     spdlog::warn("{} from sender {} ignored: it is this interpolator's own input",
-                 m.command == PC::HOMED ? "HOMED" : m.command == PC::PROBE_TRIP ? "PROBE_TRIP" : "SPINDLE_AT_SPEED", m.sender);
+                 m.command == PC::HOMED              ? "HOMED"
+                 : m.command == PC::PROBE_TRIP       ? "PROBE_TRIP"
+                 : m.command == PC::SPINDLE_POSITION ? "SPINDLE_POSITION"
+                                                     : "SPINDLE_AT_SPEED",
+                 m.sender);
     return;
   }
   if (m.command == PC::STOP && manual_ == Manual::kHome) manual_stop("homing stopped by the operator");

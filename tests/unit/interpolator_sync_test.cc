@@ -1,0 +1,242 @@
+// The core's spindle-synchronised move (G33): it starts at rest at the spindle's
+// index, speeds up to the spindle's rate times the pitch, locks its phase there and
+// then follows the spindle's position as predicted for the cycle its setpoint is
+// played; a feed hold waits for its end, a STOP does not, and a spindle feedback
+// that stops arriving stops the program naming it. The dry run (auto_resume_pauses)
+// follows a spindle turning exactly as commanded.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "common/config/machine_config.h"
+#include "common/motion/interpolator.h"
+#include "common/program/block.h"
+
+namespace cnc::interp {
+namespace {
+
+config::MachineConfig load() {
+  config::MachineConfig cfg =
+      config::load_machine_config(std::string(CNC_SOURCE_DIR) + "/config/machines/sim3_spindle.yaml");
+  cfg.spindle.encoder_counts_per_rev = 4096;
+  return cfg;
+}
+
+program::Block spindle_on(int64_t index, const std::vector<double>& at, double rpm) {
+  program::Block b;
+  b.index = index;
+  b.kind = program::BlockKind::kEvent;
+  b.start = b.end = at;
+  b.event.kind = program::EventKind::kSpindle;
+  b.event.number = 1;
+  b.event.value = rpm;
+  return b;
+}
+
+// M3 S<rpm>, G33 Z<z_end> K<pitch>, [G0 Z0,] END.
+void load_thread(Interpolator& core, double rpm, double pitch, double z_end, bool rapid_back = false) {
+  core.apply_command({Command::Kind::kLoad, 1.0, {}});
+  const std::vector<double> o{0, 0, 0};
+  ASSERT_TRUE(core.apply_block(spindle_on(0, o, rpm))) << core.last_refusal();
+  program::Block g33;
+  g33.index = 1;
+  g33.kind = program::BlockKind::kLine;
+  g33.start = o;
+  g33.end = {0, 0, z_end};
+  g33.sync = program::kSyncG33;
+  g33.sync_pitch_mm = pitch;
+  g33.feed_mm_per_min = pitch * rpm;
+  g33.spindle_rpm = rpm;
+  ASSERT_TRUE(core.apply_block(g33)) << core.last_refusal();
+  program::Block end;
+  end.index = 2;
+  end.kind = program::BlockKind::kEnd;
+  end.start = end.end = g33.end;
+  if (rapid_back) {
+    program::Block g0;
+    g0.index = 2;
+    g0.kind = program::BlockKind::kRapid;
+    g0.start = g33.end;
+    g0.end = o;
+    ASSERT_TRUE(core.apply_block(g0)) << core.last_refusal();
+    end.index = 3;
+    end.start = end.end = o;
+  }
+  ASSERT_TRUE(core.apply_block(end)) << core.last_refusal();
+  core.apply_command({Command::Kind::kStart, 1.0, {}});
+}
+
+struct Trace {
+  std::vector<double> z;         // setpoint Z per cycle
+  std::vector<int> phase;        // SyncMove::Phase per cycle
+  std::vector<double> rev;       // the spindle's true position when the cycle's setpoint is played
+};
+
+// Finite-difference velocity, acceleration and jerk of a trace against limits.
+void expect_within_limits(const std::vector<double>& z, double T, double v_max, double a_max, double j_max) {
+  double vm = 0, am = 0, jm = 0;
+  for (size_t i = 3; i < z.size(); ++i) {
+    const double v = (z[i] - z[i - 1]) / T, v1 = (z[i - 1] - z[i - 2]) / T, v2 = (z[i - 2] - z[i - 3]) / T;
+    const double a = (v - v1) / T, a1 = (v1 - v2) / T;
+    vm = std::max(vm, std::fabs(v));
+    am = std::max(am, std::fabs(a));
+    jm = std::max(jm, std::fabs((a - a1) / T));
+  }
+  EXPECT_LE(vm, v_max * (1 + 1e-9));
+  EXPECT_LE(am, a_max * (1 + 1e-6));
+  EXPECT_LE(jm, j_max * (1 + 1e-6));
+}
+
+TEST(InterpolatorSync, TheDryRunFollowsTheCommandedSpindleFromItsIndex) {
+  const config::MachineConfig cfg = load();
+  Interpolator core(cfg);
+  core.set_auto_resume_pauses(true);
+  const double rpm = 600, pitch = 1.5, T = cfg.ipo_period_s;  // 25 mm/s along -Z
+  load_thread(core, rpm, pitch, -30);
+  std::vector<double> z;
+  double rev = 0;  // the dry run's spindle: it turns from the cycle M3 is taken
+  int64_t lock_cycle = -1, start_cycle = -1;
+  double max_track_err = 0;
+  for (int i = 0; i < 5000 && core.state() != RunState::kDone; ++i) {
+    const Setpoint& sp = core.step();
+    z.push_back(sp.position_mm[2]);
+    if (start_cycle < 0 && sp.position_mm[2] != 0) {
+      start_cycle = sp.cycle;
+      // It left its start only after the spindle passed a whole revolution.
+      EXPECT_GE(rev + 1e-12, std::floor(rev)) << "sanity";
+      EXPECT_LT(rev - std::floor(rev), 600.0 / 60 * T + 1e-9) << "the move starts within a cycle of the index";
+    }
+    if (core.sync_move().phase == SyncMove::kTrack) {
+      if (lock_cycle < 0) lock_cycle = sp.cycle;
+      // Away from the end's brake the path is where the spindle says.
+      if (-sp.position_mm[2] < 30 - 1.0) {
+        const double want = pitch * (rev - core.sync_move().lock_rev);
+        max_track_err = std::max(max_track_err, std::fabs(want - (-sp.position_mm[2])));
+      }
+    }
+    if (core.spindle().direction != 0) rev += core.spindle().rpm / 60 * T;
+  }
+  ASSERT_EQ(core.state(), RunState::kDone);
+  ASSERT_GT(start_cycle, 0);
+  ASSERT_GT(lock_cycle, start_cycle);
+  std::printf("dry run: locked %.3f s after the index, largest error %.2e mm\n",
+              static_cast<double>(lock_cycle - start_cycle) * T, max_track_err);
+  EXPECT_LT(max_track_err, 1e-6) << "an exact spindle is followed exactly";
+  EXPECT_LT(core.sync_move().max_error_mm, 1e-6);
+  EXPECT_NEAR(z.back(), -30, 1e-9);
+  // Locked within the time the jerk-limited ramp to 25 mm/s takes (~0.1 s).
+  EXPECT_LT(static_cast<double>(lock_cycle - start_cycle) * T, 0.15);
+  expect_within_limits(z, T, 150, 2000, 40000);
+}
+
+// A live spindle: samples of its position each cycle, read by the bridge 2-4 cycles
+// before the cycle the core computes (jitter), quantised by a 4096-count encoder,
+// the spindle's speed rippling by 1 %.
+TEST(InterpolatorSync, ALiveSpindleIsFollowedWithinMicrometres) {
+  const config::MachineConfig cfg = load();
+  Interpolator core(cfg);
+  const double rpm = 600, pitch = 1.5, T = cfg.ipo_period_s;
+  load_thread(core, rpm, pitch, -30);
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<int> lag(2, 4);
+  auto true_rev = [&](double t) { return rpm / 60 * t + 0.01 * std::sin(2 * M_PI * 3 * t) / (2 * M_PI * 3) * 10; };
+  auto true_rps = [&](double t) { return rpm / 60 * (1 + 0.01 * std::cos(2 * M_PI * 3 * t)); };
+  std::vector<double> z;
+  double max_err = 0;
+  bool at_speed_sent = false;
+  for (int i = 0; i < 8000 && core.state() != RunState::kDone; ++i) {
+    const int64_t n = core.cycle();
+    if (core.spindle_waiting() && !at_speed_sent) {
+      Command c;
+      c.kind = Command::Kind::kSpindleAtSpeed;
+      c.value = static_cast<double>(core.spindle().seq);
+      ASSERT_TRUE(core.apply_command(c));
+      at_speed_sent = true;
+    }
+    if (core.wants_spindle_position()) {
+      const double ps = static_cast<double>(n - lag(rng));
+      Command c;
+      c.kind = Command::Kind::kSpindlePosition;
+      c.position_mm[0] = std::floor(true_rev(ps * T) * 4096) / 4096;
+      c.position_mm[1] = true_rps(ps * T);
+      c.position_mm[2] = ps;
+      ASSERT_TRUE(core.apply_command(c));
+    }
+    const Setpoint& sp = core.step();
+    z.push_back(sp.position_mm[2]);
+    if (core.sync_move().phase == SyncMove::kTrack && -sp.position_mm[2] < 29) {
+      const double want = pitch * (true_rev(static_cast<double>(sp.cycle) * T) - core.sync_move().lock_rev);
+      max_err = std::max(max_err, std::fabs(want + sp.position_mm[2]));
+    }
+  }
+  ASSERT_EQ(core.state(), RunState::kDone);
+  EXPECT_NEAR(z.back(), -30, 1e-9);
+  // The prediction's error over 4 cycles of a 1 % ripple at 3 Hz, plus a count.
+  std::printf("live spindle: largest synchronisation error %.4f um while tracking\n", max_err * 1e3);
+  EXPECT_LT(max_err, 0.005) << "synchronisation error, mm";
+  EXPECT_LT(core.sync_move().max_error_mm, 0.005);
+  expect_within_limits(z, T, 150, 2000, 40000);
+}
+
+TEST(InterpolatorSync, ALostSpindleFeedbackStopsTheProgramNamingIt) {
+  const config::MachineConfig cfg = load();
+  Interpolator core(cfg);
+  load_thread(core, 600, 1.5, -30);
+  Command at;
+  at.kind = Command::Kind::kSpindleAtSpeed;
+  at.value = 1;
+  std::string failure;
+  for (int i = 0; i < 3000 && core.state() != RunState::kIdle; ++i) {
+    if (core.spindle_waiting()) {
+      ASSERT_TRUE(core.apply_command(at));
+    }
+    // Samples for 0.6 s, then none.
+    if (core.wants_spindle_position() && i < 150) {
+      Command c;
+      c.kind = Command::Kind::kSpindlePosition;
+      c.position_mm[0] = 10.0 * i * cfg.ipo_period_s;
+      c.position_mm[1] = 10.0;
+      c.position_mm[2] = static_cast<double>(core.cycle());
+      ASSERT_TRUE(core.apply_command(c));
+    }
+    core.step();
+    if (failure.empty()) failure = core.take_plan_failure();
+  }
+  EXPECT_EQ(core.state(), RunState::kIdle);
+  EXPECT_NE(failure.find("block 1: the spindle's measured position stopped arriving"), std::string::npos) << failure;
+  const double z = core.last().position_mm[2];
+  EXPECT_LT(z, -0.5) << "it had started";
+  EXPECT_GT(z, -30) << "and stopped before the end";
+}
+
+TEST(InterpolatorSync, AFeedHoldWaitsForTheEndOfTheThreadAndAStopDoesNot) {
+  const config::MachineConfig cfg = load();
+  for (const Command::Kind k : {Command::Kind::kHold, Command::Kind::kStop}) {
+    Interpolator core(cfg);
+    core.set_auto_resume_pauses(true);
+    load_thread(core, 600, 1.5, -30, true);
+    bool sent = false;
+    for (int i = 0; i < 5000; ++i) {
+      if (!sent && core.last().position_mm[2] < -5) {
+        ASSERT_TRUE(core.apply_command({k, 1.0, {}}));
+        sent = true;
+      }
+      core.step();
+    }
+    ASSERT_TRUE(sent);
+    if (k == Command::Kind::kHold) {
+      EXPECT_NEAR(core.last().position_mm[2], -30, 1e-9) << "the hold took effect at the thread's end";
+      EXPECT_EQ(core.state(), RunState::kHeld);
+    } else {
+      EXPECT_GT(core.last().position_mm[2], -10) << "a STOP brakes inside the thread";
+      EXPECT_EQ(core.state(), RunState::kIdle);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace cnc::interp
