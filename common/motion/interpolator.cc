@@ -668,7 +668,9 @@ const Setpoint& Interpolator::step() {
     // tool is in the thread); a STOP does not.
     const bool in_sync = sync_.phase == SyncMove::kAcquire || sync_.phase == SyncMove::kTrack;
     const bool pausing = (hold_ && !in_sync) || stopping_ || door_resume_ || probe_braking_;
-    if (!blocks_.empty() && blocks_.front().stop_block() && v_ == 0) {
+    if (rigid_tap_front() && (sync_serial_ == blocks_.front().serial || (rest_left_ == 0 && !pausing))) {
+      rigid_tap_step();
+    } else if (!blocks_.empty() && blocks_.front().stop_block() && v_ == 0) {
       at_stop_block(pausing);
     } else if (blocks_.empty() || (stopping_ && v_ == 0 && a_ == 0)) {
       end_or_starve();
@@ -701,7 +703,13 @@ const Setpoint& Interpolator::step() {
   output_position();
   if (out_.feed_mm_per_min > 0) outputs_.motion();
   out_.state = state_;
-  if (auto_resume_pauses_) ideal_rev_ += spindle_.direction * spindle_.rpm / 60.0 * period_s_;
+  if (auto_resume_pauses_) {
+    // The dry run's spindle: the VFD's first-order response (spindle.sim), turning as commanded.
+    const double cmd = spindle_.direction * spindle_.rpm / 60.0;
+    const double tau = cfg_.spindle.enabled ? cfg_.spindle.sim.time_constant_s : 0.0;
+    ideal_rps_ = tau > 0 ? cmd + (ideal_rps_ - cmd) * std::exp(-period_s_ / tau) : cmd;
+    ideal_rev_ += ideal_rps_ * period_s_;
+  }
   ++cycle_;
   if (retire_pending_) {
     // The planner may free what the path has left behind.
@@ -720,7 +728,7 @@ bool Interpolator::wants_spindle_position() const {
 bool Interpolator::spindle_position(double* rev, double* rps) const {
   if (auto_resume_pauses_) {
     *rev = ideal_rev_;
-    *rps = spindle_.direction * spindle_.rpm / 60.0;
+    *rps = ideal_rps_;
     return true;
   }
   // Samples come every cycle while a synchronised move is queued; 25 cycles (0.1 s
@@ -734,7 +742,8 @@ bool Interpolator::spindle_position(double* rev, double* rps) const {
 }
 
 void Interpolator::update_sync() {
-  if (blocks_.empty() || blocks_.front().block.sync == program::kSyncNone) {
+  if (rigid_tap_front()) return;  // rigid_tap_step's
+  if (blocks_.empty() || blocks_.front().block.sync != program::kSyncG33) {
     sync_.phase = SyncMove::kNone;
     sync_speed_ = 0;
     return;
@@ -793,8 +802,194 @@ void Interpolator::update_sync() {
       sync_speed_ = std::clamp(v_sync + gap / (8 * period_s_), 0.0, 1.5 * v_sync);
       break;
     }
+    case SyncMove::kExit:  // a rigid tap's
     case SyncMove::kNone: break;
   }
+}
+
+bool Interpolator::rigid_tap_front() const {
+  return !blocks_.empty() && blocks_.front().block.sync == program::kSyncRigidTap;
+}
+
+void Interpolator::rigid_tap_step() {
+  Planned& f = blocks_.front();
+  const double T = period_s_;
+  const double pitch = f.block.sync_pitch_mm;
+  const double A = f.live_accel, J = f.live_jerk;
+  state_ = RunState::kRunning;
+  out_.block_index = f.block.index;
+  out_.source_line = f.block.source_line;
+  if (f.serial != sync_serial_) {
+    sync_serial_ = f.serial;
+    sync_ = SyncMove{};
+    sync_.block_index = f.block.index;
+    sync_.phase = SyncMove::kWaitIndex;
+    sync_.direction = spindle_.direction;
+    sync_.rpm = spindle_.rpm;
+    sync_.program_rpm = spindle_.program_rpm;
+    s_ = v_ = a_ = 0;
+  }
+  const double dir = sync_.direction < 0 ? -1.0 : 1.0;
+  double rev = 0, rps = 0;
+  const bool have = spindle_position(&rev, &rps) && sync_.direction != 0;
+  double a_n = 0;
+  auto toward = [&](double v_target) {
+    return std::clamp(landing_accel(v_target - v_, A, J, T), std::max(-A, a_ - J * T), std::min(A, a_ + J * T));
+  };
+  if (!have) {
+    // No spindle to follow: stop where the tap is (the tool may be in the hole).
+    if (sync_failure_[0] == 0 && !stopping_)
+      std::snprintf(sync_failure_.data(), sync_failure_.size(),
+                    "rigid tap at block %lld: no measured spindle position (is the spindle's encoder configured and "
+                    "answering?)", static_cast<long long>(f.block.index));
+    stopping_ = true;
+    a_n = toward(0.0);
+  } else {
+    if (stopping_ && !sync_.stopping && sync_.phase >= SyncMove::kAcquire) {
+      // A STOP in the hole: the spindle stops and the tap follows it to rest.
+      sync_.stopping = true;
+      ++spindle_.seq;
+      spindle_.direction = 0;
+      spindle_.rpm = 0;
+      spindle_.program_rpm = 0;
+    }
+    const double u = dir * rev, w = dir * rps;
+    switch (sync_.phase) {
+      case SyncMove::kWaitIndex:
+        if (!sync_.index_set) {
+          sync_.index_rev = std::floor(u) + 1.0;  // the next index ahead
+          sync_.index_set = true;
+        }
+        if (stopping_ || u < sync_.index_rev) break;
+        sync_.phase = SyncMove::kAcquire;
+        [[fallthrough]];
+      case SyncMove::kAcquire: {
+        const double v_sync = std::max(0.0, pitch * w);
+        a_n = toward(v_sync);
+        if (v_ + a_n * T < v_sync * (1 - 1e-3)) break;
+        sync_.lock_rev = u - (s_ + (v_ + a_n * T) * T) / pitch;
+        sync_.phase = SyncMove::kTrack;
+        [[fallthrough]];
+      }
+      case SyncMove::kTrack: {
+        const double target = pitch * (u - sync_.lock_rev);
+        sync_target_ = target;
+        if (!sync_.reversed && target >= f.length && !sync_.stopping) {
+          // The depth: the spindle reverses (LinuxCNC's rigid tap), the tap follows it.
+          sync_.reversed = true;
+          ++spindle_.seq;
+          spindle_.direction = -sync_.direction;
+          spindle_.rpm = std::min(sync_.rpm * f.block.tap_retract_scale, cfg_.spindle.max_rpm);
+        }
+        // On the way up, leave the spindle where a jerk-limited brake still stops on the start.
+        if (!(sync_.reversed && w < 0 && v_ < 0 &&
+              s_ <= brake_distance(-v_, -a_, 0.0, 0.8 * A, 0.5 * J) + 4 * (-v_) * T)) {
+          // Follow: the step that lands on the spindle's position, within the limits.
+          a_n = std::clamp(((target - s_) / T - v_) / T, std::max(-A, a_ - J * T), std::min(A, a_ + J * T));
+          break;
+        }
+        // The rest of the way up is a quintic stop on the start (zero speed and
+        // acceleration there), as short as keeps its jerk within half the limit, its
+        // acceleration within 0.8 of it and its speed from reversing.
+        sync_.phase = SyncMove::kExit;
+        plan_tap_exit(A, J);
+        [[fallthrough]];
+      }
+      case SyncMove::kExit: {
+        ++exit_.k;
+        const double t = std::min(static_cast<double>(exit_.k) * T, exit_.te);
+        const double x = exit_.x(t);
+        a_n = ((exit_.d - x - s_) / T - v_) / T;  // the step onto the quintic's point
+        break;
+      }
+      case SyncMove::kNone: break;
+    }
+    if (sync_.stopping && sync_.phase != SyncMove::kTrack) a_n = toward(0.0);
+  }
+  double v_n = v_ + a_n * T;
+  double s_n = s_ + v_n * T;
+  if (sync_.phase == SyncMove::kExit && static_cast<double>(exit_.k) * T >= exit_.te - 1e-12) {
+    s_n = 0;  // the quintic's end: on the start at rest
+    v_n = 0;
+  }
+  if (sync_.phase == SyncMove::kTrack) {
+    sync_.error_mm = sync_target_ - s_n;
+    sync_.max_error_mm = std::max(sync_.max_error_mm, std::fabs(sync_.error_mm));
+  }
+  if (sync_.reversed) sync_.overshoot_mm = std::max(sync_.overshoot_mm, s_n - f.length);
+  const double moved = s_n - s_;
+  out_.feed_mm_per_min = std::fabs(moved) / T * 60.0;
+  out_.path_accel_mm_s2 = (v_n - v_) / T;
+  out_.limit = Limit::kProgram;
+  a_ = (v_n - v_) / T;
+  v_ = v_n;
+  s_ = s_n;
+  const double L = f.length;
+  for (int a = 0; a < naxes_; ++a) pos_[a] = f.block.start[a] + (f.block.end[a] - f.block.start[a]) * (s_ / L);
+  const bool at_rest = v_ == 0;
+  if (sync_.phase == SyncMove::kExit && s_ == 0 && at_rest) {
+    end_rigid_tap(false);
+  } else if (stopping_ && at_rest && (sync_.phase < SyncMove::kAcquire || sync_.stopping || !have) &&
+             (!have || std::fabs(rps) * pitch < 1e-3)) {
+    end_rigid_tap(true);
+  }
+}
+
+double Interpolator::TapExit::x(double t) const {
+  return ((((c5 * t + c4) * t + c3) * t + 0.5 * a0) * t + v0) * t;
+}
+
+void Interpolator::plan_tap_exit(double A, double J) {
+  // Along the motion (upwards): x from 0 to d = s_, from speed -v_ and acceleration -a_.
+  const double T = period_s_;
+  TapExit& e = exit_;
+  e.k = 0;
+  e.d = s_;
+  e.v0 = -v_;
+  e.a0 = -a_;
+  for (int n = 2; n <= 1000; ++n) {
+    const double te = n * T;
+    const double h = e.d - e.v0 * te - 0.5 * e.a0 * te * te, hv = -e.v0 - e.a0 * te, ha = -e.a0;
+    e.te = te;
+    e.c3 = (10 * h - 4 * hv * te + 0.5 * ha * te * te) / (te * te * te);
+    e.c4 = (-15 * h + 7 * hv * te - ha * te * te) / (te * te * te * te);
+    e.c5 = (6 * h - 3 * hv * te + 0.5 * ha * te * te) / (te * te * te * te * te);
+    bool ok = true;
+    for (int i = 0; i <= 64 && ok; ++i) {
+      const double t = te * i / 64.0;
+      const double v = (((5 * e.c5 * t + 4 * e.c4) * t + 3 * e.c3) * t + e.a0) * t + e.v0;
+      const double a = ((20 * e.c5 * t + 12 * e.c4) * t + 6 * e.c3) * t + e.a0;
+      const double j = (60 * e.c5 * t + 24 * e.c4) * t + 6 * e.c3;
+      ok = v >= -1e-9 && std::fabs(a) <= 0.8 * A && std::fabs(j) <= 0.5 * J;
+    }
+    if (ok) return;
+  }
+}
+
+void Interpolator::end_rigid_tap(bool program_stops) {
+  if (program_stops) {
+    // Where the STOP left it: the program ends there.
+    clear_blocks();
+    spindle_off();
+    stopping_ = false;
+    hold_ = false;
+    state_ = RunState::kIdle;
+    v_ = a_ = s_ = 0;
+    sync_.phase = SyncMove::kNone;
+    return;
+  }
+  // Back on its start: the spindle turns as it did before the tap.
+  ++spindle_.seq;
+  spindle_.direction = sync_.direction;
+  spindle_.rpm = sync_.rpm;
+  spindle_.program_rpm = sync_.program_rpm;
+  for (int a = 0; a < naxes_; ++a) pos_[a] = blocks_.front().block.start[a];
+  pop_block();
+  ++blocks_done_;
+  s_ = v_ = a_ = 0;
+  u_ = blocks_.empty() ? 0 : blocks_.front().path.u_begin();
+  sync_.phase = SyncMove::kNone;
+  rest_left_ = kRestCycles;
 }
 
 void Interpolator::track_probe_move() {

@@ -142,14 +142,28 @@ struct WorkCounters {
 // every pass of a thread at the same speed locks at the same angle) and from then on
 // follows the spindle's position, predicted for the cycle its setpoint is played.
 // The brake at its end leaves the spindle (as LinuxCNC's).
+//
+// A rigid tap (G33.1) is followed the same way down to its depth, where the spindle
+// is reversed (turning tap_retract_scale times as fast); the tap keeps following the
+// spindle through the reversal (past the depth by the spindle's stopping distance,
+// `overshoot_mm`) and back up; near its start it leaves the spindle and stops on the
+// start (kExit), and the spindle turns again as before. A STOP during a tap stops the
+// spindle and the tap follows it to rest.
 struct SyncMove {
-  enum Phase : int8_t { kNone = 0, kWaitIndex = 1, kAcquire = 2, kTrack = 3 };
+  enum Phase : int8_t { kNone = 0, kWaitIndex = 1, kAcquire = 2, kTrack = 3, kExit = 4 };
   int64_t block_index = -1;
   Phase phase = kNone;
   double index_rev = 0;  // the index the move starts at (revolutions along the turning direction)
   double lock_rev = 0;   // tracking: where the path's s = pitch x (rev - lock_rev)
   double error_mm = 0;   // tracking: the spindle's position x pitch less the path's, last cycle
   double max_error_mm = 0;  // ...its largest magnitude over the move while tracking
+  // Rigid tap.
+  bool index_set = false;    // index_rev taken
+  bool reversed = false;     // the spindle was reversed at the depth
+  bool stopping = false;     // a STOP stopped the spindle: follow it to rest
+  double overshoot_mm = 0;   // how far past the depth the tap went
+  int direction = 0;         // the spindle's direction and speed when the tap began
+  double rpm = 0, program_rpm = 0;
 };
 
 // The spindle as the program has it where the path stands: each spindle event
@@ -265,6 +279,8 @@ class Interpolator {
   const SpindleState& spindle() const { return spindle_; }
   const ProbeMove& probe_move() const { return probe_; }
   const SyncMove& sync_move() const { return sync_; }
+  // The dry run's spindle (a first-order response to the command): revolutions at this cycle.
+  double dry_run_spindle_rev() const { return ideal_rev_; }
   // A synchronised move is queued: the node applies the spindle's position each cycle.
   bool wants_spindle_position() const;
   const InputWaitState& input_wait() const { return input_; }
@@ -498,10 +514,21 @@ class Interpolator {
   // spindle (auto_resume_pauses_: it turns exactly as commanded).
   double sp_rev_ = 0, sp_rps_ = 0, sp_cycle_ = 0;
   int64_t sp_applied_ = -1;  // the cycle it was applied at (-1: none)
-  double ideal_rev_ = 0;
+  double ideal_rev_ = 0, ideal_rps_ = 0;
   std::array<char, 200> sync_failure_{};  // why a synchronised move stopped (no allocation in the cycle)
   bool spindle_position(double* rev, double* rps) const;
   void update_sync();
+  bool rigid_tap_front() const;
+  void rigid_tap_step();
+  // A rigid tap's last stretch up: x(t) = v0 t + a0 t^2/2 + c3 t^3 + c4 t^4 + c5 t^5 to d at rest.
+  struct TapExit {
+    double d = 0, v0 = 0, a0 = 0, c3 = 0, c4 = 0, c5 = 0, te = 0;
+    int64_t k = 0;  // cycles into it
+    double x(double t) const;
+  };
+  TapExit exit_;
+  void plan_tap_exit(double A, double J);
+  void end_rigid_tap(bool program_stops);
   ProbeMove probe_;
   uint64_t probe_serial_ = UINT64_MAX;  // the front block ProbeMove describes
   bool probe_braking_ = false;          // tripped: braking to rest in the probing move

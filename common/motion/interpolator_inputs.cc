@@ -48,9 +48,9 @@ bool Interpolator::check_block(const program::Block& block) {
     return false;
   }
   if (block.sync != program::kSyncNone) {
-    // A rigid tap (G33.1) follows the spindle through its reversal: not run yet.
-    if (block.sync != program::kSyncG33 || block.kind != program::BlockKind::kLine || !(block.sync_pitch_mm > 0)) {
-      refusal_ = "block " + std::to_string(block.index) + ": only G33 lines are run synchronised with the spindle";
+    if ((block.sync != program::kSyncG33 && block.sync != program::kSyncRigidTap) ||
+        block.kind != program::BlockKind::kLine || !(block.sync_pitch_mm > 0) || !(block.tap_retract_scale >= 1)) {
+      refusal_ = "block " + std::to_string(block.index) + ": a malformed spindle-synchronised move";
       return false;
     }
     if (!cfg_.spindle.measured_position()) {
@@ -72,7 +72,9 @@ bool Interpolator::submit_block(std::unique_ptr<program::Block> block) {
   const bool was_stopping = stopping_;
   const auto tail = tail_;
   const int64_t index = block->index;
-  for (int a = 0; a < naxes_; ++a) tail_[a] = block->end[a];
+  // A rigid tap comes back to its start.
+  const bool tap = block->sync == program::kSyncRigidTap;
+  for (int a = 0; a < naxes_; ++a) tail_[a] = tap ? block->start[a] : block->end[a];
   have_tail_ = true;
   PlanRequest r;
   r.kind = PlanRequest::Kind::kBlock;

@@ -855,7 +855,6 @@ void BlockBuilder::synced_line(const SourceRef& ref, const Pose& end, int8_t syn
 }
 void BlockBuilder::rigid_tap(const SourceRef& ref, const Pose& end, double retract_scale) {
   if (!(sync_pitch_mm_ > 0)) throw Error(ref.column, "RIGID_TAP outside START_SPEED_FEED_SYNCH");
-  if (setup_.spindle_sync) throw Error(ref.column, "rigid tapping (G33.1) is not run by this controller yet");
   synced_line(ref, end, program::kSyncRigidTap, retract_scale);
 }
 void BlockBuilder::wait_orient_complete(const SourceRef&, double timeout_s) {
