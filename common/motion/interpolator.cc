@@ -1065,7 +1065,8 @@ void Interpolator::at_stop_block(bool pausing) {
       state_ = RunState::kRunning;  // at rest until the input's value or the timeout
       return;
     }
-    if (p.block.kind == program::BlockKind::kEvent && p.block.event.kind == program::EventKind::kSpindle &&
+    if (p.block.kind == program::BlockKind::kEvent &&
+        (p.block.event.kind == program::EventKind::kSpindle || p.block.event.kind == program::EventKind::kSpindleOrient) &&
         spindle_taken_ != p.serial)
       take_spindle_event(p);
     if (p.block.kind == program::BlockKind::kEvent && p.block.event.kind == program::EventKind::kOverrides &&
@@ -1086,7 +1087,10 @@ void Interpolator::at_stop_block(bool pausing) {
       state_ = RunState::kRunning;  // at rest until the spindle is at speed
       return;
     }
-    if (dwell_left_ < 0) dwell_left_ = static_cast<int64_t>(std::ceil(p.block.dwell_s / period_s_ - 1e-9));
+    // (An M19 event's dwell_s is its Q, the wait for the orientation: no dwell.)
+    if (dwell_left_ < 0)
+      dwell_left_ = p.block.kind == program::BlockKind::kEvent ? 0
+                                                                : static_cast<int64_t>(std::ceil(p.block.dwell_s / period_s_ - 1e-9));
     if (dwell_left_ > 0) --dwell_left_;
     state_ = RunState::kRunning;
     if (dwell_left_ == 0) {
@@ -1129,10 +1133,22 @@ void Interpolator::end_input_wait(double value) {
 
 void Interpolator::take_spindle_event(const Planned& p) {
   spindle_taken_ = p.serial;
+  if (p.block.event.kind == program::EventKind::kSpindleOrient) {
+    // M19: the spindle stops at the angle; the path waits for it only with a Q.
+    ++spindle_.seq;
+    spindle_.direction = 0;
+    spindle_.rpm = spindle_.program_rpm = 0;
+    spindle_.orient = true;
+    spindle_.orient_deg = p.block.event.value;
+    spindle_.orient_mode = p.block.event.number;
+    spindle_wait_ = wait_for_spindle_ && !auto_resume_pauses_ && p.block.dwell_s > 0;
+    return;
+  }
   const int dir = p.block.event.number > 0 ? 1 : p.block.event.number < 0 ? -1 : 0;
   const double rpm = dir == 0 || !(p.block.event.value > 0) ? 0.0 : p.block.event.value;
-  if (dir == spindle_.direction && rpm == spindle_.program_rpm) return;  // no change: nothing to wait for
+  if (dir == spindle_.direction && rpm == spindle_.program_rpm && !spindle_.orient) return;  // no change: nothing to wait for
   ++spindle_.seq;
+  spindle_.orient = false;
   spindle_.direction = dir;
   spindle_.program_rpm = rpm;
   spindle_.rpm = overridden_rpm(rpm);
@@ -1173,8 +1189,9 @@ void Interpolator::program_start_modes() {
 void Interpolator::spindle_off() {
   outputs_.end();  // the coolant stops with the spindle
   program_start_modes();
-  if (spindle_.direction == 0 && spindle_.rpm == 0) return;
+  if (spindle_.direction == 0 && spindle_.rpm == 0 && !spindle_.orient) return;
   ++spindle_.seq;
+  spindle_.orient = false;
   spindle_.direction = 0;
   spindle_.rpm = 0;
   spindle_.program_rpm = 0;

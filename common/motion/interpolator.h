@@ -168,12 +168,18 @@ struct SyncMove {
 
 // The spindle as the program has it where the path stands: each spindle event
 // (M3, M4, M5, S) is taken when the path reaches it; program end, a finished STOP,
-// LOAD and RESET turn it off. Every change gets a new seq.
+// LOAD and RESET turn it off. Every change gets a new seq. M19 is a change to a
+// standing spindle oriented at orient_deg (orient_mode: 0 the shortest way, 1
+// clockwise, 2 counterclockwise); the path waits for it (kSpindleAtSpeed of that
+// change: oriented) when the M19 had a Q.
 struct SpindleState {
   int64_t seq = 0;
   int direction = 0;  // 1 cw, -1 ccw, 0 off
   double rpm = 0;     // 0 when off; the program's S under the spindle override
   double program_rpm = 0;  // the program's S (0 when off)
+  bool orient = false;
+  double orient_deg = 0;
+  int orient_mode = 0;
 };
 
 // The probing move (G38.x block) the path is in or last left, for the node that

@@ -352,5 +352,64 @@ TEST(InterpolatorSync, AStopInTheHoleStopsTheSpindleAndTheTapFollowsItToRest) {
   expect_within_limits(z, cfg.ipo_period_s, 150, 2000, 40000);
 }
 
+// M3 S600, M19 R90 P1 [Q2], M3: the spindle stands oriented at 90 degrees, turning
+// clockwise to it; with a Q the path waits until the drive reports that change done.
+TEST(InterpolatorSync, M19OrientsTheSpindleAndItsQWaitsForIt) {
+  const config::MachineConfig cfg = load();
+  for (const double q : {0.0, 2.0}) {
+    Interpolator core(cfg);
+    core.apply_command({Command::Kind::kLoad, 1.0, {}});
+    const std::vector<double> o{0, 0, 0};
+    ASSERT_TRUE(core.apply_block(spindle_on(0, o, 600)));
+    program::Block m19;
+    m19.index = 1;
+    m19.kind = program::BlockKind::kEvent;
+    m19.start = m19.end = o;
+    m19.event.kind = program::EventKind::kSpindleOrient;
+    m19.event.number = 1;
+    m19.event.value = 90;
+    m19.dwell_s = q;
+    ASSERT_TRUE(core.apply_block(m19));
+    ASSERT_TRUE(core.apply_block(spindle_on(2, o, 600)));
+    program::Block end;
+    end.index = 3;
+    end.kind = program::BlockKind::kEnd;
+    end.start = end.end = o;
+    ASSERT_TRUE(core.apply_block(end));
+    core.apply_command({Command::Kind::kStart, 1.0, {}});
+    bool seen = false, waited = false;
+    for (int i = 0; i < 200; ++i) {
+      if (core.spindle_waiting() && core.spindle().seq != 2) {
+        Command at;
+        at.kind = Command::Kind::kSpindleAtSpeed;
+        at.value = static_cast<double>(core.spindle().seq);
+        ASSERT_TRUE(core.apply_command(at));
+      }
+      core.step();
+      if (core.spindle().seq != 2) continue;
+      if (!seen) {
+        seen = true;
+        EXPECT_TRUE(core.spindle().orient);
+        EXPECT_EQ(core.spindle().direction, 0);
+        EXPECT_EQ(core.spindle().orient_deg, 90);
+        EXPECT_EQ(core.spindle().orient_mode, 1);
+      }
+      if (core.spindle_waiting()) {
+        waited = true;
+        if (i > 100) {  // oriented, as the bridge would report it
+          Command at;
+          at.kind = Command::Kind::kSpindleAtSpeed;
+          at.value = 2;
+          ASSERT_TRUE(core.apply_command(at));
+        }
+      }
+    }
+    EXPECT_TRUE(seen);
+    EXPECT_EQ(waited, q > 0) << "Q " << q;
+    EXPECT_FALSE(core.spindle().orient) << "M3 turns an oriented spindle again";
+    EXPECT_EQ(core.state(), RunState::kDone);
+  }
+}
+
 }  // namespace
 }  // namespace cnc::interp
