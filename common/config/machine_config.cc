@@ -1,6 +1,7 @@
 #include "common/config/machine_config.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -79,7 +80,9 @@ constexpr std::string_view kSafetyKeys[] = {"estop", "hard_limits", "door"};
 constexpr std::string_view kSafetyLimitKeys[] = {"axis", "min", "max"};
 constexpr std::string_view kSafetyEstopKeys[] = {"input"};
 constexpr std::string_view kSafetyDoorKeys[] = {"input"};
-constexpr std::string_view kKinematicsKeys[] = {"type"};
+constexpr std::string_view kKinematicsKeys[] = {"type",        "x_rot_point_mm", "y_rot_point_mm", "z_rot_point_mm",
+                                                "x_offset_mm", "y_offset_mm",    "z_offset_mm",    "conventional_directions",
+                                                "pivot_mm",    "solution",       "pole_tolerance_deg"};
 constexpr std::string_view kProbeKeys[] = {"input", "latch", "sim_box"};
 constexpr std::string_view kProbeBoxKeys[] = {"x_min_mm", "x_max_mm", "y_min_mm", "y_max_mm", "z_min_mm", "z_max_mm"};
 constexpr std::string_view kDriveBridgeKeys[] = {"enable_on_start", "profile_dir",     "enable_timeout_s",
@@ -615,9 +618,67 @@ void read_safety(MapReader r, MachineConfig& c) {
   r.finish();
 }
 
+// A five-axis type's axes: X, Y, Z linear, the tilt (A or B, the type's fourth letter) and C rotary.
+void check_five_axis_axes(const MapReader& r, const MachineConfig& c, const std::string& type) {
+  const std::string tilt(1, static_cast<char>(std::toupper(static_cast<unsigned char>(type[3]))));
+  const std::string names[] = {"X", "Y", "Z", tilt, "C"};
+  for (const std::string& name : names) {
+    const int i = c.axis_index(name);
+    const bool rotary = name == tilt || name == "C";
+    std::string what = type;
+    if (i < 0) {
+      what += " needs an axis ";
+      what += name;
+      r.fail("type", what += " in axes[]");
+    }
+    if (c.axes[static_cast<size_t>(i)].rotary != rotary) {
+      what += " needs axis ";
+      what += name;
+      r.fail("type", what += rotary ? " of type: rotary" : " linear");
+    }
+  }
+}
+
 void read_kinematics(MapReader r, MachineConfig& c) {
-  c.kinematics.type =
-      r.get_choice("type", c.kinematics.type, std::set<std::string>(std::begin(kKinematicsTypes), std::end(kKinematicsTypes)));
+  KinematicsConfig& k = c.kinematics;
+  k.type = r.get_choice("type", k.type, std::set<std::string>(std::begin(kKinematicsTypes), std::end(kKinematicsTypes)));
+  // Which keys the type has: a key of another geometry is refused, not ignored.
+  const bool five = k.type != "identity";
+  const bool trt = k.type.ends_with("-trt");
+  const bool head_table = k.type.ends_with("-head-table");
+  const bool head = five && !trt;                // a tilting head: a pivot
+  const bool table_c = trt || head_table;        // a rotary table C: its centre, its direction
+  const bool tilt_a = five && k.type[3] == 'a';  // xyzac-*
+  auto key = [&](const char* name, bool applies, const std::string& why) {
+    if (r.has(name) && !applies) {
+      std::string what = "is no key of kinematics.type ";
+      what += k.type;
+      what += ": ";
+      r.fail(name, what += why);
+    }
+    return r.has(name);
+  };
+  const std::string no_table = "it has no rotary table";
+  if (key("x_rot_point_mm", table_c, no_table)) k.x_rot_point_mm = r.get_double("x_rot_point_mm", 0, -1e5, 1e5);
+  if (key("y_rot_point_mm", table_c, no_table)) k.y_rot_point_mm = r.get_double("y_rot_point_mm", 0, -1e5, 1e5);
+  if (key("z_rot_point_mm", trt, head_table ? "its only table axis, C, is vertical" : no_table))
+    k.z_rot_point_mm = r.get_double("z_rot_point_mm", 0, -1e5, 1e5);
+  const std::string no_tilting_table = "it has no tilting table";
+  if (key("x_offset_mm", trt && !tilt_a, trt ? "its A axis is parallel to X" : no_tilting_table))
+    k.x_offset_mm = r.get_double("x_offset_mm", 0, -1e5, 1e5);
+  if (key("y_offset_mm", trt && tilt_a, trt ? "its B axis is parallel to Y" : no_tilting_table))
+    k.y_offset_mm = r.get_double("y_offset_mm", 0, -1e5, 1e5);
+  if (key("z_offset_mm", trt, no_tilting_table)) k.z_offset_mm = r.get_double("z_offset_mm", 0, -1e5, 1e5);
+  if (key("conventional_directions", table_c,
+          five ? "its rotary axes turn the head, by the right-hand rule" : "it has no rotary axes"))
+    k.conventional_directions = r.get_bool("conventional_directions", false);
+  if (head) k.pivot_mm = r.require_double("pivot_mm", 0, 1e4);
+  else key("pivot_mm", false, "it has no tilting head");
+  if (key("solution", five, "it has no rotary axes"))
+    k.solution = r.get_choice("solution", k.solution, {"nearest", "positive_tilt", "negative_tilt"});
+  if (key("pole_tolerance_deg", five, "it has no rotary axes"))
+    k.pole_tolerance_deg = r.get_double("pole_tolerance_deg", k.pole_tolerance_deg, 0, 1);
+  if (five) check_five_axis_axes(r, c, k.type);
   r.finish();
 }
 

@@ -216,9 +216,31 @@ struct OperatorConfig {
 
 // The map between joints and axes (section `kinematics:`, optional; common/kinematics).
 // The names make_kinematics knows: a config naming another is refused here.
-inline constexpr const char* kKinematicsTypes[] = {"identity"};
+// xyz?c-trt: tilting table (A or B) carrying a rotary table C, LinuxCNC's kinematics of
+// the same names; xyz?c-head: a spindle head turning about C and tilting about A or B;
+// xyz?c-head-table: a head tilting about A or B over a rotary table C.
+inline constexpr const char* kKinematicsTypes[] = {"identity",   "xyzac-trt",        "xyzbc-trt",       "xyzac-head",
+                                                   "xyzbc-head", "xyzac-head-table", "xyzbc-head-table"};
 struct KinematicsConfig {
   std::string type = "identity";  // joint i is axis i, with axes[i]'s limits
+  // A rotary table C (trt, head-table): its centre of rotation in machine coordinates
+  // (LinuxCNC's x-, y-, z-rot-point). trt: the tilt axis's centre relative to the C
+  // axis's (LinuxCNC's x-offset for B, y-offset for A, z-offset).
+  double x_rot_point_mm = 0;
+  double y_rot_point_mm = 0;
+  double z_rot_point_mm = 0;
+  double x_offset_mm = 0;
+  double y_offset_mm = 0;
+  double z_offset_mm = 0;
+  // Table axes turn the table by the right-hand rule about +X, +Y, +Z for a positive
+  // angle (LinuxCNC's default); true: the other way, so that the tool turns that way
+  // relative to the workpiece (RS274's convention, LinuxCNC's conventional-directions).
+  bool conventional_directions = false;
+  double pivot_mm = 0;  // head: from the tilt axis to the spindle's gauge line
+  // Which of the two rotary solutions of a tool direction: nearest | positive_tilt | negative_tilt.
+  std::string solution = "nearest";
+  // A tool direction closer than this to the C axis keeps C where it is.
+  double pole_tolerance_deg = 1e-6;
 };
 
 // The browser HMI cnc-hmi (section `hmi:`): where it listens, who may use it.

@@ -101,8 +101,99 @@ TEST(MachineConfig, DefaultsApplyToOmittedSections) {
 TEST(MachineConfig, KinematicsTypeIsOneTheFactoryKnows) {
   EXPECT_EQ(parse_machine_config(sim3_text(), kLabel).kinematics.type, "identity");
   EXPECT_EQ(parse_machine_config(sim3_text() + "kinematics: {type: identity}\n", kLabel).kinematics.type, "identity");
-  expect_error_at(sim3_text() + "kinematics: {type: xyzac-trt}\n", "kinematics.type", "identity");
-  expect_error_at(sim3_text() + "kinematics: {type: identity, pivot_mm: 1}\n", "kinematics.pivot_mm", "unknown key");
+  expect_error_at(sim3_text() + "kinematics: {type: xyzab-tdr}\n", "kinematics.type", "identity, xyzac-head");
+  expect_error_at(sim3_text() + "kinematics: {type: identity, pivot_mm: 1}\n", "kinematics.pivot_mm",
+                  "is no key of kinematics.type identity");
+  expect_error_at(sim3_text() + "kinematics: {type: identity, solution: nearest}\n", "kinematics.solution",
+                  "is no key of kinematics.type identity: it has no rotary axes");
+  expect_error_at(sim3_text() + "kinematics: {type: identity, conventional_directions: true}\n",
+                  "kinematics.conventional_directions", "is no key of kinematics.type identity: it has no rotary axes");
+  expect_error_at(sim3_text() + "kinematics: {type: identity, swivel: 1}\n", "kinematics.swivel", "unknown key");
+  // sim3 is X, Y, Z only
+  expect_error_at(sim3_text() + "kinematics: {type: xyzac-trt}\n", "kinematics.type", "xyzac-trt needs an axis A in axes[]");
+}
+
+// The example five-axis machines (tests/unit/kinematics_machines/TYPE.yaml).
+std::string five_axis_text(const std::string& type) {
+  std::ifstream in(std::string(CNC_SOURCE_DIR) + "/tests/unit/kinematics_machines/" + type + ".yaml");
+  EXPECT_TRUE(in.good()) << type;
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+TEST(MachineConfig, FiveAxisKinematicsKeys) {
+  const KinematicsConfig trt = parse_machine_config(five_axis_text("xyzac-trt"), kLabel).kinematics;
+  EXPECT_EQ(trt.type, "xyzac-trt");
+  EXPECT_EQ(trt.x_rot_point_mm, 12.5);
+  EXPECT_EQ(trt.y_rot_point_mm, -7.5);
+  EXPECT_EQ(trt.z_rot_point_mm, -180.0);
+  EXPECT_EQ(trt.x_offset_mm, 0.0);
+  EXPECT_EQ(trt.y_offset_mm, 20.0);
+  EXPECT_EQ(trt.z_offset_mm, 10.0);
+  EXPECT_FALSE(trt.conventional_directions);
+  EXPECT_EQ(trt.pivot_mm, 0.0);
+  EXPECT_EQ(trt.solution, "nearest");
+  EXPECT_EQ(trt.pole_tolerance_deg, 1e-6);
+  const KinematicsConfig bc = parse_machine_config(five_axis_text("xyzbc-trt"), kLabel).kinematics;
+  EXPECT_EQ(bc.x_offset_mm, -25.0);
+  EXPECT_EQ(bc.z_offset_mm, 40.0);
+  const KinematicsConfig head = parse_machine_config(five_axis_text("xyzbc-head"), kLabel).kinematics;
+  EXPECT_EQ(head.pivot_mm, 150.0);
+  EXPECT_EQ(head.solution, "positive_tilt");
+  const KinematicsConfig mixed = parse_machine_config(five_axis_text("xyzbc-head-table"), kLabel).kinematics;
+  EXPECT_EQ(mixed.pivot_mm, 120.0);
+  EXPECT_EQ(mixed.x_rot_point_mm, 150.0);
+  EXPECT_TRUE(mixed.conventional_directions);
+  const std::string head_text = replace_nth(five_axis_text("xyzac-head"), "  pivot_mm: 180",
+                                            "  pivot_mm: 180\n  pole_tolerance_deg: 0.01\n  solution: negative_tilt");
+  const KinematicsConfig a = parse_machine_config(head_text, kLabel).kinematics;
+  EXPECT_EQ(a.pole_tolerance_deg, 0.01);
+  EXPECT_EQ(a.solution, "negative_tilt");
+}
+
+// A key of another geometry, a missing or out-of-range value, a missing or linear axis:
+// each refused with its key path.
+TEST(MachineConfig, FiveAxisKinematicsErrorsNameTheKey) {
+  const std::string ac = five_axis_text("xyzac-trt"), bc = five_axis_text("xyzbc-trt");
+  const std::string head = five_axis_text("xyzbc-head"), mixed = five_axis_text("xyzac-head-table");
+  auto add = [](const std::string& text, const std::string& after, const std::string& line) {
+    return replace_nth(text, after, after + "\n" + line);
+  };
+  expect_error_at(add(ac, "  z_offset_mm: 10", "  x_offset_mm: 1"), "kinematics.x_offset_mm",
+                  "is no key of kinematics.type xyzac-trt: its A axis is parallel to X");
+  expect_error_at(add(bc, "  z_offset_mm: 40", "  y_offset_mm: 1"), "kinematics.y_offset_mm",
+                  "its B axis is parallel to Y");
+  expect_error_at(add(ac, "  z_offset_mm: 10", "  pivot_mm: 100"), "kinematics.pivot_mm", "it has no tilting head");
+  expect_error_at(replace_nth(ac, "  y_offset_mm: 20", "  y_offset_mm: 2e5"), "kinematics.y_offset_mm", "out of range");
+  expect_error_at(replace_nth(ac, "  x_rot_point_mm: 12.5", "  x_rot_point_mm: -1e6"), "kinematics.x_rot_point_mm",
+                  "out of range");
+  expect_error_at(add(ac, "  z_offset_mm: 10", "  solution: closest"), "kinematics.solution",
+                  "'closest' is not one of: nearest, negative_tilt, positive_tilt");
+  expect_error_at(add(ac, "  z_offset_mm: 10", "  pole_tolerance_deg: 2"), "kinematics.pole_tolerance_deg",
+                  "out of range");
+  expect_error_at(add(ac, "  z_offset_mm: 10", "  pole_tolerance_deg: -1e-9"), "kinematics.pole_tolerance_deg",
+                  "out of range");
+  expect_error_at(add(ac, "  z_offset_mm: 10", "  conventional_directions: maybe"),
+                  "kinematics.conventional_directions", "expected true or false");
+  // heads
+  expect_error_at(replace_nth(head, "  pivot_mm: 150", ""), "kinematics.pivot_mm", "is required");
+  expect_error_at(replace_nth(head, "  pivot_mm: 150", "  pivot_mm: -1"), "kinematics.pivot_mm", "out of range");
+  expect_error_at(add(head, "  pivot_mm: 150", "  conventional_directions: true"), "kinematics.conventional_directions",
+                  "is no key of kinematics.type xyzbc-head: its rotary axes turn the head");
+  expect_error_at(add(head, "  pivot_mm: 150", "  x_rot_point_mm: 1"), "kinematics.x_rot_point_mm",
+                  "it has no rotary table");
+  expect_error_at(add(head, "  pivot_mm: 150", "  z_offset_mm: 1"), "kinematics.z_offset_mm", "it has no tilting table");
+  expect_error_at(add(mixed, "  pivot_mm: 220", "  z_rot_point_mm: 5"), "kinematics.z_rot_point_mm",
+                  "its only table axis, C, is vertical");
+  expect_error_at(add(mixed, "  pivot_mm: 220", "  y_offset_mm: 5"), "kinematics.y_offset_mm", "it has no tilting table");
+  // the axes the type needs
+  expect_error_at(replace_nth(mixed, "type: xyzac-head-table", "type: xyzbc-head-table"), "kinematics.type",
+                  "xyzbc-head-table needs an axis B in axes[]");
+  expect_error_at(replace_nth(five_axis_text("xyzac-head"), "    type: rotary\n", ""), "kinematics.type",
+                  "xyzac-head needs axis A of type: rotary");
+  expect_error_at(replace_nth(head, "    type: rotary\n    wrapped: true\n", "    min_mm: -10\n    max_mm: 10\n"),
+                  "kinematics.type", "xyzbc-head needs axis C of type: rotary");
 }
 
 // axes[].type (rotary: A, B, C only, in degrees) and axes[].wrapped (rotary only).

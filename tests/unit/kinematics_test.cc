@@ -64,15 +64,40 @@ TEST(Kinematics, FactoryMakesIdentityWithTheConfigsAxesAsJoints) {
   }
 }
 
-// Every name the config reader accepts is made, under that name.
+// Every name the config reader accepts is made, under that name: identity on sim3, a
+// five-axis type on its example machine (tests/unit/kinematics_machines).
 TEST(Kinematics, FactoryMakesEveryTypeTheConfigAccepts) {
-  config::MachineConfig c = sim3();
   for (const char* type : config::kKinematicsTypes) {
-    c.kinematics.type = type;
+    const config::MachineConfig c =
+        std::string(type) == "identity"
+            ? sim3()
+            : config::load_machine_config(std::string(CNC_SOURCE_DIR) + "/tests/unit/kinematics_machines/" + type + ".yaml");
+    EXPECT_EQ(c.kinematics.type, type);
     EXPECT_EQ(make_kinematics(c)->name(), type);
   }
+  config::MachineConfig c = sim3();
   c.kinematics.type = "bogus";
   EXPECT_THROW(make_kinematics(c), std::invalid_argument);
+  // A five-axis type on a machine without its axes: refused here too, not only by the reader.
+  c.kinematics.type = "xyzbc-trt";
+  EXPECT_THROW(make_kinematics(c), std::invalid_argument);
+}
+
+// A tool length moves joint Z above the tip; without one identity is what it was.
+TEST(Kinematics, IdentityPutsTheToolLengthBetweenJointAndAxisZ) {
+  const auto k = make_kinematics(nine_axes());
+  Pose axes{}, joints{}, back{};
+  for (size_t i = 0; i < axes.size(); ++i) axes[i] = 10.0 * static_cast<double>(i);
+  axes[2] = -0.0;
+  ASSERT_TRUE(k->inverse(axes, joints, Tool{35.5}));
+  for (size_t i = 0; i < axes.size(); ++i) EXPECT_EQ(joints[i], i == 2 ? 35.5 : axes[i]) << i;
+  k->forward(joints, back, Tool{35.5});
+  EXPECT_EQ(back, axes);
+  ASSERT_TRUE(k->inverse(axes, joints, Tool{}));
+  EXPECT_TRUE(std::signbit(joints[2]));  // -0 stays -0: no tool, nothing added
+  EXPECT_TRUE(k->in_travel(joints));
+  joints[4] = 1e6;
+  EXPECT_FALSE(k->in_travel(joints));
 }
 
 TEST(Kinematics, ShippedMachineIsIdentityWithItsLimits) {
