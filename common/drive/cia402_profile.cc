@@ -1,5 +1,7 @@
 #include "common/drive/cia402_profile.h"
 
+#include <utility>
+
 namespace cnc::drive {
 namespace cia402 {
 
@@ -28,12 +30,14 @@ constexpr uint16_t kSwRemote = 1u << 9;
 // TP1 input as trigger (0), bit 4 latch at the rising edge, bit 5 at the falling edge.
 constexpr uint16_t kTouchProbeBothEdges = 0x0033;
 
+// One state machine, two uses: an axis drive in a position mode (`cia402`) and a
+// spindle drive in a velocity mode (`cia402_velocity`); only their name and the
+// registers their cyclic data needs differ.
 class Cia402Logic final : public ProfileLogic {
  public:
-  const char* name() const override { return "cia402"; }
-  std::vector<Role> required_roles() const override {
-    return {Role::kControlword, Role::kStatusword, Role::kMode, Role::kTargetPosition, Role::kActualPosition};
-  }
+  Cia402Logic(const char* name, std::vector<Role> required) : name_(name), required_(std::move(required)) {}
+  const char* name() const override { return name_; }
+  std::vector<Role> required_roles() const override { return required_; }
 
   DriveStatus decode(uint16_t sw) const override {
     const State st = state_of(sw);
@@ -116,12 +120,23 @@ class Cia402Logic final : public ProfileLogic {
     d.fault = true;
     d.error_code = code;
   }
+
+ private:
+  const char* name_;
+  std::vector<Role> required_;
 };
 
 }  // namespace
 
 const ProfileLogic& cia402_logic() {
-  static const Cia402Logic logic;
+  static const Cia402Logic logic("cia402", {Role::kControlword, Role::kStatusword, Role::kMode, Role::kTargetPosition,
+                                            Role::kActualPosition});
+  return logic;
+}
+
+const ProfileLogic& cia402_velocity_logic() {
+  static const Cia402Logic logic("cia402_velocity", {Role::kControlword, Role::kStatusword, Role::kMode,
+                                                     Role::kSpeedSetpoint, Role::kActualSpeed});
   return logic;
 }
 

@@ -71,7 +71,8 @@ uint16_t delta_vfd_command(int direction) {
 }
 
 bool is_spindle_profile(const DriveProfile& p) {
-  return p.state_machine == delta_vfd_logic().name() || p.state_machine == "huanyang";
+  return p.state_machine == delta_vfd_logic().name() || p.state_machine == "huanyang" ||
+         p.state_machine == "cia402_velocity";
 }
 
 }  // namespace cnc::drive

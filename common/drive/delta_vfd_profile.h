@@ -29,7 +29,8 @@ inline constexpr uint16_t kDeltaVfdFaultReset = 1u << 1;
 inline constexpr uint16_t kDeltaVfdTurnsReverse = 1u << 3;
 inline constexpr uint16_t kDeltaVfdCommandedReverse = 1u << 4;
 inline bool delta_vfd_reverse(uint16_t statusword) { return (statusword & kDeltaVfdTurnsReverse) != 0; }
-// Whether a profile is a spindle drive's (its state machine is delta_vfd or huanyang).
+// Whether a profile is a spindle drive's (its state machine is delta_vfd, huanyang or
+// cia402_velocity, a servo drive in a velocity mode).
 bool is_spindle_profile(const DriveProfile& p);
 
 }  // namespace cnc::drive

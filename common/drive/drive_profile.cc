@@ -17,7 +17,8 @@ constexpr std::array<const char*, kRoleCount> kRoleNames = {
     "controlword", "statusword", "mode", "mode_display", "target_position",
     "actual_position", "actual_velocity", "error_code", "fault_reset", "following_error",
     "home_latch_position", "home_latch_count", "speed_setpoint", "actual_speed", "output_current",
-    "probe_rise_position", "probe_rise_count", "probe_fall_position", "probe_fall_count", "probe_function"};
+    "probe_rise_position", "probe_rise_count", "probe_fall_position", "probe_fall_count", "probe_function",
+    "encoder_position"};
 
 // The keys a profile file may hold: its top level, `registers:` (one per role) and each field.
 constexpr std::string_view kProfileKeys[] = {"name",         "description",       "state_machine", "write_and_read",
@@ -101,6 +102,10 @@ DriveProfile read_profile(config::MapReader top, const std::string& file) {
   for (Role r : {Role::kTargetPosition, Role::kActualPosition}) {
     if (p.has(r) && p.field(r).words != 2) regs.fail(std::string(role_name(r)) + ".words", "must be 2 for a position");
   }
+  // The encoder's counter is raw counts: the machine's spindle.encoder_counts_per_rev makes revolutions of it.
+  if (p.has(Role::kEncoderPosition) &&
+      (p.field(Role::kEncoderPosition).words != 2 || p.field(Role::kEncoderPosition).scale != 1.0))
+    regs.fail("encoder_position", "must be two registers (a 32-bit counter) with scale 1");
   for (Role r : {Role::kControlword, Role::kStatusword, Role::kFaultReset}) {
     if (p.has(r) && (p.field(r).words != 1 || p.field(r).scale != 1.0))
       regs.fail(role_name(r), "must be one register with scale 1");

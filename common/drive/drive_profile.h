@@ -4,7 +4,7 @@
 // keys and bad values are errors naming the file and the key path.
 //
 //   name: cia402_modbus
-//   state_machine: cia402          # sim | cia402 | leadshine | delta_vfd | huanyang: the logic in code
+//   state_machine: cia402          # sim, cia402, leadshine; delta_vfd, huanyang, cia402_velocity: the logic in code
 //   write_and_read: true           # the drive answers function 23 (write and read in one transaction)
 //   read_gap_max: 0                # unused registers a cyclic read may span to merge two fields
 //   mode_of_operation: 8           # cia402: the mode written before enabling
@@ -35,9 +35,10 @@ enum class Role : int8_t {
   kFollowingError,  // mm, the drive's own position demand minus actual (CiA-402 0x60F4; read)
   kHomeLatchPosition,  // mm, the position latched at the home switch's last closing edge (CiA-402 touch probe 0x60BA; read)
   kHomeLatchCount,     // closing edges latched so far, wrapping (read)
-  // A spindle drive (VFD; state_machine delta_vfd): frequencies in Hz, current in A.
-  kSpeedSetpoint,   // frequency command (written)
-  kActualSpeed,     // output frequency (read)
+  // A spindle drive (a VFD, state_machine delta_vfd; a servo drive in velocity mode,
+  // cia402_velocity): speeds in Hz (a servo's: motor revolutions per second), current in A.
+  kSpeedSetpoint,   // frequency command (written); cia402_velocity: target velocity 0x60FF, signed
+  kActualSpeed,     // output frequency (read); cia402_velocity: velocity actual value 0x606C, signed
   kOutputCurrent,   // output current, the drive's load figure (read)
   // The touch probe (CiA-402 0x60BA/0x60BB positions, 0x60D5/0x60D6 edge counters; read):
   // the position at the probe input's last rising / falling edge, and the edges so far (wrapping).
@@ -48,8 +49,12 @@ enum class Role : int8_t {
   // The touch probe's function (CiA-402 0x60B8; written once before enabling, where mapped):
   // TP1 on, continuous, on the TP1 input, latching at both edges (0x0033).
   kProbeFunction,
+  // A spindle drive's encoder: its position counter, raw counts (two registers, scale 1;
+  // CiA-402 0x6064, a VFD's encoder input), read each cycle. The bridge unwraps the 32-bit
+  // counter and divides by spindle.encoder_counts_per_rev.
+  kEncoderPosition,
 };
-inline constexpr int kRoleCount = 20;
+inline constexpr int kRoleCount = 21;
 const char* role_name(Role r);
 
 enum class WordOrder : int8_t { kLowFirst, kHighFirst };
@@ -94,7 +99,7 @@ struct DriveProfile {
   std::string name;
   std::string file;
   std::string description;
-  std::string state_machine;  // sim | cia402 | leadshine | delta_vfd, huanyang (spindle drives)
+  std::string state_machine;  // sim | cia402 | leadshine | delta_vfd, huanyang, cia402_velocity (spindle drives)
   bool write_and_read = false;
   int read_gap_max = 0;
   int mode_of_operation = 8;

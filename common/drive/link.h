@@ -37,6 +37,10 @@ class Link {
   void set_backoff(double min_s, double max_s);
   const std::string& name() const { return name_; }
   const std::string& last_error() const { return last_error_; }
+  // A serial line's time per byte (its character), 0 where the link has no line
+  // (TCP, loopback): how long a reply of n bytes is on its way, n times this.
+  double byte_time_s() const { return byte_time_s_; }
+  void set_byte_time_s(double s) { byte_time_s_ = s; }
 
   TxResult read_registers(int unit, int addr, int n, uint16_t* dest, LinkCounters& c);
   TxResult write_register(int unit, int addr, uint16_t value, LinkCounters& c);
@@ -89,6 +93,7 @@ class Link {
   double backoff_max_s_ = 2.0;
   double backoff_s_ = 0.1;
   std::string last_error_;
+  double byte_time_s_ = 0;
   std::array<char, 96> detail_{};  // what a failed frame exchange found, for last_error_
 };
 

@@ -4,17 +4,19 @@
 
 #include <cerrno>
 
+#include "common/util/clock.h"
+
 namespace cnc::drive {
 
-LoopbackLink::LoopbackLink() : Link("loopback") {}
+LoopbackLink::LoopbackLink() : Link("loopback"), clock_(util::monotonic_s) {}
 
 void LoopbackLink::add_drive(int unit, const DriveProfile& profile, double start_mm) {
   drives_[unit] = std::make_unique<DriveEmulator>(profile, start_mm);
 }
 
 void LoopbackLink::add_vfd(int unit, const DriveProfile& profile, const config::SpindleSimConfig& sim, double max_hz,
-                           double rpm_per_hz) {
-  vfds_[unit] = std::make_unique<VfdEmulator>(profile, sim, max_hz, rpm_per_hz);
+                           double rpm_per_hz, int64_t counts_per_rev) {
+  vfds_[unit] = std::make_unique<VfdEmulator>(profile, sim, max_hz, rpm_per_hz, counts_per_rev);
 }
 
 VfdEmulator* LoopbackLink::vfd(int unit) {
@@ -77,6 +79,12 @@ void LoopbackLink::move(DriveEmulator& d) {
   d.set_actual(d.follows() && !stalled_ ? d.target_mm() : f.decode(regs), 0.0);
 }
 
+void LoopbackLink::turn(VfdEmulator& v) {
+  const double now = clock_();
+  if (vfd_t_ >= 0 && !stalled_) v.advance(now - vfd_t_);
+  vfd_t_ = now;
+}
+
 void LoopbackLink::move(VfdEmulator& v) {
   if (!stalled_) v.settle();
 }
@@ -88,6 +96,7 @@ int LoopbackLink::do_read(int unit, int addr, int n, uint16_t* dest) {
     return x ? MODBUS_ENOBASE + x : 0;
   }
   if (VfdEmulator* v = vfd(unit)) {
+    turn(*v);
     const int x = v->read(addr, n, dest);
     return x ? MODBUS_ENOBASE + x : 0;
   }
@@ -106,6 +115,7 @@ int LoopbackLink::do_write(int unit, int addr, int n, const uint16_t* src) {
     return x ? MODBUS_ENOBASE + x : 0;
   }
   if (VfdEmulator* v = vfd(unit)) {
+    turn(*v);
     move(*v);
     const int x = v->write(addr, n, src);
     return x ? MODBUS_ENOBASE + x : 0;
@@ -119,6 +129,13 @@ int LoopbackLink::do_write(int unit, int addr, int n, const uint16_t* src) {
 
 int LoopbackLink::do_write_read(int unit, int waddr, int wn, const uint16_t* src, int raddr, int rn, uint16_t* dest) {
   if (const int e = injected()) return e;
+  if (VfdEmulator* v = vfd(unit)) {
+    turn(*v);
+    move(*v);
+    int x = v->write(waddr, wn, src);
+    if (x == 0) x = v->read(raddr, rn, dest);
+    return x ? MODBUS_ENOBASE + x : 0;
+  }
   DriveEmulator* d = drive(unit);
   if (d == nullptr) return ETIMEDOUT;
   move(*d);
@@ -132,6 +149,7 @@ int LoopbackLink::do_frame(const uint8_t* request, int n, uint8_t* reply, int, i
   if (const int e = injected()) return e;
   VfdEmulator* v = vfd(request[0]);
   if (v == nullptr) return ETIMEDOUT;
+  turn(*v);
   move(*v);
   *got = v->answer_frame(request, n, reply);
   if (short_left_ > 0 && *got > 3) {

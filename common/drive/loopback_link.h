@@ -1,9 +1,12 @@
 #pragma once
 // The in-process link: drives emulated by DriveEmulator with an ideal axis (the
 // actual position is the target once the drive follows), and spindle VFDs emulated
-// by VfdEmulator with an ideal motor (at the commanded frequency by the next request). The whole bridge runs on
+// by VfdEmulator with an ideal motor (at the commanded frequency by the next request;
+// its encoder counts the time between requests on the link's clock at the frequency
+// it had, the monotonic clock unless a test sets its own). The whole bridge runs on
 // it without a simulator or a network, as ros2_control's mock hardware does; tests
 // inject link loss, exceptions and drive faults through it.
+#include <functional>
 #include <map>
 #include <memory>
 
@@ -19,10 +22,13 @@ class LoopbackLink final : public Link {
   LoopbackLink();
   void add_drive(int unit, const DriveProfile& profile, double start_mm);
   DriveEmulator* drive(int unit);
-  // A spindle VFD (profile delta_vfd or huanyang) under `unit`; `max_hz`: its frequency at max_rpm.
+  // A spindle drive (a spindle profile: delta_vfd, huanyang, cia402_velocity) under `unit`;
+  // `max_hz`: its frequency at max_rpm; `counts_per_rev`: its encoder's, 0 none.
   void add_vfd(int unit, const DriveProfile& profile, const config::SpindleSimConfig& sim, double max_hz,
-               double rpm_per_hz);
+               double rpm_per_hz, int64_t counts_per_rev = 0);
   VfdEmulator* vfd(int unit);
+  // The clock the spindles' encoders count on (seconds).
+  void set_clock(std::function<double()> clock) { clock_ = std::move(clock); }
   // An I/O module (io.modules[module] with its points) under `unit`.
   void add_io_module(int unit, const config::IoConfig& io, int module);
   IoEmulator* io_module(int unit);
@@ -49,6 +55,7 @@ class LoopbackLink final : public Link {
   int injected();
   void move(DriveEmulator& d);
   void move(VfdEmulator& v);
+  void turn(VfdEmulator& v);  // its encoder over the time since the spindles' last request
 
   std::map<int, std::unique_ptr<DriveEmulator>> drives_;
   std::map<int, std::unique_ptr<VfdEmulator>> vfds_;
@@ -59,6 +66,8 @@ class LoopbackLink final : public Link {
   int timeouts_left_ = 0;
   int short_left_ = 0;
   bool stalled_ = false;
+  std::function<double()> clock_;
+  double vfd_t_ = -1;  // the clock at the spindles' last request
 };
 
 }  // namespace cnc::drive

@@ -28,9 +28,12 @@ std::unique_ptr<ModbusLink> ModbusLink::rtu(const std::string& device, int baud,
                                             double response_timeout_s) {
   modbus_t* ctx = modbus_new_rtu(device.c_str(), baud, parity, 8, stop_bits);
   if (ctx == nullptr) throw std::runtime_error("cannot create a Modbus RTU context for " + device);
-  return std::unique_ptr<ModbusLink>(new ModbusLink(
+  auto link = std::unique_ptr<ModbusLink>(new ModbusLink(
       "rtu://" + device + "@" + std::to_string(baud) + "-8" + parity + std::to_string(stop_bits), ctx,
       response_timeout_s, true));
+  // A character: start bit, 8 data bits, the parity bit, the stop bits.
+  link->set_byte_time_s((1 + 8 + (parity == 'N' ? 0 : 1) + stop_bits) / static_cast<double>(baud));
+  return link;
 }
 
 ModbusLink::ModbusLink(std::string name, modbus_t* ctx, double response_timeout_s, bool serial)

@@ -12,7 +12,7 @@ namespace cnc::drive {
 
 const ProfileLogic* find_profile_logic(const std::string& state_machine) {
   for (const ProfileLogic* l : {&sim_logic(), &cia402_logic(), &leadshine_logic(), &delta_vfd_logic(),
-                                  &huanyang_logic()})
+                                  &huanyang_logic(), &cia402_velocity_logic()})
     if (state_machine == l->name()) return l;
   return nullptr;
 }
@@ -23,6 +23,8 @@ const ProfileLogic& profile_logic(const DriveProfile& p) {
   return *l;
 }
 
-std::vector<std::string> profile_logic_names() { return {"sim", "cia402", "leadshine", "delta_vfd", "huanyang"}; }
+std::vector<std::string> profile_logic_names() {
+  return {"sim", "cia402", "leadshine", "delta_vfd", "huanyang", "cia402_velocity"};
+}
 
 }  // namespace cnc::drive

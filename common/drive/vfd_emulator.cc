@@ -11,9 +11,10 @@
 namespace cnc::drive {
 
 VfdEmulator::VfdEmulator(const DriveProfile& profile, const config::SpindleSimConfig& sim, double max_hz,
-                         double rpm_per_hz)
+                         double rpm_per_hz, int64_t counts_per_rev)
     : profile_(profile), logic_(profile_logic(profile)), sim_(sim), max_hz_(max_hz),
       base_(profile.first_address()), count_(profile.end_address() - profile.first_address()),
+      counts_per_rev_(counts_per_rev), cia402_(profile.state_machine == "cia402_velocity"),
       hy_(profile.huanyang.present), rpm_per_hz_(rpm_per_hz) {
   map_ = modbus_mapping_new_start_address(0, 0, 0, 0, static_cast<unsigned>(base_), static_cast<unsigned>(count_), 0, 0);
   if (map_ == nullptr) throw std::runtime_error("modbus_mapping_new_start_address failed");
@@ -50,11 +51,13 @@ int VfdEmulator::write(int addr, int n, const uint16_t* src) {
 }
 
 void VfdEmulator::after_write(int addr, int n) {
-  for (Role role : {Role::kControlword, Role::kFaultReset}) {
+  for (Role role : {Role::kMode, Role::kControlword, Role::kFaultReset}) {
     const Field& f = profile_.field(role);
     if (!f.present() || f.address >= addr + n || f.end() <= addr) continue;
     logic_.drive_write(drive_, role, *reg(f.address), profile_);
     if (role == Role::kFaultReset) *reg(f.address) = 0;  // the drive clears the reset bit
+    if (role == Role::kMode && profile_.has(Role::kModeDisplay))
+      *reg(profile_.field(Role::kModeDisplay).address) = *reg(f.address);  // the mode display follows the mode
   }
   refresh();
 }
@@ -70,6 +73,7 @@ double VfdEmulator::command_hz() const {
     return (logic_.drive_statusword(drive_) & kHyReverseCommanded) ? -hz : hz;
   }
   const Field& f = profile_.field(Role::kSpeedSetpoint);
+  if (cia402_) return f.decode(reg(f.address));  // the target velocity, signed
   const double hz = std::fabs(f.decode(reg(f.address)));
   return (logic_.drive_statusword(drive_) & kDeltaVfdCommandedReverse) ? -hz : hz;
 }
@@ -77,11 +81,26 @@ double VfdEmulator::command_hz() const {
 void VfdEmulator::step(double dt_s) {
   if (!(dt_s > 0)) return;
   const double before = hz_;
-  // First order, exact over the step: a 1 ms grid and a 10 ms one give the same curve.
-  hz_ = command_hz() + (hz_ - command_hz()) * std::exp(-dt_s / sim_.time_constant_s);
+  // First order, exact over the step: a 1 ms grid and a 10 ms one give the same curve;
+  // so is the encoder's integral of it.
+  const double target = command_hz();
+  const double decay = std::exp(-dt_s / sim_.time_constant_s);
+  revs_ += (target * dt_s + (hz_ - target) * sim_.time_constant_s * (1 - decay)) * rpm_per_hz_ / 60.0;
+  hz_ = target + (hz_ - target) * decay;
   const double accel_hz_s = (hz_ - before) / dt_s;
   const double full_accel = max_hz_ / sim_.time_constant_s;
   current_a_ = sim_.load_current_a * std::fabs(hz_) / max_hz_ + sim_.inertia_current_a * std::fabs(accel_hz_s) / full_accel;
+  refresh();
+}
+
+void VfdEmulator::advance(double dt_s) {
+  if (!(dt_s > 0)) return;
+  revs_ += hz_ * dt_s * rpm_per_hz_ / 60.0;
+  refresh();
+}
+
+void VfdEmulator::set_revolutions(double revs) {
+  revs_ = revs;
   refresh();
 }
 
@@ -157,10 +176,18 @@ int VfdEmulator::answer_frame(const uint8_t* request, int n, uint8_t* reply) {
 void VfdEmulator::refresh() {
   if (hy_) return;  // answer_frame reads the motor as it is
   uint16_t sw = logic_.drive_statusword(drive_);
-  sw = static_cast<uint16_t>((sw & ~kDeltaVfdTurnsReverse) | (hz_ < 0 ? kDeltaVfdTurnsReverse : 0));
+  if (!cia402_) sw = static_cast<uint16_t>((sw & ~kDeltaVfdTurnsReverse) | (hz_ < 0 ? kDeltaVfdTurnsReverse : 0));
   *reg(profile_.field(Role::kStatusword).address) = sw;
-  *reg(profile_.field(Role::kErrorCode).address) = drive_.error_code;
-  // The output frequency as a magnitude: the direction is in the status word.
+  if (profile_.has(Role::kErrorCode)) *reg(profile_.field(Role::kErrorCode).address) = drive_.error_code;
+  if (profile_.has(Role::kEncoderPosition) && counts_per_rev_ > 0) {
+    // The counter's 32 bits of the count (a signed field reads them as two's complement).
+    const Field& e = profile_.field(Role::kEncoderPosition);
+    const int64_t counts = std::llround(std::floor(revs_ * static_cast<double>(counts_per_rev_)));
+    const auto bits = static_cast<uint32_t>(static_cast<uint64_t>(counts));
+    e.encode_raw(e.is_signed ? int64_t{static_cast<int32_t>(bits)} : int64_t{bits}, reg(e.address));
+  }
+  // The output frequency: a Delta's as a magnitude (the direction is in the status
+  // word), a signed field's (a servo drive's velocity actual value) with its sign.
   const Field& a = profile_.field(Role::kActualSpeed);
   a.encode(a.is_signed ? hz_ : std::fabs(hz_), reg(a.address));
   if (profile_.has(Role::kOutputCurrent)) {

@@ -6,8 +6,15 @@
 // delta_vfd; the servo simulator serves it with modbus_reply on mapping()) or the
 // Huanyang frames (state_machine huanyang; answer_frame, with the PD parameters the
 // master checks set as a drive set up for the link has them). One VFD model, two
-// protocols. The simulator steps it on its 1 ms grid; tests drive it through a link
-// of their own.
+// protocols; and a third: a servo drive in profile velocity mode (state_machine
+// cia402_velocity, a register image like the Delta's), the same motor model behind
+// the CiA-402 state machine: it follows its signed target velocity while operation
+// is enabled in mode 3, and coasts down otherwise.
+// The encoder (`counts_per_rev` > 0, and the profile maps encoder_position): the
+// spindle's revolutions (output frequency x rpm_per_hz / 60, integrated exactly over
+// each step) times counts_per_rev, counted up in the forward (M3) direction, as a
+// 32-bit counter that wraps. The simulator steps it on its 1 ms grid and before each
+// request it answers; tests drive it through a link of their own.
 #include <modbus.h>
 
 #include <array>
@@ -23,7 +30,9 @@ class VfdEmulator {
  public:
   // `max_hz`: the frequency at the spindle's max_rpm (the load figure's scale; a
   // Huanyang's PD005); `rpm_per_hz`: the motor's (a Huanyang's PD144 follows from it).
-  VfdEmulator(const DriveProfile& profile, const config::SpindleSimConfig& sim, double max_hz, double rpm_per_hz = 60);
+  // `counts_per_rev`: the encoder's (spindle.encoder_counts_per_rev), 0 none.
+  VfdEmulator(const DriveProfile& profile, const config::SpindleSimConfig& sim, double max_hz, double rpm_per_hz = 60,
+              int64_t counts_per_rev = 0);
   ~VfdEmulator();
   VfdEmulator(const VfdEmulator&) = delete;
   VfdEmulator& operator=(const VfdEmulator&) = delete;
@@ -44,6 +53,8 @@ class VfdEmulator {
   void step(double dt_s);
   // An ideal motor (the loopback link): at the commanded frequency at once.
   void settle();
+  // The ideal motor's encoder: dt_s seconds at the output frequency it has (the loopback link).
+  void advance(double dt_s);
   // A fault inside the drive: it coasts down and reports `code` until a fault reset.
   void inject_fault(uint16_t code);
 
@@ -51,6 +62,10 @@ class VfdEmulator {
   // Signed: negative in reverse.
   double command_hz() const;
   double output_hz() const { return hz_; }
+  // The spindle's revolutions since start (the encoder's position before its counts and wrap).
+  double revolutions() const { return revs_; }
+  // Sets them (tests: the counter near its wrap).
+  void set_revolutions(double revs);
   double current_a() const { return current_a_; }
   const DriveProfile& profile() const { return profile_; }
 
@@ -69,6 +84,9 @@ class VfdEmulator {
   EmulatedDrive drive_;
   double hz_ = 0;
   double current_a_ = 0;
+  double revs_ = 0;
+  int64_t counts_per_rev_;
+  bool cia402_;                  // the servo drive's protocol (cia402_velocity)
   bool hy_ = false;              // the Huanyang protocol
   uint16_t hy_frequency_ = 0;    // function 0x05's value
   std::array<uint16_t, 256> pd_{};

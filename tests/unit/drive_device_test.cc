@@ -7,7 +7,11 @@
 // first-order speed response through the image, a drive fault and its reset, a lost link.
 // A Huanyang VFD (huanyang_frame.h, huanyang_device.h): its frames with their CRC, the
 // replies a master must refuse (short, malformed, none) named, the device against the
-// same emulator speaking the Huanyang protocol, its PD parameters checked.
+// same emulator speaking the Huanyang protocol, its PD parameters checked. The
+// encoder's 32-bit counter unwrapped (encoder_counter.h), signed and not, both ways; a
+// servo spindle (profile cia402_spindle) enabled through the CiA-402 state machine,
+// turning at its signed target velocity, its encoder counting across the wrap, its
+// fault reset; the encoder's sample dated on a serial line.
 #include <gtest/gtest.h>
 
 #include <cerrno>
@@ -20,6 +24,7 @@
 #include "common/drive/delta_vfd_profile.h"
 #include "common/drive/device.h"
 #include "common/drive/drive_io.h"
+#include "common/drive/encoder_counter.h"
 #include "common/drive/huanyang_device.h"
 #include "common/drive/huanyang_frame.h"
 #include "common/drive/io_module_device.h"
@@ -316,6 +321,158 @@ TEST(SpindleDevice, AFaultStopsTheDriveUntilItsResetAndALostLinkIsForgotten) {
   EXPECT_TRUE(get_pdo<SpindleInputs>(image.inputs(s)).valid);
   spindle.forget(image.inputs(s));
   EXPECT_FALSE(get_pdo<SpindleInputs>(image.inputs(s)).valid);
+}
+
+TEST(EncoderCounter, RunsOnAcrossThe32BitCountersWrapBothWays) {
+  EncoderCounter u;  // an unsigned field: 0 .. 2^32 - 1
+  EXPECT_FALSE(u.known());
+  EXPECT_EQ(u.update(0xFFFFFF00), 0xFFFFFF00) << "the first read is the counter as its field reads it";
+  EXPECT_EQ(u.update(0x00000100), int64_t{0xFFFFFF00} + 512);
+  EXPECT_EQ(u.update(0xFFFFFF00), int64_t{0xFFFFFF00}) << "and back";
+  EncoderCounter s;  // a signed field: -2^31 .. 2^31 - 1
+  EXPECT_EQ(s.update(-5), -5);
+  EXPECT_EQ(s.update(0x7FFFFF00), int64_t{0x7FFFFF00} - 5 + 5);
+  EXPECT_EQ(s.update(-0x7FFFFF00), int64_t{0x7FFFFF00} + 512) << "past +2^31 the signed counter reads negative";
+  EXPECT_EQ(s.update(0x7FFFFF00), int64_t{0x7FFFFF00});
+  // Many wraps at speed: 10,000 rpm at 2^24 counts per revolution read every 1 ms
+  // (2.8e6 counts a read, the counter wraps every 1.5 s) for 10 s.
+  EncoderCounter f;
+  const int64_t step = 2796203;
+  int64_t truth = 0;
+  for (int k = 0; k < 10000; ++k, truth += step)
+    ASSERT_EQ(f.update(static_cast<int32_t>(static_cast<uint32_t>(static_cast<uint64_t>(truth)))), truth);
+}
+
+// A servo spindle (config/drives/cia402_spindle.yaml) on the loopback link, its
+// transactions written down (TapLink), its encoder counting on the test's clock.
+struct ServoSpindle {
+  explicit ServoSpindle(double tau_s = 0.05) : profile(load_drive_profile(kDrives + "cia402_spindle.yaml")) {
+    config::SpindleSimConfig sim;
+    sim.time_constant_s = tau_s;
+    link.inner.add_vfd(kUnit, profile, sim, 100.0, 60.0, 131072);
+    link.inner.set_clock([this] { return t; });
+    EXPECT_TRUE(link.ensure_open(0.0));
+    dev = std::make_unique<SpindleDevice>(profile, kUnit, link);
+    slot = image.add(dev->layout());
+  }
+  static constexpr int kUnit = 4;
+  // One cycle of 1 ms: the command out, the answer in, a state machine step.
+  SpindleInputs cycle(int direction, double hz, Goal goal = Goal::kEnable) {
+    const auto last = get_pdo<SpindleInputs>(image.inputs(slot));
+    put_pdo(image.outputs(slot), SpindleOutputs{last.valid, static_cast<int8_t>(direction), hz});
+    EXPECT_EQ(dev->exchange(image.outputs(slot), image.inputs(slot), c), TxResult::kOk);
+    EXPECT_EQ(dev->control(goal, c), TxResult::kOk);
+    t += 0.001;
+    return get_pdo<SpindleInputs>(image.inputs(slot));
+  }
+  VfdEmulator& drive() { return *link.inner.vfd(kUnit); }
+  DriveProfile profile;
+  TapLink link;
+  std::unique_ptr<SpindleDevice> dev;
+  ProcessImage image;
+  std::size_t slot = 0;
+  LinkCounters c;
+  double t = 0;
+};
+
+TEST(SpindleDevice, AServoSpindleEnablesThroughTheCia402StateMachineAndTurnsAtItsTargetVelocity) {
+  ServoSpindle sp;
+  EXPECT_TRUE(is_spindle_profile(sp.profile));
+  EXPECT_EQ(sp.dev->reads(), 2) << "error code and statusword; position to velocity (read_gap_max 6)";
+  SpindleInputs in = sp.cycle(0, 0, Goal::kDisable);
+  EXPECT_TRUE(in.valid);
+  EXPECT_FALSE(in.running) << "switch on disabled";
+  EXPECT_EQ(sp.link.wire.size(), 2u) << "the first exchange only reads";
+  for (int k = 0; k < 6; ++k) in = sp.cycle(0, 0);
+  EXPECT_TRUE(in.running) << "operation enabled in profile velocity mode";
+  // Mode 3 first, then shutdown, switch on, enable operation: one write per cycle.
+  std::vector<std::string> steps;
+  for (const auto& w : sp.link.wire)
+    if (w.rfind("W1", 0) == 0) steps.push_back(w);
+  ASSERT_EQ(steps.size(), 4u);
+  EXPECT_EQ(steps[0], "W1 u4 @24672 n1 3");   // 0x6060 = 3
+  EXPECT_EQ(steps[1], "W1 u4 @24640 n1 6");   // 0x6040: shutdown
+  EXPECT_EQ(steps[2], "W1 u4 @24640 n1 7");   // switch on
+  EXPECT_EQ(steps[3], "W1 u4 @24640 n1 15");  // enable operation
+  // Each cycle: the target velocity written with the first read (function 23), then one read.
+  sp.link.wire.clear();
+  in = sp.cycle(1, 10.0);
+  ASSERT_EQ(sp.link.wire.size(), 3u);
+  EXPECT_EQ(sp.link.wire[0], "WR u4 @24831 n2 0 20");  // 0x60FF = 10 x 131072 = 0x140000, low word first
+  EXPECT_EQ(sp.link.wire[1], "  R u4 @24639 n3");
+  EXPECT_EQ(sp.link.wire[2], "R u4 @24676 n10");
+  // 600 rpm clockwise: the velocity actual value and the encoder counting up.
+  for (int k = 0; k < 1000; ++k) in = sp.cycle(1, 10.0);
+  EXPECT_NEAR(in.output_hz, 10.0, 1e-5);
+  EXPECT_FALSE(in.reverse);
+  EXPECT_TRUE(in.has_position);
+  EXPECT_NEAR(static_cast<double>(in.position_counts) / 131072, sp.drive().revolutions(), 1e-4);
+  EXPECT_NEAR(sp.drive().revolutions(), 10.0 * 1.0, 0.02) << "1 s at 10 rev/s on the link's clock";
+  EXPECT_EQ(in.sample_age_s, 0.0) << "no serial line";
+  // Counterclockwise: a negative target velocity, the counter counting down.
+  const int64_t before = in.position_counts;
+  for (int k = 0; k < 500; ++k) in = sp.cycle(-1, 5.0);
+  EXPECT_NEAR(in.output_hz, -5.0, 1e-5);
+  EXPECT_TRUE(in.reverse);
+  EXPECT_LT(in.position_counts, before);
+  // Stopped: at velocity 0, still enabled (it holds).
+  for (int k = 0; k < 10; ++k) in = sp.cycle(0, 0);
+  EXPECT_TRUE(in.running);
+  EXPECT_NEAR(in.output_hz, 0.0, 1e-9);
+  // Disabled: shutdown.
+  sp.link.wire.clear();
+  in = sp.cycle(0, 0, Goal::kDisable);
+  EXPECT_EQ(sp.link.wire.back(), "W1 u4 @24640 n1 6");
+  in = sp.cycle(0, 0, Goal::kDisable);
+  EXPECT_FALSE(in.running);
+}
+
+TEST(SpindleDevice, AServoSpindlesFaultIsResetByTheControlwordsEdge) {
+  ServoSpindle sp;
+  SpindleInputs in;
+  for (int k = 0; k < 20; ++k) in = sp.cycle(1, 10.0);
+  ASSERT_TRUE(in.running);
+  sp.drive().inject_fault(0x7310);
+  sp.link.wire.clear();
+  in = sp.cycle(0, 0, Goal::kDisable);  // the bridge's goal for a drive at fault, until a reset is asked for
+  EXPECT_TRUE(in.fault);
+  EXPECT_FALSE(in.running);
+  EXPECT_EQ(in.error_code, 0x7310);
+  in = sp.cycle(0, 0, Goal::kDisable);
+  for (const auto& w : sp.link.wire) EXPECT_NE(w.rfind("W1", 0), 0u) << "nothing resets it unasked: " << w;
+  sp.link.wire.clear();
+  in = sp.cycle(1, 10.0, Goal::kFaultReset);
+  EXPECT_EQ(sp.link.wire.back(), "W1 u4 @24640 n1 128");
+  in = sp.cycle(1, 10.0, Goal::kFaultReset);
+  EXPECT_FALSE(in.fault);
+  EXPECT_EQ(in.error_code, 0) << "not at fault: its last code is not reported";
+  for (int k = 0; k < 6; ++k) in = sp.cycle(1, 10.0);
+  EXPECT_TRUE(in.running) << "enabled again";
+}
+
+TEST(SpindleDevice, TheEncoderRunsOnAcrossTheCountersWrap) {
+  ServoSpindle sp;
+  // 2^31 counts are 16384 revolutions of a 17-bit encoder: start 5 revolutions short of
+  // the signed counter's wrap and turn 10 at 600 rpm.
+  sp.drive().set_revolutions(16384.0 - 5);
+  SpindleInputs in = sp.cycle(0, 0);
+  const int64_t start = in.position_counts;
+  EXPECT_EQ(start, (int64_t{16384} - 5) * 131072);
+  for (int k = 0; k < 1000; ++k) in = sp.cycle(1, 10.0);
+  EXPECT_GT(sp.drive().revolutions(), 16384.0 + 4) << "past the wrap";
+  EXPECT_NEAR(static_cast<double>(in.position_counts) / 131072, sp.drive().revolutions(), 1e-4);
+  uint16_t regs[2];
+  ASSERT_EQ(sp.drive().read(0x6064, 2, regs), 0);
+  EXPECT_LT(static_cast<int32_t>(regs[0] | (uint32_t{regs[1]} << 16)), 0) << "the counter itself has wrapped";
+}
+
+TEST(SpindleDevice, OnASerialLineTheEncodersSampleIsDatedBeforeTheReply) {
+  ServoSpindle sp;
+  sp.link.set_byte_time_s(10.0 / 115200);  // 8N1 at 115200 baud
+  const SpindleInputs in = sp.cycle(0, 0);
+  // The counter's read (0x6064-0x606D, 10 registers): 3.5 characters of silence and a
+  // reply of 5 + 20 bytes after the drive sampled it.
+  EXPECT_NEAR(in.sample_age_s, (3.5 + 5 + 20) * 10.0 / 115200, 1e-12);
 }
 
 // An I/O module: three coils (a run of two and a lone one), a discrete input and an

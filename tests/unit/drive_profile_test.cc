@@ -131,6 +131,24 @@ TEST(DriveProfile, ShippedProfilesLoad) {
   EXPECT_EQ(vfd.field(Role::kActualSpeed).address, 0x2103);
   EXPECT_EQ(vfd.field(Role::kOutputCurrent).address, 0x2104);
   EXPECT_FALSE(vfd.has(Role::kTargetPosition));
+  EXPECT_FALSE(vfd.has(Role::kEncoderPosition));
+
+  const DriveProfile enc = load_drive_profile(kDrives + "delta_vfd_encoder.yaml");
+  EXPECT_EQ(enc.state_machine, "delta_vfd");
+  EXPECT_EQ(enc.field(Role::kEncoderPosition).address, 0x2105);
+  EXPECT_EQ(enc.field(Role::kEncoderPosition).words, 2);
+
+  const DriveProfile servo = load_drive_profile(kDrives + "cia402_spindle.yaml");
+  EXPECT_EQ(servo.state_machine, "cia402_velocity");
+  EXPECT_EQ(servo.mode_of_operation, 3) << "profile velocity";
+  EXPECT_EQ(servo.field(Role::kControlword).address, 0x6040);
+  EXPECT_EQ(servo.field(Role::kStatusword).address, 0x6041);
+  EXPECT_EQ(servo.field(Role::kMode).address, 0x6060);
+  EXPECT_EQ(servo.field(Role::kSpeedSetpoint).address, 0x60FF);
+  EXPECT_EQ(servo.field(Role::kActualSpeed).address, 0x606C);
+  EXPECT_EQ(servo.field(Role::kEncoderPosition).address, 0x6064);
+  EXPECT_TRUE(servo.field(Role::kSpeedSetpoint).is_signed);
+  EXPECT_DOUBLE_EQ(servo.field(Role::kSpeedSetpoint).scale, 131072.0);
 }
 
 const std::string kGood =
@@ -174,7 +192,8 @@ TEST(DriveProfile, ErrorsNameTheKeyPath) {
                "'middle_first' is not one of: high_first, low_first");
   expect_error(kGood + "  mode: {address: 9, scale: 0}\n", "registers.mode.scale", "out of range");
   expect_error(kGood + "  mode: {address: 3}\n", "registers.target_position", "overlaps mode");
-  expect_error("name: t\nstate_machine: canopen\n", "state_machine", "is not one of: cia402, delta_vfd, huanyang, leadshine, sim");
+  expect_error("name: t\nstate_machine: canopen\n", "state_machine",
+               "is not one of: cia402, cia402_velocity, delta_vfd, huanyang, leadshine, sim");
   std::string no_status = kGood;
   no_status.replace(no_status.find("  statusword: {address: 1}\n"), 27, "");
   expect_error(no_status, "registers.statusword", "is required by state_machine sim");
@@ -191,6 +210,16 @@ TEST(DriveProfile, ErrorsNameTheKeyPath) {
                "  statusword: {address: 0x2101}\n  error_code: {address: 0x2100}\n  fault_reset: {address: 0x2002}\n"
                "  actual_speed: {address: 0x2103, scale: 100}\n",
                "registers.speed_setpoint", "is required by state_machine delta_vfd");
+  // The servo spindle needs its target velocity and velocity actual value.
+  expect_error("name: s\nstate_machine: cia402_velocity\nregisters:\n  controlword: {address: 0x6040}\n"
+               "  statusword: {address: 0x6041}\n  mode: {address: 0x6060}\n"
+               "  speed_setpoint: {address: 0x60FF, words: 2, signed: true}\n",
+               "registers.actual_speed", "is required by state_machine cia402_velocity");
+  // The encoder's counter: 32 bits, raw counts.
+  expect_error(kGood + "  encoder_position: {address: 10}\n", "registers.encoder_position",
+               "must be two registers (a 32-bit counter) with scale 1");
+  expect_error(kGood + "  encoder_position: {address: 10, words: 2, scale: 4096}\n", "registers.encoder_position",
+               "must be two registers (a 32-bit counter) with scale 1");
 }
 
 TEST(DriveProfile, FoundBesideTheMachineOrInTheSourceTree) {

@@ -312,6 +312,7 @@ class Simulator {
   void read_control();
   void housekeeping(double now);
   void reply_vfd(modbus_t* ctx, const uint8_t* query, int len, int header);
+  void step_vfd(double now);
   // The I/O module of `unit` on TCP (tcp) or on the RTU line, else nullptr.
   struct IoSim {
     std::unique_ptr<cnc::drive::IoEmulator> emu;
@@ -475,7 +476,8 @@ Simulator::Simulator(const cnc::config::MachineConfig& cfg, const cnc::service::
       throw cnc::config::ConfigError(cfg.source_file, "spindle.drive.profile",
                                      "'" + d.profile + "' is no spindle drive's profile");
     vfd_ = std::make_unique<cnc::drive::VfdEmulator>(*profiles_.back(), cfg.spindle.sim,
-                                                     cfg.spindle.max_rpm / cfg.spindle.rpm_per_hz, cfg.spindle.rpm_per_hz);
+                                                     cfg.spindle.max_rpm / cfg.spindle.rpm_per_hz, cfg.spindle.rpm_per_hz,
+                                                     cfg.spindle.encoder_counts_per_rev);
     vfd_unit_ = d.unit_id;
     vfd_tcp_ = transport == cnc::drive::Transport::kModbusTcp;
     if (vfd_->profile().huanyang.present) {
@@ -605,6 +607,7 @@ void Simulator::after_reply(SimDrive& d, const uint8_t* pdu) {
 }
 
 void Simulator::reply_vfd(modbus_t* ctx, const uint8_t* query, int len, int header) {
+  step_vfd(cnc::util::monotonic_s());  // the reply reads the motor and its encoder as they are at this moment
   modbus_reply(ctx, query, len, vfd_->mapping());
   int addr = 0, n = 0;
   written_range(query + header, &addr, &n);
@@ -834,11 +837,13 @@ void Simulator::step_dynamics() {
     ++steps;
   }
   if (steps >= 1000) next_step_s_ = now + dt_;
-  if (vfd_) {
-    // The VFD is a motor of its own: it runs on the wall's time, stalls or not.
-    if (vfd_t_ >= 0) vfd_->step(now - vfd_t_);
-    vfd_t_ = now;
-  }
+  if (vfd_) step_vfd(now);
+}
+
+void Simulator::step_vfd(double now) {
+  // The VFD is a motor of its own: it runs on the wall's time, stalls or not.
+  if (vfd_t_ >= 0 && now > vfd_t_) vfd_->step(now - vfd_t_);
+  vfd_t_ = std::max(vfd_t_, now);
 }
 
 void Simulator::serve_tcp_client(int fd, std::vector<int>& closed) {
@@ -966,6 +971,7 @@ void Simulator::serve_vfd_line() {
     }
     if (need == 0 || static_cast<int>(vfd_rx_.size()) < need) break;
     uint8_t reply[cnc::drive::huanyang::kMaxFrame];
+    step_vfd(cnc::util::monotonic_s());
     const int len = vfd_rx_[0] == vfd_unit_ && !injector_.dropped(cnc::util::monotonic_s())
                         ? vfd_->answer_frame(vfd_rx_.data(), need, reply)
                         : 0;
