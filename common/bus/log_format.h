@@ -10,12 +10,16 @@
 //   2  the format event; SETPOINTS carry the stream and the bridge's engagement
 //   3  blocks (PROGRAM_BLOCKS, INTERP_INPUT) carry the path tolerance (lcmt_program_block_v2
 //      and lcmt_interp_input_v2 read formats 1 and 2)
+//   4  SPINDLE_STATUS carries the encoder's position and the orientation's state
+//      (lcmt_spindle_status_v1 reads formats 1 to 3: common/service/spindle_status_msg.h),
+//      SPINDLE_CMD the orientation (no reader of logs takes SPINDLE_CMD; its leading
+//      fields, which the integration tests read, are unchanged)
 #include <cstddef>
 #include <string>
 
 namespace cnc::bus {
 
-inline constexpr int kLogFormat = 3;
+inline constexpr int kLogFormat = 4;
 
 // The interpolator's behaviour: the same inputs give the same setpoints within one
 // revision; a revision changes them by design (the format event carries it from

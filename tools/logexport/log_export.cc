@@ -276,13 +276,30 @@ void LogExport::write(const std::string& dir, const std::vector<std::string>& lo
     }
   }
 
+  int64_t utime0 = 0;
+  for (const auto& s : setpoints_)
+    if (s.cycle == c0) {
+      utime0 = s.utime;
+      break;
+    }
+  if (!spindle_.empty()) {
+    // The encoder's position is empty (nan) where it was not valid or not recorded (formats 1 to 3).
+    File f(dir + "/spindle_status.csv");
+    f.line("utime,t_s,state,command_seq,at_speed_seq,direction,commanded_rpm,actual_rpm,current_a,error_code,"
+           "position_rev,sample_playback_cycle,orient_state,fault");
+    for (const auto& m : spindle_) {
+      static constexpr const char* kStates[] = {"starting", "stopped", "running", "fault"};
+      static constexpr const char* kOrient[] = {"none", "orienting", "oriented", "fault"};
+      Line row;
+      row << m.utime << static_cast<double>(m.utime - utime0) * 1e-6
+          << (m.state >= 0 && m.state <= 3 ? kStates[m.state] : "unknown") << m.command_seq << m.at_speed_seq
+          << static_cast<int32_t>(m.direction) << m.commanded_rpm << m.actual_rpm << m.current_a << m.error_code
+          << (m.position_valid ? m.position_rev : kNaN) << (m.position_valid ? m.sample_playback_cycle : kNaN)
+          << (m.orient_state >= 0 && m.orient_state <= 3 ? kOrient[m.orient_state] : "unknown") << csv_text(m.fault);
+      f.line(row);
+    }
+  }
   {
-    int64_t utime0 = 0;
-    for (const auto& s : setpoints_)
-      if (s.cycle == c0) {
-        utime0 = s.utime;
-        break;
-      }
     File f(dir + "/alarms.csv");
     f.line("utime,t_s,source,severity,code,text");
     for (const auto& a : alarms_) {

@@ -1,7 +1,8 @@
 #pragma once
 // The tables of a recorded run, for plotting: fed with the decoded messages of a
 // log (in log order), it writes setpoints.csv, monitor.csv, axis_status.csv,
-// alarms.csv and summary.json. No LCM here; main.cc reads the log.
+// alarms.csv, summary.json and, for a cell with a spindle, spindle_status.csv. No LCM
+// here; main.cc reads the log.
 //
 // One time axis for every table: t_s = (cycle - cycle0) * T_ipo, where cycle0 is
 // the first RUNNING setpoint (the first setpoint when none ran). Monitor and axis
@@ -20,6 +21,7 @@
 #include "cnc/lcmt_program_block.hpp"
 #include "cnc/lcmt_program_state.hpp"
 #include "cnc/lcmt_setpoint.hpp"
+#include "cnc/lcmt_spindle_status.hpp"
 #include "common/config/machine_config.h"
 
 namespace cnc::logexport {
@@ -43,6 +45,8 @@ class LogExport {
   void on_interp_state(const cnc::lcmt_interp_state& m) { interp_ = m; }
   void on_program_block(const cnc::lcmt_program_block& m);
   void on_logger_stats(const cnc::lcmt_logger_stats& m);
+  // Of any log format (common/service/spindle_status_msg.h).
+  void on_spindle_status(const cnc::lcmt_spindle_status& m) { spindle_.push_back(m); }
 
   // Writes the tables and summary.json into `dir` (created). `log_files`: the files
   // read; `channels`: per-channel counts as the reader's bus saw them.
@@ -63,6 +67,7 @@ class LogExport {
   std::vector<cnc::lcmt_monitor_report> monitor_;
   std::vector<cnc::lcmt_axis_status> axis_status_;
   std::vector<cnc::lcmt_alarm> alarms_;
+  std::vector<cnc::lcmt_spindle_status> spindle_;
   std::optional<cnc::lcmt_program_state> program_;
   std::optional<cnc::lcmt_interp_state> interp_;
   std::map<int32_t, cnc::lcmt_logger_stats> logger_stats_;  // the last report of each logger

@@ -1,7 +1,7 @@
 // cnc-logexport: the tables of a recorded run for plotting and for people. Reads a
 // cell's log through the bus's file back end (every rotated part: NAME.lcmlog,
 // NAME.1.lcmlog, ...) and writes into DIR: setpoints.csv, monitor.csv,
-// axis_status.csv, alarms.csv and summary.json (see log_export.h).
+// axis_status.csv, alarms.csv, summary.json and spindle_status.csv (see log_export.h).
 //
 //   cnc-logexport --log LOG --out DIR [--prefix P]
 // --prefix: the cell's channel prefix when a log holds several cells (default: the
@@ -16,6 +16,7 @@
 #include "common/bus/bus.h"
 #include "common/program/block_msg.h"
 #include "common/service/service.h"
+#include "common/service/spindle_status_msg.h"
 #include "common/util/signals.h"
 #include "tools/logexport/log_export.h"
 
@@ -104,6 +105,10 @@ int run_export(const cnc::config::MachineConfig&, const cnc::service::Args& args
           ex.on_program_block(cnc::program::from_v2(v2));
         else
           ++undecoded[name];
+      } else if (name == "SPINDLE_STATUS") {
+        cnc::lcmt_spindle_status m;  // of any format (lcmt_spindle_status_v1: formats 1 to 3)
+        if (cnc::service::decode_spindle_status(data, size, &m)) ex.on_spindle_status(m);
+        else ++undecoded[name];
       } else if (name == "LOGGER_STATS") {
         cnc::lcmt_logger_stats m;
         if (decode(data, size, &m)) ex.on_logger_stats(m);
