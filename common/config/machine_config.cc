@@ -67,7 +67,8 @@ constexpr std::string_view kHomeKeys[] = {"method",      "search_velocity_mm_s",
                                           "backoff_mm",  "order"};
 constexpr std::string_view kSpindleKeys[] = {"drive",        "max_rpm",      "rpm_per_hz", "at_speed_tolerance",
                                              "at_speed_timeout_s", "min_override", "max_override", "encoder_counts_per_rev",
-                                             "sim"};
+                                             "orient_tolerance_deg", "orient_timeout_s", "orient_rpm",
+                                             "orient_gain_per_s", "sim"};
 constexpr std::string_view kSpindleSimKeys[] = {"time_constant_s", "load_current_a", "inertia_current_a"};
 constexpr std::string_view kIoKeys[] = {"modules",        "points",        "coolant",       "digital_outputs",
                                         "digital_inputs", "analog_inputs", "analog_outputs"};
@@ -443,6 +444,11 @@ void read_spindle(MapReader r, MachineConfig& c) {
   s.min_override = r.get_double("min_override", s.min_override, 0.0, 1.0);
   s.max_override = r.get_double("max_override", s.max_override, 1.0, 10.0);
   s.encoder_counts_per_rev = r.get_int("encoder_counts_per_rev", s.encoder_counts_per_rev, 0, 1 << 24);
+  s.orient_tolerance_deg = r.get_double("orient_tolerance_deg", s.orient_tolerance_deg, 0.01, 45.0);
+  s.orient_timeout_s = r.get_double("orient_timeout_s", s.orient_timeout_s, 0.1, 600.0);
+  s.orient_rpm = r.get_double("orient_rpm", s.orient_rpm, 0.1, 10000.0);
+  s.orient_gain_per_s = r.get_double("orient_gain_per_s", s.orient_gain_per_s, 0.01, 1000.0);
+  if (s.orient_rpm > s.max_rpm) r.fail("orient_rpm", "must not exceed spindle.max_rpm");
   if (c.drive_bridge.link_loss_timeout_s < s.drive.response_timeout_s)
     r.fail("drive", "drive.response_timeout_s must not exceed drive_bridge.link_loss_timeout_s");
   MapReader m = r.map("sim", kSpindleSimKeys);

@@ -129,6 +129,14 @@ struct SpindleConfig {
   // spindle's measured position.
   int64_t encoder_counts_per_rev = 0;
   bool measured_position() const { return enabled && encoder_counts_per_rev > 0; }
+  // Orientation (M19; needs the encoder): the bridge's position loop turns the spindle
+  // at orient_gain_per_s revolutions per second per revolution of error, at most
+  // orient_rpm; oriented within orient_tolerance_deg of the angle and at rest; not
+  // oriented within orient_timeout_s of the command is a fault naming that key.
+  double orient_tolerance_deg = 0.5;
+  double orient_timeout_s = 10;
+  double orient_rpm = 60;
+  double orient_gain_per_s = 2;
   SpindleSimConfig sim;
 };
 

@@ -1,5 +1,6 @@
 #include "common/service/machine_status.h"
 
+#include <cmath>
 #include <cstdarg>
 #include <cstdio>
 #include <vector>
@@ -97,6 +98,15 @@ void spindle_lines(const cnc::config::MachineConfig& cfg, const MachineView& v, 
   if (s->error_code != 0) add(out, ", drive error code %d", s->error_code);
   if (!s->fault.empty()) add(out, ": %s", s->fault.c_str());
   *out += "\n";
+  if (!cfg.spindle.measured_position()) return;
+  // The encoder's position and the orientation (M19) of the command it follows.
+  static const char* const kOrient[] = {"", ", orienting", ", oriented", ", orientation failed"};
+  const char* orient = s->orient_state >= 0 && s->orient_state <= 3 ? kOrient[s->orient_state] : "";
+  if (s->position_valid)
+    add(out, "spindle position: %.4f rev (%.2f deg)%s\n", s->position_rev,
+        (s->position_rev - std::floor(s->position_rev)) * 360.0, orient);
+  else
+    add(out, "spindle position: not read%s\n", orient);
 }
 
 void io_lines(const cnc::config::MachineConfig& cfg, const MachineView& v, std::string* out) {

@@ -23,6 +23,8 @@ namespace cnc::bridge {
 namespace ch = config::channels;
 // An E-stop disables the drives once they stand on the stopped command, at most this long after it.
 constexpr double kStandstillWaitS = 0.2;
+// A spindle drive slower than this has run down: a CiA-402 drive's power goes off.
+constexpr double kStillRpm = 1.0;
 using cnc::lcmt_axis_status;
 
 // The spindle drive on its link (config spindle:), and its commands.
@@ -38,7 +40,8 @@ void DriveBridgeNode::make_spindle(std::map<std::string, LinkWorker*>& by_link) 
   if (!drive::is_spindle_profile(*spindle_->profile))
     throw config::ConfigError(cfg_.source_file, "spindle.drive.profile",
                               "'" + d.profile + "' is no spindle drive's profile (its state_machine is " +
-                                  spindle_->profile->state_machine + ", a spindle needs delta_vfd or huanyang)");
+                                  spindle_->profile->state_machine +
+                                  ", a spindle needs delta_vfd, huanyang or cia402_velocity)");
   // A Huanyang's frames are no Modbus: TCP (or a Modbus gateway) cannot carry them.
   if (spindle_->profile->huanyang.present && drive::transport_of(d) == drive::Transport::kModbusTcp)
     throw config::ConfigError(cfg_.source_file, "spindle.drive.transport",
@@ -47,8 +50,28 @@ void DriveBridgeNode::make_spindle(std::map<std::string, LinkWorker*>& by_link) 
   spindle_->worker = worker_for(d, by_link);
   const double max_hz = cfg_.spindle.max_rpm / cfg_.spindle.rpm_per_hz;
   if (auto* loopback = dynamic_cast<drive::LoopbackLink*>(&spindle_->worker->link()))
-    loopback->add_vfd(d.unit_id, *spindle_->profile, cfg_.spindle.sim, max_hz, cfg_.spindle.rpm_per_hz);
-  spindle_->worker->add_spindle(*spindle_->profile, d.unit_id, max_hz, cfg_.spindle.rpm_per_hz);
+    loopback->add_vfd(d.unit_id, *spindle_->profile, cfg_.spindle.sim, max_hz, cfg_.spindle.rpm_per_hz,
+                      cfg_.spindle.encoder_counts_per_rev);
+  const drive::DriveProfile& p = *spindle_->profile;
+  if (cfg_.spindle.encoder_counts_per_rev > 0) {
+    if (!p.has(drive::Role::kEncoderPosition))
+      throw config::ConfigError(cfg_.source_file, "spindle.encoder_counts_per_rev",
+                                std::to_string(cfg_.spindle.encoder_counts_per_rev) + " counts: the spindle's drive profile '" +
+                                    p.name + "' (" + p.file + ") maps no encoder (registers.encoder_position)");
+    // The position loop's speed command in steps of the drive's: an error below half a step
+    // over the gain commands nothing. That dead zone must lie within the tolerance.
+    const double step_rpm = cfg_.spindle.rpm_per_hz / p.field(drive::Role::kSpeedSetpoint).scale;
+    const double dead_deg = step_rpm / 60 / (2 * cfg_.spindle.orient_gain_per_s) * 360;
+    if (dead_deg > cfg_.spindle.orient_tolerance_deg) {
+      char b[320];
+      std::snprintf(b, sizeof b,
+                    "%g deg: the drive's speed step (%.3g rpm, profile '%s') at spindle.orient_gain_per_s %g leaves the "
+                    "orientation's position loop a dead zone of %.3g deg: raise the tolerance or the gain",
+                    cfg_.spindle.orient_tolerance_deg, step_rpm, p.name.c_str(), cfg_.spindle.orient_gain_per_s, dead_deg);
+      throw config::ConfigError(cfg_.source_file, "spindle.orient_tolerance_deg", b);
+    }
+  }
+  spindle_->worker->add_spindle(p, d.unit_id, max_hz, cfg_.spindle.rpm_per_hz);
   ch_spindle_status_ = cfg_.channel(ch::kSpindleStatus);
   bus_.subscribe<cnc::lcmt_spindle_command>(cfg_.channel(ch::kSpindleCmd), [this](const auto& m) {
     Spindle& sp = *spindle_;
@@ -57,6 +80,9 @@ void DriveBridgeNode::make_spindle(std::map<std::string, LinkWorker*>& by_link) 
     sp.pending_seq = m.command_seq;
     sp.pending_direction = m.direction;
     sp.pending_rpm = m.rpm;
+    sp.pending_orient = m.orient;
+    sp.pending_orient_deg = m.orient_deg;
+    sp.pending_orient_mode = m.orient_mode;
   });
 }
 
@@ -178,22 +204,38 @@ void DriveBridgeNode::spindle_tick(double now_s) {
   if (sp.pending) {
     sp.pending = false;
     const int64_t before = sp.ctl.command_seq();
-    sp.ctl.on_command(sp.pending_seq, sp.pending_direction, sp.pending_rpm, following, now_s);
+    if (sp.pending_orient)
+      sp.ctl.on_orient(sp.pending_seq, sp.pending_orient_deg, sp.pending_orient_mode, following, now_s);
+    else
+      sp.ctl.on_command(sp.pending_seq, sp.pending_direction, sp.pending_rpm, following, now_s);
     // A line per change (events, not every tick).
-    if (sp.ctl.command_seq() != before)
+    if (sp.ctl.command_seq() != before && sp.pending_orient)
+      spdlog::info("spindle: change {}: orient to {:.2f} deg ({}){}", sp.ctl.command_seq(), sp.pending_orient_deg,
+                   sp.pending_orient_mode == 1 ? "clockwise" : sp.pending_orient_mode == 2 ? "counterclockwise" : "shortest way",
+                   following ? "" : " (not followed: the drives do not follow setpoints)");
+    else if (sp.ctl.command_seq() != before)
       spdlog::info("spindle: change {}: {} {:.0f} rpm{}", sp.ctl.command_seq(),
                    sp.ctl.direction() > 0 ? "clockwise" : sp.ctl.direction() < 0 ? "counterclockwise" : "stop",
                    sp.ctl.commanded_rpm(), following ? "" : " (not followed: the drives do not follow setpoints)");
   }
   if (!following) sp.ctl.stop();
+  // A fault reset asked for (ENABLE, FAULT_RESET) takes a round or two to reach the
+  // drive and come back: the fault it still reports meanwhile is not a new one.
+  if (sp.reset_pending && now_s > sp.reset_deadline_s) sp.reset_pending = false;
+  const bool resetting = sp.reset_pending && sp.rep.in.fault;
   sp.fb.answering = sp.rep.answering;
   sp.fb.have_status = sp.rep.in.valid;
   sp.fb.running = sp.rep.in.running;
-  sp.fb.error_code = sp.rep.in.error_code;
+  sp.fb.drive_fault = sp.rep.in.fault && !resetting;
+  sp.fb.error_code = resetting ? 0 : sp.rep.in.error_code;
   sp.fb.output_hz = sp.rep.in.output_hz;
   sp.fb.lost_events = sp.rep.lost_events;
   sp.fb.last_error = sp.rep.last_error.data();
   sp.fb.setup_error = sp.rep.in.setup_error.data();
+  sp.fb.has_position = sp.rep.in.valid && sp.rep.in.has_position;
+  sp.fb.position_counts = sp.rep.in.position_counts;
+  sp.fb.sample_s = sp.rep.sample_s;
+  const OrientState orient_before = sp.ctl.orient_state();
   if (sp.ctl.update(sp.fb, now_s)) {
     if (state_ == State::kEnabled || state_ == State::kEnabling || state_ == State::kStopping) {
       fault(0, sp.ctl.fault_reason(), false);
@@ -205,8 +247,31 @@ void DriveBridgeNode::spindle_tick(double now_s) {
   if (!was_at_speed && sp.ctl.at_speed() && sp.ctl.direction() != 0)
     spdlog::info("spindle: at speed: {:.0f} rpm, {:.3f} s after change {}", sp.ctl.actual_rpm(sp.fb),
                  sp.ctl.time_to_speed_s(now_s), sp.ctl.command_seq());
+  if (orient_before == OrientState::kOrienting && sp.ctl.orient_state() == OrientState::kOriented)
+    spdlog::info("spindle: oriented: at {:.3f} deg, {:.3f} s after change {}",
+                 (sp.ctl.position_rev() - std::floor(sp.ctl.position_rev())) * 360, sp.ctl.orient_age_s(now_s),
+                 sp.ctl.command_seq());
   sp.cmd.direction = static_cast<int8_t>(sp.ctl.direction());
   sp.cmd.hz = sp.ctl.commanded_hz();
+  // The drive's power (a CiA-402 drive's; a VFD runs by its command word): on while the
+  // bridge follows setpoints, and after that until the spindle has run down at speed 0.
+  // Its fault reset, asked for by ENABLE or FAULT_RESET, while it reports a fault.
+  // A drive at fault is never enabled (a CiA-402 drive's enable would reset it unasked).
+  const drive::SpindleInputs& in = sp.rep.in;
+  if (in.valid && !in.fault) sp.reset_pending = false;
+  const bool turning = in.valid && in.running && std::fabs(in.output_hz) * cfg_.spindle.rpm_per_hz > kStillRpm;
+  const bool follows_now = state_ == State::kEnabled && !core_.faulted() && !sp.ctl.faulted();
+  sp.cmd.goal = in.valid && in.fault ? (sp.reset_pending ? drive::Goal::kFaultReset : drive::Goal::kDisable)
+                : follows_now || turning ? drive::Goal::kEnable
+                                         : drive::Goal::kDisable;
+}
+
+void DriveBridgeNode::post_spindle_command(double now_s) {
+  Spindle& sp = *spindle_;
+  const bool playing = core_.mode() == BridgeCore::Mode::kFollowing && core_.last_cycle() >= 0;
+  sp.cmd.tick_s = now_s;
+  sp.cmd.playback_cycle = playing ? core_.playback_cycle() : -1.0;
+  sp.cmd.playback_rate = core_.playback_rate();
   sp.worker->set_spindle_command(sp.cmd);
 }
 
@@ -608,6 +673,15 @@ void DriveBridgeNode::publish_spindle_status() {
   m.fault.assign(sp.ctl.fault_reason());
   m.transactions = sp.rep.counters.transactions;
   m.timeouts = sp.rep.counters.timeouts;
+  m.position_valid = sp.ctl.position_valid();
+  m.position_rev = sp.ctl.position_rev();
+  // The playback cycle at the sample: the posting tick's, carried on at the playback rate
+  // over the time from that tick to the drive's sampling.
+  const SpindleCommand& c = sp.rep.cmd;
+  m.sample_playback_cycle = m.position_valid && c.playback_cycle >= 0
+                                ? c.playback_cycle + c.playback_rate * (sp.ctl.sample_s() - c.tick_s) / cfg_.ipo_period_s
+                                : -1.0;
+  m.orient_state = static_cast<int8_t>(sp.ctl.orient_state());
   bus_.publish(ch_spindle_status_, m);
 }
 

@@ -234,7 +234,8 @@ void DriveBridgeNode::begin_enable(double now_s) {
   }
   if (spindle_) {
     spindle_->ctl.clear_fault();
-    spindle_->cmd.goal = drive::Goal::kFaultReset;  // a fault the VFD still reports is cleared
+    spindle_->reset_pending = true;  // a fault the drive still reports is cleared
+    spindle_->reset_deadline_s = now_s + SpindleControl::kNotRunningS;
   }
   core_.disengage(actuals());
   state_ = State::kEnabling;
@@ -337,6 +338,7 @@ void DriveBridgeNode::servo_tick_inner(double now_s) {
   const AxisArray& cmd = hold ? core_.commanded() : core_.tick();
   follow_core_state();
   set_axis_commands(cmd);
+  if (spindle_) post_spindle_command(now_s);
   trace_tick(now_s, hold, cmd);
   if (hold) return;
   post_rounds(now_s);
@@ -390,7 +392,8 @@ void DriveBridgeNode::take_operator_command(double now_s) {
     }
     if (spindle_ && c == cnc::lcmt_drive_command::FAULT_RESET) {
       spindle_->ctl.clear_fault();
-      spindle_->cmd.goal = drive::Goal::kFaultReset;
+      spindle_->reset_pending = true;
+      spindle_->reset_deadline_s = now_s + SpindleControl::kNotRunningS;
     }
     core_.disengage(actuals());
     if (state_ != State::kStarting) state_ = State::kDisabled;
@@ -666,6 +669,7 @@ void DriveBridgeNode::shut_down() {
     spindle_->ctl.stop();
     spindle_->cmd.direction = 0;
     spindle_->cmd.hz = 0;
+    spindle_->cmd.goal = drive::Goal::kDisable;  // a CiA-402 drive's power off, as the axes'
     spindle_->worker->set_spindle_command(spindle_->cmd);
   }
   if (io_) {
@@ -697,6 +701,14 @@ void DriveBridgeNode::shut_down() {
     spdlog::info("axis {}: {} transactions, {} timeouts, {} exceptions, {} CRC errors, {} other errors, {} reconnects{}{}",
                  cfg_.axes[i].name, c.transactions, c.timeouts, c.exceptions, c.crc_errors, c.other_errors,
                  c.reconnects, failed ? "; last error: " : "", failed ? r.last_error.data() : "");
+  }
+  if (spindle_) {
+    const SpindleReport r = spindle_->worker->spindle_report();
+    const auto& c = r.counters;
+    spdlog::info("spindle: {} transactions, {} timeouts, {} exceptions, {} CRC errors, {} other errors{}{}",
+                 c.transactions, c.timeouts, c.exceptions, c.crc_errors, c.other_errors,
+                 c.timeouts + c.exceptions + c.crc_errors + c.other_errors > 0 ? "; last error: " : "",
+                 c.timeouts + c.exceptions + c.crc_errors + c.other_errors > 0 ? r.last_error.data() : "");
   }
   for (auto& l : links_) l->close(util::monotonic_s());
   state_ = State::kDisabled;

@@ -124,6 +124,8 @@ class DriveBridgeNode {
   void make_spindle(std::map<std::string, LinkWorker*>& by_link);
   void make_io(std::map<std::string, LinkWorker*>& by_link);
   void spindle_tick(double now_s);
+  // Its command to the drive, stamped with this tick's playback (after the core's tick).
+  void post_spindle_command(double now_s);
   void publish_spindle_status();
   // The I/O modules' share (io: in the config).
   void io_tick();
@@ -176,6 +178,11 @@ class DriveBridgeNode {
     int64_t pending_seq = 0;
     int8_t pending_direction = 0;
     double pending_rpm = 0;
+    bool pending_orient = false;
+    double pending_orient_deg = 0;
+    int8_t pending_orient_mode = 0;
+    bool reset_pending = false;  // ENABLE or FAULT_RESET asked for the drive's fault reset
+    double reset_deadline_s = 0;  // and it must have taken effect by then
   };
   std::unique_ptr<Spindle> spindle_;
   std::string ch_spindle_status_;

@@ -163,6 +163,9 @@ void LinkWorker::spindle_round(double now_s) {
   const drive::TxResult r = sp.dev->exchange(image_.outputs(sp.pdo), image_.inputs(sp.pdo), sp.work.counters);
   if (r == drive::TxResult::kOk) {
     sp.work.in = drive::get_pdo<drive::SpindleInputs>(image_.inputs(sp.pdo));
+    // The reply is in: the drive sampled its counter the reply's time on the line before.
+    sp.work.sample_s = now_s + (util::monotonic_s() - round_mono_) - sp.work.in.sample_age_s;
+    sp.work.cmd = c;
     sp.work.answering = true;
     sp.last_answer_s = now_s;
     if (sp.dev->control(c.goal, sp.work.counters) == drive::TxResult::kLinkLost) mark_all_lost();
@@ -178,6 +181,7 @@ void LinkWorker::spindle_round(double now_s) {
 }
 
 void LinkWorker::round(double now_s) {
+  round_mono_ = util::monotonic_s();
   AxisCommand cmds[kMaxSlots];
   const size_t n = slots_.size();
   for (size_t i = 0; i < n; ++i) cmds[i] = slots_[i]->cmd.read();

@@ -70,17 +70,28 @@ struct AxisReport {
   std::array<char, 96> last_error{};  // fixed size: reports are copied every tick
 };
 
-// What the servo loop and a worker exchange for the spindle drive (a VFD).
+// What the servo loop and a worker exchange for the spindle drive (a VFD, a servo drive).
 struct SpindleCommand {
-  drive::Goal goal = drive::Goal::kDisable;  // kFaultReset: clear the drive's fault
+  // kFaultReset: clear the drive's fault; kEnable / kDisable: a CiA-402 drive's power
+  // (a VFD's run is the command word's, every cycle).
+  drive::Goal goal = drive::Goal::kDisable;
   int8_t direction = 0;                      // 1, -1, 0 (stop)
   double hz = 0;
+  // The servo tick that posted it: its time (monotonic clock) and the playback there
+  // (cycle, -1 while the bridge follows no stream, and rate); they stamp the encoder's samples.
+  double tick_s = 0;
+  double playback_cycle = -1;
+  double playback_rate = 1;
 };
 
 struct SpindleReport {
   bool answering = false;
   int64_t lost_events = 0;
   drive::SpindleInputs in;  // in.valid: a status since the link was (re)opened
+  // When the drive sampled in.position_counts (the worker's monotonic clock, the
+  // sample's age on the line taken off), and the command the round carried (its stamp).
+  double sample_s = 0;
+  SpindleCommand cmd;
   drive::LinkCounters counters;
   std::array<char, 96> last_error{};
 };
@@ -190,6 +201,7 @@ class LinkWorker {
   std::atomic<bool> stopping_{false};
   std::thread thread_;
   std::atomic<int64_t> rounds_{0};
+  double round_mono_ = 0;  // the monotonic clock when the round began (its `now_s` may be a test's clock)
 };
 
 }  // namespace cnc::bridge

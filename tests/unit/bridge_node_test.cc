@@ -6,6 +6,9 @@
 // DISABLE stops following. Each profile drives the same scenario. A spindle VFD on
 // the same loopback link: SPINDLE_CMD followed and at speed on SPINDLE_STATUS, its
 // at-speed timeout a fault of the bridge naming it, and still no allocation per tick.
+// A servo spindle with its encoder: the position at 10 rev/s on SPINDLE_STATUS with its
+// playback stamp, an orientation carried out and held; the config errors of an encoder.
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <modbus.h>
 
@@ -186,6 +189,14 @@ class Cell {
     m.rpm = rpm;
     bus.publish("LB.SPINDLE_CMD", m);
   }
+  void spindle_orient(int64_t seq, double degrees, int8_t mode) {
+    cnc::lcmt_spindle_command m{};
+    m.command_seq = seq;
+    m.orient = true;
+    m.orient_deg = degrees;
+    m.orient_mode = mode;
+    bus.publish("LB.SPINDLE_CMD", m);
+  }
 
   void io_command(int64_t seq, int8_t coolant, int64_t outputs, std::vector<double> analog = {}) {
     cnc::lcmt_io_command m{};
@@ -344,6 +355,90 @@ TEST(BridgeNode, SpindleFollowsItsCommandsAndReportsAtSpeed) {
   c.hold_stream(10, 10, 5);
   EXPECT_TRUE(vfd->running());
   EXPECT_EQ(c.spindle.at_speed_seq, 103);
+}
+
+// A servo spindle (cia402_spindle: a CiA-402 drive in profile velocity mode, its
+// 17-bit encoder) as unit 3 on the axes' loopback link.
+const std::string kServoSpindle =
+    "spindle: {drive: {transport: loopback, unit_id: 3, profile: cia402_spindle}, max_rpm: 6000,"
+    " at_speed_tolerance: 0.02, at_speed_timeout_s: 0.5, encoder_counts_per_rev: 131072,"
+    " orient_tolerance_deg: 0.2, orient_timeout_s: 2, orient_rpm: 120, orient_gain_per_s: 20}\n";
+constexpr int kOriented = cnc::lcmt_spindle_status::ORIENTED;
+constexpr int kOrientNone = cnc::lcmt_spindle_status::ORIENT_NONE;
+
+TEST(BridgeNode, ServoSpindlePublishesItsEncodersPositionAndOrients) {
+  Cell c("sim", true, kServoSpindle);
+  c.link().set_clock([&c] { return c.t; });  // the encoder counts on the test's clock
+  c.ticks(40);
+  ASSERT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  drive::VfdEmulator* drive = c.link().vfd(3);
+  ASSERT_NE(drive, nullptr);
+  c.hold_stream(10, 10, 5);
+  EXPECT_TRUE(drive->running()) << "enabled through its state machine while the bridge follows setpoints";
+  EXPECT_TRUE(c.spindle.position_valid);
+  EXPECT_EQ(int{c.spindle.orient_state}, kOrientNone);
+  // 600 rpm clockwise: the position advances at +10 rev/s, stamped on the playback's clock.
+  c.spindle_command(101, 1, 600);
+  c.hold_stream(10, 10, 50);
+  ASSERT_EQ(c.spindle.at_speed_seq, 101);
+  const cnc::lcmt_spindle_status a = c.spindle;
+  const double ta = c.t;
+  c.hold_stream(10, 10, 125);  // 0.5 s
+  const cnc::lcmt_spindle_status b = c.spindle;
+  const double tb = c.t;
+  EXPECT_NEAR((b.position_rev - a.position_rev) / (tb - ta), 10.0, 0.05);
+  ASSERT_GE(a.sample_playback_cycle, 0);
+  EXPECT_NEAR((b.sample_playback_cycle - a.sample_playback_cycle) * 0.004, tb - ta, 0.002);
+  // The sample was taken in the round the last tick posted: the playback then, within a tick.
+  EXPECT_NEAR(b.sample_playback_cycle, c.status.playback_cycle, 0.25 + 1e-6);
+  EXPECT_NEAR(b.position_rev, drive->revolutions(), 10.0 * 0.002) << "within two ticks of the drive's";
+  // Orientation to 90 deg the shortest way: ORIENTED for its command_seq within the tolerance.
+  c.spindle_orient(102, 90, 0);
+  int ticks = 0;
+  while (!(c.spindle.command_seq == 102 && c.spindle.orient_state == kOriented) && ticks < 2000) {
+    c.hold_stream(10, 10, 1);
+    ticks += 4;
+  }
+  ASSERT_EQ(int{c.spindle.orient_state}, kOriented) << c.spindle.fault;
+  const double angle = (c.spindle.position_rev - std::floor(c.spindle.position_rev)) * 360;
+  EXPECT_NEAR(angle, 90, 0.2);
+  EXPECT_EQ(c.spindle.at_speed_seq, 102) << "an orientation is not waited for at speed";
+  c.hold_stream(10, 10, 100);
+  EXPECT_NEAR((drive->revolutions() - std::floor(drive->revolutions())) * 360, 90, 0.2) << "held";
+  EXPECT_EQ(int{c.spindle.orient_state}, kOriented);
+  // DISABLE: the bridge stops following; the drive is disabled once it stands.
+  c.command(cnc::lcmt_drive_command::DISABLE);
+  c.hold_stream(10, 10, 10);
+  EXPECT_FALSE(drive->running());
+}
+
+TEST(BridgeNode, AnEncoderWithoutItsRegisterOrAToleranceTheDriveCannotHoldIsAConfigError) {
+  const auto config_error = [](const std::string& spindle) {
+    const config::MachineConfig cfg = config::parse_machine_config(machine_yaml("sim", true) + spindle, "lb.yaml");
+    bus::Bus bus("memq://");
+    try {
+      DriveBridgeNode node(cfg, bus, DriveBridgeNode::Options{false});
+    } catch (const config::ConfigError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_THAT(config_error("spindle: {drive: {transport: loopback, unit_id: 3, profile: delta_vfd},"
+                           " encoder_counts_per_rev: 4096}\n"),
+              ::testing::HasSubstr("spindle.encoder_counts_per_rev: 4096 counts: the spindle's drive profile "
+                                   "'delta_vfd' ("));
+  EXPECT_THAT(config_error("spindle: {drive: {transport: loopback, unit_id: 3, profile: delta_vfd}, encoder_counts_per_rev: "
+                           "4096}\n"),
+              ::testing::HasSubstr(") maps no encoder (registers.encoder_position)"));
+  // The Delta map's 0.01 Hz (0.6 rpm at 60 rpm/Hz) at a gain of 2: a dead zone of 0.9 deg.
+  EXPECT_THAT(config_error("spindle: {drive: {transport: loopback, unit_id: 3, profile: delta_vfd_encoder},"
+                           " encoder_counts_per_rev: 4096, orient_tolerance_deg: 0.5, orient_gain_per_s: 2}\n"),
+              ::testing::HasSubstr("spindle.orient_tolerance_deg: 0.5 deg: the drive's speed step (0.6 rpm, profile "
+                                   "'delta_vfd_encoder') at spindle.orient_gain_per_s 2 leaves the orientation's "
+                                   "position loop a dead zone of 0.9 deg: raise the tolerance or the gain"));
+  EXPECT_EQ(config_error("spindle: {drive: {transport: loopback, unit_id: 3, profile: delta_vfd_encoder},"
+                         " encoder_counts_per_rev: 4096, orient_tolerance_deg: 1}\n"),
+            "no error");
 }
 
 TEST(BridgeNode, IoModuleFollowsItsCommandsAndReportsItsPoints) {

@@ -288,7 +288,19 @@ TEST(MachineConfig, SpindleSection) {
   EXPECT_DOUBLE_EQ(c.spindle.sim.time_constant_s, 0.4);
   EXPECT_DOUBLE_EQ(c.spindle.min_override, 0.5);  // LinuxCNC's MIN/MAX_SPINDLE_OVERRIDE defaults
   EXPECT_DOUBLE_EQ(c.spindle.max_override, 1.0);
+  EXPECT_EQ(c.spindle.encoder_counts_per_rev, 0);
+  EXPECT_FALSE(c.spindle.measured_position());
+  EXPECT_DOUBLE_EQ(c.spindle.orient_tolerance_deg, 0.5);
+  EXPECT_DOUBLE_EQ(c.spindle.orient_timeout_s, 10);
+  EXPECT_DOUBLE_EQ(c.spindle.orient_rpm, 60);
+  EXPECT_DOUBLE_EQ(c.spindle.orient_gain_per_s, 2);
   EXPECT_TRUE(load_machine_config(std::string(CNC_SOURCE_DIR) + "/config/machines/sim3_spindle.yaml").spindle.enabled);
+  const MachineConfig servo =
+      load_machine_config(std::string(CNC_SOURCE_DIR) + "/config/machines/sim3_servo_spindle.yaml");
+  EXPECT_EQ(servo.spindle.drive.profile, "cia402_spindle");
+  EXPECT_EQ(servo.spindle.encoder_counts_per_rev, 131072);
+  EXPECT_TRUE(servo.spindle.measured_position());
+  EXPECT_DOUBLE_EQ(servo.spindle.orient_tolerance_deg, 0.2);
 }
 
 TEST(MachineConfig, SpindleErrors) {
@@ -312,6 +324,13 @@ TEST(MachineConfig, SpindleErrors) {
   EXPECT_DOUBLE_EQ(wide.spindle.min_override, 0.2);
   EXPECT_DOUBLE_EQ(wide.spindle.max_override, 1.5);
   expect_error_at(with + "  colour: red\n", "spindle.colour", "unknown key");
+  expect_error_at(with + "  encoder_counts_per_rev: -1\n", "spindle.encoder_counts_per_rev", "out of range");
+  expect_error_at(with + "  orient_tolerance_deg: 0\n", "spindle.orient_tolerance_deg", "out of range");
+  expect_error_at(with + "  orient_tolerance_deg: 90\n", "spindle.orient_tolerance_deg", "out of range");
+  expect_error_at(with + "  orient_timeout_s: 0.01\n", "spindle.orient_timeout_s", "out of range");
+  expect_error_at(with + "  orient_gain_per_s: 0\n", "spindle.orient_gain_per_s", "out of range");
+  expect_error_at(with + "  orient_rpm: 0\n", "spindle.orient_rpm", "out of range");
+  expect_error_at(with + "  max_rpm: 100\n  orient_rpm: 200\n", "spindle.orient_rpm", "must not exceed spindle.max_rpm");
   expect_error_at(replace_nth(with, "profile: delta_vfd}", "profile: delta_vfd, response_timeout_s: 1}"),
                   "spindle.drive", "must not exceed drive_bridge.link_loss_timeout_s");
 }

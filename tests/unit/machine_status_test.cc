@@ -91,6 +91,24 @@ TEST(MachineStatus, SpindleWithOverrideAndLoad) {
   s.fault = "spindle: not at speed within 5 s";
   EXPECT_TRUE(has(machine_status(cfg, v), "spindle: FAULT, "));
   EXPECT_TRUE(has(machine_status(cfg, v), ", drive error code 7: spindle: not at speed within 5 s\n"));
+  EXPECT_FALSE(has(machine_status(cfg, v), "spindle position")) << "no encoder";
+}
+
+TEST(MachineStatus, TheSpindlesEncoderAndItsOrientation) {
+  auto cfg = guarded();
+  cfg.spindle.encoder_counts_per_rev = 4096;
+  cnc::lcmt_spindle_status s{};
+  s.state = cnc::lcmt_spindle_status::STOPPED;
+  s.position_valid = true;
+  s.position_rev = -2.75;  // the angle is the position's fraction: 0.25 of a turn
+  s.orient_state = 2;      // ORIENTED
+  MachineView v;
+  v.spindle = &s;
+  EXPECT_TRUE(has(machine_status(cfg, v), "spindle position: -2.7500 rev (90.00 deg), oriented\n"))
+      << machine_status(cfg, v);
+  s.position_valid = false;
+  s.orient_state = 1;
+  EXPECT_TRUE(has(machine_status(cfg, v), "spindle position: not read, orienting\n")) << machine_status(cfg, v);
 }
 
 TEST(MachineStatus, CoolantAndEveryPointByName) {
