@@ -2,9 +2,10 @@
 # The spindle's encoder and its orientation, live:
 #  1. A servo spindle (config/machines/sim3_servo_spindle.yaml: a CiA-402 drive in profile
 #     velocity mode with a 17-bit encoder, cnc-servo-sim's, on the axes' Modbus TCP link):
-#     M3 S600 and a dwell: SPINDLE_STATUS.position_rev advances at 10 rev/s within 0.5 %,
-#     against the messages' time stamps and against their sample_playback_cycle (the
-#     bridge's playback clock), and positive in M3's direction; then an orientation to
+#     M3 S600 and a dwell: SPINDLE_STATUS.position_rev advances at 10 rev/s within 0.5 %
+#     against the messages' time stamps, positive in M3's direction, and within 2 % against
+#     their sample_playback_cycle (the bridge's playback clock, which stands for a stalled
+#     link and catches up); then an orientation to
 #     90 deg the shortest way: ORIENTED within spindle.orient_tolerance_deg, and held
 #     there. The interpolator does not carry out M19 yet: spindle_cmd.py sends the
 #     SPINDLE_CMD as it would (signed, a newer command_seq).
@@ -95,7 +96,11 @@ print(f"# the drive's transactions: {tx_rate:.0f} a second ({tx_rate / 2:.0f} ex
 print(f"# {len(run)} SPINDLE_STATUS over {span:.2f} s at 600 rpm: position_rev advances {by_utime:.4f} rev/s against "
       f"utime, {by_cycle:.4f} rev/s against sample_playback_cycle; the samples lie off that line by {rms_ms:.3f} ms "
       f"rms, {spread_ms:.3f} ms at most (the stamp's scatter in time, the playback clock's own included)", file=sys.stderr)
-check(abs(by_utime - 10) <= 0.05 and abs(by_cycle - 10) <= 0.05, "10 rev/s within 0.5 %, positive in M3")
+check(abs(by_utime - 10) <= 0.05, "10 rev/s within 0.5 %, positive in M3")
+# The playback clock stands while the bridge holds for a stalled link and catches up at
+# up to 1.05 (docs/architecture.md): on a loaded machine its rate against the wall's over
+# 2 s is off by up to a few tenths of a percent (0.64 % at load 7 once).
+check(abs(by_cycle - 10) <= 0.2, "10 rev/s within 2 % on the playback clock")
 line = open(orient_out).read()
 g = re.search(r"orient: ORIENTED after ([0-9.]+) s at ([0-9.]+) deg", line)
 h = re.search(r"held: at ([0-9.]+) deg", line)
