@@ -693,7 +693,8 @@ const Setpoint& Interpolator::step() {
     const Planned& f = blocks_.front();
     sync_.error_mm = sync_target_ - s_;
     const double A = f.live_accel, J = f.live_jerk;
-    if (f.length - s_ > v_ * v_ / (2 * A) + v_ * A / J + v_ * period_s_)
+    if (f.length - s_ > 2 * (v_ * v_ / (2 * A) + v_ * A / J) + v_ * period_s_ &&
+        cycle_ - sync_.lock_cycle >= SyncMove::kSettleCycles)
       sync_.max_error_mm = std::max(sync_.max_error_mm, std::fabs(sync_.error_mm));
   }
   if (probe_.block_index >= 0 && !probe_.done && (blocks_.empty() || blocks_.front().serial != probe_serial_)) {
@@ -735,10 +736,27 @@ bool Interpolator::spindle_position(double* rev, double* rps) const {
   // at 4 ms) without one is a lost spindle feedback, not a late datagram.
   constexpr int64_t kStaleCycles = 25;
   if (sp_applied_ < 0 || cycle_ - sp_applied_ > kStaleCycles) return false;
-  // Where the spindle will be when this cycle's setpoint is played.
-  *rps = sp_rps_;
-  *rev = sp_rev_ + sp_rps_ * (static_cast<double>(cycle_) - sp_cycle_) * period_s_;
+  // Where the spindle will be when this cycle's setpoint is played, at its speed and
+  // acceleration (the samples are a few cycles old).
+  const double dt = (static_cast<double>(cycle_) - sp_cycle_) * period_s_;
+  *rps = sp_rps_ + sp_acc_ * dt;
+  *rev = sp_rev_ + (sp_rps_ + 0.5 * sp_acc_ * dt) * dt;
   return true;
+}
+
+double Interpolator::acquisition_lag(double v, double A, double J, bool trapezoid) const {
+  // How far a speed-up from rest to v (the landing the cycle makes, within A and J)
+  // falls behind a path that ran at v from the start; bounded (a few hundred cycles).
+  const double T = period_s_;
+  double vc = 0, a = 0, lag = 0;
+  for (int k = 0; k < 10000 && vc < v * (1 - 1e-3); ++k) {
+    const double an = std::clamp(landing_accel(v - vc, A, J, T), std::max(-A, a - J * T), std::min(A, a + J * T));
+    const double vn = vc + an * T;
+    lag += v * T - (trapezoid ? 0.5 * (vc + vn) : vn) * T;
+    vc = vn;
+    a = an;
+  }
+  return lag;
 }
 
 void Interpolator::update_sync() {
@@ -786,12 +804,16 @@ void Interpolator::update_sync() {
         break;
       }
       sync_.phase = SyncMove::kAcquire;
+      // The phase: the index, less the distance a speed-up from rest to the commanded
+      // rate leaves the path behind (the same on every pass at one S, whatever the
+      // spindle's speed does meanwhile and however late in its cycle the index came).
+      sync_.lock_rev = sync_.index_rev +
+                       acquisition_lag(pitch * spindle_.rpm / 60.0, f.live_accel, f.live_jerk, true) / pitch;
       [[fallthrough]];
     case SyncMove::kAcquire:
       sync_speed_ = v_sync;
       if (v_ < v_sync * (1 - 1e-3)) break;
-      // Where this cycle's step takes the path at its speed is where the spindle is.
-      sync_.lock_rev = u - (s_ + v_ * period_s_) / pitch;
+      sync_.lock_cycle = cycle_;
       sync_.phase = SyncMove::kTrack;
       [[fallthrough]];
     case SyncMove::kTrack: {
@@ -862,12 +884,13 @@ void Interpolator::rigid_tap_step() {
         }
         if (stopping_ || u < sync_.index_rev) break;
         sync_.phase = SyncMove::kAcquire;
+        sync_.lock_rev = sync_.index_rev + acquisition_lag(pitch * sync_.rpm / 60.0, A, J, false) / pitch;  // as G33's
         [[fallthrough]];
       case SyncMove::kAcquire: {
         const double v_sync = std::max(0.0, pitch * w);
         a_n = toward(v_sync);
         if (v_ + a_n * T < v_sync * (1 - 1e-3)) break;
-        sync_.lock_rev = u - (s_ + (v_ + a_n * T) * T) / pitch;
+        sync_.lock_cycle = cycle_;
         sync_.phase = SyncMove::kTrack;
         [[fallthrough]];
       }
@@ -883,9 +906,14 @@ void Interpolator::rigid_tap_step() {
         }
         // On the way up, leave the spindle where a jerk-limited brake still stops on the start.
         if (!(sync_.reversed && w < 0 && v_ < 0 &&
-              s_ <= brake_distance(-v_, -a_, 0.0, 0.8 * A, 0.5 * J) + 4 * (-v_) * T)) {
-          // Follow: the step that lands on the spindle's position, within the limits.
-          a_n = std::clamp(((target - s_) / T - v_) / T, std::max(-A, a_ - J * T), std::min(A, a_ + J * T));
+              s_ <= 1.5 * brake_distance(-v_, -a_, 0.0, 0.5 * A, 0.25 * J) + 4 * (-v_) * T)) {
+          // Follow as G33 does: the spindle's rate times the pitch, and a correction
+          // that closes the gap in about 8 cycles, reached within the jerk limit (a
+          // step straight onto each predicted position rang: the samples' stamps scatter).
+          const double v_ff = pitch * w;
+          // Stopped by a STOP: once the spindle all but stands, the tap lands at rest.
+          a_n = sync_.stopping && std::fabs(v_ff) < 1e-3 ? toward(0.0)
+                                                          : toward(v_ff + (target - (s_ + v_ff * T)) / (8 * T));
           break;
         }
         // The rest of the way up is a quintic stop on the start (zero speed and
@@ -914,7 +942,8 @@ void Interpolator::rigid_tap_step() {
   }
   if (sync_.phase == SyncMove::kTrack) {
     sync_.error_mm = sync_target_ - s_n;
-    sync_.max_error_mm = std::max(sync_.max_error_mm, std::fabs(sync_.error_mm));
+    if (cycle_ - sync_.lock_cycle >= SyncMove::kSettleCycles)
+      sync_.max_error_mm = std::max(sync_.max_error_mm, std::fabs(sync_.error_mm));
   }
   if (sync_.reversed) sync_.overshoot_mm = std::max(sync_.overshoot_mm, s_n - f.length);
   const double moved = s_n - s_;
@@ -926,6 +955,9 @@ void Interpolator::rigid_tap_step() {
   s_ = s_n;
   const double L = f.length;
   for (int a = 0; a < naxes_; ++a) pos_[a] = f.block.start[a] + (f.block.end[a] - f.block.start[a]) * (s_ / L);
+  // The line's parameter where the tap is (held at the ends past them: the monitor
+  // measures the step against the line between two parameters).
+  out_.u = f.path.u_begin() + (f.path.u_end() - f.path.u_begin()) * std::clamp(s_ / L, 0.0, 1.0);
   const bool at_rest = v_ == 0;
   if (sync_.phase == SyncMove::kExit && s_ == 0 && at_rest) {
     end_rigid_tap(false);
@@ -947,22 +979,37 @@ void Interpolator::plan_tap_exit(double A, double J) {
   e.d = s_;
   e.v0 = -v_;
   e.a0 = -a_;
+  // The shortest that keeps the limits; failing that (a start too near), the one of least
+  // jerk among those that never turn back past the start.
+  double best_j = std::numeric_limits<double>::infinity();
+  int best_n = 0;
+  for (int pass = 0; pass < 2; ++pass)
   for (int n = 2; n <= 1000; ++n) {
+    if (pass == 1 && n != best_n) continue;
     const double te = n * T;
     const double h = e.d - e.v0 * te - 0.5 * e.a0 * te * te, hv = -e.v0 - e.a0 * te, ha = -e.a0;
     e.te = te;
     e.c3 = (10 * h - 4 * hv * te + 0.5 * ha * te * te) / (te * te * te);
     e.c4 = (-15 * h + 7 * hv * te - ha * te * te) / (te * te * te * te);
     e.c5 = (6 * h - 3 * hv * te + 0.5 * ha * te * te) / (te * te * te * te * te);
-    bool ok = true;
-    for (int i = 0; i <= 64 && ok; ++i) {
+    if (pass == 1) return;
+    bool monotone = true;
+    double jmax = 0, amax = 0;
+    for (int i = 0; i <= 64 && monotone; ++i) {
       const double t = te * i / 64.0;
       const double v = (((5 * e.c5 * t + 4 * e.c4) * t + 3 * e.c3) * t + e.a0) * t + e.v0;
       const double a = ((20 * e.c5 * t + 12 * e.c4) * t + 6 * e.c3) * t + e.a0;
       const double j = (60 * e.c5 * t + 24 * e.c4) * t + 6 * e.c3;
-      ok = v >= -1e-9 && std::fabs(a) <= 0.8 * A && std::fabs(j) <= 0.5 * J;
+      monotone = v >= -1e-9;
+      jmax = std::max(jmax, std::fabs(j));
+      amax = std::max(amax, std::fabs(a));
     }
-    if (ok) return;
+    if (!monotone) continue;
+    if (amax <= 0.8 * A && jmax <= 0.5 * J) return;
+    if (jmax < best_j) {
+      best_j = jmax;
+      best_n = n;
+    }
   }
 }
 

@@ -155,6 +155,9 @@ struct SyncMove {
   Phase phase = kNone;
   double index_rev = 0;  // the index the move starts at (revolutions along the turning direction)
   double lock_rev = 0;   // tracking: where the path's s = pitch x (rev - lock_rev)
+  int64_t lock_cycle = -1;  // the cycle it locked at; the phase it took from the index is
+                            // made up over the next kSettleCycles, then it counts in max_error_mm
+  static constexpr int64_t kSettleCycles = 50;
   double error_mm = 0;   // tracking: the spindle's position x pitch less the path's, last cycle
   double max_error_mm = 0;  // ...its largest magnitude over the move while tracking
   // Rigid tap.
@@ -519,11 +522,13 @@ class Interpolator {
   // The spindle's last measured position (kSpindlePosition), and the dry run's own
   // spindle (auto_resume_pauses_: it turns exactly as commanded).
   double sp_rev_ = 0, sp_rps_ = 0, sp_cycle_ = 0;
+  double sp_acc_ = 0, sp_acc_cycle_ = 0, sp_acc_rps_ = 0;  // its acceleration, rev/s², and the sample it is from
   int64_t sp_applied_ = -1;  // the cycle it was applied at (-1: none)
   double ideal_rev_ = 0, ideal_rps_ = 0;
   std::array<char, 200> sync_failure_{};  // why a synchronised move stopped (no allocation in the cycle)
   bool spindle_position(double* rev, double* rps) const;
   void update_sync();
+  double acquisition_lag(double v, double A, double J, bool trapezoid) const;
   bool rigid_tap_front() const;
   void rigid_tap_step();
   // A rigid tap's last stretch up: x(t) = v0 t + a0 t^2/2 + c3 t^3 + c4 t^4 + c5 t^5 to d at rest.

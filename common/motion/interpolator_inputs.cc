@@ -249,6 +249,17 @@ bool Interpolator::apply_command(const Command& cmd) {
     case Command::Kind::kSpindlePosition:
       if (!std::isfinite(cmd.position_mm[0]) || !std::isfinite(cmd.position_mm[1]) || !std::isfinite(cmd.position_mm[2]))
         return false;
+      // The spindle's acceleration from the speeds of samples two cycles apart or more (a
+      // reversal's: the samples are a few cycles old when a setpoint is made).
+      if (sp_applied_ < 0 || cmd.position_mm[2] < sp_acc_cycle_) {
+        sp_acc_ = 0;
+        sp_acc_cycle_ = cmd.position_mm[2];
+        sp_acc_rps_ = cmd.position_mm[1];
+      } else if (cmd.position_mm[2] - sp_acc_cycle_ >= 2.0) {
+        sp_acc_ = (cmd.position_mm[1] - sp_acc_rps_) / ((cmd.position_mm[2] - sp_acc_cycle_) * period_s_);
+        sp_acc_cycle_ = cmd.position_mm[2];
+        sp_acc_rps_ = cmd.position_mm[1];
+      }
       sp_rev_ = cmd.position_mm[0];
       sp_rps_ = cmd.position_mm[1];
       sp_cycle_ = cmd.position_mm[2];

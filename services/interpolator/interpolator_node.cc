@@ -71,6 +71,14 @@ InterpolatorNode::InterpolatorNode(const config::MachineConfig& cfg, bus::Bus& b
   if (cfg.spindle.enabled)
     bus_.subscribe<cnc::lcmt_spindle_status>(cfg.channel(ch::kSpindleStatus), [this](const cnc::lcmt_spindle_status& m) {
       spindle_at_speed_seq_ = std::max(spindle_at_speed_seq_, m.at_speed_seq);
+      if (m.orient_state == cnc::lcmt_spindle_status::ORIENTED)
+        spindle_oriented_seq_ = std::max(spindle_oriented_seq_, m.command_seq);
+      // The newest measured position for a synchronised move (G33, G33.1).
+      if (m.position_valid && m.sample_playback_cycle >= 0 && std::isfinite(m.position_rev) &&
+          std::isfinite(m.actual_rpm) && std::isfinite(m.sample_playback_cycle)) {
+        spindle_pos_ = {m.position_rev, m.actual_rpm / 60.0, m.sample_playback_cycle};
+        spindle_pos_new_ = true;
+      }
     });
   if (cfg.safety.door_input >= 0) door_input_ = cfg.io.point_label(cfg.safety.door_input);
   io_msg_.num_analog = static_cast<int32_t>(std::min<size_t>(cfg.io.analog_outputs.size(), 64));
@@ -388,6 +396,7 @@ void InterpolatorNode::run_cycle() {
   input_cycle();
   manual_cycle();
   take_spindle_at_speed();
+  take_spindle_position();
   feed_planner(cyc);
   request_blocks();
 
@@ -402,7 +411,8 @@ void InterpolatorNode::run_cycle() {
 void InterpolatorNode::take_spindle_at_speed() {
   if (!core_.spindle_waiting()) return;
   const int64_t seq = spindle_seq_base_ + core_.spindle().seq;
-  if (spindle_at_speed_seq_ < seq) return;
+  // An orientation (M19 Q) is done when the bridge reports it oriented.
+  if ((core_.spindle().orient ? spindle_oriented_seq_ : spindle_at_speed_seq_) < seq) return;
   cnc::lcmt_program_command m{};
   m.command = cnc::lcmt_program_command::SPINDLE_AT_SPEED;
   m.value = static_cast<double>(core_.spindle().seq);
@@ -410,6 +420,19 @@ void InterpolatorNode::take_spindle_at_speed() {
   c.kind = Command::Kind::kSpindleAtSpeed;
   c.value = m.value;
   apply_command(c, m);
+}
+
+void InterpolatorNode::take_spindle_position() {
+  // While a synchronised move is queued: the newest sample, once, a recorded input.
+  if (!spindle_pos_new_ || !core_.wants_spindle_position()) return;
+  spindle_pos_new_ = false;
+  spindle_pos_cmd_.command = cnc::lcmt_program_command::SPINDLE_POSITION;
+  spindle_pos_cmd_.num_axes = 3;
+  spindle_pos_cmd_.position_mm.assign(spindle_pos_.begin(), spindle_pos_.end());  // capacity 3 from the first
+  Command c;
+  c.kind = Command::Kind::kSpindlePosition;
+  for (size_t i = 0; i < 3; ++i) c.position_mm[i] = spindle_pos_[i];
+  apply_command(c, spindle_pos_cmd_);
 }
 
 void InterpolatorNode::publish_spindle(int64_t cyc) {
@@ -423,6 +446,9 @@ void InterpolatorNode::publish_spindle(int64_t cyc) {
   spindle_msg_.direction = static_cast<int8_t>(s.direction);
   spindle_msg_.rpm = s.rpm;
   spindle_msg_.stream = stream_;
+  spindle_msg_.orient = s.orient;
+  spindle_msg_.orient_deg = s.orient ? s.orient_deg : 0.0;
+  spindle_msg_.orient_mode = static_cast<int8_t>(s.orient ? s.orient_mode : 0);
   if (bus_.publish(ch_spindle_cmd_, spindle_msg_)) {
     spindle_sent_seq_ = seq;
     spindle_sent_cycle_ = cyc;

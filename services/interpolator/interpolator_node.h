@@ -96,6 +96,9 @@ class InterpolatorNode {
   // The spindle (spindle: in the config): the at-speed wait ended by SPINDLE_STATUS
   // (a recorded SPINDLE_AT_SPEED input), and the core's spindle sent on SPINDLE_CMD.
   void take_spindle_at_speed();
+  // The spindle's measured position (SPINDLE_STATUS) for a synchronised move: a
+  // recorded SPINDLE_POSITION input each cycle a new sample came while one is queued.
+  void take_spindle_position();
   void publish_spindle(int64_t cyc);
   // The core's coolant and digital outputs sent on IO_CMD (io: in the config).
   void publish_io(int64_t cyc);
@@ -273,6 +276,10 @@ class InterpolatorNode {
   // any an interpolator started before this one sent (the bridge takes each once).
   int64_t spindle_seq_base_;
   int64_t spindle_at_speed_seq_ = -1;  // the newest SPINDLE_STATUS at_speed_seq
+  int64_t spindle_oriented_seq_ = -1;  // ...and command_seq reported ORIENTED (M19)
+  std::array<double, 3> spindle_pos_{};  // revolutions, rev/s, sample playback cycle
+  bool spindle_pos_new_ = false;
+  cnc::lcmt_program_command spindle_pos_cmd_{};
   int64_t spindle_sent_seq_ = -1;
   int64_t spindle_sent_cycle_ = 0;
   std::string ch_spindle_cmd_;

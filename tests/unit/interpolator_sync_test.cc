@@ -118,8 +118,9 @@ TEST(InterpolatorSync, TheDryRunFollowsItsSpindleFromTheIndex) {
     }
     if (core.sync_move().phase == SyncMove::kTrack) {
       if (lock_cycle < 0) lock_cycle = sp.cycle;
-      // Away from the end's brake the path is where the spindle says.
-      if (-sp.position_mm[2] < 30 - 1.0) {
+      // Away from the end's brake, and once the phase from the index is made up, the
+      // path is where the spindle says.
+      if (-sp.position_mm[2] < 30 - 3.0 && sp.cycle - lock_cycle >= SyncMove::kSettleCycles) {
         const double want = pitch * (rev - core.sync_move().lock_rev);
         max_track_err = std::max(max_track_err, std::fabs(want - (-sp.position_mm[2])));
       }
@@ -131,8 +132,10 @@ TEST(InterpolatorSync, TheDryRunFollowsItsSpindleFromTheIndex) {
   std::printf("dry run: locked %.3f s after the index, largest error %.2e mm\n",
               static_cast<double>(lock_cycle - start_cycle) * T, max_track_err);
   // The dry run's spindle still speeds up (0.5 s time constant): followed within a micrometre.
-  EXPECT_LT(max_track_err, 1e-5);
-  EXPECT_LT(core.sync_move().max_error_mm, 1e-5);
+  // The phase taken from the index (up to a cycle of the spindle's turn, 0.1 mm here)
+  // is made up within kSettleCycles to a few hundredths of a micrometre.
+  EXPECT_LT(max_track_err, 1e-4);
+  EXPECT_LT(core.sync_move().max_error_mm, 1e-4);
   EXPECT_NEAR(z.back(), -30, 1e-9);
   EXPECT_LT(static_cast<double>(lock_cycle - start_cycle) * T, 0.15);
   expect_within_limits(z, T, 150, 2000, 40000);
@@ -173,7 +176,8 @@ TEST(InterpolatorSync, ALiveSpindleIsFollowedWithinMicrometres) {
     }
     const Setpoint& sp = core.step();
     z.push_back(sp.position_mm[2]);
-    if (core.sync_move().phase == SyncMove::kTrack && -sp.position_mm[2] < 29) {
+    if (core.sync_move().phase == SyncMove::kTrack && -sp.position_mm[2] < 27 &&
+        sp.cycle - core.sync_move().lock_cycle >= SyncMove::kSettleCycles) {
       const double want = pitch * (true_rev(static_cast<double>(sp.cycle) * T) - core.sync_move().lock_rev);
       max_err = std::max(max_err, std::fabs(want + sp.position_mm[2]));
     }
@@ -302,7 +306,8 @@ TEST(InterpolatorSync, ARigidTapFollowsTheSpindleThroughItsReversalAndBack) {
         last_dir = core.spindle().direction;
       }
       if (sp.position_mm[0] > 0 && dir_after == 0) dir_after = core.spindle().direction;
-      if (core.sync_move().phase == SyncMove::kTrack) {
+      if (core.sync_move().phase == SyncMove::kTrack &&
+          sp.cycle - core.sync_move().lock_cycle >= SyncMove::kSettleCycles) {
         tracked = true;
         max_err = std::max(max_err, std::fabs(pitch * (rev - core.sync_move().lock_rev) + sp.position_mm[2]));
       }
@@ -322,9 +327,70 @@ TEST(InterpolatorSync, ARigidTapFollowsTheSpindleThroughItsReversalAndBack) {
                 scale, -deepest - depth, depth, over, max_err);
     EXPECT_NEAR(-deepest - depth, over, 0.02 + pitch * w0 * T);
     EXPECT_NEAR(core.sync_move().overshoot_mm, -deepest - depth, 1e-9);
-    EXPECT_LT(max_err, 1e-6) << "the tap follows the spindle's position exactly while it tracks";
+    EXPECT_LT(max_err, 1e-4) << "the tap follows the spindle's position while it tracks";
     expect_within_limits(z, T, 150, 2000, 40000);
   }
+}
+
+// A live spindle for a tap: a first-order response (tau 0.5 s) to what the core
+// commands, its samples 2-4 cycles old with their stamps scattered by up to +-0.5 ms
+// (a quarter cycle), counted at 131072 per revolution. A tracker that stepped onto
+// each predicted position rang on such samples until Z ran at its velocity limit.
+TEST(InterpolatorSync, ARigidTapFollowsALiveSpindleThroughItsReversal) {
+  const config::MachineConfig cfg = load();
+  Interpolator core(cfg);
+  const double T = cfg.ipo_period_s, tau = 0.5, pitch = 1.25;
+  load_tap(core, 600, pitch, 20, 1.0);
+  std::mt19937 rng(11);
+  std::uniform_int_distribution<int> lag(2, 4);
+  std::uniform_real_distribution<double> scatter(-0.125, 0.125);
+  // The spindle's history, one entry per cycle: revolutions and rev/s at cycle n.
+  std::vector<double> rev{0}, rps{0};
+  std::vector<double> z;
+  double max_err = 0, deepest = 0;
+  for (int i = 0; i < 12000 && core.state() != RunState::kDone; ++i) {
+    const int64_t n = core.cycle();
+    if (core.spindle_waiting()) {
+      Command at;
+      at.kind = Command::Kind::kSpindleAtSpeed;
+      at.value = static_cast<double>(core.spindle().seq);
+      ASSERT_TRUE(core.apply_command(at));
+    }
+    if (core.wants_spindle_position() && n >= 5) {
+      const int64_t k = n - lag(rng);
+      const double stamp = static_cast<double>(k) + scatter(rng);  // when the drive really read it
+      const double r = rev[static_cast<size_t>(k)] + rps[static_cast<size_t>(k)] * (stamp - static_cast<double>(k)) * T;
+      Command c;
+      c.kind = Command::Kind::kSpindlePosition;
+      c.position_mm[0] = std::floor(r * 131072) / 131072;
+      c.position_mm[1] = rps[static_cast<size_t>(k)];
+      c.position_mm[2] = static_cast<double>(k);  // the bridge's stamp: its tick, not the read
+      ASSERT_TRUE(core.apply_command(c));
+    }
+    const Setpoint& sp = core.step();
+    z.push_back(sp.position_mm[2]);
+    deepest = std::min(deepest, sp.position_mm[2]);
+    if (core.sync_move().phase == SyncMove::kTrack && static_cast<size_t>(sp.cycle) < rev.size() &&
+        sp.cycle - core.sync_move().lock_cycle >= SyncMove::kSettleCycles)
+      max_err = std::max(max_err, std::fabs(pitch * (rev[static_cast<size_t>(sp.cycle)] - core.sync_move().lock_rev) +
+                                            sp.position_mm[2]));
+    // The spindle answers the command of this cycle.
+    const double cmd = core.spindle().direction * core.spindle().rpm / 60.0;
+    const double w = cmd + (rps.back() - cmd) * std::exp(-T / tau);
+    rev.push_back(rev.back() + 0.5 * (rps.back() + w) * T);
+    rps.push_back(w);
+  }
+  ASSERT_EQ(core.state(), RunState::kDone);
+  std::printf("rigid tap on a live spindle: largest synchronisation error %.2f um, %.3f mm past the depth\n",
+              max_err * 1e3, -deepest - 20);
+  // Through the reversal the spindle decelerates at 40 rev/s^2 (50 mm/s^2 of Z) while
+  // the samples are 2-4 cycles old: predicted with the samples' acceleration, 7.7 um
+  // (17.6 um with their speed alone).
+  EXPECT_LT(max_err, 0.012);
+  // The model: 1.534 revolutions after the reversal (tau 0.5 s, 10 rev/s) x 1.25 mm.
+  EXPECT_NEAR(-deepest - 20, 1.917, 0.05);
+  EXPECT_EQ(core.last().position_mm[2], 0.0);
+  expect_within_limits(z, T, 150, 2000, 40000);
 }
 
 TEST(InterpolatorSync, AStopInTheHoleStopsTheSpindleAndTheTapFollowsItToRest) {
