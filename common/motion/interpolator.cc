@@ -897,12 +897,30 @@ void Interpolator::rigid_tap_step() {
       case SyncMove::kTrack: {
         const double target = pitch * (u - sync_.lock_rev);
         sync_target_ = target;
-        if (!sync_.reversed && target >= f.length && !sync_.stopping) {
-          // The depth: the spindle reverses (LinuxCNC's rigid tap), the tap follows it.
+        const double As = 0.5 * A / pitch, Js = 0.25 * J / pitch;
+        if (!sync_.reversed && !sync_.stopping &&
+            target + pitch * brake_distance(sync_.rpm / 60.0, 0.0, 0.0, As, Js) >= f.length) {
+          // The depth: the spindle reverses (LinuxCNC's rigid tap), its command's ramp
+          // begun where it stands at the depth; the tap follows the spindle (past the
+          // depth by what the spindle lags behind its command).
           sync_.reversed = true;
+          sync_.ramping = true;
+          sync_.ramp_rps = sync_.direction * sync_.rpm / 60.0;
+          sync_.ramp_acc = 0;
+          sync_.ramp_target = -sync_.direction * std::min(sync_.rpm * f.block.tap_retract_scale, cfg_.spindle.max_rpm) / 60.0;
+        }
+        if (sync_.ramping && !sync_.stopping) {
+          const double acc = std::clamp(landing_accel(sync_.ramp_target - sync_.ramp_rps, As, Js, T),
+                                        std::max(-As, sync_.ramp_acc - Js * T), std::min(As, sync_.ramp_acc + Js * T));
+          sync_.ramp_rps += acc * T;
+          sync_.ramp_acc = acc;
+          if (std::fabs(sync_.ramp_rps - sync_.ramp_target) <= 1e-9 * std::fabs(sync_.ramp_target) && acc == 0) {
+            sync_.ramp_rps = sync_.ramp_target;
+            sync_.ramping = false;
+          }
           ++spindle_.seq;
-          spindle_.direction = -sync_.direction;
-          spindle_.rpm = std::min(sync_.rpm * f.block.tap_retract_scale, cfg_.spindle.max_rpm);
+          spindle_.direction = sync_.ramp_rps > 0 ? 1 : sync_.ramp_rps < 0 ? -1 : 0;
+          spindle_.rpm = std::fabs(sync_.ramp_rps) * 60.0;
         }
         // On the way up, leave the spindle where a jerk-limited brake still stops on the start.
         if (!(sync_.reversed && w < 0 && v_ < 0 &&

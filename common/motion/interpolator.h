@@ -167,6 +167,11 @@ struct SyncMove {
   double overshoot_mm = 0;   // how far past the depth the tap went
   int direction = 0;         // the spindle's direction and speed when the tap began
   double rpm = 0, program_rpm = 0;
+  // The reversal is commanded as a ramp of the spindle's speed (rev/s, signed) whose
+  // acceleration and jerk times the pitch stay within half and a quarter of the
+  // tap's: a step left the tap behind a servo spindle (125 um at 400 rev/s^2).
+  bool ramping = false;
+  double ramp_rps = 0, ramp_acc = 0, ramp_target = 0;
 };
 
 // The spindle as the program has it where the path stands: each spindle event

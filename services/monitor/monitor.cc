@@ -113,6 +113,8 @@ double Monitor::step_chord_error(const SetpointIn& sa, const SetpointIn& sb) con
   }
   if (a.block_index == b.block_index) {
     const Known* k = find(b.program_token, b.block_index);
+    // A rigid tap's setpoints lie on its line by construction, past its end too.
+    if (k != nullptr && k->block.sync == program::kSyncRigidTap) return 0.0;
     return k ? motion::chord_error(*k->path, a.u, b.u, a.position_mm, b.position_mm) : kNaN;
   }
   // Across block boundaries: every block part against the step's segment.
@@ -124,8 +126,11 @@ double Monitor::step_chord_error(const SetpointIn& sa, const SetpointIn& sb) con
       continue;
     }
     const double u0 = i == a.block_index ? a.u : k->path->u_begin();
-    // A probing move left before its end ended where the path left it.
-    const double u1 = i == b.block_index ? b.u : k->block.probe != 0 ? u0 : k->path->u_end();
+    // A probing move left before its end ended where the path left it; a rigid tap
+    // ends on its start (its setpoints' u is where on its line the tap is).
+    const double u1 = i == b.block_index                                            ? b.u
+                      : k->block.probe != 0 || k->block.sync == program::kSyncRigidTap ? u0
+                                                                                        : k->path->u_end();
     worst = std::max(worst, motion::chord_error(*k->path, u0, u1, a.position_mm, b.position_mm));
   }
   return worst;
