@@ -48,7 +48,7 @@ DEFAULT_PROGRAM="$ROOT/config/programs/demo.ngc"
 bin() {
   if [ "$INSTALLED" -eq 1 ]; then echo "$BINDIR/$1"; return; fi
   case "$1" in
-    cnc-logger|cnc-interpolator|cnc-drive-bridge|cnc-monitor|cnc-program-server|cnc-hmi) echo "$BUILD/services/$1" ;;
+    cnc-logger|cnc-interpolator|cnc-drive-bridge|cnc-monitor|cnc-program-server|cnc-hmi|cnc-opcua) echo "$BUILD/services/$1" ;;
     cnc-cam) echo "$BUILD/tools/cam/$1" ;;
     cnc-rs274) echo "$BUILD/tools/rs274/$1" ;;
     *) echo "$BUILD/tools/$1" ;;
@@ -77,18 +77,21 @@ PACKAGES=(
   libcgal-dev                            # CGAL's AABB tree, the baseline of cnc-cam-index-bench (optional)
   libboost-dev nlohmann-json3-dev        # cnc-hmi: Boost.Beast (HTTP, WebSocket), JSON
   chromium-driver python3-selenium       # integration.hmi drives the page in headless Chromium
+  nodejs npm                             # cnc-opcua: node-opcua (npm ci from services/opcua/package-lock.json at build)
   clang libclang-rt-14-dev               # libFuzzer with ASan and UBSan: tests/fuzz/run (optional)
 )
 
-# Service name -> executable, in start order (config/services.txt, the one list).
+# Service name -> executable, in start order (config/services.txt, the one list);
+# OPTIONAL: the services started only when the config has their section.
 SERVICES=()
-declare -A EXE=()
-while read -r _svc _exe _; do
+declare -A EXE=() OPTIONAL=()
+while read -r _svc _exe _opt; do
   case "$_svc" in ''|'#'*) continue ;; esac
   SERVICES+=("$_svc")
   EXE[$_svc]="$_exe"
+  [ "${_opt%% *}" = optional ] && OPTIONAL[$_svc]=1
 done <"$ROOT/config/services.txt"
-unset _svc _exe
+unset _svc _exe _opt
 
 say() { printf '%s\n' "cnc: $*" >&2; }
 die() { say "$*"; exit 2; }
@@ -110,9 +113,14 @@ run_child() {
 }
 
 install_missing() {
-  local missing=()
+  local missing=() provided
+  # A package another one provides counts as there: NodeSource's nodejs provides npm
+  # (and conflicts with Debian's npm, which apt would otherwise try to install).
+  provided=" $(dpkg-query -W -f='${db:Status-Abbrev} ${Provides}\n' 2>/dev/null | awk '$1 == "ii" {$1 = ""; print}' |
+              sed -e 's/([^)]*)//g' -e 's/,/ /g' | tr -s ' \n' '  ') "
   for p in "${PACKAGES[@]}"; do
-    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed' || missing+=("$p")
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed' ||
+      [[ "$provided" == *" $p "* ]] || missing+=("$p")
   done
   [ ${#missing[@]} -eq 0 ] && return 0
   if [ "$(id -u)" -ne 0 ]; then
@@ -188,7 +196,15 @@ cmd_up() {
   }
   trap 'stop_all; exit $rc' INT TERM
   for s in "${chosen[@]}"; do
-    local args=(--machine "$machine")
+    local args=(--machine "$machine") url=""
+    # An optional service runs when its program finds its section in the config
+    # (--print-url answers its address; 3: no section).
+    if [ -n "${OPTIONAL[$s]:-}" ]; then
+      if ! url="$("$(bin "${EXE[$s]##*/}")" --machine "$machine" --print-url 2>/dev/null)"; then
+        [ -z "$only" ] || say "$s: $machine does not configure it (no $s: section): not started"
+        continue
+      fi
+    fi
     [ "$s" = logger ] && [ -n "$log_out" ] && args+=(--out "$log_out")
     [ "$s" = servo-sim ] && [ -n "$final_state" ] && args+=(--final-state "$final_state")
     [ "$s" = servo-sim ] && [ -n "$sim_trace" ] && args+=(--trace "$sim_trace")
@@ -200,10 +216,16 @@ cmd_up() {
       local sdir="${CNC_STATE_DIR:-$(dirname "$machine")}"
       mkdir -p "$sdir" && args+=(--state "$sdir/$(basename "$machine" .yaml).program-server.state")
     fi
+    # The OPC UA server's certificate and counters: MACHINE.opcua/ in the same folder.
+    if [ "$s" = opcua ]; then
+      local sdir="${CNC_STATE_DIR:-$(dirname "$machine")}"
+      mkdir -p "$sdir" && args+=(--state "$sdir")
+    fi
     "$(bin "${EXE[$s]##*/}")" "${args[@]}" &
     pids[$s]=$!
     say "started $s (pid ${pids[$s]})"
     if [ "$s" = hmi ]; then say "the operator's page: $("$(bin cnc-hmi)" --machine "$machine" --print-url 2>/dev/null)"; fi
+    if [ "$s" = opcua ]; then say "the OPC UA endpoint: $url"; fi
     sleep 0.1
   done
   # A service that ends on its own does not end the others: stopping them would take

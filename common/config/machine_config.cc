@@ -29,7 +29,7 @@ std::set<std::string> transport_names() {
 constexpr std::string_view kTopKeys[] = {"cell",    "timing", "motion", "operator",     "hmi",    "process",
                                          "cutting", "program", "axes",  "drive_bridge", "logger", "security",
                                          "monitor", "spindle", "io",  "safety", "kinematics",
-                                         "probe"};
+                                         "probe", "opcua"};
 constexpr std::string_view kCellKeys[] = {"name", "channel_prefix", "lcm_url"};
 constexpr std::string_view kTimingKeys[] = {"ipo_period_s",       "servo_period_s",      "setpoint_timeout_s",
                                             "stop_decel_mm_s2",   "heartbeat_period_s",  "heartbeat_timeout_s",
@@ -41,6 +41,10 @@ constexpr std::string_view kOperatorKeys[] = {"homing_required", "jog_keepalive_
                                               "safe_z_mm"};
 constexpr std::string_view kHmiKeys[] = {"listen",      "port",           "users_file", "read_only_without_login",
                                          "program_dir", "status_rate_hz", "runs_dir"};
+constexpr std::string_view kOpcuaKeys[] = {"listen",   "port",          "anonymous",        "allow_security_none",
+                                           "trust_unknown_clients", "hmi_user", "hmi_password_file", "identification"};
+constexpr std::string_view kOpcuaIdKeys[] = {"manufacturer", "model", "serial_number", "product_instance_uri",
+                                             "year_of_construction"};
 constexpr std::string_view kProcessKeys[] = {"ball_radius_mm", "flutes", "pick_feed_mm", "target_rmax_um",
                                              "spindle_rpm"};
 constexpr std::string_view kCuttingKeys[] = {"tool",          "material",       "model",          "stock",
@@ -100,6 +104,8 @@ constexpr KeySection kSections[] = {
     {"motion", kMotionKeys},
     {"operator", kOperatorKeys},
     {"hmi", kHmiKeys},
+    {"opcua", kOpcuaKeys},
+    {"opcua.identification", kOpcuaIdKeys},
     {"process", kProcessKeys},
     {"cutting", kCuttingKeys},
     {"cutting.stock", kStockKeys},
@@ -296,6 +302,36 @@ void read_hmi(MapReader r, HmiConfig& h) {
   if (!local && h.users_file.empty())
     r.fail("users_file", "is required when hmi.listen is not a localhost address ('" + h.listen +
                              "'): a shop network needs passwords (cnc-hmi --hash-password makes a line)");
+  r.finish();
+}
+
+// After read_hmi: who may log in depends on the HMI's users.
+void read_opcua(MapReader r, const HmiConfig& hmi, const std::string& cell, OpcuaConfig& o) {
+  o.enabled = true;
+  o.listen = r.get_string("listen", o.listen);
+  o.port = static_cast<int>(r.get_int("port", o.port, 1, 65535));
+  o.anonymous = r.get_bool("anonymous", false);
+  o.allow_security_none = r.get_bool("allow_security_none", false);
+  o.trust_unknown_clients = r.get_bool("trust_unknown_clients", false);
+  o.hmi_user = r.get_string("hmi_user", "");
+  o.hmi_password_file = beside(r, r.get_string("hmi_password_file", ""));
+  MapReader id = r.map("identification", kOpcuaIdKeys);
+  o.manufacturer = id.require_string("manufacturer");
+  o.model = id.require_string("model");
+  o.serial_number = id.require_string("serial_number");
+  o.product_instance_uri = id.get_string("product_instance_uri", "urn:cnc:" + cell + ":" + o.serial_number);
+  o.year_of_construction = static_cast<int>(id.get_int("year_of_construction", 0, 0, 9999));
+  for (const auto& [k, v] : {std::pair{"manufacturer", &o.manufacturer}, {"model", &o.model},
+                              {"serial_number", &o.serial_number}, {"product_instance_uri", &o.product_instance_uri}})
+    if (v->empty()) id.fail(k, "must not be empty");
+  id.finish();
+  if (hmi.users_file.empty() && !o.anonymous)
+    r.fail("anonymous", "is false and hmi.users_file is not set: nobody could log in (OPC UA users are the HMI's)");
+  const bool hmi_asks = !hmi.users_file.empty() && !hmi.read_only_without_login;
+  if (hmi_asks && o.hmi_user.empty())
+    r.fail("hmi_user", "is required: the HMI asks for a login (hmi.users_file) and cnc-opcua reads the cell through it");
+  if (!o.hmi_user.empty() && o.hmi_password_file.empty())
+    r.fail("hmi_password_file", "is required with hmi_user: the file with " + o.hmi_user + "'s password");
   r.finish();
 }
 
@@ -747,6 +783,7 @@ MachineConfig read_machine(MapReader top) {
   read_motion(top.map("motion", kMotionKeys), c);
   if (top.has("operator")) read_operator(top.map("operator", kOperatorKeys), c.operator_);
   read_hmi(top.map("hmi", kHmiKeys), c.hmi);
+  if (top.has("opcua")) read_opcua(top.map("opcua", kOpcuaKeys), c.hmi, c.name, c.opcua);
   read_process(top.map("process", kProcessKeys), c.process);
   if (top.has("cutting")) read_cutting(top.map("cutting", kCuttingKeys), c.cutting);
   read_program(top.map("program", kProgramKeys), c.program);

@@ -262,6 +262,29 @@ struct HmiConfig {
   std::string runs_dir;              // the recorded runs the page lists ("" = logger.directory)
 };
 
+// The OPC UA server cnc-opcua (section `opcua:`, optional; docs/opcua.md): OPC 40501-1
+// Machine Tools over the HMI's API. Absent: no server (./cnc up does not start it).
+struct OpcuaConfig {
+  bool enabled = false;              // the section is there
+  std::string listen = "127.0.0.1";  // the address the endpoint listens on
+  int port = 4840;                   // opc.tcp port (4840: IANA's for OPC UA)
+  bool anonymous = false;            // anonymous sessions (read only); off: a user of hmi.users_file must log in
+  bool allow_security_none = false;  // an endpoint with SecurityPolicy None beside Basic256Sha256 SignAndEncrypt
+  // A client application's certificate that the server does not know: trusted on first
+  // use (true), or refused and kept in the state's pki/rejected until moved to pki/trusted.
+  bool trust_unknown_clients = false;
+  // The HMI user cnc-opcua logs in as (hmi.users_file) and the file with its password
+  // (owner-only, relative to the config); needed when the HMI asks for a login.
+  std::string hmi_user;
+  std::string hmi_password_file;
+  // Identification (MachineToolIdentificationType).
+  std::string manufacturer;
+  std::string model;
+  std::string serial_number;
+  std::string product_instance_uri;  // "" = urn:cnc:<cell.name>:<serial_number>
+  int year_of_construction = 0;      // 0: not given
+};
+
 struct ProcessConfig {
   // Choi et al. 2005's roughness feed law; all zero = not set.
   double ball_radius_mm = 0;
@@ -379,6 +402,7 @@ struct MachineConfig {
 
   OperatorConfig operator_;
   HmiConfig hmi;
+  OpcuaConfig opcua;
 
   DriveBridgeConfig drive_bridge;
   // drive_bridge.profile_dir: where drive profiles are; "" = config/drives beside the machine's folder.

@@ -477,6 +477,40 @@ TEST(MachineConfig, SafetyErrors) {
   EXPECT_EQ(c.io.points[static_cast<size_t>(c.safety.hard_limits[0].max_input)].name, "estop_ok");
 }
 
+TEST(MachineConfig, OpcuaSection) {
+  const std::string id = "  identification: {manufacturer: ACME, model: M3, serial_number: SN-1}\n";
+  EXPECT_FALSE(parse_machine_config(sim3_text(), kLabel).opcua.enabled);
+  const MachineConfig c = parse_machine_config(
+      sim3_text() + "hmi: {users_file: users}\nopcua:\n  port: 4841\n  hmi_user: opcua\n  hmi_password_file: pw\n" + id,
+      "/etc/cnc/cell.yaml");
+  EXPECT_TRUE(c.opcua.enabled);
+  EXPECT_EQ(c.opcua.port, 4841);
+  EXPECT_EQ(c.opcua.listen, "127.0.0.1");
+  EXPECT_FALSE(c.opcua.anonymous);
+  EXPECT_FALSE(c.opcua.allow_security_none);
+  EXPECT_FALSE(c.opcua.trust_unknown_clients);
+  EXPECT_EQ(c.opcua.hmi_password_file, "/etc/cnc/pw");
+  EXPECT_EQ(c.opcua.manufacturer, "ACME");
+  EXPECT_EQ(c.opcua.product_instance_uri, "urn:cnc:sim3:SN-1");
+  EXPECT_EQ(c.opcua.year_of_construction, 0);
+}
+
+TEST(MachineConfig, OpcuaErrors) {
+  const std::string id = "  identification: {manufacturer: ACME, model: M3, serial_number: SN-1}\n";
+  // No users (no hmi.users_file) and no anonymous access: nobody could log in.
+  expect_error_at(sim3_text() + "opcua:\n" + id, "opcua.anonymous", "nobody could log in");
+  // The HMI asks for a login: cnc-opcua needs a user of its own.
+  expect_error_at(sim3_text() + "hmi: {users_file: users}\nopcua:\n" + id, "opcua.hmi_user", "is required");
+  expect_error_at(sim3_text() + "hmi: {users_file: users}\nopcua:\n  hmi_user: o\n" + id, "opcua.hmi_password_file",
+                  "is required with hmi_user");
+  expect_error_at(sim3_text() + "opcua:\n  anonymous: true\n  identification: {model: M3, serial_number: SN-1}\n",
+                  "opcua.identification.manufacturer", "is required");
+  expect_error_at(sim3_text() + "opcua:\n  anonymous: true\n  identification: {manufacturer: '', model: M, serial_number: S}\n",
+                  "opcua.identification.manufacturer", "must not be empty");
+  expect_error_at(sim3_text() + "opcua:\n  anonymous: true\n  port: 0\n" + id, "opcua.port", "out of range");
+  expect_error_at(sim3_text() + "opcua:\n  anonymous: true\n  policy: None\n" + id, "opcua.policy", "unknown key");
+}
+
 TEST(MachineConfig, DuplicateKey) {
   expect_error_at(replace_nth(sim3_text(), "timing:\n", "timing:\n  stop_decel_mm_s2: 100\n"),
                   "timing.stop_decel_mm_s2", "duplicate key");
