@@ -10,7 +10,7 @@
 const fs = require("node:fs");
 const path = require("node:path");
 const {
-  OPCUAServer, OPCUACertificateManager, nodesets, SecurityPolicy, MessageSecurityMode,
+  OPCUAServer, OPCUACertificateManager, nodesets, SecurityPolicy, MessageSecurityMode, UserTokenType,
 } = require("node-opcua");
 const { HmiClient } = require("./hmi_client");
 const { MachineToolModel } = require("./machine_tool");
@@ -72,6 +72,29 @@ async function main() {
     automaticallyAcceptUnknownCertificate: s.trust_unknown_clients,
   });
 
+  // The pki folders are polled every second (node-opcua-pki's default: 5 s), so that a
+  // client certificate an operator moves from rejected/ to trusted/certs/ is taken soon.
+  certificateManager.folderPoolingInterval = 1000;
+  // node-opcua-pki 5.7 forgets the file of a certificate it rejected while running: the
+  // move out of rejected/ goes unnoticed, the fingerprint stays in its rejected index
+  // and wins over the trusted file (and a client that tries again before the trusted
+  // folder's watcher has the file is rejected anew). Once a second: a rejected entry
+  // whose file was moved to trusted/certs is trusted, one whose file is gone forgotten.
+  const forgetMovedRejections = setInterval(() => {
+    const thumbs = certificateManager._thumbs;
+    if (!thumbs || !thumbs.rejected) return;
+    for (const [fingerprint, entry] of Object.entries(thumbs.rejected)) {
+      if (!entry || !entry.filename || fs.existsSync(entry.filename)) continue;
+      delete thumbs.rejected[fingerprint];
+      const moved = path.join(certificateManager.trustedFolder, path.basename(entry.filename));
+      if (fs.existsSync(moved)) {
+        thumbs.trusted[fingerprint] = { certificate: entry.certificate, filename: moved };
+        log.info(`cnc-opcua: client certificate ${path.basename(moved)} trusted (moved to ${certificateManager.trustedFolder})`);
+      }
+    }
+  }, 1000);
+  forgetMovedRejections.unref();
+
   const policies = [SecurityPolicy.Basic256Sha256];
   const modes = [MessageSecurityMode.SignAndEncrypt];
   if (s.allow_security_none) {
@@ -87,6 +110,12 @@ async function main() {
     securityModes: modes,
     allowAnonymous: s.anonymous,
     serverCertificateManager: certificateManager,
+    // No user is known by a certificate (below: that token is not offered); this PKI only
+    // keeps node-opcua from making its default one in the user's home.
+    userCertificateManager: new OPCUACertificateManager({
+      rootFolder: path.join(s.state_dir, "user-pki"),
+      automaticallyAcceptUnknownCertificate: false,
+    }),
     disableDiscovery: false,
     nodeset_filename: [nodesets.standard, nodesets.di, nodesets.machinery, nodesets.ia, nodesets.isa95JobControl,
                        nodesets.machineryJobs, nodesets.machineTool],
@@ -113,6 +142,12 @@ async function main() {
     },
   });
   await server.initialize();
+  // The user tokens offered: a user name and password (the HMI's users), and anonymous
+  // when the config allows it. node-opcua also offers X509 user certificates; removed,
+  // a session that presents one is refused.
+  for (const e of server.endpoints)
+    for (const d of e.endpointDescriptions())
+      d.userIdentityTokens = (d.userIdentityTokens || []).filter((t) => t.tokenType !== UserTokenType.Certificate);
 
   const countersFile = path.join(s.state_dir, "counters.json");
   const counters = loadCounters(countersFile);
@@ -126,7 +161,8 @@ async function main() {
   model.on("counters", () => saveCounters(countersFile, counters));
 
   await server.start();
-  const endpoints = server.endpoints.flatMap((e) => e.endpointDescriptions())
+  // A restricted None endpoint serves discovery only (GetEndpoints); no session is taken on it.
+  const endpoints = server.endpoints.flatMap((e) => e.endpointDescriptions()).filter((d) => !d.restricted)
     .map((d) => `${d.securityPolicyUri.split("#")[1]}/${MessageSecurityMode[d.securityMode]}`);
   log.info(`cnc-opcua: ${s.endpoint_url} listening (${[...new Set(endpoints)].join(", ")}; ` +
            `anonymous ${s.anonymous ? "read only" : "refused"}; certificate ${path.join(s.state_dir, "pki", "own", "certs", "certificate.pem")})`);
