@@ -164,7 +164,7 @@ async function main() {
   // A restricted None endpoint serves discovery only (GetEndpoints); no session is taken on it.
   const endpoints = server.endpoints.flatMap((e) => e.endpointDescriptions()).filter((d) => !d.restricted)
     .map((d) => `${d.securityPolicyUri.split("#")[1]}/${MessageSecurityMode[d.securityMode]}`);
-  log.info(`cnc-opcua: ${s.endpoint_url} listening (${[...new Set(endpoints)].join(", ")}; ` +
+  log.info(`cnc-opcua: ${s.endpoint_url} listening (node ${process.version}, ${[...new Set(endpoints)].join(", ")}; ` +
            `anonymous ${s.anonymous ? "read only" : "refused"}; certificate ${path.join(s.state_dir, "pki", "own", "certs", "certificate.pem")})`);
   console.log(`cnc-opcua: open ${s.endpoint_url}`);
   hmi.start();

@@ -110,6 +110,13 @@ stop opcua-open TERM
 grep -q "cnc-opcua: stopped (.* events raised, 1 parts counted)" "$WORK/opcua.log" ||
   { tail -5 "$WORK/opcua.log" >&2; fail "cnc-opcua did not count 1 part"; }
 grep -q '"parts":1' "$WORK/machine.opcua/counters.json" || fail "counters.json: $(cat "$WORK/machine.opcua/counters.json")"
+# The hour meter counted the seconds the drive bridge ran while the server did (some 10-30 s).
+/usr/bin/python3 - "$WORK/machine.opcua/counters.json" <<'PY' || fail "the power-on seconds: $(cat "$WORK/machine.opcua/counters.json")"
+import json, sys
+s = json.load(open(sys.argv[1]))["power_on_s"]
+print(f"# power-on seconds counted: {s}", file=sys.stderr)
+sys.exit(0 if 3 <= s <= 90 else 1)
+PY
 [ "$(stat -c %a "$WORK/machine.opcua/pki/own/private/private_key.pem")" = 600 ] ||
   fail "the server's private key has mode $(stat -c %a "$WORK/machine.opcua/pki/own/private/private_key.pem"), not 600"
 for s in hmi interpolator program-server monitor drive-bridge servo-sim; do stop "$s" TERM; done
