@@ -283,7 +283,13 @@ class MachineToolModel extends EventEmitter {
     }
     const changed = this.runs.update(st);
     const run = this.runs.run;
-    if (run !== null) {
+    if (run === null) {
+      // No run since cnc-opcua started: an empty job, waiting in Initializing.
+      this.set(this.activeJob, DataType.String, "");
+      this.set(this.jobIdentifier, DataType.String, "");
+      this.set(this.jobProgramName, DataType.String, "");
+      this.set(this.runsCompleted, DataType.UInt32, 0);
+    } else {
       this.set(this.activeJob, DataType.String, run.id);
       this.set(this.jobIdentifier, DataType.String, run.id);
       this.set(this.jobProgramName, DataType.String, run.name);

@@ -163,6 +163,25 @@ async function main() {
     if (!names.includes(m)) fail(`the machine has no mandatory ${m} (it has ${names})`);
   ok(`the machine's mandatory components: ${names.join(", ")}`);
 
+  // Every variable below the machine reads Good with a value (the mandatory ones and
+  // the optional ones this server adds).
+  {
+    const vars = [];
+    const walk = async (id, where) => {
+      const r = await session.browse({ nodeId: id, browseDirection: BrowseDirection.Forward, resultMask: 63,
+                                       referenceTypeId: "HasChild", includeSubtypes: true });
+      for (const ref of r.references) {
+        const here = `${where}/${ref.browseName.name}`;
+        if (ref.nodeClass === NodeClass.Variable) vars.push([here, ref.nodeId]);
+        if (ref.nodeClass === NodeClass.Object || ref.nodeClass === NodeClass.Variable) await walk(ref.nodeId, here);
+      }
+    };
+    await walk(machine, cfg.cell);
+    const dvs = await session.read(vars.map(([, nodeId]) => ({ nodeId, attributeId: AttributeIds.Value })));
+    const bad = vars.filter((v, i) => dvs[i].statusCode !== StatusCodes.Good || dvs[i].value.value === null)
+      .map(([p], i) => p);
+    expectEqual(`variables below the machine (${vars.length}) that do not read Good with a value`, bad, []);
+  }
   const node = (p) => resolvePath(session, machine, p);
   const read = async (p) => {
     const dv = await session.read({ nodeId: await node(p), attributeId: AttributeIds.Value });
