@@ -47,6 +47,7 @@ class HmiClient extends EventEmitter {
 
   // A warning once, and again every minute while it holds (the HMI away: one a second).
   warn(text) {
+    if (this.stopped) return;
     const now = Date.now();
     if (text === this.lastWarning && now - this.lastWarningAt < 60000) return;
     this.lastWarning = text;

@@ -7,6 +7,14 @@
 //
 // Started by cnc-opcua (main.cc), which reads the machine config and passes the
 // resolved settings in CNC_OPCUA_SETTINGS. docs/opcua.md has the node -> source table.
+// A stop asked for while node-opcua loads and the server starts is carried out once it
+// has started (SIGTERM's default would end node with 143, not a clean stop).
+let stop = null;
+let stopAsked = null;
+const onSignal = (signal) => (stop ? stop(signal) : (stopAsked = signal));
+process.on("SIGTERM", () => onSignal("SIGTERM"));
+process.on("SIGINT", () => onSignal("SIGINT"));
+
 const fs = require("node:fs");
 const path = require("node:path");
 const {
@@ -170,7 +178,7 @@ async function main() {
   hmi.start();
 
   let stopping = false;
-  const stop = async (signal) => {
+  stop = async (signal) => {
     if (stopping) return;
     stopping = true;
     log.info(`cnc-opcua: ${signal}: stopping`);
@@ -181,8 +189,7 @@ async function main() {
     log.info(`cnc-opcua: stopped (${model.eventsRaised} events raised, ${counters.parts} parts counted)`);
     process.exit(0);
   };
-  process.on("SIGTERM", () => stop("SIGTERM"));
-  process.on("SIGINT", () => stop("SIGINT"));
+  if (stopAsked) stop(stopAsked);
 }
 
 main().catch((e) => {

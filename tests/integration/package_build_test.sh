@@ -5,7 +5,8 @@
 # took their share of the live chain's time when they ran inside integration.package).
 #
 # lintian finds no error in either; neither ships build files; cnc ships the services,
-# the unit, the cell file, the drive profiles and the report tool; cnc-cam ships cnc-cam.
+# the unit, the cell file, the drive profiles, the report tool and the OPC UA server with
+# its node modules (npm ci's, from the lock file); cnc-cam ships cnc-cam.
 set -euo pipefail
 BUILD="$(cd "$1" && pwd)"
 SRC="$(cd "$2" && pwd)"
@@ -36,7 +37,10 @@ for deb in "$CELL_DEB" "$CAM_DEB"; do
   note "  lintian: $(grep -c '^E:' "$WORK/lintian.$(basename "$deb").txt" || true) errors, $(grep -c '^W:' "$WORK/lintian.$(basename "$deb").txt" || true) warnings"
 done
 for f in /usr/bin/cnc-interpolator /usr/bin/cnc-ctl /usr/lib/systemd/system/cnc@.service /etc/cnc/cell.yaml \
-         /usr/share/cnc/config/drives/sim.yaml /usr/share/cnc/tools/report/make_report.py; do
+         /usr/share/cnc/config/drives/sim.yaml /usr/share/cnc/tools/report/make_report.py \
+         /usr/bin/cnc-opcua /usr/share/cnc/services/opcua/server.js \
+         /usr/share/cnc/services/opcua/node_modules/node-opcua/package.json \
+         /usr/lib/systemd/system/cnc@opcua.service.d/restart.conf; do
   grep -q " \.$f\$" "$WORK/contents.$(basename "$CELL_DEB").txt" || fail "cnc does not ship $f"
 done
 grep -q ' \./usr/bin/cnc-cam$' "$WORK/contents.$(basename "$CAM_DEB").txt" || fail "cnc-cam does not ship /usr/bin/cnc-cam"
