@@ -167,12 +167,14 @@ async function main() {
   // the optional ones this server adds).
   {
     const vars = [];
+    const methods = [];
     const walk = async (id, where) => {
       const r = await session.browse({ nodeId: id, browseDirection: BrowseDirection.Forward, resultMask: 63,
                                        referenceTypeId: "HasChild", includeSubtypes: true });
       for (const ref of r.references) {
         const here = `${where}/${ref.browseName.name}`;
         if (ref.nodeClass === NodeClass.Variable) vars.push([here, ref.nodeId]);
+        if (ref.nodeClass === NodeClass.Method) methods.push(here);
         if (ref.nodeClass === NodeClass.Object || ref.nodeClass === NodeClass.Variable) await walk(ref.nodeId, here);
       }
     };
@@ -181,6 +183,7 @@ async function main() {
     const bad = vars.filter((v, i) => dvs[i].statusCode !== StatusCodes.Good || dvs[i].value.value === null)
       .map(([p], i) => p);
     expectEqual(`variables below the machine (${vars.length}) that do not read Good with a value`, bad, []);
+    expectEqual("methods below the machine", methods, []);
   }
   const node = (p) => resolvePath(session, machine, p);
   const read = async (p) => {
