@@ -106,6 +106,7 @@ class HmiClient extends EventEmitter {
   }
 
   closed() {
+    if (this.stopped) return;
     if (this.connected) {
       this.connected = false;
       this.log.warn("cnc-opcua: the HMI's WebSocket closed; the values are marked BadNoCommunication until it is back");
