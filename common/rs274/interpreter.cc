@@ -334,10 +334,8 @@ void Interpreter::end_program(bool m30) {
   canon_.set_feed_mode(r, feed_mode_);
   feed_ = 0;
   canon_.set_feed_rate(r, 0);
-  if (!feed_override_ || !speed_override_) {
-    canon_.enable_feed_override(r, true);
-    canon_.enable_speed_override(r, true);
-  }
+  // LinuxCNC turns the feed override back on with a call, the speed override without one.
+  if (!feed_override_) canon_.enable_feed_override(r, true);
   feed_override_ = speed_override_ = true;
   spindle_ = 0;
   canon_.stop_spindle_turning(r);

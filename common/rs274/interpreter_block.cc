@@ -166,8 +166,8 @@ void Interpreter::m48_m53(const Words& w) {
   const SourceRef r = ref(w.mcol[9]);
   const bool p_on = !w.on('P') || w['P'] != 0;
   switch (w.m[9]) {
-    case 48: feed_override_ = speed_override_ = true; canon_.enable_speed_override(r, true); canon_.enable_feed_override(r, true); break;
-    case 49: feed_override_ = speed_override_ = false; canon_.enable_speed_override(r, false); canon_.enable_feed_override(r, false); break;
+    case 48: feed_override_ = speed_override_ = true; canon_.enable_feed_override(r, true); canon_.enable_speed_override(r, true); break;
+    case 49: feed_override_ = speed_override_ = false; canon_.enable_feed_override(r, false); canon_.enable_speed_override(r, false); break;
     case 50: feed_override_ = p_on; canon_.enable_feed_override(r, p_on); break;
     case 51: speed_override_ = p_on; canon_.enable_speed_override(r, p_on); break;
     case 52: adaptive_feed_ = p_on; canon_.enable_adaptive_feed(r, p_on); break;

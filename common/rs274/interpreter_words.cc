@@ -154,7 +154,7 @@ void Interpreter::check_words(const Words& w) {
              std::to_string(fanuc_closed_line_));
   if (!arc && !cyc && g0 != 100 && !nurbs_g && !synced && w.on('K')) not_with('K', "with no G code that uses it (G2/G3, G33, G73/G83 ...)");
   if (w.on('P') && !(g0 == 40 || g0 == 100 || arc || cyc || nurbs_g || w.g[13] == 640 || w.g[7] == 410 ||
-                     w.g[7] == 420 || w.m[5] >= 0 || w.g[8] == 432 || m19))
+                     w.g[7] == 420 || w.m[5] >= 0 || w.g[8] == 432 || m19 || w.m[9] >= 50))
     not_with('P', "with no G code or M code that uses it");
   if (w.on('Q') && !(cyc || nurbs_g || w.g[13] == 640 || w.m[5] >= 0 || w.m[6] == 61 || g0 == 100 || m19))
     not_with('Q', "with no G code or M code that uses it");
