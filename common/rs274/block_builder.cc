@@ -834,13 +834,16 @@ void BlockBuilder::straight_probe(const SourceRef& ref, const Pose& end, int kin
 
 void BlockBuilder::start_speed_feed_sync(const SourceRef& ref, double feed_per_rev, bool velocity_mode) {
   if (velocity_mode) throw Error(ref.column, "spindle-synchronised motion in velocity mode is not supported");
+  // G76 changes the pitch within one synchronised run (its tapers' longer pitch).
+  if (!(feed_per_rev > 0) || !std::isfinite(feed_per_rev))
+    throw Error(ref.column, "spindle-synchronised motion needs a distance per revolution > 0");
   sync_pitch_mm_ = feed_per_rev * scale_;
 }
 void BlockBuilder::stop_speed_feed_sync(const SourceRef&) { sync_pitch_mm_ = 0; }
 
 void BlockBuilder::synced_line(const SourceRef& ref, const Pose& end, int8_t sync, double retract_scale) {
   if (!setup_.spindle_sync)
-    throw Error(ref.column, "spindle-synchronised motion (G33, G33.1): this machine's spindle has no encoder");
+    throw Error(ref.column, "spindle-synchronised motion (G33, G33.1, G76): this machine's spindle has no encoder");
   std::vector<double> e = to_machine(ref, end);
   for (size_t a = 0; a < e.size(); ++a)
     if (rotary(a) && e[a] != position_[a]) throw Error(ref.column, "a rotary axis moves in spindle-synchronised motion");

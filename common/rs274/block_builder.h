@@ -165,7 +165,7 @@ class BlockBuilder : public Canon {
   double angular_feed_ = 0;       // deg / min (or / rev): the last rate set, unscaled by G20/G21
   FeedMode feed_mode_ = FeedMode::kUnitsPerMinute;
   double speed_rpm_ = 0;
-  double sync_pitch_mm_ = 0;  // between START_ and STOP_SPEED_FEED_SYNCH: G33's K in mm; 0 otherwise
+  double sync_pitch_mm_ = 0;  // between START_ and STOP_SPEED_FEED_SYNCH: G33's K, G76's P (or taper pitch) in mm; 0 otherwise
   void synced_line(const SourceRef& ref, const Pose& end, int8_t sync, double retract_scale);
   int spindle_dir_ = 0;
   int coolant_ = 0;

@@ -68,7 +68,7 @@ struct MachineSetup {
   // var file, when write_var_file), atomically, as LinuxCNC writes its table.
   bool write_tool_table = false;
   bool has_probe = false;                  // G38.x needs one
-  // G33, G33.1 and M19 need a spindle whose position the machine measures (an encoder).
+  // G33, G33.1, G76 and M19 need a spindle whose position the machine measures (an encoder).
   bool spindle_sync = false;
   // What the program reads from the machine: G38.x's result (#5061-#5070 and where the
   // machine stopped) and M66's input (#5399). false, the interpreter takes them as
@@ -246,6 +246,8 @@ class Interpreter {
   void spline(Words& w, bool cubic, int col);
   void straight_probe(Words& w, int g, int col);
   void synced_move(Words& w, int g, int col);  // G33, G33.1
+  void threading_cycle(Words& w, int col);     // G76
+  int spindle_number(const Words& w) const;    // the $ word, as LinuxCNC keeps it (an int)
   void wait_input(const Words& w);
   void set_coord_system(int index);
   void end_program(bool m30);

@@ -10,6 +10,9 @@ using namespace interp;
 void Interpreter::execute_block(Words& w) {
   comments_of_line();
   if (nurbs_ && continue_nurbs(w)) return;
+  // G96/G97 (LinuxCNC's spindle mode step; this controller keeps G97) select with $.
+  if (w.g[14] >= 0 && w.on('$') && spindle_number(w) != 0)
+    fail(w.column('$'), "Invalid spindle ($) number in Spindle Mode command");
   if (w.g[5] >= 0) g93_g95(w);
   if ((w.has & (bit('F') | bit('S') | bit('T'))) != 0) f_s_t(w);
   if (w.m[5] >= 0) m62_m68(w);
@@ -43,6 +46,7 @@ void Interpreter::execute_block_after_m6(Words& w) {
 // Feed mode (G93, G94, G95).
 void Interpreter::g93_g95(const Words& w) {
   const SourceRef r = ref(w.gcol[5]);
+  if (w.on('$') && spindle_number(w) != 0) fail(w.column('$'), "Invalid spindle ($) number in Spindle Feed command");
   feed_mode_ = w.g[5] == 930 ? FeedMode::kInverseTime : w.g[5] == 950 ? FeedMode::kUnitsPerRev : FeedMode::kUnitsPerMinute;
   canon_.comment(r, feed_mode_ == FeedMode::kInverseTime   ? "interpreter: feed mode set to inverse time"
                     : feed_mode_ == FeedMode::kUnitsPerRev ? "interpreter: feed mode set to units per revolution"
@@ -60,8 +64,10 @@ void Interpreter::f_s_t(const Words& w) {
     feed_ = w['F'];
     if (feed_mode_ != FeedMode::kInverseTime) canon_.set_feed_rate(ref(w.column('F')), feed_);
   }
-  // Spindle speed.
+  // Spindle speed ($-1: every spindle, here the one).
   if (w.on('S')) {
+    if (w.on('$') && (spindle_number(w) < -1 || spindle_number(w) > 0))
+      fail(w.column('$'), "Invalid spindle ($) number in Spindle speed command");
     speed_ = w['S'];
     canon_.set_spindle_speed(ref(w.column('S')), speed_);
   }
@@ -98,6 +104,19 @@ void Interpreter::m62_m68(const Words& w) {
 // Spindle (M3, M4, M5, M19).
 void Interpreter::m3_m5(const Words& w) {
   const SourceRef r = ref(w.mcol[7]);
+  if (w.on('$')) {
+    // $-1 (every spindle) starts and stops the one there is; M19 orients one.
+    const int d = spindle_number(w);
+    if (w.m[7] == 19 && d != 0) fail(w.column('$'), "Spindle ($) number out of range in M19 Command");
+    if (w.m[7] != 19 && (d < -1 || d > 0)) {
+      std::string what = "Spindle ($) number out of range in M";
+      what += std::to_string(w.m[7]);
+      what += " Command (num_spindles = 1, $ = ";
+      what += std::to_string(d);
+      what += ")";
+      fail(w.column('$'), what);
+    }
+  }
   switch (w.m[7]) {
     case 3: spindle_ = 1; canon_.start_spindle_clockwise(r); break;
     case 4: spindle_ = -1; canon_.start_spindle_counterclockwise(r); break;
@@ -165,6 +184,8 @@ void Interpreter::m7_m9(const Words& w) {
 void Interpreter::m48_m53(const Words& w) {
   const SourceRef r = ref(w.mcol[9]);
   const bool p_on = !w.on('P') || w['P'] != 0;
+  // LinuxCNC takes M51's $ from 1 up: with one spindle no $ is valid there.
+  if (w.m[9] == 51 && w.on('$')) fail(w.column('$'), "Invalid spindle ($) number in M51 command");
   switch (w.m[9]) {
     case 48: feed_override_ = speed_override_ = true; canon_.enable_feed_override(r, true); canon_.enable_speed_override(r, true); break;
     case 49: feed_override_ = speed_override_ = false; canon_.enable_feed_override(r, false); canon_.enable_speed_override(r, false); break;

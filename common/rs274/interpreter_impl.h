@@ -20,8 +20,8 @@ namespace interp {
 inline constexpr double kMmPerInch = 25.4;
 inline constexpr char kAxisLetters[] = "XYZABCUVW";
 
-// Word slots: A..Z, then @ (polar distance) and ^ (polar angle).
-inline int letter_index(char c) { return c == '@' ? 26 : c == '^' ? 27 : c - 'A'; }
+// Word slots: A..Z, then @ (polar distance), ^ (polar angle) and $ (spindle).
+inline int letter_index(char c) { return c == '@' ? 26 : c == '^' ? 27 : c == '$' ? 28 : c - 'A'; }
 inline uint32_t bit(char c) { return 1u << letter_index(c); }
 
 inline int axis_of_letter(char c) {
@@ -131,8 +131,8 @@ struct Interpreter::Loop {
 };
 
 struct Interpreter::Words {
-  std::array<double, 28> v{};
-  std::array<int32_t, 28> col{};
+  std::array<double, 29> v{};
+  std::array<int32_t, 29> col{};
   uint32_t has = 0;
   std::array<int, 16> g{};
   std::array<int32_t, 16> gcol{};
@@ -193,6 +193,12 @@ class Interpreter::Reader : public ParamReader {
  private:
   const Interpreter& in_;
 };
+
+// LinuxCNC stores the $ word in an int (truncated towards 0).
+inline int Interpreter::spindle_number(const Words& w) const {
+  const double d = std::trunc(w['$']);
+  return d < -1e6 ? -1000000 : d > 1e6 ? 1000000 : static_cast<int>(d);
+}
 
 // Small conversions used on every line: defined here so that each part inlines them.
 inline double Interpreter::length_scale() const { return units_ == Units::kInch ? interp::kMmPerInch : 1.0; }

@@ -112,7 +112,7 @@ void Interpreter::motion(Words& w) {
     return;
   }
   const bool g53 = w.g[0] == 530;
-  if (!(m >= 730 && m <= 890)) in_cycle_ = false;
+  if (!(m >= 730 && m <= 890) || m == 760) in_cycle_ = false;
   if (m == 0 || m == 10) {
     if (w.axes == 0 && w.g[1] < 0) return;  // G0/G1 on its line moves even to where it is (LinuxCNC)
     const Pose end = axis_target(w, g53);
@@ -146,6 +146,10 @@ void Interpreter::motion(Words& w) {
     arc(w, m == 20, axis_target(w, false));
     return;
   }
+  if (m == 760) {
+    threading_cycle(w, col);
+    return;
+  }
   if (m >= 730 && m <= 890) {
     cycle(w);
     return;
@@ -158,7 +162,6 @@ void Interpreter::motion(Words& w) {
     synced_move(w, m, col);
     return;
   }
-  if (m == 760) fail(col, g_text(m) + " (threading cycle) is not supported");
   if (m >= 382 && m <= 385) {
     straight_probe(w, m, col);
     return;
@@ -175,6 +178,7 @@ void Interpreter::synced_move(Words& w, int g, int col) {
   if (!w.on('K')) fail(col, "K word missing with g33/g33.1");
   if (w.on('F')) fail(w.column('F'), "F word used with a g33/g33.1");
   if (w['K'] <= 0) fail(w.column('K'), "K (distance per revolution) must be > 0 with " + name);
+  if (w.on('$') && spindle_number(w) != 0) fail(w.column('$'), "Invalid spindle ($) number in " + name + " move");
   if (spindle_ == 0) fail(col, "Spindle not turning in " + name);
   if (comp_ != 400) fail(col, name + " with cutter radius compensation on is not supported");
   if (w.g[0] == 530) fail(w.gcol[0], "G53 is only allowed with G0 or G1");

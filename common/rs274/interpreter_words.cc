@@ -98,6 +98,18 @@ void Interpreter::collect_words(Words& w) {
       continue;
     }
     if (w.on(c)) fail(word.column, std::string("word '") + c + "' given twice on one line");
+    if (c == 'H' || c == 'L') {
+      // LinuxCNC reads H and L as integers (read_integer_value): a value within 1e-4
+      // of one is that integer, any other is refused, whatever code uses the word.
+      double n = std::floor(v);
+      if (v - n > 0.9999)
+        n = std::ceil(v);
+      else if (v - n > 0.0001)
+        fail(word.column, "Non integer value for integer");
+      v = n;
+      if (c == 'H' && v < -1) fail(word.column, "Negative h word used");
+      if (c == 'L' && v < 0) fail(word.column, "Negative l word used");
+    }
     const int ax = axis_of_letter(c);
     if (ax >= 0 && setup_.axes.find(c) == std::string::npos) {
       // I J K R are not axes; axis letters the machine lacks are refused.
@@ -120,6 +132,15 @@ void Interpreter::check_words(const Words& w) {
   // The fanuc NURBS continuation lines carry K X Y Z R without a G code.
   if (nurbs_ && nurbs_->fanuc) return;
   if (nurbs_ && !nurbs_->fanuc && w.g[1] < 0) return;
+  // LinuxCNC's enhance_block: these motion codes move only with an axis word.
+  if ((w.g[1] == 330 || w.g[1] == 331 || w.g[1] == 760) && w.axes == 0)
+    fail(w.gcol[1], "All axes missing with motion code");
+  // The motion this block makes (LinuxCNC's motion_to_be): its G code, or the modal
+  // one when it has axis words that no G10/G28/G30/G52/G92 takes.
+  const bool g0_takes_axes = g0 == 100 || g0 == 280 || g0 == 300 || g0 == 520 || g0 == 920;
+  const int to_be = w.g[1] >= 0 ? w.g[1] : (w.axes != 0 && !g0_takes_axes ? motion_ : -1);
+  const bool g76 = to_be == 760;
+  const bool synced_to_be = to_be == 330 || to_be == 331 || g76;
   if (uses_axes && (motion == 800 || motion < 0) && g0 != 100 && g0 != 280 && g0 != 300 && g0 != 520 &&
       g0 != 920 && g0 != 530)
     fail(w.column(kAxisLetters[std::countr_zero(w.axes)]), "axis words without a G code that uses them (motion mode is G80)");
@@ -133,13 +154,13 @@ void Interpreter::check_words(const Words& w) {
     if (w.on(c)) fail(w.column(c), std::string(1, c) + " word " + what);
   };
   const bool arc = motion == 20 || motion == 30;
-  const bool cyc = motion >= 730 && motion != 800 && (motion <= 890);
+  const bool cyc = motion >= 730 && motion != 800 && motion != 760 && motion <= 890;
   const bool nurbs_g = motion == 52 || motion == 62 || motion == 50 || motion == 51;
   const bool m19 = w.m[7] == 19;
   if (!arc && !cyc && !nurbs_g && g0 != 100) {
-    if (w.on('R') && !m19) not_with('R', "with no G code that uses it (G2/G3, a canned cycle, G10, M19)");
-    if (w.on('I') && motion != 331) not_with('I', "with no G code that uses it (G2/G3, G5, G33.1, G87)");
-    if (w.on('J')) not_with('J', "with no G code that uses it (G2/G3, G5, G87)");
+    if (w.on('R') && !m19 && !g76) not_with('R', "with no G code that uses it (G2/G3, a canned cycle, G10, G76, M19)");
+    if (w.on('I') && motion != 331 && !g76) not_with('I', "with no G code that uses it (G2/G3, G5, G33.1, G76, G87)");
+    if (w.on('J') && !g76) not_with('J', "with no G code that uses it (G2/G3, G5, G76, G87)");
   }
   // LinuxCNC's check_other_codes: no rotary axis word with a canned cycle (also a modal one).
   if (cyc)
@@ -152,17 +173,29 @@ void Interpreter::check_words(const Words& w) {
     fail(w.column('K'),
          "a knot after the G6.2 curve's knots were complete (control points + order) at line " +
              std::to_string(fanuc_closed_line_));
-  if (!arc && !cyc && g0 != 100 && !nurbs_g && !synced && w.on('K')) not_with('K', "with no G code that uses it (G2/G3, G33, G73/G83 ...)");
+  if (!arc && !cyc && g0 != 100 && !nurbs_g && !synced && w.on('K')) not_with('K', "with no G code that uses it (G2/G3, G33, G76, G73/G83 ...)");
   if (w.on('P') && !(g0 == 40 || g0 == 100 || arc || cyc || nurbs_g || w.g[13] == 640 || w.g[7] == 410 ||
-                     w.g[7] == 420 || w.m[5] >= 0 || w.g[8] == 432 || m19 || w.m[9] >= 50))
+                     w.g[7] == 420 || w.m[5] >= 0 || w.g[8] == 432 || m19 || g76 || w.m[9] >= 50))
     not_with('P', "with no G code or M code that uses it");
-  if (w.on('Q') && !(cyc || nurbs_g || w.g[13] == 640 || w.m[5] >= 0 || w.m[6] == 61 || g0 == 100 || m19))
+  if (w.on('Q') && !(cyc || nurbs_g || w.g[13] == 640 || w.m[5] >= 0 || w.m[6] == 61 || g0 == 100 || m19 || g76))
     not_with('Q', "with no G code or M code that uses it");
-  if (w.on('L') && !(g0 == 100 || cyc || nurbs_g || w.m[5] == 66)) not_with('L', "with no G code or M code that uses it (G10, canned cycles, M66)");
-  if (w.on('H') && !(w.g[8] == 430 || w.g[8] == 432 || g0 == 100)) not_with('H', "with no G43 that uses it");
+  if (w.on('L') && !(g0 == 100 || cyc || nurbs_g || w.m[5] == 66 || g76))
+    not_with('L', "with no G code or M code that uses it (G10, canned cycles, G76, M66)");
+  // G76's H is its spring passes, not a tool number.
+  if (w.on('H') && !(w.g[8] == 430 || w.g[8] == 432 || g0 == 100 || g76)) not_with('H', "with no G43 or G76 that uses it");
   if (w.on('D') && !(w.g[7] == 410 || w.g[7] == 420 || w.g[7] == 411 || w.g[7] == 421))
     not_with('D', "with no G41/G42 that uses it");
-  if (w.on('E') && w.m[5] < 0) not_with('E', "with no M code that uses it (M66, M67, M68)");
+  if (w.on('E') && w.m[5] < 0 && !synced_to_be) not_with('E', "with no G76 or M code that uses it (M66, M67, M68)");
+  // LinuxCNC's spindle selection; this machine has one spindle, $0 (and $-1, all of
+  // them, where LinuxCNC takes it), checked where each code runs.
+  if (w.on('$') && !(synced_to_be || (w.m[7] >= 3 && w.m[7] <= 5) || m19 || w.m[9] == 51 || w.on('S')))
+    fail(w.column('$'), "$ (spindle selection) word with no M3, M4, M5, M19, M51, G33, G33.1, G76, G95, G96 or G97 to use it");
+  if (g76) {
+    // LinuxCNC's check_other_codes: P-1 is its mark of an absent P.
+    const int col = w.g[1] >= 0 ? w.gcol[1] : w.column(kAxisLetters[std::countr_zero(w.axes)]);
+    if (!w.on('P') || w['P'] == -1) fail(col, "P word missing with G76");
+    if (!w.on('I') || !w.on('J') || !w.on('K')) fail(col, "I J or K words missing with G76");
+  }
   if (w.on('F') && w.v[static_cast<size_t>(letter_index('F'))] < 0) fail(w.column('F'), "negative feed rate");
   if (w.on('S') && w.v[static_cast<size_t>(letter_index('S'))] < 0) fail(w.column('S'), "negative spindle speed");
   if (w.on('T') && w.v[static_cast<size_t>(letter_index('T'))] < 0) fail(w.column('T'), "negative tool number");

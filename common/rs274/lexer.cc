@@ -90,13 +90,13 @@ std::string quoted(char c) {
   return q;
 }
 
-// The letters LinuxCNC 2.9 reads as words, with @ and ^ (polar distance and angle),
-// less $ (spindle selection), which this controller does not support.
+// The letters LinuxCNC 2.9 reads as words, with @ and ^ (polar distance and angle)
+// and $ (spindle selection).
 bool word_letter(char c) {
   switch (c) {
     case 'a': case 'b': case 'c': case 'd': case 'e': case 'f': case 'g': case 'h': case 'i': case 'j': case 'k':
     case 'l': case 'm': case 'p': case 'q': case 'r': case 's': case 't': case 'u': case 'v': case 'w':
-    case 'x': case 'y': case 'z': case '@': case '^':
+    case 'x': case 'y': case 'z': case '@': case '^': case '$':
       return true;
     default:
       return false;

@@ -1004,9 +1004,10 @@ TEST(Rs274BlocksRs274Differences, SWordInsideAG52Curve) {
   EXPECT_DOUBLE_EQ(m[0].spindle_rpm, 100);
 }
 
-// rs274 refuses a fractional order ("Non integer value for integer").
+// rs274 refuses a fractional order ("Non integer value for integer": it reads every L
+// as an integer, as here).
 TEST(Rs274BlocksRs274Differences, FractionalOrder) {
-  expect_error_at("F500\nG5.2 P1 L3.5\nX10 Y0 P1\nX20 Y5 P1\nX30 Y0 P1\nG5.3\nM2\n", 2, 9, "L");
+  expect_error_at("F500\nG5.2 P1 L3.5\nX10 Y0 P1\nX20 Y5 P1\nX30 Y0 P1\nG5.3\nM2\n", 2, 9, "Non integer value for integer");
   expect_error_at("G06.2 P3.5 K0 X0 Y0 Z0 F500\nM2\n", 1, 7, "P");
 }
 

@@ -539,7 +539,7 @@ TEST(Rs274LexError, EveryRefusalNamesItsColumn) {
   lex_line("M67 E5 Q2", e5);
   ASSERT_EQ(e5.words.size(), 3u);
   EXPECT_EQ(e5.words[1].letter, 'E');
-  expect_lex_error("G1 X1 $2", 7, "unexpected '$'");
+  expect_lex_error("G1 X1 &2", 7, "unexpected '&'");
   expect_lex_error("G1 N10", 4, "unknown word 'N'");                // rs274: Bad character 'n' used
   expect_lex_error("G1 X1.2.3", 8, "second decimal point");          // rs274: bad number format
   expect_lex_error("G1 X.", 5, "number has no digits");              // rs274: conversion failed '.'

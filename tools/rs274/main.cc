@@ -89,7 +89,7 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"inch", "mm"}));
   app.add_option("--axes", setup.axes, "the machine's axes");
   app.add_flag("--probe", setup.has_probe, "G38.x accepted: the probe at each move's end, not tripped (as rs274)");
-  app.add_flag("--spindle-sync", setup.spindle_sync, "G33, G33.1 and M19 accepted (a spindle with an encoder)");
+  app.add_flag("--spindle-sync", setup.spindle_sync, "G33, G33.1, G76 and M19 accepted (a spindle with an encoder)");
   // rs274's simulated machine answers every M66 (WAIT never fails there); 64 is the
   // most LinuxCNC's motion module has (EMCMOT_MAX_DIO, EMCMOT_MAX_AIO).
   setup.digital_inputs = setup.analog_inputs = 64;
