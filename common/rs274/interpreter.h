@@ -70,6 +70,8 @@ struct MachineSetup {
   bool has_probe = false;                  // G38.x needs one
   // G33, G33.1, G76 and M19 need a spindle whose position the machine measures (an encoder).
   bool spindle_sync = false;
+  // M19's angle is R plus this, degrees (LinuxCNC's [RS274NGC]ORIENT_OFFSET).
+  double orient_offset_deg = 0;
   // What the program reads from the machine: G38.x's result (#5061-#5070 and where the
   // machine stopped) and M66's input (#5399). false, the interpreter takes them as
   // LinuxCNC's rs274 does (the probe at the move's end, #5070 = 0; #5399 as it was,

@@ -130,10 +130,16 @@ void Interpreter::m3_m5(const Words& w) {
                         "(spindle.encoder_counts_per_rev)");
       spindle_ = 0;
       if (w.on('P')) {
+        // LinuxCNC's check_other_codes: within 0.001 of an integer, that integer 0..2.
         const double p = w['P'];
-        if (p != 0 && p != 1 && p != 2) fail(w.column('P'), "P with M19 must be 0, 1 or 2");
+        const double n = std::round(p);
+        if (std::fabs(n - p) > 0.001) fail(w.column('P'), "P value not an integer with M19 G2 or G3");
+        if (n < 0 || n > 2) fail(w.column('P'), "P value must be 0,1,or 2 with M19");
       }
-      if (w.on('R') || w.on('P')) canon_.orient_spindle(r, w.on('R') ? w['R'] : 0.0, w.on('P') ? static_cast<int>(w['P']) : 0);
+      // The angle is R from the spindle's orientation offset (LinuxCNC's ORIENT_OFFSET).
+      if (w.on('R') || w.on('P'))
+        canon_.orient_spindle(r, w.on('R') ? w['R'] + setup_.orient_offset_deg : setup_.orient_offset_deg,
+                              w.on('P') ? static_cast<int>(w['P']) : 0);
       if (w.on('Q')) {
         if (w['Q'] <= 0) fail(w.column('Q'), "Q word with M19 requires a value > 0");
         canon_.wait_orient_complete(r, w['Q']);

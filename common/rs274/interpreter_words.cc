@@ -162,6 +162,7 @@ void Interpreter::check_words(const Words& w) {
     if (w.on('I') && motion != 331 && !g76) not_with('I', "with no G code that uses it (G2/G3, G5, G33.1, G76, G87)");
     if (w.on('J') && !g76) not_with('J', "with no G code that uses it (G2/G3, G5, G76, G87)");
   }
+  if (w.on('R') && m19 && (w['R'] > 360.0 || w['R'] < 0.0)) fail(w.column('R'), "R value must be within 0..360 with M19");
   // LinuxCNC's check_other_codes: no rotary axis word with a canned cycle (also a modal one).
   if (cyc)
     for (const char c : {'A', 'B', 'C'})

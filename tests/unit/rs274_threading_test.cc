@@ -1,8 +1,9 @@
 // G76, LinuxCNC's threading cycle: its canonical calls as LinuxCNC 2.9's rs274 prints
-// them, its refusals (message and column), and the blocks the block builder makes of
-// it (spindle-synchronised lines with their pitch in mm, the rapids between them, the
-// feed override off while synchronised). The expected calls are the lines rs274
-// printed for each program's N900 block, without its call counter, run as
+// them, its refusals (message and column), M19's orientation offset and checks, and
+// the blocks the block builder makes of G76 (spindle-synchronised lines with their
+// pitch in mm, the rapids between them, the feed override off while synchronised).
+// The expected calls are the lines rs274 printed for each program's N900 block,
+// without its call counter, run as
 //   HOME=$(mktemp -d) rs274 -g PROGRAM OUT
 // on Debian 12's linuxcnc-uspace 2.9.0~pre1+git20230208.f1270d6ed7.
 #include <gtest/gtest.h>
@@ -247,6 +248,35 @@ TEST(Rs274ThreadingError, ItsWordsBelongToIt) {
                  "$ (spindle selection) word with no M3, M4, M5, M19, M51, G33, G33.1, G76, G95, G96 or G97 to use it");
   // A line without axis words makes no G76 move (LinuxCNC's motion_to_be): P is unused.
   expect_refused(t + "G76 P1 Z-5 I-1 J.2 K1\n", "P1", "P1", "P word with no G code or M code that uses it");
+}
+
+// ---- M19, the orientation a spindle with an encoder also has -----------------------------
+
+// LinuxCNC's tests/interp/m19 (its INI sets [RS274NGC]ORIENT_OFFSET = 42): R is from
+// that offset; neither R nor P orients nothing; Q waits.
+TEST(Rs274Orientation, LinuxCncsM19TestWithItsOrientOffset) {
+  rs274::MachineSetup s = encoder_setup();
+  s.orient_offset_deg = 42;
+  const std::string out = printed("M19\nM19 R45 Q2\nM19 P1\nM19 R90 P0\nM19 R90 P1\nM19 Q1\n\nM2\n", s);
+  std::string got;
+  std::istringstream in(out);
+  for (std::string line; std::getline(in, line);)
+    if (line.find("ORIENT") != std::string::npos) got += line.substr(line.find_first_not_of(' ', line.find(" N") + 7)) + '\n';
+  EXPECT_EQ(got,
+            "ORIENT_SPINDLE(0, 87.0000, 0)\n"
+            "SPINDLE.0.WAIT_ORIENT_COMPLETE(2.0000)\n"
+            "ORIENT_SPINDLE(0, 42.0000, 1)\n"
+            "ORIENT_SPINDLE(0, 132.0000, 0)\n"
+            "ORIENT_SPINDLE(0, 132.0000, 1)\n"
+            "SPINDLE.0.WAIT_ORIENT_COMPLETE(1.0000)\n");
+}
+
+TEST(Rs274Orientation, LinuxCncsChecksOfRAndP) {
+  expect_refused("", "M19 R400", "R400", "R value must be within 0..360 with M19");
+  expect_refused("", "M19 R-1", "R-1", "R value must be within 0..360 with M19");
+  expect_refused("", "M19 P1.5", "P1.5", "P value not an integer with M19 G2 or G3");
+  expect_refused("", "M19 P3", "P3", "P value must be 0,1,or 2 with M19");
+  expect_refused("", "M19 R10 $1", "$1", "Spindle ($) number out of range in M19 Command");
 }
 
 // ---- blocks -------------------------------------------------------------------------------

@@ -9,6 +9,7 @@
 // --table-units mm.
 #include <cctype>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <sstream>
@@ -76,7 +77,8 @@ int main(int argc, char** argv) {
   cnc::util::cli::setup(app);
   app.add_flag("-g", ignored_flags, "ignored (rs274's graphical mode)");
   app.add_option("-i", ini,
-                 "LinuxCNC INI file: [RS274NGC] SUBROUTINE_PATH, DISABLE_FANUC_STYLE_SUB, REMAP=M6 ngc=, [AXIS_A/B/C] WRAPPED_ROTARY")
+                 "LinuxCNC INI file: [RS274NGC] SUBROUTINE_PATH, DISABLE_FANUC_STYLE_SUB, REMAP=M6 ngc=, ORIENT_OFFSET, "
+                 "[AXIS_A/B/C] WRAPPED_ROTARY")
       ->type_name("INI");
   app.add_option("-t", setup.tool_table, "tool table")->type_name("TOOLTABLE");
   app.add_option("-v", setup.var_file, "parameter (var) file")->type_name("VARFILE");
@@ -115,6 +117,8 @@ int main(int argc, char** argv) {
       return v == "1" || v == "true" || v == "yes" || v == "on";
     };
     setup.fanuc_subs = !yes("RS274NGC", "DISABLE_FANUC_STYLE_SUB");
+    if (const std::string v = ini_value(ini, "RS274NGC", "ORIENT_OFFSET"); !v.empty())
+      setup.orient_offset_deg = std::strtod(v.c_str(), nullptr);
     // REMAP=M6 ... ngc=NAME (an ngc body; a Python prolog or epilog is not read).
     const std::string remap = ini_value(ini, "RS274NGC", "REMAP");
     if (remap.rfind("M6 ", 0) == 0 || remap.rfind("m6 ", 0) == 0) {
