@@ -145,7 +145,9 @@ void Interpreter::check_words(const Words& w) {
       g0 != 920 && g0 != 530)
     fail(w.column(kAxisLetters[std::countr_zero(w.axes)]), "axis words without a G code that uses them (motion mode is G80)");
   if (g0 == 530 && !(motion == 0 || motion == 10) ) fail(w.gcol[0], "G53 is only allowed with G0 or G1");
-  if (g0 == 530 && incremental_) fail(w.gcol[0], "G53 with G91 (incremental) is not allowed");
+  // The distance mode the block leaves (LinuxCNC's check_g_codes: G90 on the line allows it).
+  if (g0 == 530 && (w.g[3] == 910 || (w.g[3] != 900 && incremental_)))
+    fail(w.gcol[0], "G53 with G91 (incremental) is not allowed");
   if (w.g[0] >= 0 && w.g[1] >= 0 && uses_axes && g0 != 530) {
     if (g0 == 100 || g0 == 280 || g0 == 300 || g0 == 520 || g0 == 920)
       fail(w.gcol[1], g_text(g0) + " and " + g_text(w.g[1]) + " both use axis words: only one per line");

@@ -365,6 +365,15 @@ TEST(Rs274BlocksError, G4WithAxisWords) {
   expect_error_at("G4 P1 X2\nM2\n", 1, 7, "axis words without a G code that uses them");
 }
 
+// LinuxCNC's check_g_codes: G53 goes with the distance mode the block leaves.
+TEST(Rs274BlocksError, G53WithG91) {
+  expect_error_at("G91\nG53 G0 X1\nM2\n", 2, 1, "G53 with G91 (incremental) is not allowed");
+  expect_error_at("G53 G91 G0 X1\nM2\n", 1, 1, "G53 with G91 (incremental) is not allowed");
+  const std::vector<Block> m = moves(run("G91\nG90 G53 G0 X1\nM2\n"));
+  ASSERT_EQ(m.size(), 1u);
+  expect_point(m[0].end, 1, 0, 0);
+}
+
 // ---- arcs --------------------------------------------------------------------------
 
 void expect_center(const Block& b, double x, double y, double z) {
