@@ -135,6 +135,7 @@ void Interpreter::open(const std::string& path) {
     }
     incremental_ = m.incremental;
     arc_incremental_ = m.arc_incremental;
+    lathe_diameter_ = m.lathe_diameter;
     motion_ = m.motion;
     if (m.feed_mode != static_cast<int>(feed_mode_)) {
       feed_mode_ = static_cast<FeedMode>(m.feed_mode);
@@ -234,6 +235,7 @@ ModalState Interpreter::modal_state() const {
   m.plane = static_cast<int>(plane_);
   m.incremental = incremental_;
   m.arc_incremental = arc_incremental_;
+  m.lathe_diameter = lathe_diameter_;
   m.feed_mode = static_cast<int>(feed_mode_);
   m.units = static_cast<int>(units_);
   m.comp = comp_;

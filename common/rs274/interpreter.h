@@ -42,6 +42,7 @@ struct ModalState {
   int spindle = 0;
   bool mist = false, flood = false;
   bool feed_override = true, speed_override = true, adaptive_feed = false, feed_hold = true;
+  bool lathe_diameter = false;  // G7
   int tool = 0, selected_tool = -1;
   Pose tool_offset{}, g92{};
   bool g92_active = false;
@@ -216,6 +217,7 @@ class Interpreter {
   void g4(const Words& w);
   void g17_g19(const Words& w);
   void g20_g21(const Words& w);
+  void g7_g8(Words& w);
   void g40_g42(const Words& w);
   void g43_g49(Words& w);
   void g54_g59(const Words& w);
@@ -250,6 +252,7 @@ class Interpreter {
   void synced_move(Words& w, int g, int col);  // G33, G33.1
   void threading_cycle(Words& w, int col);     // G76
   int spindle_number(const Words& w) const;    // the $ word, as LinuxCNC keeps it (an int)
+  int motion_to_be(const Words& w) const;      // the motion the block makes (G code in tenths), -1 none
   void wait_input(const Words& w);
   void set_coord_system(int index);
   void end_program(bool m30);
@@ -303,6 +306,7 @@ class Interpreter {
   Plane plane_ = Plane::kXY;
   bool incremental_ = false;      // G91
   bool arc_incremental_ = true;   // G91.1 (LinuxCNC's default)
+  bool lathe_diameter_ = false;   // G7 (LinuxCNC's lathe diameter mode): X words are diameters
   FeedMode feed_mode_ = FeedMode::kUnitsPerMinute;
   Units units_ = Units::kMm;
   int comp_ = 400;                // 400, 410, 420 (tenths); 411/421 for G41.1/G42.1

@@ -32,6 +32,7 @@ void Interpreter::execute_block_after_m6(Words& w) {
   if (w.g[0] == 40) g4(w);
   if (w.g[2] >= 0) g17_g19(w);
   if (w.g[6] >= 0) g20_g21(w);
+  if (w.g[15] >= 0) g7_g8(w);
   if (w.g[7] >= 0) g40_g42(w);
   if (w.g[8] >= 0) g43_g49(w);
   if (w.g[12] >= 0) g54_g59(w);
@@ -229,6 +230,21 @@ void Interpreter::g20_g21(const Words& w) {
   }
   units_ = u;
   canon_.use_length_units(ref(w.gcol[6]), units_);
+}
+
+// Lathe diameter mode (G7) and radius mode (G8, the default). The block's X was read
+// in the mode before it: LinuxCNC scales it (and a G76's I J K) to the new mode here,
+// so a G76 on a G7 line halves them twice (once here, once in the cycle).
+void Interpreter::g7_g8(Words& w) {
+  const bool diameter = w.g[15] == 70;
+  if (diameter == lathe_diameter_) return;
+  const double f = diameter ? 0.5 : 2.0;
+  w.v[static_cast<size_t>(letter_index('X'))] *= f;
+  if (motion_to_be(w) == 760)
+    for (const char c : {'I', 'J', 'K'}) w.v[static_cast<size_t>(letter_index(c))] *= f;
+  canon_.comment(ref(w.gcol[15]), diameter ? "interpreter: Lathe diameter mode changed to diameter"
+                                           : "interpreter: Lathe diameter mode changed to radius");
+  lathe_diameter_ = diameter;
 }
 
 // Path control (G61, G61.1, G64).

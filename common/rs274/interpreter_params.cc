@@ -43,8 +43,8 @@ double Interpreter::named_value(const std::string& name, int column) const {
     if (name == "_spindle_rpm_mode") return 1;
     if (name == "_spindle_css_mode") return 0;
     if (name == "_ijk_absolute_mode") return !arc_incremental_;
-    if (name == "_lathe_diameter_mode") return 0;
-    if (name == "_lathe_radius_mode") return 1;
+    if (name == "_lathe_diameter_mode") return lathe_diameter_;
+    if (name == "_lathe_radius_mode") return !lathe_diameter_;
     if (name == "_spindle_on") return spindle_ != 0;
     if (name == "_spindle_cw") return spindle_ == 1;
     if (name == "_mist") return mist_;

@@ -42,7 +42,12 @@ void Interpreter::threading_cycle(Words& w, int col) {
   const Pose from = program_pose(position_);
   const Pose to = program_pose(end);
   const double start_x = from[0], start_y = from[1], start_z = from[2], end_z = to[2];
-  const double i_number = w['I'], j_number = w['J'], k_number = w['K'];
+  double i_number = w['I'], j_number = w['J'], k_number = w['K'];
+  if (lathe_diameter_) {  // G7: I J K are diameters too
+    i_number /= 2;
+    j_number /= 2;
+    k_number /= 2;
+  }
   const bool boring = i_number > 0.0;  // I > 0: the thread is inside, cut outwards
   const double safe_x = start_x;
   const double full_dia_depth = std::fabs(i_number);

@@ -116,11 +116,20 @@ void Interpreter::collect_words(Words& w) {
       fail(word.column, std::string(1, c) + " word, but the machine has no " + c + " axis (axes: " + setup_.axes + ")");
     }
     if (ax >= 0) w.axes |= 1u << ax;
+    if (c == 'X' && lathe_diameter_) v /= 2;  // LinuxCNC's read_x in G7: the radius
     if (c == '@' || c == '^') w.axes |= 3u;  // polar coordinates set X and Y
     w.has |= bit(c);
     w.v[i] = v;
     w.col[i] = word.column;
   }
+}
+
+// LinuxCNC's motion_to_be: the block's motion code, or the modal one when the block
+// has axis words that no G10/G28/G30/G52/G92 takes.
+int Interpreter::motion_to_be(const Words& w) const {
+  const int g0 = w.g[0];
+  const bool g0_takes_axes = g0 == 100 || g0 == 280 || g0 == 300 || g0 == 520 || g0 == 920;
+  return w.g[1] >= 0 ? w.g[1] : (w.axes != 0 && !g0_takes_axes ? motion_ : -1);
 }
 
 void Interpreter::check_words(const Words& w) {
@@ -137,8 +146,7 @@ void Interpreter::check_words(const Words& w) {
     fail(w.gcol[1], "All axes missing with motion code");
   // The motion this block makes (LinuxCNC's motion_to_be): its G code, or the modal
   // one when it has axis words that no G10/G28/G30/G52/G92 takes.
-  const bool g0_takes_axes = g0 == 100 || g0 == 280 || g0 == 300 || g0 == 520 || g0 == 920;
-  const int to_be = w.g[1] >= 0 ? w.g[1] : (w.axes != 0 && !g0_takes_axes ? motion_ : -1);
+  const int to_be = motion_to_be(w);
   const bool g76 = to_be == 760;
   const bool synced_to_be = to_be == 330 || to_be == 331 || g76;
   if (uses_axes && (motion == 800 || motion < 0) && g0 != 100 && g0 != 280 && g0 != 300 && g0 != 520 &&

@@ -164,6 +164,35 @@ TEST(Rs274Threading, TheMotionModeStaysG76) {
   EXPECT_NE(block_900(two).find("STRAIGHT_FEED(8.0000, 0.0000, -8.0000"), std::string::npos) << two;
 }
 
+// G7 (lathe diameter mode): X words are diameters, and so are G76's I J K. A G7 on the
+// G76's own line halves them once more (LinuxCNC scales the block's words to the new
+// mode, then the cycle halves them again): both programs cut the same thread.
+TEST(Rs274Threading, InDiameterModeIJKAreDiameters) {
+  const std::string g7_before = block_900(printed("G21 S500 M3 G18\nG7 G0 X20 Z5\nN900 G76 P1.5 Z-20 I-2 J0.8 K2\nM2\n"));
+  std::string g7_on_the_line = block_900(printed("G21 S500 M3 G18\nG0 X10 Z5\nN900 G7 G76 P1.5 Z-20 I-4 J1.6 K4\nM2\n"));
+  const std::string comment = "COMMENT(\"interpreter: Lathe diameter mode changed to diameter\")\n";
+  ASSERT_EQ(g7_on_the_line.rfind(comment, 0), 0u) << g7_on_the_line;
+  g7_on_the_line.erase(0, comment.size());
+  EXPECT_EQ(g7_before, g7_on_the_line);
+  EXPECT_EQ(g7_before.substr(0, g7_before.find("DISABLE")),
+            "STRAIGHT_TRAVERSE(10.6000, 0.0000, 5.0000, 0.0000, 0.0000, 0.0000)\n"
+            "STRAIGHT_TRAVERSE(8.6000, 0.0000, 5.0000, 0.0000, 0.0000, 0.0000)\n");
+}
+
+TEST(Rs274Threading, DiameterModeHalvesXWordsAsRead) {
+  const std::string got = block_900(printed(
+      "G21\nN900 G7 G0 X10\nN900 G8 X10\nN900 G7\nN900 X4 Z1\n"
+      "N900 (debug, #<_lathe_diameter_mode> #<_lathe_radius_mode> #<_x>)\nM2\n"));
+  EXPECT_EQ(got,
+            "COMMENT(\"interpreter: Lathe diameter mode changed to diameter\")\n"
+            "STRAIGHT_TRAVERSE(5.0000, 0.0000, 0.0000, 0.0000, 0.0000, 0.0000)\n"
+            "COMMENT(\"interpreter: Lathe diameter mode changed to radius\")\n"
+            "STRAIGHT_TRAVERSE(10.0000, 0.0000, 0.0000, 0.0000, 0.0000, 0.0000)\n"
+            "COMMENT(\"interpreter: Lathe diameter mode changed to diameter\")\n"
+            "STRAIGHT_TRAVERSE(2.0000, 0.0000, 1.0000, 0.0000, 0.0000, 0.0000)\n"
+            "MESSAGE(\" 1.000000 0.000000 2.000000\")\n");
+}
+
 // ---- refusals ---------------------------------------------------------------------------
 
 // `line` follows the lines `before` and is refused at the word `at` (its column; the
