@@ -39,8 +39,8 @@ program::Block spindle_on(int64_t index, const std::vector<double>& at, double r
   return b;
 }
 
-// M3 S<rpm>, G4 P3 (the dry run's spindle gets to speed), G33 Z<z_end> K<pitch>, [G0 Z0,] END.
-void load_thread(Interpolator& core, double rpm, double pitch, double z_end, bool rapid_back = false) {
+// LOAD, then blocks 0 and 1: M3 S<rpm> and G4 P3 (the dry run's spindle gets to speed).
+void load_spindle_start(Interpolator& core, double rpm) {
   core.apply_command({Command::Kind::kLoad, 1.0, {}});
   const std::vector<double> o{0, 0, 0};
   ASSERT_TRUE(core.apply_block(spindle_on(0, o, rpm))) << core.last_refusal();
@@ -50,6 +50,12 @@ void load_thread(Interpolator& core, double rpm, double pitch, double z_end, boo
   dwell.start = dwell.end = o;
   dwell.dwell_s = 3;
   ASSERT_TRUE(core.apply_block(dwell)) << core.last_refusal();
+}
+
+// M3 S<rpm>, G4 P3, G33 Z<z_end> K<pitch>, [G0 Z0,] END.
+void load_thread(Interpolator& core, double rpm, double pitch, double z_end, bool rapid_back = false) {
+  const std::vector<double> o{0, 0, 0};
+  load_spindle_start(core, rpm);
   program::Block g33;
   g33.index = 2;
   g33.kind = program::BlockKind::kLine;
@@ -251,15 +257,8 @@ TEST(InterpolatorSync, AFeedHoldWaitsForTheEndOfTheThreadAndAStopDoesNot) {
 // (a first-order response, spindle.sim.time_constant_s) down, through the reversal
 // and back up, stops on its start, and the spindle turns forward again.
 void load_tap(Interpolator& core, double rpm, double pitch, double depth, double scale) {
-  core.apply_command({Command::Kind::kLoad, 1.0, {}});
   const std::vector<double> o{0, 0, 0};
-  ASSERT_TRUE(core.apply_block(spindle_on(0, o, rpm))) << core.last_refusal();
-  program::Block dwell;
-  dwell.index = 1;
-  dwell.kind = program::BlockKind::kDwell;
-  dwell.start = dwell.end = o;
-  dwell.dwell_s = 3;
-  ASSERT_TRUE(core.apply_block(dwell)) << core.last_refusal();
+  load_spindle_start(core, rpm);
   program::Block tap;
   tap.index = 2;
   tap.kind = program::BlockKind::kLine;
