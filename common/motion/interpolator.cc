@@ -759,6 +759,12 @@ double Interpolator::acquisition_lag(double v, double A, double J, bool trapezoi
   return lag;
 }
 
+double Interpolator::follow_speed(double target, double v_ff) const {
+  // The spindle's rate times the pitch, and a correction that closes the gap to where
+  // the spindle puts the path at the end of this cycle in about 8 cycles.
+  return v_ff + (target - (s_ + v_ff * period_s_)) / (8 * period_s_);
+}
+
 void Interpolator::update_sync() {
   if (rigid_tap_front()) return;  // rigid_tap_step's
   if (blocks_.empty() || blocks_.front().block.sync != program::kSyncG33) {
@@ -817,11 +823,8 @@ void Interpolator::update_sync() {
       sync_.phase = SyncMove::kTrack;
       [[fallthrough]];
     case SyncMove::kTrack: {
-      // Where the spindle says the path should be at the end of this cycle, and a
-      // correction of the speed that closes the gap in about 8 cycles.
       sync_target_ = pitch * (u - sync_.lock_rev);
-      const double gap = sync_target_ - (s_ + v_sync * period_s_);
-      sync_speed_ = std::clamp(v_sync + gap / (8 * period_s_), 0.0, 1.5 * v_sync);
+      sync_speed_ = std::clamp(follow_speed(sync_target_, v_sync), 0.0, 1.5 * v_sync);
       break;
     }
     case SyncMove::kExit:  // a rigid tap's
@@ -925,13 +928,12 @@ void Interpolator::rigid_tap_step() {
         // On the way up, leave the spindle where a jerk-limited brake still stops on the start.
         if (!(sync_.reversed && w < 0 && v_ < 0 &&
               s_ <= 1.5 * brake_distance(-v_, -a_, 0.0, 0.5 * A, 0.25 * J) + 4 * (-v_) * T)) {
-          // Follow as G33 does: the spindle's rate times the pitch, and a correction
-          // that closes the gap in about 8 cycles, reached within the jerk limit (a
-          // step straight onto each predicted position rang: the samples' stamps scatter).
+          // Follow as G33 does, within the jerk limit (a step straight onto each
+          // predicted position rang: the samples' stamps scatter).
           const double v_ff = pitch * w;
           // Stopped by a STOP: once the spindle all but stands, the tap lands at rest.
           a_n = sync_.stopping && std::fabs(v_ff) < 1e-3 ? toward(0.0)
-                                                          : toward(v_ff + (target - (s_ + v_ff * T)) / (8 * T));
+                                                          : toward(follow_speed(target, v_ff));
           break;
         }
         // The rest of the way up is a quintic stop on the start (zero speed and

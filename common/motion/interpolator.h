@@ -534,6 +534,7 @@ class Interpolator {
   bool spindle_position(double* rev, double* rps) const;
   void update_sync();
   double acquisition_lag(double v, double A, double J, bool trapezoid) const;
+  double follow_speed(double target, double v_ff) const;  // G33's and the rigid tap's tracker
   bool rigid_tap_front() const;
   void rigid_tap_step();
   // A rigid tap's last stretch up: x(t) = v0 t + a0 t^2/2 + c3 t^3 + c4 t^4 + c5 t^5 to d at rest.
