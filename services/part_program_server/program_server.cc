@@ -296,6 +296,105 @@ ProgramSetup dry_run_setup(const config::MachineConfig& cfg, const DryRunFiles& 
   return s;
 }
 
+std::string describe(const ProgramSetup& s) {
+  std::string out;
+  const auto line = [&out](const char* key, const std::string& value) {
+    out += key;
+    out += " = ";
+    out += value;
+    out += '\n';
+  };
+  const auto num = [](double v) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%.17g", v);
+    return std::string(buf);
+  };
+  const auto flag = [](bool v) { return std::string(v ? "true" : "false"); };
+  const auto list = [](const auto& items, const auto& one) {
+    std::string t = "[";
+    for (const auto& x : items) {
+      if (t.size() > 1) t += ", ";
+      t += one(x);
+    }
+    t += ']';
+    return t;
+  };
+  const auto quoted = [](const std::string& v) {
+    std::string t = "'";
+    t += v;
+    t += '\'';
+    return t;
+  };
+  // Structured bindings name every member: a field added to one of these structs stops
+  // the build here until it is described, and so compared (dry_run_agreement_test).
+  const auto& [machine, builder, max_validation_lines, travel_mm, safe_z_mm] = s;
+  const auto& [m_axes, m_wrapped, m_units, m_subroutine_path, m_tool_table, m_var_file, m_write_var_file,
+               m_tool_in_var_file, m_write_tool_table, m_has_probe, m_spindle_sync, m_orient_offset_deg,
+               m_machine_results_supplied, m_digital_inputs, m_analog_inputs, m_digital_outputs, m_analog_outputs,
+               m_block_delete, m_optional_stop, m_start_position, m_max_call_depth, m_m6_remap, m_fanuc_subs,
+               m_loop_on_main_m99, m_initial_modes] = machine;
+  const auto& [b_axis_names, b_start_position_mm, b_rotary, b_spindle_rpm, b_process, b_fit_runs,
+               b_fit_max_segment_mm, b_fit_max_turn_deg, b_fit_max_spans, b_ipo_period_s, b_corner_dv_mm_s,
+               b_accel_mm_s2, b_jerk_mm_s3, b_chord_tolerance_mm, b_default_path_tolerance_mm, b_spindle_sync] = builder;
+  const auto& [p_ball_radius_mm, p_flutes, p_pick_feed_mm, p_target_rmax_um] = b_process;
+  line("machine.axes", quoted(m_axes));
+  line("machine.wrapped", quoted(m_wrapped));
+  line("machine.machine_units", m_units == rs274::Units::kMm ? "mm" : "inch");
+  line("machine.subroutine_path", list(m_subroutine_path, quoted));
+  line("machine.tool_table", quoted(m_tool_table));
+  line("machine.var_file", quoted(m_var_file));
+  line("machine.write_var_file", flag(m_write_var_file));
+  line("machine.tool_in_var_file", flag(m_tool_in_var_file));
+  line("machine.write_tool_table", flag(m_write_tool_table));
+  line("machine.has_probe", flag(m_has_probe));
+  line("machine.spindle_sync", flag(m_spindle_sync));
+  line("machine.orient_offset_deg", num(m_orient_offset_deg));
+  line("machine.machine_results_supplied", flag(m_machine_results_supplied));
+  line("machine.digital_inputs", std::to_string(m_digital_inputs));
+  line("machine.analog_inputs", std::to_string(m_analog_inputs));
+  line("machine.digital_outputs", std::to_string(m_digital_outputs));
+  line("machine.analog_outputs", std::to_string(m_analog_outputs));
+  line("machine.block_delete", flag(m_block_delete));
+  line("machine.optional_stop", flag(m_optional_stop));
+  line("machine.start_position", list(m_start_position, num));
+  line("machine.max_call_depth", std::to_string(m_max_call_depth));
+  line("machine.m6_remap", quoted(m_m6_remap));
+  line("machine.fanuc_subs", flag(m_fanuc_subs));
+  line("machine.loop_on_main_m99", flag(m_loop_on_main_m99));
+  // The modes an MDI line starts in: the server's own, per line, never a machine's setting.
+  line("machine.initial_modes", m_initial_modes ? "given" : "none");
+  line("builder.axis_names", list(b_axis_names, quoted));
+  line("builder.start_position_mm", list(b_start_position_mm, num));
+  line("builder.rotary", list(b_rotary, flag));
+  line("builder.spindle_rpm", num(b_spindle_rpm));
+  line("builder.process.ball_radius_mm", num(p_ball_radius_mm));
+  line("builder.process.flutes", std::to_string(p_flutes));
+  line("builder.process.pick_feed_mm", num(p_pick_feed_mm));
+  line("builder.process.target_rmax_um", num(p_target_rmax_um));
+  line("builder.fit_runs", flag(b_fit_runs));
+  line("builder.fit_max_segment_mm", num(b_fit_max_segment_mm));
+  line("builder.fit_max_turn_deg", num(b_fit_max_turn_deg));
+  line("builder.fit_max_spans", std::to_string(b_fit_max_spans));
+  line("builder.ipo_period_s", num(b_ipo_period_s));
+  line("builder.corner_dv_mm_s", num(b_corner_dv_mm_s));
+  line("builder.accel_mm_s2", num(b_accel_mm_s2));
+  line("builder.jerk_mm_s3", num(b_jerk_mm_s3));
+  line("builder.chord_tolerance_mm", num(b_chord_tolerance_mm));
+  line("builder.default_path_tolerance_mm", num(b_default_path_tolerance_mm));
+  line("builder.spindle_sync", flag(b_spindle_sync));
+  line("max_validation_lines", std::to_string(max_validation_lines));
+  line("travel_mm", list(travel_mm, [&num](const std::pair<double, double>& t) {
+         std::string r = "[";
+         r += num(t.first);
+         r += ", ";
+         r += num(t.second);
+         r += ']';
+         return r;
+       }));
+  line("safe_z_mm", num(safe_z_mm));
+  return out;
+}
+
 ProgramServer::ProgramServer(const config::MachineConfig& cfg, ServerLimits limits)
     : ProgramServer(program_setup(cfg), limits) {}
 

@@ -82,6 +82,10 @@ struct DryRunFiles {
 };
 ProgramSetup dry_run_setup(const config::MachineConfig& cfg, const DryRunFiles& files = {});
 
+// Every field of a setup, one "key = value" line each (numbers to 17 digits): what
+// dry_run_agreement_test compares, and what `cnc-plan --show-setup` prints.
+std::string describe(const ProgramSetup& s);
+
 class ProgramServer {
  public:
   // Probing and input waits: the validation takes each G38.x move as tripped at its

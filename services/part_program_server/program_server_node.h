@@ -50,6 +50,8 @@ class ProgramServerNode {
   void interpolator_lost();
   // The interlock's view of the cell now.
   CellView view(double now_s) const;
+  // What this server loads programs with (the dry run's must match: dry_run_agreement_test).
+  const ProgramSetup& setup() const { return core_.setup(); }
 
  private:
   void on_command(const cnc::lcmt_program_command& m);

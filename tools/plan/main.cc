@@ -4,6 +4,7 @@
 //
 //   cnc-plan --machine M --program P --csv OUT [--override 1.0] [--param-update corrected]
 //            [--subroutine-path DIR:DIR] [--tool-table FILE]
+//   cnc-plan --machine M --show-setup     (what a program may do here: the program server's setup)
 #include <utility>
 #include <array>
 #include <chrono>
@@ -26,10 +27,6 @@ namespace {
 int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& args) {
   const std::string program_path = args.option("program");
   const std::string csv_path = args.option("csv");
-  if (program_path.empty()) {
-    std::fprintf(stderr, "cnc-plan: --program FILE is required\n");
-    return cnc::service::kExitBadInput;
-  }
   // The language's files from the command line, over the machine config's.
   cnc::pps::DryRunFiles files;
   const std::string dirs = args.option("subroutine-path");
@@ -41,6 +38,14 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
   }
   files.tool_table = args.option("tool-table");
   cnc::pps::ProgramSetup setup = cnc::pps::dry_run_setup(cfg, files);
+  if (args.flags.count("show-setup") > 0) {
+    std::fputs(cnc::pps::describe(setup).c_str(), stdout);
+    return 0;
+  }
+  if (program_path.empty()) {
+    std::fprintf(stderr, "cnc-plan: --program FILE is required\n");
+    return cnc::service::kExitBadInput;
+  }
   cnc::pps::ProgramServer server(std::move(setup), cnc::pps::ServerLimits{});
   const cnc::pps::LoadResult loaded = server.load(program_path, 1);
   if (!loaded.ok) {
@@ -179,6 +184,6 @@ int main(int argc, char** argv) {
                            {"param-update", "LAW", "the parameter update (first_order, taylor2, corrected)"},
                            {"subroutine-path", "DIR:DIR", "where O-word subroutines are looked for"},
                            {"tool-table", "FILE", "the tool table (default: the config's)"}},
-                          {}};
+                          {{"show-setup", "", "print the settings programs are interpreted with, then exit"}}};
   return cnc::service::run(spec, argc, argv, run_plan);
 }
