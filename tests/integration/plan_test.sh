@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The dry run: two runs of the same program give identical files, byte for byte;
 # a malformed program is refused with file:line:column and writes no setpoint; the
-# program-time cap is the machine file's.
+# program-time cap is the machine file's, and LinuxCNC's 52 h arc at F1 passes under its default.
 #   plan_test.sh BUILD_DIR SOURCE_DIR
 source "$(dirname "$0")/lib.sh"
 BUILD="$1"; SRC="$2"
@@ -60,4 +60,29 @@ rc=0
 grep -q "did not finish within 10 s of program time.*program.dry_run_max_time_s" "$WORK/long.out" \
   || { cat "$WORK/long.out" >&2; fail "the cap's message does not name program.dry_run_max_time_s"; }
 note "program-time cap: $(grep -o 'did not finish.*' "$WORK/long.out")"
+
+# LinuxCNC's interpreter test good-arc.medium.metric.center-format.ngc (its geometry,
+# written here): a half circle of r 1,000 mm (999.5 at the start, 1000.5 at the end) at
+# F1, about pi x 1,000 min = 52.4 h of program time. Under the default cap (a week) it
+# is planned to its end; under a cap of 10 s it is refused naming the key. On a machine
+# with the travel for it, at a 16 ms period (4x fewer cycles than sim3's 4 ms: ~4 s).
+sed -e '0,/max_mm: 400/s//max_mm: 2100/' -e '0,/max_mm: 300/s//max_mm: 1100/' \
+    -e 's/ipo_period_s: 0.004 /ipo_period_s: 0.016 /' "$M" >"$WORK/big.yaml"
+grep -q 'ipo_period_s: 0.016 ' "$WORK/big.yaml" && grep -q 'max_mm: 2100' "$WORK/big.yaml" \
+  || fail "the large machine's file was not made from $M"
+{ cat "$WORK/big.yaml"; printf 'program:\n  dry_run_max_time_s: 10\n'; } >"$WORK/big_cap.yaml"
+printf 'G21 G90 G17 F1\nG0 X0 Y0 Z0\nG2 X2000 I[0.9995 * 1000]\nM2\n' >"$WORK/good_arc_medium.ngc"
+rc=0
+"$BUILD/tools/cnc-plan" --machine "$WORK/big_cap.yaml" --program "$WORK/good_arc_medium.ngc" >"$WORK/arc_cap.out" 2>&1 || rc=$?
+[ "$rc" -eq 1 ] && grep -q "did not finish within 10 s of program time.*program.dry_run_max_time_s" "$WORK/arc_cap.out" \
+  || { cat "$WORK/arc_cap.out" >&2; fail "the 52 h arc under a 10 s cap: exit $rc, or no key named"; }
+t0=$(date +%s.%N)
+"$BUILD/tools/cnc-plan" --machine "$WORK/big.yaml" --program "$WORK/good_arc_medium.ngc" >"$WORK/arc.out" 2>&1 \
+  || { cat "$WORK/arc.out" >&2; fail "the 52 h arc is not planned under the default cap"; }
+wall=$(awk -v a="$t0" -v b="$(date +%s.%N)" 'BEGIN {printf "%.1f", b - a}')
+t=$(sed -n 's/^program time \([0-9.]*\) s.*/\1/p' "$WORK/arc.out")
+# pi x 1,000 mm at 1 mm/min (the spiral's length is within 0.01 mm of it) = 188,495.6 s; 10 s for the ends.
+awk -v t="$t" 'BEGIN {exit !(t > 188485 && t < 188506)}' \
+  || { cat "$WORK/arc.out" >&2; fail "the arc's program time $t s, expected 188,495.6 +- 10 s"; }
+note "good-arc.medium (F1, r 1,000 mm): planned to its end, $t s of program time ($(awk -v t="$t" 'BEGIN {printf "%.1f", t / 3600}') h) in $wall s; refused under a 10 s cap: $(grep -o 'did not finish.*' "$WORK/arc_cap.out")"
 echo PASS
