@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <memory>
 
 #include "cnc/lcmt_alarm.hpp"
@@ -61,6 +62,10 @@ InterpolatorNode::InterpolatorNode(const config::MachineConfig& cfg, bus::Bus& b
       peers_(bus, cfg, "cnc-interpolator", {"cnc-drive-bridge", "cnc-program-server"}),
       stream_(util::next_token(0)), spindle_seq_base_(stream_), ch_spindle_cmd_(cfg.channel(ch::kSpindleCmd)),
       io_seq_base_(stream_), ch_io_cmd_(cfg.channel(ch::kIoCmd)) {
+  // Recorded absolute: a replay elsewhere finds the files the machine file names beside it.
+  std::error_code ec;
+  const std::filesystem::path here = std::filesystem::absolute(cfg.source_file, ec);
+  config_file_ = ec || cfg.source_file.empty() ? cfg.source_file : here.lexically_normal().string();
   bus_.subscribe<cnc::lcmt_program_command>(cfg.channel(ch::kProgramCmd),
                                             [this](const auto& m) { on_command(m); });
   bus_.subscribe<cnc::lcmt_program_state>(cfg.channel(ch::kProgramState),
@@ -478,7 +483,7 @@ void InterpolatorNode::publish_config(int64_t cyc) {
   if (cyc % config_period_cycles_ != 0) return;
   cnc::lcmt_config c{};
   c.service = "cnc-interpolator";
-  c.source_file = cfg_.source_file;
+  c.source_file = config_file_;
   c.yaml = cfg_.source_text;
   c.cycle = cyc;
   bus_.publish(ch_config_, c);

@@ -212,6 +212,7 @@ class InterpolatorNode {
   FeedPolicy feed_;
   std::string ch_setpoints_, ch_request_, ch_state_, ch_input_, ch_config_, ch_alarm_;
   int64_t config_period_cycles_;
+  std::string config_file_;  // the machine file's absolute path, for INTERP_CONFIG
 
   // Inputs that arrived since the last cycle, applied in arrival order.
   std::vector<cnc::lcmt_program_command> pending_commands_;

@@ -11,9 +11,12 @@
 // them): a log with a message that does not verify (unsigned, unknown key, forged,
 // repeated) is not replayed (exit 2), the counts per cause are printed.
 //
-// --machine replays with another config, --program with another version of a
-// program: its blocks replace the recorded blocks of every recorded program with
-// the same file name. Both show where a change would alter the run.
+// The config is the machine file the interpolator recorded in the log (its relative
+// paths beside the file it was loaded from). --machine replays with another config,
+// --program with another version of a program: its blocks replace the recorded
+// blocks of every recorded program with the same file name, interpreted as the dry
+// run does (pps::dry_run_setup: the cell's setup, the var file and tool table never
+// written). Both show where a change would alter the run.
 #include <algorithm>
 #include <chrono>
 #include <cstdlib>
@@ -31,6 +34,7 @@
 #include "cnc/lcmt_interp_input_v2.hpp"
 #include "cnc/lcmt_setpoint_v1.hpp"
 #include "common/bus/log_format.h"
+#include "common/config/yaml_reader.h"
 #include "common/bus/bus.h"
 #include "common/program/block_msg.h"
 #include "common/service/service.h"
@@ -266,16 +270,27 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
     return kExitUnreplayable;
   }
 
+  // The machine file as the run loaded it, its relative paths (tool table, var file,
+  // subroutine path) beside the file it was loaded from, as cnc-logexport reads it.
+  const auto recorded = [&]() {
+    try {
+      return cnc::config::parse_machine_config(config->yaml, config->source_file);
+    } catch (const cnc::config::ConfigError& e) {
+      throw cnc::config::ConfigError(log, "INTERP_CONFIG",
+                                     std::string("the machine file the run recorded (") + config->source_file +
+                                         ") does not load here: " + e.what() + "; --machine FILE replays with another");
+    }
+  };
   const cnc::config::MachineConfig cfg =
-      args.machine_file.empty() ? cnc::config::parse_machine_config(config->yaml, "log:" + config->source_file)
-                                     : cnc::config::load_machine_config(args.machine_file);
+      args.machine_file.empty() ? recorded() : cnc::config::load_machine_config(args.machine_file);
   const int naxes = static_cast<int>(cfg.axes.size());
 
   // --program: the blocks of another program in place of the recorded ones. It is
   // parsed at each recorded load of a program of that name, from where the machine
-  // then stood, as the live server does.
+  // then stood, as the live server does, with the dry run's setup: the cell's, but the
+  // machine's var file and tool table are read, never written.
   std::optional<cnc::pps::ProgramServer> other;
-  if (!args.option("program").empty()) other.emplace(cfg);
+  if (!args.option("program").empty()) other.emplace(cnc::pps::dry_run_setup(cfg), cnc::pps::ServerLimits{});
 
   const auto t0 = std::chrono::steady_clock::now();
   // The planner inline: every plan is ready when its block is submitted and is taken

@@ -57,3 +57,51 @@ n_status="$(/usr/bin/python3 -c 'import sys; print(sum(1 for _ in open(sys.argv[
 [ "$n_status" -gt 0 ] || echo "$out" | grep -q "AXIS_STATUS message(s) do not decode in this version" \
   || { echo "$out" >&2; echo "FAIL: $newest: no AXIS_STATUS row and no word why" >&2; exit 1; }
 echo "export of $(basename "$newest"): $n_status AXIS_STATUS rows; $(echo "$out" | grep -c 'do not decode') channel(s) named as not decoded"
+# The machine file the log recorded, as the cell loaded it: its relative paths beside
+# the file it was loaded from (here a tool table and a var file: the newest golden log
+# with its INTERP_CONFIG's machine file moved to $files and given both), and --program
+# interpreted as the dry run does: read, never written. The program: golden.ngc with
+# its two comment lines made G10s that the cell would write (a work offset, a tool's
+# length), so its blocks and lines are the recorded ones.
+files="$(mktemp -d /tmp/cnc-golden-files.XXXXXX)"
+trap 'rm -f "$tmp"; rm -rf "$exp" "$files"' EXIT
+printf 'T1 P1 Z+0.500000 D+6.000000 ;ball\n' >"$files/tool.tbl"
+printf '5241\t0.000000\n' >"$files/params.var"
+cp "$files/tool.tbl" "$files/tool.before"; cp "$files/params.var" "$files/params.before"
+/usr/bin/python3 - "$newest" "$files/run.lcmlog" "$files/machine.yaml" \
+  $'\nprogram:\n  tool_table: tool.tbl\n  var_file: params.var\n' <<'PY'
+import struct, sys
+src, dst, source_file, extra = sys.argv[1:5]
+data = open(src, "rb").read()
+out, i, n = bytearray(), 0, 0
+while i < len(data):  # LCM log events: magic, number, time, channel and data lengths
+    magic, num, ts, clen, dlen = struct.unpack_from(">IqqII", data, i)
+    assert magic == 0xEDA1DA01, "not an LCM log event at byte %d" % i
+    channel = data[i + 28:i + 28 + clen]
+    body = data[i + 28 + clen:i + 28 + clen + dlen]
+    i += 28 + clen + dlen
+    if channel.endswith(b"INTERP_CONFIG"):  # lcmt_config: hash, utime, seq, sender, 3 strings, cycle
+        p, strings = 28, []
+        for _ in range(3):
+            (k,) = struct.unpack_from(">i", body, p)
+            strings.append(body[p + 4:p + 3 + k])
+            p += 4 + k
+        strings[1] = source_file.encode()
+        strings[2] += extra.encode()
+        # The cycle and the signature's trailer follow (not verified without --key).
+        body = body[:28] + b"".join(struct.pack(">i", len(s) + 1) + s + b"\0" for s in strings) + body[p:]
+        n += 1
+    out += struct.pack(">IqqII", magic, num, ts, clen, len(body)) + channel + body
+assert n > 0, "no INTERP_CONFIG in " + src
+open(dst, "wb").write(out)
+PY
+rc=0; out="$("$BUILD/tools/cnc-replay" --log "$files/run.lcmlog" 2>&1)" || rc=$?
+[ "$rc" -eq 0 ] && echo "$out" | grep -q "^identical: " \
+  || { echo "$out" >&2; echo "FAIL: a log whose machine file names a tool table beside it does not replay (exit $rc)" >&2; exit 1; }
+{ printf 'G10 L2 P2 X1\nG10 L1 P1 Z0.3\n'; tail -n +3 "$SRC/tests/golden/logs/golden.ngc"; } >"$files/golden.ngc"
+rc=0; out="$("$BUILD/tools/cnc-replay" --log "$files/run.lcmlog" --program "$files/golden.ngc" 2>&1)" || rc=$?
+[ "$rc" -eq 0 ] && echo "$out" | grep -q "^identical: " \
+  || { echo "$out" >&2; echo "FAIL: --program with the G10s: exit $rc, expected identical" >&2; exit 1; }
+cmp -s "$files/tool.tbl" "$files/tool.before" && cmp -s "$files/params.var" "$files/params.before" \
+  || { cat "$files/tool.tbl" >&2; echo "FAIL: the replay wrote the machine's tool table or var file" >&2; exit 1; }
+echo "recorded machine file with a tool table and a var file beside it: replays identically; with --program's G10s: $(echo "$out" | grep -o '^identical: [0-9]* setpoints'), the tool table and var file unchanged"
