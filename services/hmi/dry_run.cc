@@ -16,10 +16,10 @@ namespace cnc::hmi {
 
 using json = nlohmann::json;
 
-void DryRun::start(int64_t token, const std::string& program) {
+void DryRun::start(int64_t token, const std::string& program, bool block_delete) {
   cancel();
   cancelled_ = false;
-  thread_ = std::thread([this, token, program] { run(token, program); });
+  thread_ = std::thread([this, token, program, block_delete] { run(token, program, block_delete); });
 }
 
 void DryRun::cancel() {
@@ -28,7 +28,7 @@ void DryRun::cancel() {
   if (thread_.joinable()) thread_.join();
 }
 
-void DryRun::run(int64_t token, const std::string& program) {
+void DryRun::run(int64_t token, const std::string& program, bool block_delete) {
   char tmpl[] = "/tmp/cnc-hmi-plan-XXXXXX";
   const int fd = mkstemp(tmpl);
   if (fd < 0) return;
@@ -42,7 +42,7 @@ void DryRun::run(int64_t token, const std::string& program) {
       dup2(devnull, 2);
     }
     execl(exe_.c_str(), exe_.c_str(), "--machine", machine_.c_str(), "--program", program.c_str(), "--csv",
-          csv.c_str(), static_cast<char*>(nullptr));
+          csv.c_str(), "--block-delete", block_delete ? "on" : "off", static_cast<char*>(nullptr));
     _exit(127);
   }
   json out;

@@ -18,7 +18,9 @@ class DryRun {
   DryRun(std::string machine_file, std::string plan_exe) : machine_(std::move(machine_file)), exe_(std::move(plan_exe)) {}
   ~DryRun() { cancel(); }
 
-  void start(int64_t token, const std::string& program);  // cancels the one running
+  // Cancels the one running. block_delete: the program server's switch the program was
+  // loaded with (PROGRAM_STATE), so that the preview skips the '/' lines the run skips.
+  void start(int64_t token, const std::string& program, bool block_delete);
   void cancel();
   // The finished preview, once (a JSON text), or "".
   std::string take() {
@@ -29,7 +31,7 @@ class DryRun {
   }
 
  private:
-  void run(int64_t token, const std::string& program);
+  void run(int64_t token, const std::string& program, bool block_delete);
 
   std::string machine_, exe_;
   std::thread thread_;

@@ -46,6 +46,20 @@ printf 'G21 G90\nG10 L2 P1 X5\nG0 X10\nM2\n' >"$WORK/g10.ngc"
 cmp -s "$WORK/cell.var" "$WORK/cell.var.before" || { cat "$WORK/cell.var" >&2; fail "the dry run wrote the parameter file"; }
 note "dry run with program.var_file: the parameter file unchanged ($(wc -l <"$WORK/cell.var") line)"
 
+# --show-setup prints what programs may do on the machine, the program server's setup
+# (dry_run_agreement_test compares the two field by field); --block-delete sets the
+# server's switch as the HMI's preview passes it, and refuses anything but on and off.
+P="$BUILD/tools/cnc-plan"
+"$P" --machine "$SRC/config/machines/sim3_probe.yaml" --show-setup | grep -qx "machine.has_probe = true" \
+  || fail "--show-setup: sim3_probe.yaml without its probe"
+"$P" --machine "$M" --show-setup | grep -qx "machine.has_probe = false" || fail "--show-setup: sim3.yaml with a probe"
+"$P" --machine "$M" --show-setup --block-delete off | grep -qx "machine.block_delete = false" \
+  || fail "--block-delete off does not reach the setup"
+rc=0; "$P" --machine "$M" --show-setup --block-delete maybe >/dev/null 2>"$WORK/bd.err" || rc=$?
+[ "$rc" -eq 2 ] && grep -q -- "--block-delete maybe: expected on or off" "$WORK/bd.err" \
+  || { cat "$WORK/bd.err" >&2; fail "--block-delete maybe: exit $rc"; }
+note "--show-setup: $("$P" --machine "$M" --show-setup | wc -l) fields; --block-delete maybe refused: $(cat "$WORK/bd.err")"
+
 # The dry run's program-time cap is the machine's setting (program.dry_run_max_time_s),
 # and a program beyond it is an error that names it: 10 s here, a 5 s dwell within it,
 # a 30 s one not.

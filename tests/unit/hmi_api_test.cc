@@ -2,7 +2,11 @@
 // dispatcher answers by that table without any HTTP (over an in-memory bus).
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
+#include <algorithm>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <memory>
 #include <set>
@@ -12,6 +16,7 @@
 
 #include "common/config/machine_config.h"
 #include "services/hmi/api.h"
+#include "services/hmi/dry_run.h"
 #include "tests/hmi_offline_options.h"
 
 using cnc::hmi::Api;
@@ -158,3 +163,39 @@ TEST_F(HmiApi, ViewOnlyClientsMayOnlyLook) {
   api_->message(7, false, R"({"id": 10, "action": "fly"})");
   EXPECT_EQ(last()["text"], "view only: log in to operate the machine");
 }
+
+namespace {
+
+// The preview's dry run (cnc-plan in a child process) with the program server's block
+// delete switch: the '/' line's move is skipped when it is on and made when it is off.
+json preview(bool block_delete, const std::string& program) {
+  cnc::hmi::DryRun dry(std::string(CNC_SOURCE_DIR) + "/config/machines/sim3.yaml", CNC_PLAN_EXE);
+  dry.start(7, program, block_delete);
+  for (int i = 0; i < 500; ++i) {
+    if (std::string r = dry.take(); !r.empty()) return json::parse(r);
+    usleep(20'000);
+  }
+  return json{};
+}
+
+TEST(HmiDryRun, ThePreviewTakesTheServersBlockDeleteSwitch) {
+  char dir[] = "/tmp/cnc-hmi-dry-run.XXXXXX";
+  ASSERT_NE(mkdtemp(dir), nullptr);
+  const std::string program = std::string(dir) + "/slash.ngc";
+  std::ofstream(program) << "G21 G90\n/G0 X9\nG0 Y2\nM2\n";
+  double x_max[2] = {-1, -1};
+  for (bool on : {true, false}) {
+    const json p = preview(on, program);
+    ASSERT_TRUE(p.contains("points")) << p.dump();
+    const auto& pts = p["points"];
+    ASSERT_GE(pts.size(), 6u);
+    double x = -1e9;
+    for (size_t i = 0; i + 2 < pts.size(); i += 3) x = std::max(x, pts[i].get<double>());
+    x_max[on ? 1 : 0] = x;
+  }
+  std::filesystem::remove_all(dir);
+  EXPECT_NEAR(x_max[1], 0.0, 1e-9) << "block delete on: the '/' line's X9 is skipped";
+  EXPECT_NEAR(x_max[0], 9.0, 1e-9) << "block delete off: the '/' line's X9 is made";
+}
+
+}  // namespace

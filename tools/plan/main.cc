@@ -3,7 +3,7 @@
 // of the same program and config give identical files, byte for byte.
 //
 //   cnc-plan --machine M --program P --csv OUT [--override 1.0] [--param-update corrected]
-//            [--subroutine-path DIR:DIR] [--tool-table FILE]
+//            [--subroutine-path DIR:DIR] [--tool-table FILE] [--block-delete on|off]
 //   cnc-plan --machine M --show-setup     (what a program may do here: the program server's setup)
 #include <utility>
 #include <array>
@@ -38,6 +38,12 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
   }
   files.tool_table = args.option("tool-table");
   cnc::pps::ProgramSetup setup = cnc::pps::dry_run_setup(cfg, files);
+  // The program server's switch as the program was loaded with it (the HMI's preview passes it).
+  if (const std::string bd = args.option("block-delete"); !bd.empty()) {
+    if (bd != "on" && bd != "off")
+      throw cnc::service::FlagError("--block-delete " + bd + ": expected on or off");
+    setup.machine.block_delete = bd == "on";
+  }
   if (args.flags.count("show-setup") > 0) {
     std::fputs(cnc::pps::describe(setup).c_str(), stdout);
     return 0;
@@ -183,7 +189,9 @@ int main(int argc, char** argv) {
                            {"override", "F", "feed override factor (default 1.0)", true},
                            {"param-update", "LAW", "the parameter update (first_order, taylor2, corrected)"},
                            {"subroutine-path", "DIR:DIR", "where O-word subroutines are looked for"},
-                           {"tool-table", "FILE", "the tool table (default: the config's)"}},
+                           {"tool-table", "FILE", "the tool table (default: the config's)"},
+                           {"block-delete", "on|off", "the block delete switch: '/' lines skipped when on (default: "
+                                                      "program.block_delete)"}},
                           {{"show-setup", "", "print the settings programs are interpreted with, then exit"}}};
   return cnc::service::run(spec, argc, argv, run_plan);
 }
