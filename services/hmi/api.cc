@@ -551,7 +551,10 @@ void Api::update(double now) {
     preview_token_ = program_.program_token;
     // An MDI or touch-off line keeps the program's preview.
     if (std::filesystem::path(program_.program_path).filename().string().rfind("mdi-", 0) != 0)
-      dry_.start(preview_token_, program_.program_path, program_.block_delete != 0);
+      dry_.start(preview_token_, program_.program_path, program_.block_delete != 0,
+                 have_interp_ ? std::vector<double>(interp_.position_mm.begin(),
+                                                    interp_.position_mm.begin() + interp_.num_axes)
+                              : std::vector<double>{});
   }
   if (std::string p = dry_.take(); !p.empty()) {
     preview_msg_ = json::parse(p);

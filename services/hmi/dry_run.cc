@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -16,10 +17,12 @@ namespace cnc::hmi {
 
 using json = nlohmann::json;
 
-void DryRun::start(int64_t token, const std::string& program, bool block_delete) {
+void DryRun::start(int64_t token, const std::string& program, bool block_delete, std::vector<double> start_mm) {
   cancel();
   cancelled_ = false;
-  thread_ = std::thread([this, token, program, block_delete] { run(token, program, block_delete); });
+  thread_ = std::thread([this, token, program, block_delete, start = std::move(start_mm)] {
+    run(token, program, block_delete, start);
+  });
 }
 
 void DryRun::cancel() {
@@ -28,12 +31,24 @@ void DryRun::cancel() {
   if (thread_.joinable()) thread_.join();
 }
 
-void DryRun::run(int64_t token, const std::string& program, bool block_delete) {
+void DryRun::run(int64_t token, const std::string& program, bool block_delete, const std::vector<double>& start_mm) {
   char tmpl[] = "/tmp/cnc-hmi-plan-XXXXXX";
   const int fd = mkstemp(tmpl);
   if (fd < 0) return;
   close(fd);
   const std::string csv = tmpl;
+  // The arguments before the fork: the child only execs.
+  std::string start;
+  for (double v : start_mm) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%.17g", v);  // the position exactly
+    if (!start.empty()) start += ',';
+    start += buf;
+  }
+  std::vector<const char*> argv = {exe_.c_str(), "--machine", machine_.c_str(), "--program", program.c_str(),
+                                   "--csv", csv.c_str(), "--block-delete", block_delete ? "on" : "off"};
+  if (!start.empty()) argv.insert(argv.end(), {"--start", start.c_str()});
+  argv.push_back(nullptr);
   const pid_t child = fork();
   if (child == 0) {
     const int devnull = open("/dev/null", O_WRONLY);
@@ -41,8 +56,7 @@ void DryRun::run(int64_t token, const std::string& program, bool block_delete) {
       dup2(devnull, 1);
       dup2(devnull, 2);
     }
-    execl(exe_.c_str(), exe_.c_str(), "--machine", machine_.c_str(), "--program", program.c_str(), "--csv",
-          csv.c_str(), "--block-delete", block_delete ? "on" : "off", static_cast<char*>(nullptr));
+    execv(exe_.c_str(), const_cast<char* const*>(argv.data()));
     _exit(127);
   }
   json out;

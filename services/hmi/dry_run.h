@@ -8,6 +8,7 @@
 #include <string>
 #include <thread>
 #include <utility>
+#include <vector>
 
 namespace cnc::hmi {
 
@@ -19,8 +20,10 @@ class DryRun {
   ~DryRun() { cancel(); }
 
   // Cancels the one running. block_delete: the program server's switch the program was
-  // loaded with (PROGRAM_STATE), so that the preview skips the '/' lines the run skips.
-  void start(int64_t token, const std::string& program, bool block_delete);
+  // loaded with (PROGRAM_STATE), so that the preview skips the '/' lines the run skips;
+  // start_mm: where the machine stands (INTERP_STATE, machine coordinates), where the
+  // server loaded the program from (empty: home).
+  void start(int64_t token, const std::string& program, bool block_delete, std::vector<double> start_mm = {});
   void cancel();
   // The finished preview, once (a JSON text), or "".
   std::string take() {
@@ -31,7 +34,7 @@ class DryRun {
   }
 
  private:
-  void run(int64_t token, const std::string& program, bool block_delete);
+  void run(int64_t token, const std::string& program, bool block_delete, const std::vector<double>& start_mm);
 
   std::string machine_, exe_;
   std::thread thread_;

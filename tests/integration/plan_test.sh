@@ -59,6 +59,21 @@ rc=0; "$P" --machine "$M" --show-setup --block-delete maybe >/dev/null 2>"$WORK/
 [ "$rc" -eq 2 ] && grep -q -- "--block-delete maybe: expected on or off" "$WORK/bd.err" \
   || { cat "$WORK/bd.err" >&2; fail "--block-delete maybe: exit $rc"; }
 note "--show-setup: $("$P" --machine "$M" --show-setup | wc -l) fields; --block-delete maybe refused: $(cat "$WORK/bd.err")"
+# --start: the program loaded from where the machine stands (the server's load, the
+# HMI's preview): an incremental move ends 10 mm on from it, and leaves X's travel
+# [-5, 400] from X 395 (refused, exit 3, as the server refuses it).
+printf 'G21 G91\nG1 X10 Y-5 F600\nM2\n' >"$WORK/inc.ngc"
+"$P" --machine "$M" --program "$WORK/inc.ngc" --csv "$WORK/inc.csv" --start 100,50,-10 >/dev/null \
+  || fail "--start 100,50,-10: the incremental program's dry run failed"
+[ "$(tail -1 "$WORK/inc.csv" | cut -d, -f3-5)" = "110.000000000,45.000000000,-10.000000000" ] \
+  || fail "--start 100,50,-10: the incremental move ends at $(tail -1 "$WORK/inc.csv" | cut -d, -f3-5)"
+rc=0; "$P" --machine "$M" --program "$WORK/inc.ngc" --start 395,0,0 2>"$WORK/start.err" >/dev/null || rc=$?
+[ "$rc" -eq 3 ] && grep -q "inc.ngc:2:1: X 405.0000 mm .* outside the axis's travel" "$WORK/start.err" \
+  || { cat "$WORK/start.err" >&2; fail "--start 395,0,0: exit $rc, expected the travel refusal"; }
+rc=0; "$P" --machine "$M" --program "$WORK/inc.ngc" --start 1,2 2>"$WORK/start.err" >/dev/null || rc=$?
+[ "$rc" -eq 2 ] && grep -q -- "--start 1,2: expected 3 machine positions" "$WORK/start.err" \
+  || { cat "$WORK/start.err" >&2; fail "--start 1,2: exit $rc"; }
+note "--start: the incremental move from (100, 50, -10) ends at (110, 45, -10); from X 395 refused at inc.ngc:2:1"
 
 # The dry run's program-time cap is the machine's setting (program.dry_run_max_time_s),
 # and a program beyond it is an error that names it: 10 s here, a 5 s dwell within it,

@@ -166,11 +166,11 @@ TEST_F(HmiApi, ViewOnlyClientsMayOnlyLook) {
 
 namespace {
 
-// The preview's dry run (cnc-plan in a child process) with the program server's block
-// delete switch: the '/' line's move is skipped when it is on and made when it is off.
-json preview(bool block_delete, const std::string& program) {
+// The preview's dry run (cnc-plan in a child process) as the program server loaded the
+// program: with its block delete switch, from where the machine stands.
+json preview(bool block_delete, const std::string& program, std::vector<double> start = {}) {
   cnc::hmi::DryRun dry(std::string(CNC_SOURCE_DIR) + "/config/machines/sim3.yaml", CNC_PLAN_EXE);
-  dry.start(7, program, block_delete);
+  dry.start(7, program, block_delete, std::move(start));
   for (int i = 0; i < 500; ++i) {
     if (std::string r = dry.take(); !r.empty()) return json::parse(r);
     usleep(20'000);
@@ -196,6 +196,27 @@ TEST(HmiDryRun, ThePreviewTakesTheServersBlockDeleteSwitch) {
   std::filesystem::remove_all(dir);
   EXPECT_NEAR(x_max[1], 0.0, 1e-9) << "block delete on: the '/' line's X9 is skipped";
   EXPECT_NEAR(x_max[0], 9.0, 1e-9) << "block delete off: the '/' line's X9 is made";
+}
+
+TEST(HmiDryRun, ThePreviewStartsWhereTheMachineStands) {
+  char dir[] = "/tmp/cnc-hmi-dry-run.XXXXXX";
+  ASSERT_NE(mkdtemp(dir), nullptr);
+  const std::string program = std::string(dir) + "/incremental.ngc";
+  std::ofstream(program) << "G21 G91\nG1 X10 Y-5 F600\nM2\n";
+  const json p = preview(true, program, {100.25, 50, -10});
+  std::filesystem::remove_all(dir);
+  ASSERT_TRUE(p.contains("points")) << p.dump();
+  const auto& pts = p["points"];
+  ASSERT_GE(pts.size(), 6u);
+  // The first point (the first cycle's, a few um on) where the machine stands, the last
+  // 10 mm along X and -5 along Y from it.
+  EXPECT_NEAR(pts[0].get<double>(), 100.25, 0.01);
+  EXPECT_NEAR(pts[1].get<double>(), 50.0, 0.01);
+  EXPECT_NEAR(pts[2].get<double>(), -10.0, 1e-9);
+  const size_t n = pts.size();
+  EXPECT_NEAR(pts[n - 3].get<double>(), 110.25, 1e-9);
+  EXPECT_NEAR(pts[n - 2].get<double>(), 45.0, 1e-9);
+  EXPECT_NEAR(pts[n - 1].get<double>(), -10.0, 1e-9);
 }
 
 }  // namespace

@@ -3,7 +3,7 @@
 // of the same program and config give identical files, byte for byte.
 //
 //   cnc-plan --machine M --program P --csv OUT [--override 1.0] [--param-update corrected]
-//            [--subroutine-path DIR:DIR] [--tool-table FILE] [--block-delete on|off]
+//            [--subroutine-path DIR:DIR] [--tool-table FILE] [--block-delete on|off] [--start X,Y,Z]
 //   cnc-plan --machine M --show-setup     (what a program may do here: the program server's setup)
 #include <utility>
 #include <array>
@@ -14,6 +14,7 @@
 #include <cstdlib>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "common/motion/feed_override.h"
 #include "common/motion/feed_policy.h"
@@ -52,8 +53,28 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
     std::fprintf(stderr, "cnc-plan: --program FILE is required\n");
     return cnc::service::kExitBadInput;
   }
+  // Where the machine stands, as the program server loads a program from there (the
+  // HMI's preview passes it); default: the home position.
+  const int naxes = static_cast<int>(cfg.axes.size());
+  std::vector<double> start;
+  if (const std::string text = args.option("start"); !text.empty()) {
+    for (size_t b = 0; b <= text.size();) {
+      size_t e = text.find(',', b);
+      if (e == std::string::npos) e = text.size();
+      const std::string one = text.substr(b, e - b);
+      char* end = nullptr;
+      const double v = std::strtod(one.c_str(), &end);
+      if (one.empty() || *end != '\0' || !std::isfinite(v))
+        throw cnc::service::FlagError("--start " + text + ": '" + one + "' is not a position");
+      start.push_back(v);
+      b = e + 1;
+    }
+    if (static_cast<int>(start.size()) != naxes)
+      throw cnc::service::FlagError("--start " + text + ": expected " + std::to_string(naxes) +
+                                    " machine positions, one per axis, comma-separated");
+  }
   cnc::pps::ProgramServer server(std::move(setup), cnc::pps::ServerLimits{});
-  const cnc::pps::LoadResult loaded = server.load(program_path, 1);
+  const cnc::pps::LoadResult loaded = server.load(program_path, 1, start);
   if (!loaded.ok) {
     std::fprintf(stderr, "cnc-plan: program refused: %s\n", loaded.error.c_str());
     return 3;
@@ -83,6 +104,12 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
     cnc::interp::Command c{cnc::interp::Command::Kind::kOverride, value};
     core.apply_command(c);
   }
+  if (!start.empty()) {
+    // The path rests there, as after a RESET that took the drives' positions.
+    cnc::interp::Command c{cnc::interp::Command::Kind::kReset, 0.0};
+    for (int a = 0; a < naxes; ++a) c.position_mm[static_cast<size_t>(a)] = start[static_cast<size_t>(a)];
+    core.apply_command(c);
+  }
   core.apply_command(cnc::interp::Command{cnc::interp::Command::Kind::kLoad, 1.0});
   core.apply_command(cnc::interp::Command{cnc::interp::Command::Kind::kStart, 1.0});
 
@@ -103,7 +130,6 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
   int64_t cycles = 0;
   // Finite differences of the setpoints against each axis's limits (at rest before
   // the first and after the last setpoint).
-  const int naxes = static_cast<int>(cfg.axes.size());
   const double T = cfg.ipo_period_s;
   std::array<double, cnc::program::kMaxAxes> p_prev = core.last().position_mm, v1{}, v2{};
   std::array<double, cnc::program::kMaxAxes> use_v{}, use_a{}, use_j{};
@@ -190,6 +216,7 @@ int main(int argc, char** argv) {
                            {"param-update", "LAW", "the parameter update (first_order, taylor2, corrected)"},
                            {"subroutine-path", "DIR:DIR", "where O-word subroutines are looked for"},
                            {"tool-table", "FILE", "the tool table (default: the config's)"},
+                           {"start", "X,Y,Z", "where the machine stands, machine coordinates per axis (default: home)"},
                            {"block-delete", "on|off", "the block delete switch: '/' lines skipped when on (default: "
                                                       "program.block_delete)"}},
                           {{"show-setup", "", "print the settings programs are interpreted with, then exit"}}};
