@@ -6,7 +6,7 @@
 # (read at the load; switching it while loaded reloads the program); single block
 # switched on while a program runs at speed holds at a line start, and off again lets
 # it run to its end; block delete is refused while a program runs or is held; the
-# session replays bit for bit.
+# session replays bit for bit, also with --program (the '/' lines read as each load read them).
 #   switches_test.sh BUILD_DIR SOURCE_DIR
 source "$(dirname "$0")/lib.sh"
 enter_private_netns "$@"
@@ -127,4 +127,9 @@ stop logger TERM
 # 7. Replay: the switches are recorded inputs; the session reproduces bit for bit.
 "$BUILD/tools/cnc-replay" --log "$WORK/run.lcmlog" >"$WORK/replay.out" 2>&1 || { cat "$WORK/replay.out" >&2; fail "replay is not identical"; }
 grep "^identical: " "$WORK/replay.out" >&2 || fail "no verdict from cnc-replay"
+# --program with the same file: read again with the switch each load had (the server's,
+# on PROGRAM_STATE: on for the first, off from the second), the same blocks.
+"$BUILD/tools/cnc-replay" --log "$WORK/run.lcmlog" --program "$WORK/sw.ngc" >"$WORK/replay_p.out" 2>&1 \
+  || { cat "$WORK/replay_p.out" >&2; fail "replay --program sw.ngc is not identical (block delete as loaded?)"; }
+grep "^identical: " "$WORK/replay_p.out" >&2 || fail "no verdict from cnc-replay --program"
 echo "PASS"

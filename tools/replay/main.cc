@@ -16,7 +16,8 @@
 // --program with another version of a program: its blocks replace the recorded
 // blocks of every recorded program with the same file name, interpreted as the dry
 // run does (pps::dry_run_setup: the cell's setup, the var file and tool table never
-// written). Both show where a change would alter the run.
+// written), with the block delete switch the recorded program was loaded with
+// (PROGRAM_STATE). Both show where a change would alter the run.
 #include <algorithm>
 #include <chrono>
 #include <cstdlib>
@@ -30,6 +31,7 @@
 
 #include "cnc/lcmt_config.hpp"
 #include "cnc/lcmt_interp_input.hpp"
+#include "cnc/lcmt_program_state.hpp"
 #include "cnc/lcmt_setpoint.hpp"
 #include "cnc/lcmt_interp_input_v2.hpp"
 #include "cnc/lcmt_setpoint_v1.hpp"
@@ -154,6 +156,7 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
   std::vector<cnc::lcmt_config> runs;  // each run's config, in the order they began
   std::map<int32_t, std::vector<cnc::lcmt_interp_input>> inputs_of;
   std::map<int32_t, std::map<int64_t, cnc::lcmt_setpoint>> setpoints_of;
+  std::map<int64_t, bool> block_delete_of;  // program token -> the switch it was loaded with
   cnc::bus::LogFormat format;  // format 1 unless the log says otherwise
   bool format_seen = false;
   const std::string key_file = args.option("key");
@@ -178,6 +181,13 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
     bus.subscribe_raw(".*INTERP_INPUT", [&](const std::string&, const void* d, size_t n, int64_t) {
       cnc::lcmt_interp_input in;
       if (decode(d, n, &in) || decode_v2(d, n, &in)) inputs_of[in.sender].push_back(std::move(in));
+    });
+    // The block delete switch each program was loaded with (the server's, not an
+    // interpolator input): --program reads the edited program with it.
+    bus.subscribe_raw(".*PROGRAM_STATE", [&](const std::string&, const void* d, size_t n, int64_t) {
+      cnc::lcmt_program_state st;
+      if (decode(d, n, &st) && st.state == cnc::lcmt_program_state::LOADED)
+        block_delete_of.emplace(st.program_token, st.block_delete != 0);
     });
     bus.subscribe_raw(".*SETPOINTS", [&](const std::string&, const void* d, size_t n, int64_t) {
       cnc::lcmt_setpoint sp;
@@ -310,6 +320,13 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
       if (in.kind == cnc::lcmt_interp_input::COMMAND && in.command.command == cnc::lcmt_program_command::LOAD) {
         substituting = other && base_name(in.command.program_path) == other_name;
         if (substituting) {
+          // The program this LOAD became: the token of the next recorded block.
+          for (size_t k = next_input; k < mine.size(); ++k) {
+            if (mine[k].kind != cnc::lcmt_interp_input::BLOCK) continue;
+            if (const auto bd = block_delete_of.find(mine[k].block.program_token); bd != block_delete_of.end())
+              other->set_block_delete(bd->second);
+            break;
+          }
           std::vector<double> here(naxes);
           for (int a = 0; a < naxes; ++a)
             here[a] = core.last().num_axes > 0 ? core.last().position_mm[a] : cfg.axes[a].home_mm;
