@@ -49,13 +49,14 @@ void DryRun::run(int64_t token, const std::string& program, bool block_delete, c
                                    "--csv", csv.c_str(), "--block-delete", block_delete ? "on" : "off"};
   if (!start.empty()) argv.insert(argv.end(), {"--start", start.c_str()});
   argv.push_back(nullptr);
+  // Its stderr kept: a refusal names the place (file:line:column), which the page shows.
+  const std::string err = csv + ".err";
   const pid_t child = fork();
   if (child == 0) {
     const int devnull = open("/dev/null", O_WRONLY);
-    if (devnull >= 0) {
-      dup2(devnull, 1);
-      dup2(devnull, 2);
-    }
+    if (devnull >= 0) dup2(devnull, 1);
+    const int errfd = open(err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0600);
+    if (errfd >= 0) dup2(errfd, 2);
     execv(exe_.c_str(), const_cast<char* const*>(argv.data()));
     _exit(127);
   }
@@ -72,10 +73,17 @@ void DryRun::run(int64_t token, const std::string& program, bool block_delete, c
     pid_ = 0;
     if (cancelled_) {
       std::filesystem::remove(csv);
+      std::filesystem::remove(err);
       return;
     }
     if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
-      out["error"] = "the dry run (" + exe_ + ") ended with status " + std::to_string(WEXITSTATUS(status));
+      // Its last line says why ("cnc-plan: program refused: FILE:LINE:COLUMN: ...").
+      std::ifstream e(err);
+      std::string why;
+      for (std::string l; std::getline(e, l);)
+        if (!l.empty()) why = l;
+      out["error"] = why.empty() ? "the dry run (" + exe_ + ") ended with status " + std::to_string(WEXITSTATUS(status))
+                                 : why;
     } else {
       // Thinned: a point where the path moved 0.05 mm or its line changed, at most 40,000.
       std::ifstream f(csv);
@@ -120,6 +128,7 @@ void DryRun::run(int64_t token, const std::string& program, bool block_delete, c
     }
   }
   std::filesystem::remove(csv);
+  std::filesystem::remove(err);
   std::lock_guard<std::mutex> lk(mu_);
   result_ = out.dump();
 }

@@ -219,4 +219,21 @@ TEST(HmiDryRun, ThePreviewStartsWhereTheMachineStands) {
   EXPECT_NEAR(pts[n - 1].get<double>(), -10.0, 1e-9);
 }
 
+// A program the dry run refuses: the preview says why and where, in the dry run's words.
+TEST(HmiDryRun, ARefusalNamesThePlace) {
+  char dir[] = "/tmp/cnc-hmi-dry-run.XXXXXX";
+  ASSERT_NE(mkdtemp(dir), nullptr);
+  const std::string program = std::string(dir) + "/incremental.ngc";
+  std::ofstream(program) << "G21 G91\nG1 X10 Y-5 F600\nM2\n";
+  const json p = preview(true, program, {395, 50, -10});
+  std::filesystem::remove_all(dir);
+  ASSERT_TRUE(p.contains("error")) << p.dump();
+  const std::string e = p["error"].get<std::string>();
+  EXPECT_NE(e.find("incremental.ngc:2:1: X 405.0000 mm (machine coordinates, the block's end) is outside the axis's "
+                   "travel [-5, 400]"),
+            std::string::npos)
+      << e;
+  EXPECT_FALSE(p.contains("points"));
+}
+
 }  // namespace
