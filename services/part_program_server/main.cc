@@ -1,4 +1,6 @@
 // cnc-program-server: parses part programs and serves their blocks on request.
+#include <cstdio>
+
 #include "cnc/lcmt_heartbeat.hpp"
 #include "common/service/heartbeat.h"
 #include "common/service/peer_watch.h"
@@ -13,8 +15,12 @@ int main(int argc, char** argv) {
   cnc::service::Spec spec{"cnc-program-server", "parses part programs and serves their blocks", 
                           {{"state", "FILE",
                             "keeps the loaded program's path, token and start, so that a restarted server resumes it"}},
-                          {}};
+                          {{"show-setup", "", "print the settings programs are interpreted with, then exit"}}};
   return cnc::service::run(spec, argc, argv, [](const cnc::config::MachineConfig& cfg, const cnc::service::Args& args) {
+    if (args.flags.count("show-setup") > 0) {  // what cnc-plan --show-setup prints for the dry run
+      std::fputs(cnc::pps::describe(cnc::pps::program_setup(cfg)).c_str(), stdout);
+      return cnc::service::kExitOk;
+    }
     cnc::bus::Bus bus(cfg.lcm_url, 0, 1000, cnc::service::bus_security(cfg, "cnc-program-server"));
     cnc::pps::ProgramServerNode node(cfg, bus);
     node.use_state_file(args.option("state"));

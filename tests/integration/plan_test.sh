@@ -59,6 +59,19 @@ rc=0; "$P" --machine "$M" --show-setup --block-delete maybe >/dev/null 2>"$WORK/
 [ "$rc" -eq 2 ] && grep -q -- "--block-delete maybe: expected on or off" "$WORK/bd.err" \
   || { cat "$WORK/bd.err" >&2; fail "--block-delete maybe: exit $rc"; }
 note "--show-setup: $("$P" --machine "$M" --show-setup | wc -l) fields; --block-delete maybe refused: $(cat "$WORK/bd.err")"
+# The executables themselves: on every shipped machine file cnc-program-server and
+# cnc-plan print the same setup, but that the dry run never writes the var file.
+n=0
+for f in "$SRC"/config/machines/*.yaml; do
+  "$BUILD/services/cnc-program-server" --machine "$f" --show-setup >"$WORK/cell.setup" || fail "$f: cnc-program-server --show-setup"
+  "$P" --machine "$f" --show-setup >"$WORK/dry.setup" || fail "$f: cnc-plan --show-setup"
+  d="$(diff "$WORK/cell.setup" "$WORK/dry.setup" | grep '^[<>]' | tr '\n' ' ' || true)"
+  [ "$d" = "< machine.write_var_file = true > machine.write_var_file = false " ] \
+    || fail "$(basename "$f"): the server's and the dry run's setups differ: $d"
+  n=$((n + 1))
+done
+[ "$n" -ge 10 ] || fail "only $n machine files"
+note "cnc-program-server and cnc-plan --show-setup: alike on $n machine files ($(wc -l <"$WORK/dry.setup") fields), but machine.write_var_file"
 # --start: the program loaded from where the machine stands (the server's load, the
 # HMI's preview): an incremental move ends 10 mm on from it, and leaves X's travel
 # [-5, 400] from X 395 (refused, exit 3, as the server refuses it).
