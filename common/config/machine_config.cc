@@ -59,7 +59,9 @@ constexpr std::string_view kProgramKeys[] = {
 constexpr std::string_view kAxisKeys[] = {"name",          "type",    "wrapped",         "min_mm",
                                           "max_mm",        "max_velocity_mm_s", "max_accel_mm_s2", "max_jerk_mm_s3",
                                           "max_following_error_mm", "home_mm", "drive",     "sim",
-                                          "home",          "jog_velocity_mm_s"};
+                                          "home",          "jog_velocity_mm_s", "gantry"};
+constexpr std::string_view kGantryKeys[] = {"name", "drive", "switch_position_mm", "skew_limit_mm",
+                                            "home_max_difference_mm", "sim"};
 constexpr std::string_view kDriveKeys[] = {"transport", "host",      "port",    "device",  "baud",
                                            "parity",    "stop_bits", "unit_id", "profile", "response_timeout_s"};
 constexpr std::string_view kSimKeys[] = {"bandwidth_hz",         "damping",          "max_velocity_mm_s",
@@ -114,6 +116,9 @@ constexpr KeySection kSections[] = {
     {"axes[].drive", kDriveKeys},
     {"axes[].sim", kSimKeys},
     {"axes[].home", kHomeKeys},
+    {"axes[].gantry", kGantryKeys},
+    {"axes[].gantry.drive", kDriveKeys},
+    {"axes[].gantry.sim", kSimKeys},
     {"drive_bridge", kDriveBridgeKeys},
     {"spindle", kSpindleKeys},
     {"spindle.drive", kDriveKeys},
@@ -198,6 +203,22 @@ HomeConfig read_home(MapReader h, const AxisConfig& a) {
   return k;
 }
 
+GantryConfig read_gantry(MapReader g, const AxisConfig& a) {
+  GantryConfig k;
+  k.enabled = true;
+  k.name = g.require_string("name");
+  if (k.name.empty()) g.fail("name", "must not be empty");
+  if (!g.has("drive")) g.fail("drive", "is required: the second side's drive");
+  k.drive = read_drive(g.map("drive", kDriveKeys));
+  k.switch_position_mm = g.get_double("switch_position_mm", a.home.switch_position_mm, -1e5, 1e5);
+  k.skew_limit_mm = g.get_double("skew_limit_mm", k.skew_limit_mm, 1e-3, 100);
+  k.home_max_difference_mm = g.get_double("home_max_difference_mm", k.home_max_difference_mm, 1e-3, 1e3);
+  // Without its own sim: section the second simulated drive is the first's.
+  k.sim = g.has("sim") ? read_sim(g.map("sim", kSimKeys)) : a.sim;
+  g.finish();
+  return k;
+}
+
 AxisConfig read_axis(MapReader r) {
   AxisConfig a;
   a.name = r.require_string("name");
@@ -230,6 +251,12 @@ AxisConfig read_axis(MapReader r) {
   a.sim = read_sim(r.map("sim", kSimKeys));
   if (r.has("home")) a.home = read_home(r.map("home", kHomeKeys), a);
   a.jog_velocity_mm_s = r.get_double("jog_velocity_mm_s", 0.1 * a.max_velocity_mm_s, 1e-3, a.max_velocity_mm_s);
+  if (r.has("gantry")) {
+    if (a.rotary) r.fail("gantry", "a gantry is a linear axis (this one is type: rotary)");
+    if (a.home.method == "absolute")
+      r.fail("gantry", "a gantry squares on its two switches: home.method switch (or none), not absolute");
+    a.gantry = read_gantry(r.map("gantry", kGantryKeys), a);
+  }
   r.finish();
   return a;
 }
@@ -431,17 +458,37 @@ void read_axes(MapReader& top, MachineConfig& c) {
     const std::string path = top.item_path("axes", i);
     AxisConfig a = read_axis(MapReader(axes[i], path, top.file(), kAxisKeys));
     if (!names.insert(a.name).second) throw ConfigError(top.file(), path + ".name", "duplicate axis '" + a.name + "'");
-    const auto addr = std::make_tuple(a.drive.transport, a.drive.host, a.drive.port, a.drive.device, a.drive.unit_id);
-    if (!addresses.insert(addr).second)
-      throw ConfigError(top.file(), path + ".drive.unit_id", "another axis already uses this drive address");
-    for (const auto& other : c.axes) {
-      if (other.drive.link_key() != a.drive.link_key()) continue;
-      if (other.drive.baud != a.drive.baud || other.drive.parity != a.drive.parity ||
-          other.drive.stop_bits != a.drive.stop_bits)
-        throw ConfigError(top.file(), path + ".drive.baud",
-                          "axis " + other.name + " is on the same serial line with other line settings");
+    // Every drive (each axis's, each gantry's second) at an address of its own, and the
+    // drives on one serial line with the same line settings.
+    const auto check_drive = [&](const DriveConfig& d, const std::string& at) {
+      const auto addr = std::make_tuple(d.transport, d.host, d.port, d.device, d.unit_id);
+      if (!addresses.insert(addr).second)
+        throw ConfigError(top.file(), at + ".unit_id", "another axis already uses this drive address");
+      for (const auto& other : c.axes)
+        for (const DriveConfig* o : {&other.drive, other.gantry.enabled ? &other.gantry.drive : nullptr}) {
+          if (o == nullptr || o->link_key() != d.link_key()) continue;
+          if (o->baud != d.baud || o->parity != d.parity || o->stop_bits != d.stop_bits)
+            throw ConfigError(top.file(), at + ".baud",
+                              "axis " + other.name + " is on the same serial line with other line settings");
+        }
+    };
+    check_drive(a.drive, path + ".drive");
+    if (a.gantry.enabled) {
+      if (a.gantry.drive.link_key() == a.drive.link_key() &&
+          (a.gantry.drive.baud != a.drive.baud || a.gantry.drive.parity != a.drive.parity ||
+           a.gantry.drive.stop_bits != a.drive.stop_bits))
+        throw ConfigError(top.file(), path + ".gantry.drive.baud",
+                            "the axis's own drive is on the same serial line with other line settings");
+      check_drive(a.gantry.drive, path + ".gantry.drive");
     }
     c.axes.push_back(std::move(a));
+  }
+  // A gantry's second joint has a name of its own: no axis's, no other joint's.
+  for (size_t i = 0; i < c.axes.size(); ++i) {
+    if (!c.axes[i].gantry.enabled) continue;
+    if (!names.insert(c.axes[i].gantry.name).second)
+      throw ConfigError(top.file(), top.item_path("axes", i) + ".gantry.name",
+                        "'" + c.axes[i].gantry.name + "' is already the name of an axis or of another gantry's joint");
   }
 }
 
@@ -793,6 +840,10 @@ MachineConfig read_machine(MapReader top) {
   if (top.has("io")) read_io(top.map("io", kIoKeys), c);
   if (top.has("safety")) read_safety(top.map("safety", kSafetyKeys), c);
   if (top.has("kinematics")) read_kinematics(top.map("kinematics", kKinematicsKeys), c);
+  for (size_t i = 0; i < c.axes.size(); ++i)
+    if (c.axes[i].gantry.enabled && c.kinematics.type != "identity")
+      throw ConfigError(top.file(), top.item_path("axes", i) + ".gantry",
+                        "a gantry needs kinematics.type identity (this machine's is " + c.kinematics.type + ")");
   if (top.has("probe")) read_probe(top.map("probe", kProbeKeys), c);
   read_logger(top.map("logger", kLoggerKeys), c);
   read_security(top.map("security", kSecurityKeys), c.security);

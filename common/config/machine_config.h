@@ -79,6 +79,24 @@ struct HomeConfig {
   int order = 0;                    // homing all: lower first, equal together one after another
 };
 
+// A gantry (axes[].gantry): the axis is driven by two drives, its own (`drive`, the
+// first joint) and this second one, LinuxCNC's two joints on one axis. Both follow the
+// axis's setpoint, the second plus its squaring offset: after homing, the difference
+// of the two sides' offsets (each latches its own switch, whose machine coordinate is
+// home.switch_position_mm and switch_position_mm here), before it the difference at
+// the drives' enabling. The drive bridge faults (a controlled stop) when the two
+// sides' actual positions, less that offset, differ by more than skew_limit_mm.
+struct GantryConfig {
+  bool enabled = false;  // the section is present
+  std::string name;      // the second joint's name (alarms, JOINT_STATUS), e.g. Y2
+  DriveConfig drive;
+  double switch_position_mm = 0;  // machine coordinate of its switch's closing point (its own HOME_OFFSET)
+  double skew_limit_mm = 0.5;
+  // Homing: the second side's switch must close within this travel of the first's.
+  double home_max_difference_mm = 5;
+  ServoSimAxisConfig sim;  // the second simulated drive (cnc-servo-sim only): its own switch
+};
+
 // The travel of a wrapped rotary axis (axes[].wrapped): none in effect, finite.
 inline constexpr double kWrappedTravelDeg = 1e9;
 
@@ -101,6 +119,7 @@ struct AxisConfig {
   ServoSimAxisConfig sim;  // used by cnc-servo-sim only
   HomeConfig home;
   double jog_velocity_mm_s = 0;  // jogging's speed (0: a tenth of max_velocity_mm_s)
+  GantryConfig gantry;
 };
 
 // The simulated VFD of a spindle (spindle.sim, cnc-servo-sim only): a first-order
@@ -456,6 +475,7 @@ inline constexpr const char* kSpindleCmd = "SPINDLE_CMD";
 inline constexpr const char* kSpindleStatus = "SPINDLE_STATUS";
 inline constexpr const char* kIoCmd = "IO_CMD";
 inline constexpr const char* kIoStatus = "IO_STATUS";
+inline constexpr const char* kJointStatus = "JOINT_STATUS";
 }  // namespace channels
 
 }  // namespace cnc::config

@@ -220,6 +220,63 @@ TEST(MachineConfig, RotaryAxes) {
                   "a wrapped axis has no travel limits");
 }
 
+const std::string kGantryPath = std::string(CNC_SOURCE_DIR) + "/config/machines/sim3_gantry.yaml";
+
+std::string gantry_text() {
+  std::ifstream in(kGantryPath);
+  EXPECT_TRUE(in.good()) << "cannot open " << kGantryPath;
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+TEST(MachineConfig, GantrySection) {
+  const MachineConfig c = load_machine_config(kGantryPath);
+  ASSERT_EQ(c.axes.size(), 3u);
+  EXPECT_FALSE(c.axes[0].gantry.enabled);
+  EXPECT_FALSE(c.axes[2].gantry.enabled);
+  const GantryConfig& g = c.axes[1].gantry;
+  ASSERT_TRUE(g.enabled);
+  EXPECT_EQ(g.name, "Y2");
+  EXPECT_EQ(g.drive.unit_id, 4);
+  EXPECT_EQ(g.drive.link_key(), c.axes[1].drive.link_key());
+  EXPECT_DOUBLE_EQ(g.switch_position_mm, -4.0);
+  EXPECT_DOUBLE_EQ(g.skew_limit_mm, 0.5);
+  EXPECT_DOUBLE_EQ(g.home_max_difference_mm, 2.0);
+  // The second simulated drive has its own switch, 0.8 mm nearer than Y's.
+  EXPECT_TRUE(g.sim.has_home_switch);
+  EXPECT_DOUBLE_EQ(g.sim.home_switch_mm - c.axes[1].sim.home_switch_mm, 0.8);
+  // Defaults: the axis's switch position, and the axis's simulator without gantry.sim.
+  const std::string minimal = replace_nth(
+      replace_nth(gantry_text(), "      switch_position_mm: -4\n", ""),
+      "      sim: {bandwidth_hz: 40, damping: 1.0, home_switch_mm: -3.2, home_switch_sigma_mm: 0.002, "
+      "home_switch_seed: 14}\n",
+      "");
+  const MachineConfig d = parse_machine_config(minimal, kLabel);
+  EXPECT_DOUBLE_EQ(d.axes[1].gantry.switch_position_mm, d.axes[1].home.switch_position_mm);
+  EXPECT_DOUBLE_EQ(d.axes[1].gantry.sim.home_switch_mm, d.axes[1].sim.home_switch_mm);
+}
+
+TEST(MachineConfig, GantryErrorsNameTheKey) {
+  const std::string g = gantry_text();
+  expect_error_at(replace_nth(g, "      name: Y2\n", ""), "axes[1].gantry.name", "is required");
+  expect_error_at(replace_nth(g, "      name: Y2\n", "      name: X\n"), "axes[1].gantry.name",
+                  "already the name of an axis");
+  expect_error_at(replace_nth(g, "skew_limit_mm: 0.5", "skew_limit_mm: 0"), "axes[1].gantry.skew_limit_mm", "");
+  expect_error_at(replace_nth(g, "home_max_difference_mm: 2", "home_max_difference_mm: -1"),
+                  "axes[1].gantry.home_max_difference_mm", "");
+  expect_error_at(replace_nth(g, "unit_id: 4", "unit_id: 2"), "axes[1].gantry.drive.unit_id",
+                  "another axis already uses this drive address");
+  expect_error_at(replace_nth(g, "unit_id: 4", "unit_id: 4, baud: 9600"), "axes[1].gantry.drive.baud", "");
+  expect_error_at(replace_nth(g, "      name: Y2\n", "      name: Y2\n      colour: red\n"),
+                  "axes[1].gantry.colour", "unknown key");
+  expect_error_at(replace_nth(g, "home: {method: switch,", "home: {method: absolute,"), "axes[1].gantry",
+                  "not absolute");
+  expect_error_at(replace_nth(g, "      drive: {transport: modbus_tcp, host: 127.0.0.1, port: 1502, unit_id: 4, profile: sim}\n",
+                              ""),
+                  "axes[1].gantry.drive", "is required");
+}
+
 TEST(MachineConfig, UnknownKeyAtTopLevel) {
   expect_error_at(sim3_text() + "bogus: 1\n", "bogus", "unknown key");
 }
