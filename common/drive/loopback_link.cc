@@ -76,7 +76,13 @@ void LoopbackLink::move(DriveEmulator& d) {
   const Field& f = d.profile().field(Role::kActualPosition);
   uint16_t regs[2];
   d.read(f.address, 2, regs);
-  d.set_actual(d.follows() && !stalled_ ? d.target_mm() : f.decode(regs), 0.0);
+  const auto jam = jammed_.find(&d);
+  const bool jammed = jam != jammed_.end() && jam->second;
+  d.set_actual(d.follows() && !stalled_ && !jammed ? d.target_mm() : f.decode(regs), 0.0);
+}
+
+void LoopbackLink::set_jammed(int unit, bool jammed) {
+  if (DriveEmulator* d = drive(unit)) jammed_[d] = jammed;
 }
 
 void LoopbackLink::turn(VfdEmulator& v) {

@@ -39,6 +39,7 @@ class LoopbackLink final : public Link {
   void inject_timeouts(int count);
   void inject_short_replies(int count);         // the next `count` Huanyang replies lose their last 3 bytes
   void set_stalled(bool stalled);               // the axes and motors stop moving (a blocked axis: following error)
+  void set_jammed(int unit, bool jammed);       // that one axis stops moving (a gantry side jammed)
 
  private:
   int do_open(std::string& error) override;
@@ -66,6 +67,7 @@ class LoopbackLink final : public Link {
   int timeouts_left_ = 0;
   int short_left_ = 0;
   bool stalled_ = false;
+  std::map<const DriveEmulator*, bool> jammed_;
   std::function<double()> clock_;
   double vfd_t_ = -1;  // the clock at the spindles' last request
 };

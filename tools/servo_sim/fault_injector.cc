@@ -49,13 +49,19 @@ std::string FaultInjector::apply(const std::string& line, double now_s) {
       return "fault code '" + code + "' is not a number";
     }
     if (!on_fault_(axis, c)) return "no axis '" + axis + "'";
+  } else if (what == "jam") {
+    std::string axis;
+    in >> axis;
+    if (axis.empty()) return "jam needs an axis name";
+    if (!on_jam_(axis, true)) return "no axis '" + axis + "'";
   } else if (what == "clear") {
+    on_jam_("", false);
     drop_until_s_ = -1;
     delay_until_s_ = -1;
     exceptions_left_ = 0;
     crc_left_ = 0;
   } else {
-    return "unknown command '" + what + "' (drop, delay, exception, crc, fault, clear)";
+    return "unknown command '" + what + "' (drop, delay, exception, crc, fault, jam, clear)";
   }
   return "";
 }

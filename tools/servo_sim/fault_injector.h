@@ -7,6 +7,9 @@
 //   exception C [N]  answer the next N requests (default 1) with Modbus exception C
 //   crc [N]          RTU: corrupt the CRC of the next N replies (default 1)
 //   fault AXIS [C]   the drive of AXIS raises a fault (error code C, default 0x7500)
+//   jam AXIS         the drive of AXIS (an axis's or a gantry joint's name) stands still
+//                    while enabled, as a jammed carriage or a stalled motor: its position
+//                    demand goes on, its position does not (until clear)
 //   clear            end every injection
 #include <cstdint>
 #include <functional>
@@ -19,7 +22,10 @@ namespace cnc::servo_sim {
 class FaultInjector {
  public:
   using AxisFault = std::function<bool(const std::string& axis, uint16_t code)>;
-  explicit FaultInjector(AxisFault on_fault) : on_fault_(std::move(on_fault)) {}
+  // Jams (on) the drive named `axis`, or frees (off) every drive when `axis` is "".
+  using AxisJam = std::function<bool(const std::string& axis, bool on)>;
+  explicit FaultInjector(AxisFault on_fault, AxisJam on_jam = [](const std::string&, bool) { return true; })
+      : on_fault_(std::move(on_fault)), on_jam_(std::move(on_jam)) {}
 
   // Applies one command; "" when done, else what is wrong with it.
   std::string apply(const std::string& line, double now_s);
@@ -36,6 +42,7 @@ class FaultInjector {
 
  private:
   AxisFault on_fault_;
+  AxisJam on_jam_;
   double drop_until_s_ = -1;
   double delay_s_ = 0;
   double delay_until_s_ = -1;

@@ -424,6 +424,15 @@ Simulator::Simulator(const cnc::config::MachineConfig& cfg, const cnc::service::
           return true;
         }
         return false;
+      },
+      [this](const std::string& axis, bool on) {
+        bool found = axis.empty();
+        for (SimDrive* d : all_)
+          if (axis.empty() || d->name() == axis) {
+            d->set_jammed(on);
+            found = true;
+          }
+        return found;
       }),
       dt_(cfg.servo_period_s) {
   std::map<std::string, const cnc::drive::DriveProfile*> by_file;
@@ -433,28 +442,30 @@ Simulator::Simulator(const cnc::config::MachineConfig& cfg, const cnc::service::
     start = read_positions(persist);
     spdlog::info("cnc-servo-sim: starting from the positions in {}", persist);
   }
-  for (size_t i = 0; i < cfg.axes.size(); ++i) {
-    const auto& a = cfg.axes[i];
-    const auto& d = a.drive;
+  // One simulated drive per axis (in axes[] order), then each gantry's second drive
+  // (named axes[].gantry.name, with its own sim: section and switch).
+  const auto add_drive = [&](const cnc::config::AxisConfig& a, const std::string& name,
+                             const cnc::config::DriveConfig& d, const cnc::config::ServoSimAxisConfig& sim,
+                             const std::string& key) {
     const cnc::drive::Transport transport = cnc::drive::transport_of(d);
-    if (transport == cnc::drive::Transport::kLoopback) continue;  // emulated inside the bridge
+    if (transport == cnc::drive::Transport::kLoopback) return;  // emulated inside the bridge
     const std::string file = cnc::drive::find_drive_profile(d.profile, cfg.source_file, cfg.drive_profile_dir);
     if (!by_file.count(file)) {
       if (!std::filesystem::exists(file))
-        throw cnc::config::ConfigError(cfg.source_file, "axes[" + std::to_string(i) + "].drive.profile",
+        throw cnc::config::ConfigError(cfg.source_file, key + ".profile",
                                        "no drive profile '" + d.profile + "' (looked for " + file + ")");
       profiles_.push_back(std::make_unique<cnc::drive::DriveProfile>(cnc::drive::load_drive_profile(file)));
       by_file[file] = profiles_.back().get();
     }
-    const double at = start.count(a.name) ? std::clamp(start[a.name], a.min_mm, a.max_mm) : a.home_mm;
-    drives_.push_back(std::make_unique<SimDrive>(a.name, d.unit_id, *by_file[file], a.sim, a.max_velocity_mm_s, at,
+    const double at = start.count(name) ? std::clamp(start[name], a.min_mm, a.max_mm) : a.home_mm;
+    drives_.push_back(std::make_unique<SimDrive>(name, d.unit_id, *by_file[file], sim, a.max_velocity_mm_s, at,
                                                  a.max_accel_mm_s2));
-    drives_.back()->set_home_switch(a.sim, a.home.direction);
+    drives_.back()->set_home_switch(sim, a.home.direction);
     all_.push_back(drives_.back().get());
     if (transport == cnc::drive::Transport::kModbusTcp) {
       if (port_ < 0) port_ = d.port;
       if (d.port != port_)
-        throw std::runtime_error("axis " + a.name + ": the simulator serves one TCP port; axes use " +
+        throw std::runtime_error("axis " + name + ": the simulator serves one TCP port; axes use " +
                                  std::to_string(port_) + " and " + std::to_string(d.port));
       tcp_.push_back(all_.back());
     } else {
@@ -463,7 +474,13 @@ Simulator::Simulator(const cnc::config::MachineConfig& cfg, const cnc::service::
       const int bits = 1 + 8 + (d.parity == "none" ? 0 : 1) + d.stop_bits;
       char_s_ = bits / static_cast<double>(baud_);
     }
-  }
+  };
+  for (size_t i = 0; i < cfg.axes.size(); ++i)
+    add_drive(cfg.axes[i], cfg.axes[i].name, cfg.axes[i].drive, cfg.axes[i].sim, "axes[" + std::to_string(i) + "].drive");
+  for (size_t i = 0; i < cfg.axes.size(); ++i)
+    if (cfg.axes[i].gantry.enabled)
+      add_drive(cfg.axes[i], cfg.axes[i].gantry.name, cfg.axes[i].gantry.drive, cfg.axes[i].gantry.sim,
+                "axes[" + std::to_string(i) + "].gantry.drive");
   if (cfg.spindle.enabled && cnc::drive::transport_of(cfg.spindle.drive) != cnc::drive::Transport::kLoopback) {
     const auto& d = cfg.spindle.drive;
     const cnc::drive::Transport transport = cnc::drive::transport_of(d);

@@ -15,6 +15,11 @@ class ServoModel {
  public:
   ServoModel(const config::ServoSimAxisConfig& sim, double max_velocity_mm_s, double start_mm);
   void step(double dt_s, double target_mm, double feedforward_mm_s, double accel_ff_mm_s2, bool enabled);
+  // Jammed: stands where it is; the target (the demand) moves on without it.
+  void jam(double target_mm) {
+    vel_ = 0;
+    last_target_ = target_mm;
+  }
   double position_mm() const { return pos_; }
   double velocity_mm_s() const { return vel_; }
   double max_velocity_mm_s() const { return vmax_; }

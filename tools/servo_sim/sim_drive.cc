@@ -240,7 +240,10 @@ void SimDrive::step_to(double now_s) {
   double v_ff = 0, a_ff = 0;
   feed_forward(mid_s, &v_ff, &a_ff);
   const double target = demand_mm(now_s);
-  model_.step(dt, target, v_ff, a_ff, true);
+  if (jammed_)
+    model_.jam(target);
+  else
+    model_.step(dt, target, v_ff, a_ff, true);
   emu_.set_actual(model_.position_mm(), model_.velocity_mm_s());
   emu_.set_following_error(target - model_.position_mm());
   last_fe_ = target - model_.position_mm();

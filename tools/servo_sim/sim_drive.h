@@ -59,6 +59,10 @@ class SimDrive {
   // edge (the profile's home_latch_position / home_latch_count registers).
   void set_home_switch(const config::ServoSimAxisConfig& sim, int direction);
   bool home_switch_closed() const { return sw_closed_; }
+  // Jammed (fault injection `jam`): enabled, the axis stands still wherever it is while
+  // its demand goes on (its following error grows), as a jammed carriage or a stalled motor.
+  void set_jammed(bool on) { jammed_ = on; }
+  bool jammed() const { return jammed_; }
   int64_t home_latches() const { return sw_count_; }
   double home_latch_mm() const { return sw_latch_mm_; }
   // This process stalled for dt_s: the drive's clock skips it (see the simulator's
@@ -113,6 +117,7 @@ class SimDrive {
   double slope(int i) const { return (pts_[i + 1].mm - pts_[i].mm) / (pts_[i + 1].t_s - pts_[i].t_s); }
   void feed_forward(double t_s, double* v_ff, double* a_ff) const;
 
+  bool jammed_ = false;
   // Home switch.
   void step_switch();
   bool sw_on_ = false;
