@@ -284,6 +284,7 @@ bool DriveBridgeNode::settled(double& since_s, double now_s) const {
   if (since_s < 0) since_s = now_s;
   bool still = true;
   for (const auto& a : axes_) still = still && (!a.rep.have_status || std::fabs(a.rep.fe_mm) <= 1e-3);
+  for (const auto& j : joints_) still = still && (!j.drv.rep.have_status || std::fabs(j.drv.rep.fe_mm) <= 1e-3);
   return still || now_s - since_s >= kStandstillWaitS;
 }
 
@@ -324,6 +325,7 @@ void DriveBridgeNode::limits_tick(double now_s) {
     limit_.stood = true;
     limit_.stop_ms = (now_s - limit_.at_s) * 1e3;
     for (auto& a : axes_) a.cmd.goal = drive::Goal::kDisable;
+    for (auto& j : joints_) j.drv.cmd.goal = drive::Goal::kDisable;
     spdlog::info("hard limit: the axes stand {:.1f} ms after the trip ({}); drives disabled", limit_.stop_ms,
                  limit_name(limits_[static_cast<size_t>(limit_.tripped)]));
   }
@@ -437,6 +439,7 @@ void DriveBridgeNode::safety_tick(double now_s) {
     estop_.stood = true;
     estop_.stop_ms = (now_s - estop_.at_s) * 1e3;
     for (auto& a : axes_) a.cmd.goal = drive::Goal::kDisable;
+    for (auto& j : joints_) j.drv.cmd.goal = drive::Goal::kDisable;
     spdlog::info("E-stop: the axes stand {:.1f} ms after the E-stop (input {}); drives disabled", estop_.stop_ms, label());
   }
 }

@@ -40,32 +40,40 @@ DriveBridgeNode::DriveBridgeNode(const config::MachineConfig& cfg, bus::Bus& bus
       health_(bus, cfg.channel(ch::kAlarm), "cnc-drive-bridge", cnc::lcmt_alarm::FAULT) {
   std::map<std::string, const drive::DriveProfile*> by_file;
   std::map<std::string, LinkWorker*> by_link;
-  for (size_t i = 0; i < cfg.axes.size(); ++i) {
-    const config::AxisConfig& a = cfg.axes[i];
-    const config::DriveConfig& d = a.drive;
+  // An axis drive on its link: each axis's, then each gantry's second (`key` its config path).
+  const auto make_drive = [&](size_t i, const config::DriveConfig& d, const std::string& key) {
     const std::string file = drive::find_drive_profile(d.profile, cfg.source_file, cfg.drive_profile_dir);
     if (!by_file.count(file)) {
       if (!std::filesystem::exists(file))
-        throw config::ConfigError(cfg.source_file, "axes[" + std::to_string(i) + "].drive.profile",
+        throw config::ConfigError(cfg.source_file, key + ".profile",
                                   "no drive profile '" + d.profile + "' (looked for " + file + ")");
       profiles_.push_back(std::make_unique<drive::DriveProfile>(drive::load_drive_profile(file)));
       by_file[file] = profiles_.back().get();
     }
     const drive::DriveProfile* profile = by_file[file];
     if (drive::is_spindle_profile(*profile))
-      throw config::ConfigError(cfg.source_file, "axes[" + std::to_string(i) + "].drive.profile",
+      throw config::ConfigError(cfg.source_file, key + ".profile",
                                 "'" + d.profile + "' is a spindle drive's profile (state_machine " +
                                     profile->state_machine + "), not an axis drive's");
     LinkWorker* worker = worker_for(d, by_link);
     // The in-process link emulates its drives: each needs its profile and start.
     if (auto* loopback = dynamic_cast<drive::LoopbackLink*>(&worker->link()))
-      loopback->add_drive(d.unit_id, *profile, a.home_mm);
+      loopback->add_drive(d.unit_id, *profile, cfg.axes[i].home_mm);
     Axis ax;
     ax.profile = profile;
     ax.worker = worker;
     ax.slot = ax.worker->axes().size();
     ax.worker->add_axis(static_cast<int>(i), *profile, d.unit_id);
-    axes_.push_back(ax);
+    return ax;
+  };
+  for (size_t i = 0; i < cfg.axes.size(); ++i)
+    axes_.push_back(make_drive(i, cfg.axes[i].drive, "axes[" + std::to_string(i) + "].drive"));
+  for (size_t i = 0; i < cfg.axes.size(); ++i) {
+    if (!cfg.axes[i].gantry.enabled) continue;
+    Joint j;
+    j.axis = i;
+    j.drv = make_drive(i, cfg.axes[i].gantry.drive, "axes[" + std::to_string(i) + "].gantry.drive");
+    joints_.push_back(j);
   }
   if (cfg.probe.enabled() && cfg.probe.drive_latch)
     for (size_t i = 0; i < axes_.size(); ++i) {
@@ -88,6 +96,11 @@ DriveBridgeNode::DriveBridgeNode(const config::MachineConfig& cfg, bus::Bus& bus
   bus_.subscribe<cnc::lcmt_setpoint>(cfg.channel(ch::kSetpoints), [this](const auto& m) { on_setpoint(m); });
   bus_.subscribe<cnc::lcmt_drive_command>(cfg.channel(ch::kDriveCmd),
                                           [this](const auto& m) { pending_command_ = m.command; });
+  if (!joints_.empty()) {
+    ch_joint_status_ = cfg.channel(ch::kJointStatus);
+    bus_.subscribe<cnc::lcmt_interp_input>(cfg.channel(ch::kInterpInput),
+                                           [this](const auto& m) { on_interp_input(m); });
+  }
 }
 
 // The worker of d's link, made on first use: drives and devices on one link share it.
@@ -115,6 +128,10 @@ void DriveBridgeNode::start() {
   for (size_t i = 0; i < axes_.size(); ++i)
     spdlog::info("axis {}: profile {} ({}), unit {}", cfg_.axes[i].name, axes_[i].profile->name,
                  axes_[i].profile->file, cfg_.axes[i].drive.unit_id);
+  for (const Joint& j : joints_)
+    spdlog::info("axis {}'s gantry joint {}: profile {} ({}), unit {}, skew limit {} mm", cfg_.axes[j.axis].name,
+                 cfg_.axes[j.axis].gantry.name, j.drv.profile->name, j.drv.profile->file,
+                 cfg_.axes[j.axis].gantry.drive.unit_id, cfg_.axes[j.axis].gantry.skew_limit_mm);
   if (spindle_)
     spdlog::info("spindle: profile {} ({}), unit {} on {}", spindle_->profile->name, spindle_->profile->file,
                  cfg_.spindle.drive.unit_id, spindle_->worker->link().name());
@@ -223,6 +240,7 @@ void DriveBridgeNode::fault(size_t axis, const std::string& why, bool disable_ax
   if (disable_axis) axes_[axis].cmd.goal = drive::Goal::kDisable;
   if (state_ == State::kEnabling) {
     for (auto& a : axes_) a.cmd.goal = drive::Goal::kDisable;
+    for (auto& j : joints_) j.drv.cmd.goal = drive::Goal::kDisable;
   }
   core_.fault(why);
 }
@@ -231,6 +249,10 @@ void DriveBridgeNode::begin_enable(double now_s) {
   for (auto& a : axes_) {
     a.cmd.goal = drive::Goal::kEnable;
     a.link_down = false;
+  }
+  for (auto& j : joints_) {
+    j.drv.cmd.goal = drive::Goal::kEnable;
+    j.drv.link_down = false;
   }
   if (spindle_) {
     spindle_->ctl.clear_fault();
@@ -247,32 +269,37 @@ void DriveBridgeNode::begin_enable(double now_s) {
 
 void DriveBridgeNode::check_drives() {
   const bool expect_enabled = state_ == State::kEnabled || state_ == State::kStopping;
-  for (size_t i = 0; i < axes_.size(); ++i) {
-    Axis& a = axes_[i];
-    const std::string& name = cfg_.axes[i].name;
-    if (a.rep.lost_events > a.lost_seen) {
-      a.lost_seen = a.rep.lost_events;
-      a.link_down = true;
-      fault(i, "axis " + name + ": link " + a.worker->link().name() + " lost (" + a.rep.last_error.data() + ")", true);
-    }
-    if (!expect_enabled || a.link_down || !a.rep.have_status) continue;
-    char code[16];
-    std::snprintf(code, sizeof code, "0x%04X", a.rep.error_code);
-    if (a.rep.status.fault) {
-      fault(i, "axis " + name + ": the drive reports a fault (" + a.rep.status.state + ", error code " + code + ")",
-            true);
-    } else if (!a.rep.status.enabled && a.cmd.goal == drive::Goal::kEnable) {
-      fault(i, "axis " + name + ": the drive left the enabled state (" + a.rep.status.state + ")", true);
-    }
-    if (a.rep.fe_samples > a.fe_seen) {
-      a.fe_seen = a.rep.fe_samples;
-      const double limit = cfg_.axes[i].max_following_error_mm;
-      if (std::fabs(a.rep.fe_mm) > limit) {
-        char buf[160];
-        std::snprintf(buf, sizeof buf, "axis %s: following error %.4f mm over its limit %g mm", name.c_str(),
-                      a.rep.fe_mm, limit);
-        fault(i, buf, true);
-      }
+  for (size_t i = 0; i < axes_.size(); ++i) check_drive(axes_[i], i, cfg_.axes[i].name, expect_enabled);
+  for (Joint& j : joints_) check_drive(j.drv, j.axis, cfg_.axes[j.axis].gantry.name, expect_enabled);
+}
+
+void DriveBridgeNode::check_drive(Axis& a, size_t i, const std::string& name, bool expect_enabled) {
+  // A fault disables the drive that has it (and brakes every axis).
+  const auto drive_fault = [&](const std::string& why) {
+    a.cmd.goal = drive::Goal::kDisable;
+    fault(i, why, false);
+  };
+  if (a.rep.lost_events > a.lost_seen) {
+    a.lost_seen = a.rep.lost_events;
+    a.link_down = true;
+    drive_fault("axis " + name + ": link " + a.worker->link().name() + " lost (" + a.rep.last_error.data() + ")");
+  }
+  if (!expect_enabled || a.link_down || !a.rep.have_status) return;
+  char code[16];
+  std::snprintf(code, sizeof code, "0x%04X", a.rep.error_code);
+  if (a.rep.status.fault) {
+    drive_fault("axis " + name + ": the drive reports a fault (" + a.rep.status.state + ", error code " + code + ")");
+  } else if (!a.rep.status.enabled && a.cmd.goal == drive::Goal::kEnable) {
+    drive_fault("axis " + name + ": the drive left the enabled state (" + a.rep.status.state + ")");
+  }
+  if (a.rep.fe_samples > a.fe_seen) {
+    a.fe_seen = a.rep.fe_samples;
+    const double limit = cfg_.axes[i].max_following_error_mm;
+    if (std::fabs(a.rep.fe_mm) > limit) {
+      char buf[160];
+      std::snprintf(buf, sizeof buf, "axis %s: following error %.4f mm over its limit %g mm", name.c_str(),
+                    a.rep.fe_mm, limit);
+      drive_fault(buf);
     }
   }
 }
@@ -317,12 +344,14 @@ void DriveBridgeNode::servo_tick_inner(double now_s) {
   bus_.drain();
   ++tick_;
   for (auto& a : axes_) a.rep = a.worker->report(a.slot);
+  for (auto& j : joints_) j.drv.rep = j.drv.worker->report(j.drv.slot);
   if (io_)
     for (auto& m : io_->modules) m.rep = m.worker->io_report(m.slot);
   safety_tick(now_s);
   probe_tick();
   take_operator_command(now_s);
   advance_state(now_s);
+  if (!joints_.empty()) gantry_tick(now_s);
   report_reconnects();
   spindle_tick(now_s);
   io_tick();
@@ -337,6 +366,7 @@ void DriveBridgeNode::servo_tick_inner(double now_s) {
   const bool hold = link_stalled() && core_.hold();
   const AxisArray& cmd = hold ? core_.commanded() : core_.tick();
   follow_core_state();
+  if (!hold && !joints_.empty()) advance_squaring();
   set_axis_commands(cmd);
   if (spindle_) post_spindle_command(now_s);
   trace_tick(now_s, hold, cmd);
@@ -367,6 +397,10 @@ void DriveBridgeNode::take_operator_command(double now_s) {
     const std::string text = "FAULT_RESET refused: the axes still brake for the hard limit";
     spdlog::warn("{}", text);
     alarm(cnc::lcmt_alarm::WARNING, "limit_reset_refused", text);
+  } else if (c == cnc::lcmt_drive_command::FAULT_RESET && skew_.latched && !skew_.stood) {
+    const std::string text = "FAULT_RESET refused: the axes still brake for the gantry's skew";
+    spdlog::warn("{}", text);
+    alarm(cnc::lcmt_alarm::WARNING, "skew_reset_refused", text);
   } else if (c == cnc::lcmt_drive_command::FAULT_RESET && estop_.latched && (!estop_.ok || !estop_.stood)) {
     const std::string name = cfg_.io.point_label(cfg_.safety.estop_input);
     const std::string text = !estop_.ok ? "FAULT_RESET refused: E-stop input " + name + " still reads 0"
@@ -390,6 +424,14 @@ void DriveBridgeNode::take_operator_command(double now_s) {
       a.cmd.goal = c == cnc::lcmt_drive_command::DISABLE ? drive::Goal::kDisable : drive::Goal::kFaultReset;
       if (c == cnc::lcmt_drive_command::FAULT_RESET) a.link_down = false;
     }
+    for (auto& j : joints_) {
+      j.drv.cmd.goal = c == cnc::lcmt_drive_command::DISABLE ? drive::Goal::kDisable : drive::Goal::kFaultReset;
+      if (c == cnc::lcmt_drive_command::FAULT_RESET) j.drv.link_down = false;
+    }
+    if (c == cnc::lcmt_drive_command::FAULT_RESET && skew_.latched) {
+      skew_.latched = false;
+      spdlog::info("gantry skew fault reset by the operator");
+    }
     if (spindle_ && c == cnc::lcmt_drive_command::FAULT_RESET) {
       spindle_->ctl.clear_fault();
       spindle_->reset_pending = true;
@@ -407,6 +449,7 @@ void DriveBridgeNode::advance_state(double now_s) {
     case State::kStarting: {
       bool all = true;
       for (const auto& a : axes_) all = all && a.rep.answering && a.rep.have_status;
+      for (const auto& j : joints_) all = all && j.drv.rep.answering && j.drv.rep.have_status;
       // And the E-stop's module: its input decides whether anything may be enabled.
       if (estop_.module >= 0) all = all && io_->modules[static_cast<size_t>(estop_.module)].rep.in.valid;
       if (all) {
@@ -433,17 +476,29 @@ void DriveBridgeNode::advance_enabling(double now_s) {
   if (core_.faulted()) return;
   bool all = true;
   for (const auto& a : axes_) all = all && a.rep.answering && a.rep.status.enabled && a.rep.holding;
+  for (const auto& j : joints_) all = all && j.drv.rep.answering && j.drv.rep.status.enabled && j.drv.rep.holding;
   if (all) {
     AxisArray hold{};
     for (size_t i = 0; i < axes_.size(); ++i) hold[i] = axes_[i].rep.hold_mm;
+    // A gantry's squaring starts where its two drives stand, and moves from there to the
+    // homed one (if known): ENABLE after a skew squares the axis again.
+    for (Joint& j : joints_) {
+      j.squaring_mm = j.drv.rep.hold_mm - hold[j.axis];
+      if (!j.homed) j.target_mm = j.squaring_mm;
+      j.v_mm_s = 0;
+      j.skew_mm = 0;
+      j.max_skew_mm = 0;
+      j.prev_s = -1;
+    }
     engagement_ = util::next_token(engagement_);
     core_.engage(hold, engagement_);
     state_ = State::kEnabled;
     ready_ = true;
-    spdlog::info("{} drive(s) enabled", axes_.size());
+    spdlog::info("{} drive(s) enabled", axes_.size() + joints_.size());
     alarm(cnc::lcmt_alarm::INFO, "drives_enabled", "drives enabled; following setpoints from where the axes stand");
   } else if (now_s > enable_deadline_s_) {
-    for (size_t i = 0; i < axes_.size(); ++i) {
+    bool named = false;
+    for (size_t i = 0; i < axes_.size() && !named; ++i) {
       const Axis& a = axes_[i];
       if (a.rep.answering && a.rep.status.enabled) continue;
       fault(i, "axis " + cfg_.axes[i].name + " did not enable within " +
@@ -451,23 +506,32 @@ void DriveBridgeNode::advance_enabling(double now_s) {
                    (a.rep.answering ? std::string("drive state ") + a.rep.status.state
                                     : std::string("no answer (") + a.rep.last_error.data() + ")"),
             true);
-      break;
+      named = true;
+    }
+    for (Joint& j : joints_) {
+      if (named || (j.drv.rep.answering && j.drv.rep.status.enabled)) continue;
+      j.drv.cmd.goal = drive::Goal::kDisable;
+      fault(j.axis, "axis " + cfg_.axes[j.axis].gantry.name + " did not enable within " +
+                        std::to_string(cfg_.drive_bridge.enable_timeout_s).substr(0, 4) + " s: " +
+                        (j.drv.rep.answering ? std::string("drive state ") + j.drv.rep.status.state
+                                             : std::string("no answer (") + j.drv.rep.last_error.data() + ")"),
+            false);
+      named = true;
     }
   }
 }
 
 void DriveBridgeNode::report_reconnects() {
-  for (size_t i = 0; i < axes_.size(); ++i) {
-    Axis& a = axes_[i];
-    if (a.rep.counters.reconnects > a.reconnects_seen) {
-      a.reconnects_seen = a.rep.counters.reconnects;
-      const std::string text = "axis " + cfg_.axes[i].name + ": the drive answers again on " +
-                               a.worker->link().name() + " (reconnect " + std::to_string(a.reconnects_seen) +
-                               "); it stays disabled until ENABLE";
-      spdlog::warn("{}", text);
-      alarm(cnc::lcmt_alarm::WARNING, "drive_reconnected", text);
-    }
-  }
+  const auto report = [&](Axis& a, const std::string& name) {
+    if (a.rep.counters.reconnects <= a.reconnects_seen) return;
+    a.reconnects_seen = a.rep.counters.reconnects;
+    const std::string text = "axis " + name + ": the drive answers again on " + a.worker->link().name() +
+                             " (reconnect " + std::to_string(a.reconnects_seen) + "); it stays disabled until ENABLE";
+    spdlog::warn("{}", text);
+    alarm(cnc::lcmt_alarm::WARNING, "drive_reconnected", text);
+  };
+  for (size_t i = 0; i < axes_.size(); ++i) report(axes_[i], cfg_.axes[i].name);
+  for (Joint& j : joints_) report(j.drv, cfg_.axes[j.axis].gantry.name);
 }
 
 void DriveBridgeNode::follow_core_state() {
@@ -502,6 +566,14 @@ void DriveBridgeNode::set_axis_commands(const AxisArray& cmd) {
     a.cmd.follow = following_state && a.cmd.goal == drive::Goal::kEnable && !a.link_down &&
                    core_.mode() != BridgeCore::Mode::kIdle;
     a.cmd.cmd_mm = cmd[i];
+    a.cmd.cmd_cycle = core_.segment_cycle();
+    a.worker->set_command(a.slot, a.cmd);
+  }
+  for (Joint& j : joints_) {
+    Axis& a = j.drv;
+    a.cmd.follow = following_state && a.cmd.goal == drive::Goal::kEnable && !a.link_down &&
+                   core_.mode() != BridgeCore::Mode::kIdle;
+    a.cmd.cmd_mm = cmd[j.axis] + j.squaring_mm;
     a.cmd.cmd_cycle = core_.segment_cycle();
     a.worker->set_command(a.slot, a.cmd);
   }
@@ -649,6 +721,7 @@ void DriveBridgeNode::publish_status_inner(int64_t overruns) {
     s.probe_fall_cycle = probe_.fall_cycle;
   }
   bus_.publish(ch_status_, s);
+  if (!joints_.empty()) publish_joint_status();
   if (spindle_) publish_spindle_status();
   if (io_) publish_io_status();
 }
@@ -664,6 +737,11 @@ void DriveBridgeNode::shut_down() {
     a.cmd.goal = drive::Goal::kDisable;
     a.cmd.follow = false;
     a.worker->set_command(a.slot, a.cmd);
+  }
+  for (Joint& j : joints_) {
+    j.drv.cmd.goal = drive::Goal::kDisable;
+    j.drv.cmd.follow = false;
+    j.drv.worker->set_command(j.drv.slot, j.drv.cmd);
   }
   if (spindle_) {
     spindle_->ctl.stop();

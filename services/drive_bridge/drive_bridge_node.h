@@ -21,6 +21,14 @@
 // switch still at 0) and ENABLE. While a switch reads 0, a setpoint that takes its axis
 // further towards it than where the axis stood (or got to, moving off) is refused: a
 // stop and a fault. Moving off it is followed, as a machinist jogs off a limit.
+// A gantry (axes[].gantry): the axis's second drive (a joint) follows the axis's command
+// plus the squaring offset (the second drive's position minus the first's): the
+// difference of their positions at each engagement, moving from there at the axis's
+// home.search_velocity_mm_s to the difference of the two sides' HOMED offsets (the
+// interpolator's HOMED on INTERP_INPUT carries the second side's). While enabled, the
+// sides' actual positions less that offset differing by more than gantry.skew_limit_mm
+// is a category 1 stop as a hard limit's (a fault naming the axis, both drives and the
+// skew; the drives disabled once the axes stand; FAULT_RESET and ENABLE to move again).
 // The guard door (safety.door): its state on IO_STATUS with the stamp of its opening;
 // the feed hold and the refusals are the interpolator's and the program server's.
 //
@@ -35,6 +43,8 @@
 
 #include "cnc/lcmt_axis_status.hpp"
 #include "cnc/lcmt_drive_command.hpp"
+#include "cnc/lcmt_interp_input.hpp"
+#include "cnc/lcmt_joint_status.hpp"
 #include "cnc/lcmt_setpoint.hpp"
 #include "cnc/lcmt_io_command.hpp"
 #include "cnc/lcmt_io_status.hpp"
@@ -89,6 +99,16 @@ class DriveBridgeNode {
   const IoControl* io() const { return io_ ? &io_->ctl : nullptr; }
   // Setpoints lost on the way and taken from a later one's history.
   int64_t recovered_setpoints() const { return recovered_setpoints_; }
+  // The gantries' second drives (axes[].gantry), in axes[] order.
+  size_t joints() const { return joints_.size(); }
+  size_t joint_axis(size_t j) const { return joints_[j].axis; }
+  const AxisReport& joint_report(size_t j) const { return joints_[j].drv.rep; }
+  double joint_command(size_t j) const { return joints_[j].drv.cmd.cmd_mm; }
+  double joint_squaring(size_t j) const { return joints_[j].squaring_mm; }
+  double joint_skew(size_t j) const { return joints_[j].skew_mm; }
+  // The last skew fault: how long after the skew crossed the limit (interpolated between
+  // the two reads around it) the bridge saw it and began the stop; -1 none.
+  double skew_reaction_ms() const { return skew_.reaction_ms; }
 
  private:
   struct Axis {
@@ -138,6 +158,15 @@ class DriveBridgeNode {
   // with the drives' actual positions of the same I/O round.
   void probe_tick();
   void fault(size_t axis, const std::string& why, bool disable_axis);
+  // One drive's link, fault and following-error checks (check_drives); `axis` the one
+  // whose fault it is (a gantry's joint: its axis).
+  void check_drive(Axis& a, size_t axis, const std::string& name, bool expect_enabled);
+  // The gantries: the skew check (before the core's tick: a fault brakes in it), the
+  // squaring's motion (after it, with the commands), JOINT_STATUS.
+  void gantry_tick(double now_s);
+  void advance_squaring();
+  void publish_joint_status();
+  void on_interp_input(const cnc::lcmt_interp_input& m);
   void begin_enable(double now_s);
   void check_drives();
   void alarm(int8_t severity, const std::string& code, const std::string& text);
@@ -165,6 +194,31 @@ class DriveBridgeNode {
   double stale_report_s_ = -1e9;
   bool link_stalled();
   std::vector<Axis> axes_;
+  // A gantry's second drive and its squaring (axes[axis].gantry).
+  struct Joint {
+    size_t axis = 0;
+    Axis drv;
+    double squaring_mm = 0;  // commanded: second drive minus first
+    double target_mm = 0;    // where squaring_mm moves to
+    bool homed = false;      // target_mm is the HOMED offsets' difference (else the engagement's)
+    double v_mm_s = 0;       // squaring_mm's rate
+    double skew_mm = 0;      // (second actual - first actual) - squaring_mm
+    double max_skew_mm = 0;  // |skew_mm| since the engagement
+    double prev_abs_skew_mm = 0;  // at the tick before, for the crossing's time
+    double prev_s = -1;
+  };
+  std::vector<Joint> joints_;
+  struct SkewLatch {
+    bool latched = false;  // tripped; until a FAULT_RESET once the axes stand
+    bool stood = false;
+    double at_s = 0;
+    double reaction_ms = -1;
+    double stop_ms = -1;
+    double command_stood_s = -1;
+  };
+  SkewLatch skew_;
+  std::string ch_joint_status_;
+  cnc::lcmt_joint_status joint_msg_{};  // reused by every status publish
   // The spindle's VFD (cfg.spindle.enabled): on a link worker like the axes' drives.
   struct Spindle {
     explicit Spindle(const config::SpindleConfig& c) : ctl(c) {}

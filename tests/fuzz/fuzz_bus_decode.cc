@@ -37,6 +37,7 @@
 #include "cnc/lcmt_spindle_status.hpp"
 #include "cnc/lcmt_io_command.hpp"
 #include "cnc/lcmt_io_status.hpp"
+#include "cnc/lcmt_joint_status.hpp"
 #include "common/bus/auth.h"
 #include "common/bus/bus.h"
 #include "common/program/block.h"
@@ -49,7 +50,7 @@ const char* const kChannels[] = {"F.ALARM",     "F.AXIS_STATUS",  "F.BLOCK_REQUE
                                  "F.DRIVE_CMD", "F.HEARTBEAT",    "F.INTERP_INPUT",   "F.INTERP_STATE",
                                  "F.LOGGER",    "F.MONITOR",      "F.PROGRAM_BLOCK",  "F.PROGRAM_CMD",
                                  "F.PROGRAM_STATE", "F.SETPOINTS",     "F.SPINDLE_CMD",    "F.SPINDLE_STATUS",
-                                 "F.IO_CMD",        "F.IO_STATUS"};
+                                 "F.IO_CMD",        "F.IO_STATUS",      "F.JOINT_STATUS"};
 constexpr size_t kNumChannels = sizeof(kChannels) / sizeof(kChannels[0]);
 
 bus::Key test_key() {
@@ -87,6 +88,7 @@ void subscribe_all(bus::Bus& b) {
   sub<lcmt_spindle_status>(b, i++);
   sub<lcmt_io_command>(b, i++);
   sub<lcmt_io_status>(b, i++);
+  sub<lcmt_joint_status>(b, i++);
   b.subscribe_raw("F\\..*", [](const std::string&, const void* data, size_t size, int64_t) {
     (void)bus::peek_header(data, size);
   });

@@ -22,6 +22,8 @@
 #include "cnc/lcmt_alarm.hpp"
 #include "cnc/lcmt_axis_status.hpp"
 #include "cnc/lcmt_drive_command.hpp"
+#include "cnc/lcmt_interp_input.hpp"
+#include "cnc/lcmt_joint_status.hpp"
 #include "cnc/lcmt_setpoint.hpp"
 #include "cnc/lcmt_spindle_command.hpp"
 #include "cnc/lcmt_io_status.hpp"
@@ -84,8 +86,9 @@ const std::string kIo =
 class Cell {
  public:
   Cell(const std::string& profile, bool enable_on_start, const std::string& extra = "")
-      : cfg(config::parse_machine_config(machine_yaml(profile, enable_on_start) + extra, "lb.yaml")), bus("memq://"),
-        node(cfg, bus, DriveBridgeNode::Options{false}) {
+      : Cell(config::parse_machine_config(machine_yaml(profile, enable_on_start) + extra, "lb.yaml")) {}
+  explicit Cell(config::MachineConfig c)
+      : cfg(std::move(c)), bus("memq://"), node(cfg, bus, DriveBridgeNode::Options{false}) {
     bus.subscribe<cnc::lcmt_axis_status>("LB.AXIS_STATUS", [this](const auto& m) { status = m; });
     bus.subscribe<cnc::lcmt_spindle_status>("LB.SPINDLE_STATUS", [this](const auto& m) { spindle = m; });
     bus.subscribe<cnc::lcmt_io_status>("LB.IO_STATUS", [this](const auto& m) { io = m; });
@@ -1326,6 +1329,151 @@ TEST(BridgeNode, HardLimitAtZeroWhenEnabledIsNoTripAndAMoveOffIsFollowed) {
   EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
   c.move_x(x, x + 0.01);
   EXPECT_TRUE(c.alarmed("hard_limit_refused")) << ::testing::PrintToString(c.alarms);
+}
+
+}  // namespace
+}  // namespace cnc::bridge
+
+namespace cnc::bridge {
+namespace {
+
+// Y a gantry: its second drive Y2 is unit 5 on the same loopback link, skew limit 0.2 mm.
+std::string gantry_yaml() {
+  std::string y = machine_yaml("sim", true);
+  const std::string tail = "profile: sim}}\n";
+  const size_t at = y.rfind(tail);
+  y.replace(at, tail.size(),
+            "profile: sim}, gantry: {name: Y2, skew_limit_mm: 0.2,"
+            " drive: {transport: loopback, unit_id: 5, profile: sim}}}\n");
+  return y;
+}
+
+// The interpolator's HOMED of Y as recorded: Y's offset `first`, Y2's `second`.
+void publish_homed(bus::Bus& bus, double first, double second) {
+  cnc::lcmt_interp_input in{};
+  in.kind = cnc::lcmt_interp_input::COMMAND;
+  in.command.command = cnc::lcmt_program_command::HOMED;
+  in.command.axis = 1;
+  in.command.value = first;
+  in.command.num_axes = 1;
+  in.command.position_mm = {second};
+  bus.publish("LB.INTERP_INPUT", in);
+}
+
+TEST(BridgeNodeGantry, BothDrivesFollowTheAxisPlusTheSquaringThenASkewStopsAndDisables) {
+  Cell c(config::parse_machine_config(gantry_yaml(), "lb.yaml"));
+  cnc::lcmt_joint_status js{};
+  c.bus.subscribe<cnc::lcmt_joint_status>("LB.JOINT_STATUS", [&](const auto& m) { js = m; });
+  c.ticks(40);
+  ASSERT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  ASSERT_EQ(c.node.joints(), 1u);
+  ASSERT_NE(c.link().drive(5), nullptr);
+  EXPECT_TRUE(c.link().drive(5)->follows()) << "the second drive is enabled with the axes";
+  ASSERT_EQ(js.num_joints, 1);
+  EXPECT_EQ(js.name[0], "Y2");
+  EXPECT_EQ(js.axis[0], 1);
+  EXPECT_EQ(int{js.drive_state[0]}, kEnabled);
+  // Y moves 2 mm (a quintic over 0.2 s); Y2 gets Y's command every tick (squaring 0),
+  // and the cyclic path allocates nothing.
+  for (int i = 1; i <= 50; ++i) {
+    const double u = i / 50.0;
+    c.setpoint(10, 10 + 2 * u * u * u * (10 - 15 * u + 6 * u * u));
+    c.count_allocations = i > 5;  // once the setpoints' history has grown to three
+    for (int k = 0; k < 4; ++k) {
+      c.tick();
+      EXPECT_EQ(c.node.joint_command(0), c.node.core().commanded()[1]) << "cycle " << i;
+    }
+  }
+  c.count_allocations = false;
+  EXPECT_EQ(c.cyclic_allocations, 0);
+  c.hold_stream(10, 12, 40);
+  EXPECT_NEAR(c.drive_mm(2), 12, 1e-5) << "at the end of the move (the limiter's last creep)";
+  EXPECT_EQ(c.drive_mm(5), c.drive_mm(2));
+  EXPECT_NEAR(js.max_skew_mm[0], 0, 1e-6) << "ideal drives: no skew";
+
+  // HOMED: Y's offset 0.1 mm, Y2's 0.4 mm: Y2 moves 0.3 mm further than Y, at the axis's
+  // home search velocity (10 mm/s) and acceleration (3000 mm/s^2): 0.3 mm in 30-40 ms.
+  publish_homed(c.bus, 0.1, 0.4);
+  std::vector<double> sq;
+  for (int i = 0; i < 20; ++i) {
+    c.setpoint(10, 12);
+    for (int k = 0; k < 4; ++k) {
+      c.tick();
+      sq.push_back(c.node.joint_squaring(0));
+    }
+  }
+  EXPECT_DOUBLE_EQ(sq.back(), 0.3);
+  for (size_t i = 2; i < sq.size(); ++i) {
+    const double v = (sq[i] - sq[i - 1]) / 0.001, v0 = (sq[i - 1] - sq[i - 2]) / 0.001;
+    EXPECT_LE(std::fabs(v), 10 * 1.000001) << "tick " << i;
+    EXPECT_LE(std::fabs(v - v0) / 0.001, 3000 * 1.000001 + 1e-6) << "tick " << i;
+  }
+  EXPECT_NEAR(c.drive_mm(5) - c.drive_mm(2), 0.3, 1e-6);
+  EXPECT_DOUBLE_EQ(js.squaring_target_mm[0], 0.3);
+  EXPECT_NEAR(js.skew_mm[0], 0, 1e-6);
+  EXPECT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+
+  // Y2 jams while Y moves at 25 mm/s: the skew grows by 0.025 mm per tick and crosses
+  // 0.2 mm in the 9th; the bridge brakes in the tick that reads it.
+  c.link().set_jammed(5, true);
+  double y = 12, v = 0;
+  int braking = -1, tick = 0;
+  double skew_at_fault = 0;
+  for (int i = 0; i < 80; ++i) {
+    if (braking < 0) {
+      v = std::min(0.1, v + 0.01);
+      y += v;
+    }
+    c.setpoint(10, y);
+    for (int k = 0; k < 4; ++k, ++tick) {
+      c.tick();
+      if (braking < 0 && c.node.core().faulted()) {
+        braking = tick;
+        skew_at_fault = c.node.joint_skew(0);
+      }
+    }
+  }
+  ASSERT_GE(braking, 0) << "no skew fault";
+  EXPECT_LT(skew_at_fault, -0.2);
+  EXPECT_GT(skew_at_fault, -0.2 - 0.03) << "seen within a tick of the crossing (25 mm/s: 0.025 mm per tick)";
+  EXPECT_GE(c.node.skew_reaction_ms(), 0.0);
+  EXPECT_LE(c.node.skew_reaction_ms(), 1.0) << "between the two reads around the crossing";
+  EXPECT_TRUE(c.alarmed("gantry_skew: gantry skew: axis Y's drives Y (unit 2) at ")) << ::testing::PrintToString(c.alarms);
+  bool names_both = false;
+  for (const auto& a : c.alarms) names_both = names_both || a.find("and Y2 (unit 5) at ") != std::string::npos;
+  EXPECT_TRUE(names_both) << ::testing::PrintToString(c.alarms);
+  // Standing: a fault, every drive disabled, nothing moves.
+  EXPECT_EQ(c.node.state(), State::kFault) << c.node.detail();
+  EXPECT_FALSE(c.link().drive(1)->follows());
+  EXPECT_FALSE(c.link().drive(2)->follows());
+  EXPECT_FALSE(c.link().drive(5)->follows());
+  const double y_rest = c.drive_mm(2), y2_rest = c.drive_mm(5);
+  c.hold_stream(10, y, 20);
+  EXPECT_EQ(c.drive_mm(2), y_rest);
+  EXPECT_EQ(c.drive_mm(5), y2_rest);
+  std::printf("gantry skew fault at 25 mm/s: skew %.4f mm at the fault (limit 0.2), seen %.2f ms after the crossing, "
+              "braking in that tick; standing %.4f mm apart\n",
+              skew_at_fault, c.node.skew_reaction_ms(), y2_rest - y_rest);
+  // Freed, FAULT_RESET and ENABLE: the squaring starts where the drives stand and moves
+  // back to the homed one: square again.
+  c.link().set_jammed(5, false);
+  c.command(cnc::lcmt_drive_command::FAULT_RESET);
+  c.hold_stream(10, y_rest, 5);
+  c.command(cnc::lcmt_drive_command::ENABLE);
+  c.hold_stream(10, y_rest, 100);
+  ASSERT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  EXPECT_NEAR(c.drive_mm(5) - c.drive_mm(2), 0.3, 1e-6);
+  EXPECT_NEAR(c.drive_mm(2), y_rest, 1e-6) << "the axis itself stays";
+}
+
+TEST(BridgeNodeGantry, AMachineWithoutAGantryPublishesNoJointStatus) {
+  Cell c("sim", true);
+  int n = 0;
+  c.bus.subscribe<cnc::lcmt_joint_status>("LB.JOINT_STATUS", [&](const auto&) { ++n; });
+  c.ticks(40);
+  ASSERT_EQ(c.node.state(), State::kEnabled) << c.node.detail();
+  EXPECT_EQ(c.node.joints(), 0u);
+  EXPECT_EQ(n, 0);
 }
 
 }  // namespace
