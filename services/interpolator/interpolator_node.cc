@@ -100,6 +100,9 @@ InterpolatorNode::InterpolatorNode(const config::MachineConfig& cfg, bus::Bus& b
     axis_status_ = m;
     axis_status_s_ = util::monotonic_s();
   });
+  if (std::any_of(cfg.axes.begin(), cfg.axes.end(), [](const config::AxisConfig& a) { return a.gantry.enabled; }))
+    bus_.subscribe<cnc::lcmt_joint_status>(cfg.channel(ch::kJointStatus),
+                                           [this](const cnc::lcmt_joint_status& m) { joint_status_ = m; });
 }
 
 void InterpolatorNode::on_command(const cnc::lcmt_program_command& m) { pending_commands_.push_back(m); }

@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "cnc/lcmt_axis_status.hpp"
+#include "cnc/lcmt_joint_status.hpp"
 #include "cnc/lcmt_interp_input.hpp"
 #include "cnc/lcmt_logger_stats.hpp"
 #include "cnc/lcmt_program_block.hpp"
@@ -197,7 +198,19 @@ class InterpolatorNode {
     double seen_mm = 0;   // where the search found the switch (drive)
     double search_end_s = 0;  // monotonic time the search stood without a latch (0: not yet)
     double latch_mm = 0;  // the latch of the slow approach (drive)
+    // A gantry axis: both sides search and latch together; each side's own switch. The
+    // second side's latch count at the phase's start, which sides have latched in this
+    // phase, and where (each in its own drive's coordinates), and the machine position
+    // at the first side's latch (the other's must follow within home_max_difference_mm).
+    bool gantry = false;
+    int32_t count0_2 = 0;
+    bool got1 = false, got2 = false;
+    double at1_mm = 0, at2_mm = 0;
+    double first_machine_mm = 0;
   } home_;
+  // A gantry's search or latch phase: takes the sides' new latches; true once both have
+  // latched (home_.at1_mm, at2_mm), false meanwhile or when the homing was stopped.
+  bool gantry_latches(const char* phase);
   Manual last_manual_ = Manual::kNone;
   int64_t done_token_ = 0;
   // The loaded program runs from a line and its approach waits for CONFIRM: START is
@@ -268,6 +281,11 @@ class InterpolatorNode {
   int past_head_ = 0;
   cnc::lcmt_setpoint setpoint_msg_{};  // reused every cycle
   cnc::lcmt_axis_status axis_status_{};
+  // The gantries' second drives (JOINT_STATUS; machines with axes[].gantry): their home
+  // latches for homing.
+  cnc::lcmt_joint_status joint_status_{};
+  // The entry of axis a's gantry joint in joint_status_, -1 none (or no JOINT_STATUS yet).
+  int joint_of(int axis) const;
   double axis_status_s_ = -1e9;  // monotonic time it arrived
   bool drives_seen_enabled_ = false;  // every axis ENABLED in a status since the program started
   service::PeerWatch peers_;  // [0] the drive bridge, [1] the program server

@@ -40,6 +40,14 @@ bool InterpolatorNode::limits_apply(int axis) const {
   return a.home.method == "none" || core_.homed(axis);
 }
 
+int InterpolatorNode::joint_of(int axis) const {
+  const auto n = static_cast<size_t>(joint_status_.num_joints);
+  if (joint_status_.axis.size() != n || joint_status_.home_latch_count.size() != n) return -1;
+  for (size_t k = 0; k < n; ++k)
+    if (joint_status_.axis[k] == axis) return static_cast<int>(k);
+  return -1;
+}
+
 std::string InterpolatorNode::unhomed() const {
   if (!cfg_.operator_.homing_required) return "";
   for (size_t a = 0; a < cfg_.axes.size(); ++a)
@@ -157,6 +165,14 @@ void InterpolatorNode::on_manual_command(const cnc::lcmt_program_command& m) {
           (axis_status_.num_latches != n || axis_status_.home_latch_count[i] < 0))
         return manual_refuse(what, "axis " + cfg_.axes[i].name +
                                        ": its drive reports no home switch latch (drive profile home_latch_*)");
+      if (cfg_.axes[i].home.method == "switch" && cfg_.axes[i].gantry.enabled) {
+        const int k = joint_of(a);
+        if (k < 0) return manual_refuse(what, "axis " + cfg_.axes[i].name + ": no JOINT_STATUS of its gantry joint " +
+                                                  cfg_.axes[i].gantry.name + " from the drive bridge");
+        if (joint_status_.home_latch_count[static_cast<size_t>(k)] < 0)
+          return manual_refuse(what, "axis " + cfg_.axes[i].gantry.name +
+                                         ": its drive reports no home switch latch (drive profile home_latch_*)");
+      }
     }
     home_ = h;
     manual_ = Manual::kHome;
@@ -224,6 +240,12 @@ void InterpolatorNode::start_search() {
   home_.phase = 0;
   home_.count0 = axis_status_.num_latches == n ? axis_status_.home_latch_count[i] : 0;
   home_.search_end_s = 0;
+  home_.gantry = cfg_.axes[i].gantry.enabled;
+  if (home_.gantry) {
+    const int k = joint_of(a);
+    home_.count0_2 = k >= 0 ? joint_status_.home_latch_count[static_cast<size_t>(k)] : 0;
+    home_.got1 = home_.got2 = false;
+  }
   manual_text_ = "home " + cfg_.axes[i].name + ": search";
   const auto& ax = cfg_.axes[i];
   // At most the travel and a half, and never past the travel the drive bridge checks
@@ -291,6 +313,34 @@ void InterpolatorNode::home_next_axis() {
   num_blocks_ = 0;
 }
 
+bool InterpolatorNode::gantry_latches(const char* phase) {
+  const int a = home_.axis;
+  const auto i = static_cast<size_t>(a);
+  const auto& ax = cfg_.axes[i];
+  const int n = static_cast<int>(cfg_.axes.size());
+  const int k = joint_of(a);
+  if (axis_status_.num_latches != n || k < 0) return false;
+  const auto kk = static_cast<size_t>(k);
+  if (!home_.got1 && axis_status_.home_latch_count[i] != home_.count0) {
+    home_.got1 = true;
+    home_.at1_mm = axis_status_.home_latch_mm[i];
+    if (!home_.got2) home_.first_machine_mm = core_.machine_position(a);
+  }
+  if (!home_.got2 && joint_status_.home_latch_count[kk] != home_.count0_2) {
+    home_.got2 = true;
+    home_.at2_mm = joint_status_.home_latch_mm[kk];
+    if (!home_.got1) home_.first_machine_mm = core_.machine_position(a);
+  }
+  if (home_.got1 && home_.got2) return true;
+  // One side latched: the other's switch must follow within home_max_difference_mm.
+  if ((home_.got1 || home_.got2) &&
+      std::fabs(core_.machine_position(a) - home_.first_machine_mm) > ax.gantry.home_max_difference_mm)
+    manual_stop("axis " + ax.name + " (" + phase + "): " + (home_.got1 ? ax.name : ax.gantry.name) +
+                "'s switch closed, " + (home_.got1 ? ax.gantry.name : ax.name) + "'s not within " +
+                mm(ax.gantry.home_max_difference_mm) + " mm (axes[].gantry.home_max_difference_mm)");
+  return false;
+}
+
 void InterpolatorNode::manual_cycle() {
   if (manual_ == Manual::kNone) return;
   const bool moving = active(core_.state());
@@ -328,6 +378,32 @@ void InterpolatorNode::manual_cycle() {
     m.command = PC::STOP;
     apply_command(Command{Command::Kind::kStop, 1.0, {}}, m);
   };
+  // A gantry: both sides move together; each latches its own switch.
+  if (home_.gantry && (home_.phase == 0 || home_.phase == 3)) {
+    const bool search = home_.phase == 0;
+    if (gantry_latches(search ? "search" : "latch")) {
+      stop();
+      if (search) {
+        // Off both switches: back from the one the search met first.
+        const int k = joint_of(a);
+        const double squaring = k >= 0 ? joint_status_.squaring_mm[static_cast<size_t>(k)] : 0.0;
+        const double second = home_.at2_mm - squaring;  // in the first drive's coordinates
+        home_.seen_mm = h.direction * (home_.at1_mm - second) < 0 ? home_.at1_mm : second;
+        home_.phase = 1;
+      } else {
+        home_.latch_mm = home_.at1_mm;
+        home_.phase = 4;
+      }
+      return;
+    }
+    if (manual_ != Manual::kHome) return;  // stopped
+    if (!moving && !(search && !home_.got1 && !home_.got2)) {
+      manual_stop("axis " + ax.name + ": " + (home_.got1 ? ax.gantry.name : ax.name) + "'s switch did not close" +
+                  (search ? " up to the end of the search" : " within " + mm(2 * h.backoff_mm) + " mm of the back-off"));
+      return;
+    }
+    if (!search || home_.got1 || home_.got2) return;
+  }
   switch (home_.phase) {
     case 0:  // search
       if (count != home_.count0) {
@@ -353,6 +429,11 @@ void InterpolatorNode::manual_cycle() {
       if (moving) break;
       home_.phase = 3;
       home_.count0 = count;
+      if (home_.gantry) {
+        const int k = joint_of(a);
+        home_.count0_2 = k >= 0 ? joint_status_.home_latch_count[static_cast<size_t>(k)] : 0;
+        home_.got1 = home_.got2 = false;
+      }
       manual_text_ = "home " + ax.name + ": latch";
       start_move(a, core_.machine_position(a) + h.direction * 2 * h.backoff_mm, h.latch_velocity_mm_s * 60.0,
                  manual_text_);
@@ -374,6 +455,20 @@ void InterpolatorNode::manual_cycle() {
       homed.command = PC::HOMED;
       homed.axis = a;
       homed.value = offset;
+      if (home_.gantry) {
+        // The second side's offset, for the drive bridge (the core plans the axis alone):
+        // it moves that side by the difference, which squares the axis.
+        const double offset2 = home_.at2_mm - ax.gantry.switch_position_mm;
+        homed.num_axes = 1;
+        homed.position_mm.assign(1, offset2);
+        spdlog::info("gantry {}: {} latched at {} mm, {} at {} mm (each drive's); offsets {} and {} mm: squaring {} mm",
+                     ax.name, ax.name, mm(home_.at1_mm), ax.gantry.name, mm(home_.at2_mm), mm(offset), mm(offset2),
+                     mm(offset2 - offset));
+        alarm(cnc::lcmt_alarm::INFO, "gantry_squared",
+              "gantry " + ax.name + ": " + ax.gantry.name + " squared to " + ax.name + ": squaring " +
+                  mm(offset2 - offset) + " mm (switches latched at " + mm(home_.at1_mm) + " and " + mm(home_.at2_mm) +
+                  " mm, each drive's)");
+      }
       Command c;
       c.kind = Command::Kind::kHomed;
       c.axis = a;
