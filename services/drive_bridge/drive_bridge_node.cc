@@ -742,6 +742,8 @@ void DriveBridgeNode::shut_down() {
     j.drv.cmd.goal = drive::Goal::kDisable;
     j.drv.cmd.follow = false;
     j.drv.worker->set_command(j.drv.slot, j.drv.cmd);
+    spdlog::info("gantry {}: squaring {:.4f} mm (target {:.4f}), skew {:.4f} mm, largest since the last ENABLE {:.4f} mm",
+                 cfg_.axes[j.axis].name, j.squaring_mm, j.target_mm, j.skew_mm, j.max_skew_mm);
   }
   if (spindle_) {
     spindle_->ctl.stop();

@@ -289,17 +289,42 @@ void InterpolatorNode::home_next_axis() {
     // to -5.04 mm, a travel fault, in 1 of 12 suite runs). It backs off first, as
     // LinuxCNC does from a tripped home switch.
     const bool latched = axis_status_.num_latches == n && axis_status_.home_latch_count[i] > 0;
+    // The back-off's target (the further back of the sides that stand on their switch), if any.
+    bool on_switch = false;
+    double backoff_to = 0;
     if (latched) {
       const double latch_drive = axis_status_.home_latch_mm[i];
       const double drive_pos = core_.machine_position(a) + core_.drive_offset(a);
       if (h.direction * (drive_pos - latch_drive) > -h.backoff_mm) {
-        home_.phase = 6;
-        manual_text_ = "home " + cfg_.axes[i].name + ": off the switch";
-        spdlog::info("{}: the switch closed at {} mm (drive) and the axis stands at {} mm: backing off first",
-                     manual_text_, mm(latch_drive), mm(drive_pos));
-        start_move(a, backoff_target(a, latch_drive), h.search_velocity_mm_s * 60.0, manual_text_);
-        return;
+        on_switch = true;
+        backoff_to = backoff_target(a, latch_drive);
+        spdlog::info("home {}: off the switch: the switch closed at {} mm (drive) and the axis stands at {} mm: "
+                     "backing off first",
+                     cfg_.axes[i].name, mm(latch_drive), mm(drive_pos));
       }
+    }
+    // A gantry's second side on its own switch: the same, in the first drive's coordinates.
+    if (const int k = cfg_.axes[i].gantry.enabled ? joint_of(a) : -1; k >= 0) {
+      const auto kk = static_cast<size_t>(k);
+      if (joint_status_.home_latch_count[kk] > 0) {
+        const double squaring = joint_status_.squaring_mm[kk];
+        const double latch_drive = joint_status_.home_latch_mm[kk] - squaring;
+        const double drive_pos = joint_status_.actual_mm[kk] - squaring;
+        if (h.direction * (drive_pos - latch_drive) > -h.backoff_mm) {
+          const double to = backoff_target(a, latch_drive);
+          backoff_to = on_switch && h.direction * (backoff_to - to) > 0 ? to : (on_switch ? backoff_to : to);
+          on_switch = true;
+          spdlog::info("home {}: off the switch: {}'s switch closed at {} mm and it stands at {} mm (the first "
+                       "drive's coordinates): backing off first",
+                       cfg_.axes[i].name, cfg_.axes[i].gantry.name, mm(latch_drive), mm(drive_pos));
+        }
+      }
+    }
+    if (on_switch) {
+      home_.phase = 6;
+      manual_text_ = "home " + cfg_.axes[i].name + ": off the switch";
+      start_move(a, backoff_to, h.search_velocity_mm_s * 60.0, manual_text_);
+      return;
     }
     start_search();
     return;

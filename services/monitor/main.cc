@@ -6,11 +6,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <map>
 
 #include "cnc/lcmt_alarm.hpp"
 #include "cnc/lcmt_axis_status.hpp"
+#include "cnc/lcmt_joint_status.hpp"
 #include "cnc/lcmt_heartbeat.hpp"
 #include "cnc/lcmt_interp_input.hpp"
 #include "cnc/lcmt_monitor_report.hpp"
@@ -115,6 +117,36 @@ int main(int argc, char** argv) {
       for (const auto& a : alarms) raise(a.code, a.text, cnc::lcmt_alarm::WARNING);
       handling.record_s(cnc::util::monotonic_s() - t_in);
     });
+    // A gantry's second drives (JOINT_STATUS): a skew over half its limit while enabled
+    // is a warning (at most one a second per joint) before the bridge's fault at the
+    // limit; the largest skew and following error go to the summary.
+    struct JointSeen {
+      double max_skew_mm = 0, max_fe_mm = 0;
+      double warned_s = -1e9;
+    };
+    std::vector<JointSeen> joints_seen;
+    if (std::any_of(cfg.axes.begin(), cfg.axes.end(), [](const cnc::config::AxisConfig& a) { return a.gantry.enabled; }))
+      bus.subscribe<cnc::lcmt_joint_status>(cfg.channel(ch::kJointStatus), [&](const cnc::lcmt_joint_status& m) {
+        const auto n = static_cast<size_t>(m.num_joints);
+        if (m.axis.size() != n || m.skew_mm.size() != n || m.drive_state.size() != n) return;
+        if (joints_seen.size() != n) joints_seen.assign(n, JointSeen{});
+        for (size_t k = 0; k < n; ++k) {
+          if (m.axis[k] < 0 || m.axis[k] >= naxes || m.drive_state[k] != cnc::lcmt_axis_status::ENABLED) continue;
+          const auto& ax = cfg.axes[static_cast<size_t>(m.axis[k])];
+          JointSeen& j = joints_seen[k];
+          const double skew = std::fabs(m.skew_mm[k]);
+          j.max_skew_mm = std::max(j.max_skew_mm, skew);
+          j.max_fe_mm = std::max(j.max_fe_mm, std::fabs(m.following_error_mm[k]));
+          const double now_s = cnc::util::monotonic_s();
+          if (skew > 0.5 * ax.gantry.skew_limit_mm && now_s - j.warned_s >= 1.0) {
+            j.warned_s = now_s;
+            char b[200];
+            std::snprintf(b, sizeof b, "gantry %s: %s's skew %.4f mm is over half its limit %g mm", ax.name.c_str(),
+                          m.name[k].c_str(), m.skew_mm[k], ax.gantry.skew_limit_mm);
+            raise("gantry_skew_warning", b, cnc::lcmt_alarm::WARNING);
+          }
+        }
+      });
     cnc::service::Heartbeat hb(bus, cfg, "cnc-monitor");
     // Sequence gaps: one alarm per channel and second at most, with the count since
     // the last one (a lossy network loses a few datagrams a second: a line each
@@ -142,6 +174,12 @@ int main(int argc, char** argv) {
       }
       hb.tick(cnc::lcmt_heartbeat::RUNNING, 0);
     }
+    for (size_t k = 0, j = 0; k < cfg.axes.size(); ++k)
+      if (cfg.axes[k].gantry.enabled && j < joints_seen.size()) {
+        spdlog::info("cnc-monitor: gantry {}: largest skew {:.4f} mm, {}'s largest following error {:.4f} mm",
+                     cfg.axes[k].name, joints_seen[j].max_skew_mm, cfg.axes[k].gantry.name, joints_seen[j].max_fe_mm);
+        ++j;
+      }
     spdlog::info("cnc-monitor: largest chord error {:.4f} um, largest following error {:.4f} mm",
                  core.largest_chord_error_mm() * 1e3, core.largest_following_error_mm());
     hb.tick(cnc::lcmt_heartbeat::STOPPING, 0, "", true);

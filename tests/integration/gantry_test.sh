@@ -10,7 +10,8 @@
 #     skew crosses axes[].gantry.skew_limit_mm (0.5 mm): a fault naming the axis, both
 #     drives and the skew; nothing moves for 1 s after; ENABLE refused until FAULT_RESET.
 #     Freed, fault-reset and reset: the bridge squares the gantry again.
-#  4. The log replays bit for bit (cnc-replay).
+#  4. The bridge's and the monitor's largest skew (as read from the drives, JOINT_STATUS:
+#     the monitor's includes the jam's); the log replays bit for bit (cnc-replay).
 #   gantry_test.sh BUILD_DIR SOURCE_DIR
 source "$(dirname "$0")/lib.sh"
 enter_private_netns "$@"
@@ -29,7 +30,7 @@ mkfifo "$WORK/sim.ctl"
 start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M" --control "$WORK/sim.ctl" --trace "$WORK/trace.csv"
 exec 7<>"$WORK/sim.ctl"
 start logger "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/run"
-start_cell --no-monitor
+start_cell
 
 # skew FROM [TO]: the simulated gantry's skew over the trace's rows in [FROM, TO] (wall
 # clock): first, last, largest magnitude; and the largest motion of any drive, and
@@ -100,7 +101,7 @@ expect_drive_fault "$ctl_pid" "gantry skew: axis Y's drives Y (unit 2)"
 text=$(grep -o "gantry skew: .*" "$WORK/drive-bridge.log" | head -1)
 note "$text"
 grep -q "and Y2 (unit 4)" <<<"$text" || fail "the fault does not name Y2"
-sleep 0.5
+sleep 0.3
 t3=$(wall)
 sleep 1.0
 read -r _ _ _ span on _ < <(skew "$t3")
@@ -115,7 +116,11 @@ resq=$(settled_skew 0.010)
 note "after FAULT_RESET and ENABLE the bridge squared the gantry again: skew $resq mm"
 cmp_le "$resq" 0.010 || fail "the skew after the re-enable is $resq mm"
 
-for name in interpolator drive-bridge program-server servo-sim logger; do stop "$name"; done
+# The bridge's own skew (the drives' actual positions as read) and the monitor's (JOINT_STATUS).
+for name in monitor interpolator drive-bridge program-server servo-sim logger; do stop "$name"; done
+note "bridge: $(grep -o 'gantry Y: squaring.*' "$WORK/drive-bridge.log" | tail -1)"
+note "monitor: $(grep -o 'gantry Y: largest skew.*' "$WORK/monitor.log" | tail -1)"
+grep -q "gantry Y: largest skew" "$WORK/monitor.log" || fail "the monitor did not see the gantry's joint"
 "$BUILD/tools/cnc-replay" --log "$WORK/run.lcmlog" >"$WORK/replay.out" 2>&1 || { cat "$WORK/replay.out" >&2; fail "replay is not identical"; }
 grep "^identical: " "$WORK/replay.out" >&2 || fail "no verdict from cnc-replay"
 echo "PASS: gantry homed square ($before -> $after mm), program skew <= $max_run mm, skew fault and stop, replay identical" >&2

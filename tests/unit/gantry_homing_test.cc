@@ -29,7 +29,7 @@
 namespace cnc {
 namespace {
 
-std::string machine(double y2_switch_mm) {
+std::string machine(double y2_switch_mm, double start_mm) {
   std::string y =
       "cell: {name: gh, channel_prefix: \"GH.\"}\n"
       "timing: {ipo_period_s: 0.004, servo_period_s: 0.001, setpoint_timeout_s: 0.05, stop_decel_mm_s2: 2000}\n"
@@ -44,11 +44,11 @@ std::string machine(double y2_switch_mm) {
     if (i == 1) {
       char b[400];
       std::snprintf(b, sizeof b,
-                    ", home: {method: switch, search_velocity_mm_s: 10, latch_velocity_mm_s: 1, direction: -1,"
+                    ", home_mm: %g, home: {method: switch, search_velocity_mm_s: 10, latch_velocity_mm_s: 1, direction: -1,"
                     " switch_position_mm: -4, position_mm: 0, backoff_mm: 1},"
                     " gantry: {name: Y2, switch_position_mm: -4, skew_limit_mm: 0.5, home_max_difference_mm: 2,"
                     " drive: {transport: loopback, unit_id: 4, profile: sim}}  # Y2's switch at %g\n",
-                    y2_switch_mm);
+                    start_mm, y2_switch_mm);
       y += b;
       y.insert(y.rfind("  #"), "}");
     } else {
@@ -97,8 +97,9 @@ struct HomingRun {
   bool homed = false;
 };
 
-HomingRun home_y(double y2_switch_mm) {
-  const config::MachineConfig cfg = config::parse_machine_config(machine(y2_switch_mm), "gh.yaml");
+// HOME Y with Y2's switch at `y2_switch_mm`, both sides starting at `start_mm`.
+HomingRun home_y(double y2_switch_mm, double start_mm = 0) {
+  const config::MachineConfig cfg = config::parse_machine_config(machine(y2_switch_mm, start_mm), "gh.yaml");
   bus::Bus bus("memq://");
   bridge::DriveBridgeNode bridge(cfg, bus, bridge::DriveBridgeNode::Options{false});
   interp::InterpolatorNode interp(cfg, bus);
@@ -159,6 +160,15 @@ TEST(GantryHoming, BothSidesLatchTheirOwnSwitchesAndTheAxisEndsSquare) {
   EXPECT_LE(std::fabs(r.skew_mm), 0.01);
   std::printf("gantry homing: skew before -0.8000 mm, squaring %.4f mm, skew after %.4f mm\n", r.squaring_mm,
               r.skew_mm);
+}
+
+TEST(GantryHoming, ASecondSideStandingOnItsSwitchBacksOffFirst) {
+  // Both at -3.5 mm: Y2's switch (-3.2) closed and latched there (a homing stopped on
+  // it), Y's (-4) open. The homing backs off Y2's switch first, then searches as usual.
+  const HomingRun r = home_y(-3.2, -3.5);
+  ASSERT_TRUE(r.homed) << ::testing::PrintToString(r.alarms);
+  EXPECT_NEAR(r.squaring_mm, 0.8, 0.01);
+  EXPECT_LE(std::fabs(r.skew_mm), 0.01);
 }
 
 TEST(GantryHoming, ASecondSwitchBeyondTheAllowedDifferenceStopsTheHomingNamingBoth) {
