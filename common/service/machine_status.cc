@@ -231,8 +231,27 @@ void input_wait_lines(const cnc::config::MachineConfig& cfg, const MachineView& 
 
 }  // namespace
 
+void gantry_lines(const cnc::config::MachineConfig& cfg, const MachineView& v, std::string* out) {
+  for (size_t i = 0; i < cfg.axes.size(); ++i) {
+    const cnc::config::AxisConfig& a = cfg.axes[i];
+    if (!a.gantry.enabled) continue;
+    add(out, "gantry %s: ", a.name.c_str());
+    const cnc::lcmt_joint_status* j = v.joints;
+    size_t k = 0;
+    while (j != nullptr && k < j->axis.size() && j->axis[k] != static_cast<int32_t>(i)) ++k;
+    if (j == nullptr || k >= j->axis.size() || j->skew_mm.size() != j->axis.size()) {
+      add(out, "%s not heard (JOINT_STATUS)\n", a.gantry.name.c_str());
+      continue;
+    }
+    add(out, "%s at %.4f mm, squaring %.4f mm (to %.4f), skew %.4f mm (limit %g, largest since enable %.4f)\n",
+        a.gantry.name.c_str(), j->actual_mm[k], j->squaring_mm[k], j->squaring_target_mm[k], j->skew_mm[k],
+        a.gantry.skew_limit_mm, j->max_skew_mm[k]);
+  }
+}
+
 std::string machine_status(const cnc::config::MachineConfig& cfg, const MachineView& v) {
   std::string out;
+  gantry_lines(cfg, v, &out);
   spindle_lines(cfg, v, &out);
   io_lines(cfg, v, &out);
   safety_lines(cfg, v, &out);

@@ -9,6 +9,7 @@
 #include "cnc/lcmt_axis_status.hpp"
 #include "cnc/lcmt_interp_state.hpp"
 #include "cnc/lcmt_io_status.hpp"
+#include "cnc/lcmt_joint_status.hpp"
 #include "cnc/lcmt_spindle_status.hpp"
 #include "common/config/machine_config.h"
 
@@ -20,9 +21,10 @@ struct MachineView {
   const cnc::lcmt_io_status* io = nullptr;
   const cnc::lcmt_axis_status* axes = nullptr;
   const cnc::lcmt_interp_state* interp = nullptr;
+  const cnc::lcmt_joint_status* joints = nullptr;  // a machine with a gantry
 };
 
-// Lines for what the config has (a spindle:, io:, safety:, probe: section), each
+// Lines for what the config has (a spindle:, io:, safety:, probe: section, a gantry), each
 // ending in '\n'; a device whose status was not heard says so. "" for a cell without any.
 std::string machine_status(const cnc::config::MachineConfig& cfg, const MachineView& v);
 

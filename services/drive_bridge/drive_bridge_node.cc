@@ -408,12 +408,15 @@ void DriveBridgeNode::take_operator_command(double now_s) {
     spdlog::warn("{}", text);
     alarm(cnc::lcmt_alarm::WARNING, "estop_reset_refused", text);
   } else if (c == cnc::lcmt_drive_command::DISABLE || c == cnc::lcmt_drive_command::FAULT_RESET) {
-    if (c == cnc::lcmt_drive_command::FAULT_RESET && (estop_.module >= 0 || !limits_.empty())) {
-      // With an E-stop or hard limits every FAULT_RESET is answered (cnc-ctl waits for it or the refusal).
+    if (c == cnc::lcmt_drive_command::FAULT_RESET && (estop_.module >= 0 || !limits_.empty() || !joints_.empty())) {
+      // With an E-stop, hard limits or a gantry every FAULT_RESET is answered (cnc-ctl
+      // waits for it or the refusal).
       alarm(cnc::lcmt_alarm::INFO, "fault_reset_done",
             estop_.latched   ? "FAULT_RESET: the E-stop reset, the drives disabled: ENABLE to move again"
             : limit_.latched ? "FAULT_RESET: the hard limit reset, the drives disabled: ENABLE, then move off the "
                                "switch (moves towards it are refused while it reads 0)"
+            : skew_.latched  ? "FAULT_RESET: the gantry's skew fault reset, the drives disabled: ENABLE squares "
+                               "the gantry again"
                              : "FAULT_RESET: the drives reset and disabled");
       if (estop_.latched) spdlog::info("E-stop reset by the operator");
       if (limit_.latched) spdlog::info("hard limit reset by the operator");

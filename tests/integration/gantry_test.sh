@@ -81,6 +81,10 @@ note "skew before homing $before mm, after homing $after mm"
 cmp_le "$before + 0.8" 0.005 || fail "the simulated gantry did not start 0.8 mm out of square ($before mm)"
 cmp_le "$after" 0.010 || fail "the skew after homing is $after mm (tolerance 10 um)"
 
+"${CTL[@]}" --do status --timeout 0.3 >"$WORK/status.out" 2>&1 || true
+grep -q "^gantry Y: Y2 at .* squaring 0.80" "$WORK/status.out" || { cat "$WORK/status.out" >&2; fail "cnc-ctl status does not show Y2 squared"; }
+note "status: $(grep '^gantry Y:' "$WORK/status.out")"
+
 # ---- 2. A short program ----------------------------------------------------------------
 t2=$(wall)
 ok short "${CTL[@]}" --do run --program "$WORK/short.ngc" --timeout 30
@@ -111,6 +115,7 @@ cmp_le "$span" 0.0001 || fail "a drive moved $span mm after the skew fault"
 grep -q "gantry skew: the axes stand" "$WORK/drive-bridge.log" || fail "the bridge did not disable the drives at standstill"
 echo "clear" >&7
 ok fault_reset "${CTL[@]}" --do fault-reset
+grep -q "the gantry's skew fault reset" "$WORK/fault_reset.out" || fail "the bridge did not answer the FAULT_RESET"
 ok reset "${CTL[@]}" --do reset --timeout 20
 resq=$(settled_skew 0.010)
 note "after FAULT_RESET and ENABLE the bridge squared the gantry again: skew $resq mm"

@@ -61,6 +61,25 @@ TEST(MachineStatus, SaysWhatWasNotHeard) {
   EXPECT_TRUE(has(text, "probe: input clamp_closed ? (not read); no probing result in this program\n")) << text;
 }
 
+TEST(MachineStatus, AGantrysSecondDriveItsSquaringAndSkew) {
+  const auto cfg = cnc::config::load_machine_config(CNC_SOURCE_DIR "/config/machines/sim3_gantry.yaml");
+  EXPECT_EQ(machine_status(cfg, MachineView{}), "gantry Y: Y2 not heard (JOINT_STATUS)\n");
+  cnc::lcmt_joint_status j{};
+  j.num_joints = 1;
+  j.axis = {1};
+  j.name = {"Y2"};
+  j.actual_mm = {12.8031};
+  j.squaring_mm = {0.8031};
+  j.squaring_target_mm = {0.8031};
+  j.skew_mm = {-0.0012};
+  j.max_skew_mm = {0.0185};
+  MachineView v;
+  v.joints = &j;
+  EXPECT_EQ(machine_status(cfg, v),
+            "gantry Y: Y2 at 12.8031 mm, squaring 0.8031 mm (to 0.8031), skew -0.0012 mm (limit 0.5, largest since "
+            "enable 0.0185)\n");
+}
+
 TEST(MachineStatus, SpindleWithOverrideAndLoad) {
   const auto cfg = guarded();
   cnc::lcmt_spindle_status s{};

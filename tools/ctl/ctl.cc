@@ -84,6 +84,10 @@ Ctl::Ctl(const cnc::config::MachineConfig& cfg, const cnc::service::Args& args)
       view_.io = m;
       view_.have_io = true;
     });
+    bus_.subscribe<cnc::lcmt_joint_status>(cfg.channel(ch::kJointStatus), [this](const auto& m) {
+      view_.joints = m;
+      view_.have_joints = true;
+    });
   }
   bus_.subscribe<cnc::lcmt_alarm>(cfg.channel(ch::kAlarm), [this](const auto& m) {
     view_.alarms.push_back(m);
@@ -288,6 +292,7 @@ int Ctl::status() {
   machine.io = view_.have_io ? &view_.io : nullptr;
   machine.axes = view_.have_axes ? &view_.axes : nullptr;
   machine.interp = view_.have_interp ? &view_.interp : nullptr;
+  machine.joints = view_.have_joints ? &view_.joints : nullptr;
   std::fputs(cnc::service::machine_status(cfg_, machine).c_str(), stdout);
   std::printf("cnc-ctl %s: %zu services heard in %.1f s\n", cnc::util::version(), view_.heartbeats.size(), now - t0);
   return view_.heartbeats.empty() ? kExitTimeout : 0;
@@ -296,7 +301,9 @@ int Ctl::status() {
 int Ctl::disable() { return drive_command(cnc::lcmt_drive_command::DISABLE), 0; }
 
 int Ctl::fault_reset() {
-  if (cfg_.safety.estop_input < 0 && cfg_.safety.hard_limits.empty())
+  const bool gantry = std::any_of(cfg_.axes.begin(), cfg_.axes.end(),
+                                  [](const cnc::config::AxisConfig& a) { return a.gantry.enabled; });
+  if (cfg_.safety.estop_input < 0 && cfg_.safety.hard_limits.empty() && !gantry)
     return drive_command(cnc::lcmt_drive_command::FAULT_RESET), 0;
   // With an E-stop or hard limits the bridge answers: done (fault_reset_done), or
   // refused while the E-stop's input reads 0 or the axes still brake
@@ -307,6 +314,7 @@ int Ctl::fault_reset() {
   wait(std::min(timeout_s_, 5.0), [&] {
     why = bridge_alarm_since(from, "estop_reset_refused");
     if (why.empty()) why = bridge_alarm_since(from, "limit_reset_refused");
+    if (why.empty()) why = bridge_alarm_since(from, "skew_reset_refused");
     done = bridge_alarm_since(from, "fault_reset_done");
     return !why.empty() || !done.empty();
   });

@@ -9,6 +9,7 @@
 
 #include "cnc/lcmt_alarm.hpp"
 #include "cnc/lcmt_axis_status.hpp"
+#include "cnc/lcmt_joint_status.hpp"
 #include "cnc/lcmt_heartbeat.hpp"
 #include "cnc/lcmt_interp_state.hpp"
 #include "cnc/lcmt_command_answers.hpp"
@@ -33,6 +34,8 @@ struct CellView {
   bool have_interp = false;
   cnc::lcmt_axis_status axes{};
   bool have_axes = false;
+  cnc::lcmt_joint_status joints{};
+  bool have_joints = false;
   cnc::lcmt_spindle_status spindle{};
   bool have_spindle = false;
   cnc::lcmt_io_status io{};
