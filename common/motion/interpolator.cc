@@ -302,7 +302,8 @@ bool Interpolator::own_limit(const Planned& p, size_t i) const {
   // in two steps (a raster's stop at a pass end: 26 cycles where 21 do).
   const double v = p.v_bw[i];
   if (!(v > 0)) return true;
-  double cap = rapid_at_full_speed(p) ? p.samples[i].v_geo : std::min(p.samples[i].v_geo, programmed_speed(p));
+  const double v_lim = sample_limit(p, i, law_scale_);
+  double cap = rapid_at_full_speed(p) ? v_lim : std::min(v_lim, programmed_speed(p));
   if (i == 0) cap = std::min(cap, p.live_entry);
   return !(v < cap);
 }
@@ -321,6 +322,17 @@ double Interpolator::cap_at(const Planned& p, double s, Limit* why, double* v_ge
   if (!std::isfinite(v)) v = std::min(sm[i].v_geo, sm[i + 1].v_geo);
   *why = f < 0.5 ? sm[i].limit : sm[i + 1].limit;
   if (v_geo != nullptr) *v_geo = v;
+  if (law_scale_ < 1.0 && !p.v_law.empty()) {
+    // A slower spindle lowers the process laws' cap (taken jerk-limited, as an
+    // override's), not the hard geometric caps (*v_geo).
+    const double v0 = sample_limit(p, i, law_scale_), v1 = sample_limit(p, i + 1, law_scale_);
+    double vl = v0 + (v1 - v0) * f;
+    if (!std::isfinite(vl)) vl = std::min(v0, v1);
+    if (vl < v) {
+      v = vl;
+      *why = Limit::kRoughness;
+    }
+  }
   // A rapid at full override runs at its axes' limit, which v already is.
   if (rapid_at_full_speed(p)) return std::isfinite(v) ? v : p.v_prog;
   const double vp = programmed_speed(p);
@@ -724,6 +736,12 @@ bool Interpolator::wants_spindle_position() const {
   for (size_t b = 0; b < blocks_.size(); ++b)
     if (blocks_[b].block.sync != program::kSyncNone) return true;
   return false;
+}
+
+double Interpolator::law_scale_for(double measured_rpm) const {
+  if (!(spindle_.program_rpm > 0) || !std::isfinite(measured_rpm)) return 1.0;
+  // Steps of 1/128: a drive's speed reading wanders in its last digit; each step re-plans the look-ahead.
+  return std::clamp(std::round(std::fabs(measured_rpm) / spindle_.program_rpm * 128.0) / 128.0, 0.0, 1.0);
 }
 
 bool Interpolator::spindle_position(double* rev, double* rps) const {

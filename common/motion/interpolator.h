@@ -90,7 +90,11 @@ struct Command {
     // M3), [1] revolutions per second, [2] the bridge's playback cycle of the sample
     // (the setpoint cycle being played when it was read). The node applies one per
     // cycle while wants_spindle_position(), recorded like every input.
-    kSpindlePosition = 23
+    kSpindlePosition = 23,
+    // The spindle's measured speed (`value`, rpm, its magnitude): the process laws
+    // (roughness, force) follow it, as law_scale_for(value) of their planned limits.
+    // The node applies it when that scale would change, recorded like every input.
+    kSpindleSpeed = 24
   };
   Kind kind = Kind::kStart;
   double feed_override = 1.0;  // kOverride: 0.0 .. kMaxFeedOverride; kRapidOverride: 0.0 .. 1.0; kSpindleOverride
@@ -297,6 +301,10 @@ class Interpolator {
   double dry_run_spindle_rev() const { return ideal_rev_; }
   // A synchronised move is queued: the node applies the spindle's position each cycle.
   bool wants_spindle_position() const;
+  // The process laws' scale (planner.h, sample_limit) for a measured spindle speed:
+  // that speed over the program's S, rounded to 1/128 and at most 1 (1 with no S).
+  double law_scale_for(double measured_rpm) const;
+  double law_scale() const { return law_scale_; }
   const InputWaitState& input_wait() const { return input_; }
   // Coolant and digital outputs where the path stands (machine_outputs.h).
   const MachineOutputs& outputs() const { return outputs_; }
@@ -455,6 +463,7 @@ class Interpolator {
   double rapid_override_ = 1.0;
   double spindle_override_ = 1.0;
   bool spindle_override_on_ = true;
+  double law_scale_ = 1.0;  // the process laws' scale (kSpindleSpeed)
   uint64_t overrides_taken_ = UINT64_MAX;  // serial of the M48-M53 event last taken
   bool single_block_ = false;
   bool optional_stop_ = true;

@@ -270,6 +270,25 @@ bool Interpolator::apply_command(const Command& cmd) {
       spindle_override_ = std::clamp(cmd.feed_override, cfg_.spindle.min_override, cfg_.spindle.max_override);
       spindle_reoverride();
       break;
+    case Command::Kind::kSpindleSpeed: {
+      if (!std::isfinite(cmd.value) || cmd.value < 0) return false;
+      const double scale = law_scale_for(cmd.value);
+      if (scale == law_scale_) break;
+      // As an override: the cap at once, the look-ahead when the planner's pass is taken.
+      PlanRequest r;
+      r.kind = PlanRequest::Kind::kOverride;
+      r.epoch = epoch_;
+      r.feed_override = override_;
+      r.rapid_override = rapid_override_;
+      r.law_scale = scale;
+      if (!push_request(r)) return false;
+      law_scale_ = scale;
+      if (inline_) {
+        int64_t used = 0;
+        apply_plans(std::numeric_limits<int64_t>::max(), &used);
+      }
+      break;
+    }
     case Command::Kind::kOverride:
     case Command::Kind::kRapidOverride:
       if (std::isfinite(cmd.feed_override)) {
@@ -281,6 +300,7 @@ bool Interpolator::apply_command(const Command& cmd) {
         const bool rapid = cmd.kind == Command::Kind::kRapidOverride;
         r.feed_override = rapid ? override_ : std::clamp(cmd.feed_override, 0.0, motion::kMaxFeedOverride);
         r.rapid_override = rapid ? std::clamp(cmd.feed_override, 0.0, 1.0) : rapid_override_;
+        r.law_scale = law_scale_;
         if (!push_request(r)) return false;
         override_ = r.feed_override;
         rapid_override_ = r.rapid_override;

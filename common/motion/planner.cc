@@ -239,6 +239,7 @@ struct Planner::BlockWork {
   std::vector<AxisVec> kvec;   // curvature vector d²P/ds²
   std::vector<AxisVec> tvec;   // unit tangent (zero at a singular point)
   std::vector<double> v_chord;
+  std::vector<double> v_rough;  // the roughness law's limit (∞ where it does not apply)
   std::vector<AxisVec> kleft;  // the curvature's left-hand limit (differs at a knot where it jumps)
   AxisVec c_jump{};            // per axis: the largest v²·|Δk_a|/T at a curvature jump (jerk)
   bool inner_corner = false;   // an unresolved turn inside the block (crossed at speed)
@@ -394,6 +395,7 @@ void Planner::local_limits(Planned& p, BlockWork& w) const {
   kvec.assign(n, AxisVec{});
   tvec.assign(n, AxisVec{});
   w.v_chord.assign(n, kInf);
+  w.v_rough.assign(n, kInf);
   double v_rapid = p.v_prog;  // a rapid's speed: the least axis-velocity limit of its samples
   for (size_t i = 0; i < n; ++i) {
     AxisVec P{}, d1{}, d2{};
@@ -431,7 +433,8 @@ void Planner::local_limits(Planned& p, BlockWork& w) const {
     w.v_chord[i] = chord_speed(kappa, w.eps);
     if (w.rough && naxes_ >= 3) {
       const double alpha = process::feed_inclination_angle(Eigen::Vector3d(t[0], t[1], t[2]));
-      take(w.law.feed_mm_per_min(b.spindle_rpm, alpha) / 60.0, Limit::kRoughness);
+      w.v_rough[i] = w.law.feed_mm_per_min(b.spindle_rpm, alpha) / 60.0;
+      take(w.v_rough[i], Limit::kRoughness);
     }
   }
   if (rapid) p.v_prog = v_rapid;
@@ -538,6 +541,20 @@ void Planner::neighbour_limits(Planned& p, const BlockWork& w) const {
   };
   spread(w.v_chord, Limit::kChord);
   spread(w.v_force, Limit::kForce);
+  // What of it the process laws set, for the cyclic side to scale with the spindle.
+  p.v_law.clear();
+  const size_t n = p.samples.size();
+  const bool force = w.v_force.size() == n;
+  bool any = false;
+  for (size_t i = 0; i < n && !any; ++i) any = w.v_rough[i] < kInf || (force && w.v_force[i] < kInf);
+  if (!any) return;
+  p.v_law.assign(n, kInf);
+  for (size_t i = 0; i < n; ++i) {
+    double v = w.v_rough[i];
+    if (force)
+      for (size_t k = i > 0 ? i - 1 : 0; k <= i + 1 && k < n; ++k) v = std::min(v, w.v_force[k]);
+    p.v_law[i] = v;
+  }
 }
 
 // Arc length by 3-point Gauss–Legendre per sample interval (on top of dense samples).
@@ -864,7 +881,8 @@ void Planner::backward_pass(bool full, PlanUpdate* u) {
     const double vp = programmed_speed(p);
     const bool feed_binds = !rapid_at_full_speed(p);
     for (size_t i = n; i-- > 0;) {
-      double cap = feed_binds ? std::min(p.samples[i].v_geo, vp) : p.samples[i].v_geo;
+      const double v_lim = sample_limit(p, i, law_scale_);
+      double cap = feed_binds ? std::min(v_lim, vp) : v_lim;
       if (i == 0) cap = std::min(cap, p.v_entry);
       const double ds = i + 1 < n ? p.samples[i + 1].s - p.samples[i].s : 0.0;
       const double v = std::min(cap, std::sqrt(carry * carry + 2.0 * e.accel * ds));
@@ -931,6 +949,7 @@ PlanUpdate* Planner::process(const PlanRequest& r) {
     case PlanRequest::Kind::kOverride: {
       override_ = r.feed_override;
       rapid_override_ = r.rapid_override;
+      law_scale_ = r.law_scale;
       PlanUpdate* u = fresh_update();
       backward_pass(true, u);
       return u;

@@ -68,9 +68,22 @@ struct Planned {
   double planned_v0 = 0;        // the planner's v_bw[0] before the cyclic side lowered it to live_entry
   double live_accel = 0, live_jerk = 0;  // the tangential limits the cyclic side uses
   bool stop_at_start() const { return stop_block() || live_entry == 0; }
+  // The process laws' own limit per sample (the roughness law, the force limit), at
+  // the programmed S; empty where neither applies. Both are feeds per tooth, so they
+  // scale with the spindle's speed (sample_limit).
+  std::vector<double> v_law;
 
   Planned(program::Block b, motion::PathSegment p) : block(std::move(b)), path(std::move(p)) {}
 };
+
+// Sample i's speed limit with the process laws scaled by law_scale: the spindle's
+// measured speed over the programmed S, at most 1 (a faster spindle leaves the plan's
+// limits as they are). At 1 it is the planned limit, bit for bit.
+inline double sample_limit(const Planned& p, size_t i, double law_scale) {
+  const double v = p.samples[i].v_geo;
+  if (!(law_scale < 1.0) || p.v_law.empty()) return v;
+  return std::min(v, law_scale * p.v_law[i]);
+}
 
 // From the cyclic side to the planner, in the order the core emitted them.
 struct PlanRequest {
@@ -81,6 +94,7 @@ struct PlanRequest {
   program::Block* block = nullptr;  // kBlock: owned by the planner from the push on
   double feed_override = 1.0;       // kOverride
   double rapid_override = 1.0;      // kOverride: the rapids' scale (0 .. 1)
+  double law_scale = 1.0;           // kOverride: the process laws' scale (sample_limit)
 };
 
 // From the planner to the cyclic side: one per block or override request, in order.
@@ -176,6 +190,7 @@ class Planner {
   int naxes_;
   double override_ = 1.0;
   double rapid_override_ = 1.0;  // the rapids' scale (0 .. 1)
+  double law_scale_ = 1.0;       // the process laws' (sample_limit)
   uint64_t epoch_ = 0;
   uint64_t retired_below_ = 0;
   std::deque<Entry> list_;  // this epoch's blocks not yet retired, and always the newest

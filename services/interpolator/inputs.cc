@@ -42,6 +42,12 @@ bool to_core_command(const cnc::lcmt_program_command& m, Command* out) {
         out->position_mm[i] = m.position_mm[i];
       }
       return true;
+    case C::SPINDLE_SPEED:
+      if (!std::isfinite(m.value) || m.value < 0) return false;
+      *out = Command{};
+      out->kind = Command::Kind::kSpindleSpeed;
+      out->value = m.value;
+      return true;
     case C::INPUT_VALUE:
       if (!std::isfinite(m.value)) return false;
       *out = Command{};

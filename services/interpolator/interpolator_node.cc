@@ -84,6 +84,10 @@ InterpolatorNode::InterpolatorNode(const config::MachineConfig& cfg, bus::Bus& b
         spindle_pos_ = {m.position_rev, m.actual_rpm / 60.0, m.sample_playback_cycle};
         spindle_pos_new_ = true;
       }
+      if (std::isfinite(m.actual_rpm)) {
+        spindle_rpm_ = std::fabs(m.actual_rpm);
+        spindle_rpm_new_ = true;
+      }
     });
   if (cfg.safety.door_input >= 0) door_input_ = cfg.io.point_label(cfg.safety.door_input);
   io_msg_.num_analog = static_cast<int32_t>(std::min<size_t>(cfg.io.analog_outputs.size(), 64));
@@ -405,6 +409,7 @@ void InterpolatorNode::run_cycle() {
   manual_cycle();
   take_spindle_at_speed();
   take_spindle_position();
+  take_spindle_speed();
   feed_planner(cyc);
   request_blocks();
 
@@ -441,6 +446,20 @@ void InterpolatorNode::take_spindle_position() {
   c.kind = Command::Kind::kSpindlePosition;
   for (size_t i = 0; i < 3; ++i) c.position_mm[i] = spindle_pos_[i];
   apply_command(c, spindle_pos_cmd_);
+}
+
+void InterpolatorNode::take_spindle_speed() {
+  // Only when the process laws' scale would change: a steady spindle adds nothing to the log.
+  if (!spindle_rpm_new_) return;
+  spindle_rpm_new_ = false;
+  if (core_.law_scale_for(spindle_rpm_) == core_.law_scale()) return;
+  cnc::lcmt_program_command m{};
+  m.command = cnc::lcmt_program_command::SPINDLE_SPEED;
+  m.value = spindle_rpm_;
+  Command c;
+  c.kind = Command::Kind::kSpindleSpeed;
+  c.value = m.value;
+  apply_command(c, m);
 }
 
 void InterpolatorNode::publish_spindle(int64_t cyc) {
@@ -526,11 +545,12 @@ void InterpolatorNode::apply_pending_command(const cnc::lcmt_program_command& m)
     return;
   }
   if (m.command == PC::HOMED || m.command == PC::SPINDLE_AT_SPEED || m.command == PC::PROBE_TRIP ||
-      m.command == PC::SPINDLE_POSITION) {
+      m.command == PC::SPINDLE_POSITION || m.command == PC::SPINDLE_SPEED) {
     spdlog::warn("{} from sender {} ignored: it is this interpolator's own input",
                  m.command == PC::HOMED              ? "HOMED"
                  : m.command == PC::PROBE_TRIP       ? "PROBE_TRIP"
                  : m.command == PC::SPINDLE_POSITION ? "SPINDLE_POSITION"
+                 : m.command == PC::SPINDLE_SPEED    ? "SPINDLE_SPEED"
                                                      : "SPINDLE_AT_SPEED",
                  m.sender);
     return;

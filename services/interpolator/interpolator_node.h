@@ -100,6 +100,9 @@ class InterpolatorNode {
   // The spindle's measured position (SPINDLE_STATUS) for a synchronised move: a
   // recorded SPINDLE_POSITION input each cycle a new sample came while one is queued.
   void take_spindle_position();
+  // The spindle's measured speed (SPINDLE_STATUS), a recorded SPINDLE_SPEED input when
+  // the process laws' scale it gives differs from the core's.
+  void take_spindle_speed();
   void publish_spindle(int64_t cyc);
   // The core's coolant and digital outputs sent on IO_CMD (io: in the config).
   void publish_io(int64_t cyc);
@@ -298,6 +301,8 @@ class InterpolatorNode {
   int64_t spindle_oriented_seq_ = -1;  // ...and command_seq reported ORIENTED (M19)
   std::array<double, 3> spindle_pos_{};  // revolutions, rev/s, sample playback cycle
   bool spindle_pos_new_ = false;
+  double spindle_rpm_ = 0;  // the newest measured speed, magnitude
+  bool spindle_rpm_new_ = false;
   cnc::lcmt_program_command spindle_pos_cmd_{};
   int64_t spindle_sent_seq_ = -1;
   int64_t spindle_sent_cycle_ = 0;

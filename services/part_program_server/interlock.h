@@ -99,6 +99,7 @@ inline std::string refusal(const cnc::lcmt_program_command& c, const CellView& v
   if (c.command >= C::HOME && c.command <= C::HOMED) return operator_refusal(c, v);
   if (c.command == C::SPINDLE_AT_SPEED) return "SPINDLE_AT_SPEED is the interpolator's own input, never a command";
   if (c.command == C::SPINDLE_POSITION) return "SPINDLE_POSITION is the interpolator's own input, never a command";
+  if (c.command == C::SPINDLE_SPEED) return "SPINDLE_SPEED is the interpolator's own input, never a command";
   if (c.command == C::CONFIRM) {
     if (v.state == CellState::kLoaded && !v.approach.empty()) return "";
     if (v.state == CellState::kFault) return fault;

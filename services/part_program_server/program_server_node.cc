@@ -207,9 +207,9 @@ void ProgramServerNode::refuse(const cnc::lcmt_program_command& m, const std::st
                                        "RESET", "HOME", "JOG", "JOG_KEEPALIVE", "TOUCH_OFF", "MDI",    "HOMED",
                                        "SINGLE_BLOCK", "OPTIONAL_STOP", "BLOCK_DELETE", "CONFIRM", "RAPID_OVERRIDE",
                                        "SPINDLE_AT_SPEED", "PROBE_TRIP", "INPUT_VALUE", "SPINDLE_OVERRIDE",
-                                       "SPINDLE_POSITION"};
+                                       "SPINDLE_POSITION", "SPINDLE_SPEED"};
   constexpr int kLast = static_cast<int>(sizeof kNames / sizeof kNames[0]) - 1;
-  static_assert(kLast == cnc::lcmt_program_command::SPINDLE_POSITION, "a command without its name");
+  static_assert(kLast == cnc::lcmt_program_command::SPINDLE_SPEED, "a command without its name");
   const char* name = m.command >= 1 && m.command <= kLast ? kNames[m.command] : "?";
   refusal_ = std::string(name) + (m.command == cnc::lcmt_program_command::LOAD ? " " + m.program_path : "") +
              " refused: " + why;

@@ -20,7 +20,9 @@
 #     at once, no wait), M4 S3000 (2400 under the override; the reversal waited for),
 #     a feed move back, M5; the commanded and actual speeds on SPINDLE_STATUS, the
 #     drive's own log of its commands; the run replays bit for bit (the override is a
-#     recorded input).
+#     recorded input). The program's PROCESS (the roughness law: at S3000 it allows 1959
+#     mm/min along X, under F3000) makes the move back run at the law's feed for the
+#     spindle's measured speed: 0.8 of it (the recorded SPINDLE_SPEED inputs).
 #   spindle_test.sh BUILD_DIR SOURCE_DIR
 source "$(dirname "$0")/lib.sh"
 enter_private_netns "$@"
@@ -64,7 +66,7 @@ for ts, ch, b in events(log):
         stats.append((ts, state, seq, at_seq, d, crpm, arpm, cur))
     elif ch == prefix + "SETPOINTS":
         _, _, _, cycle, _, n, x = fields(b, "qqiqdid")
-        xs.append((ts, x))
+        xs.append((ts, cycle, x))
 from checks import Checks
 check = Checks()
 m3 = next((c for c in cmds if c[2] == 1 and c[3] == 6000), None)
@@ -174,6 +176,7 @@ sed -i "s#/tmp/cnc-hy-bridge#$WORK/hy-bridge#" "$M"
 CTL=("$BUILD/tools/cnc-ctl" --machine "$M")
 cat >"$WORK/reverse.ngc" <<'NGC'
 G21 G90
+(PROCESS, BALL_RADIUS=5, FLUTES=2, PICK_FEED=0.5, RMAX_UM=10.67)
 M3 S6000
 G1 X5 F3000
 G4 P3
@@ -226,7 +229,7 @@ for ts, ch, b in events(log):
         stats.append((ts, state, seq, at_seq, d, crpm, arpm, cur))
     elif ch == prefix + "SETPOINTS":
         _, _, _, cycle, _, n, x = fields(b, "qqiqdid")
-        xs.append((ts, x))
+        xs.append((ts, cycle, x))
 from checks import Checks
 check = Checks()
 m3 = next((c for c in cmds if c[2] == 1 and c[3] == 6000), None)
@@ -255,11 +258,26 @@ print(f"# M4: commanded {a4[5]:.0f} rpm, actual {a4[6]:.0f} rpm at speed {(a4[0]
       file=sys.stderr)
 check(a3[5] == 6000 and abs(a3[6] - 6000) <= tol * 6000, "M3: commanded 6000, actual within tolerance")
 check(a4[4] == -1 and a4[5] == 2400 and abs(a4[6] + 2400) <= tol * 2400, "M4: reverse, commanded 2400, actual -2400 within tolerance")
-x0 = xs[0][1]
-out = next((x for x in xs if x[1] > x0 + 1e-6), None)
-back = next((x for x in xs if x[0] > m4[0] and x[1] < x0 + 5 - 1e-6), None)
+x0 = xs[0][2]
+out = next((x for x in xs if x[2] > x0 + 1e-6), None)
+back = next((x for x in xs if x[0] > m4[0] and x[2] < x0 + 5 - 1e-6), None)
 check(out is not None and out[0] >= a3[0], "the feed move out began after M3 was at speed")
 check(back is not None and back[0] >= a4[0], "the feed move back began after M4 was at speed")
+# The move back's feed from its setpoints (4 ms cycles), on its middle 3 mm.
+period = 0.004
+vel = [(xs[k][2], (xs[k - 1][2] - xs[k][2]) / ((xs[k][1] - xs[k - 1][1]) * period))
+       for k in range(1, len(xs)) if xs[k][0] > m4[0] and xs[k][1] > xs[k - 1][1]]
+mid = [v for x, v in vel if x0 + 1 <= x <= x0 + 4]
+law_at_s = 1958.8 / 60  # the roughness law along X at S3000 (roughness_feed_test: 1305.9 at S2000)
+check(len(mid) > 20, "the move back's middle sampled")
+if mid:
+    lo, hi = min(mid) / law_at_s, max(mid) / law_at_s
+    print(f"# the move back under the roughness law: {min(mid) * 60:.1f}..{max(mid) * 60:.1f} mm/min over its middle "
+          f"3 mm = {lo:.3f}..{hi:.3f} of the law at S3000 ({law_at_s * 60:.1f}); spindle {abs(a4[6]):.0f} of 3000 rpm",
+          file=sys.stderr)
+    # The law's scale is the measured speed over S rounded to 1/128; at speed within the tolerance.
+    check(0.8 * (1 - tol) - 1 / 128 <= lo and hi <= 0.8 * (1 + tol) + 1 / 128,
+          "the move back at the law's feed for the spindle's measured speed (0.8 of S's)")
 check(max(s[7] for s in stats if m3[0] <= s[0] <= a3[0]) > 0, "a load figure (output current) on the bus")
 last = stats[-1]
 print(f"# last SPINDLE_STATUS: commanded {last[5]:.0f} rpm, actual {last[6]:.0f} rpm; {len(stats)} messages", file=sys.stderr)
