@@ -147,6 +147,11 @@ struct SpindleConfig {
   // revolution, 0 none. With one, G33, G33.1 and M19 run: the path follows the
   // spindle's measured position.
   int64_t encoder_counts_per_rev = 0;
+  // How long the axes take to reach a setpoint after the bridge plays it (its smoothing
+  // and the drives' following): a synchronised move follows the spindle's position
+  // predicted this much further ahead, so the axes, not their setpoints, meet the
+  // spindle (a rigid tap's way down and up on one helix).
+  double sync_lead_s = 0.0;
   bool measured_position() const { return enabled && encoder_counts_per_rev > 0; }
   // Orientation (M19; needs the encoder): the bridge's position loop turns the spindle
   // at orient_gain_per_s revolutions per second per revolution of error, at most

@@ -754,9 +754,10 @@ bool Interpolator::spindle_position(double* rev, double* rps) const {
   // at 4 ms) without one is a lost spindle feedback, not a late datagram.
   constexpr int64_t kStaleCycles = 25;
   if (sp_applied_ < 0 || cycle_ - sp_applied_ > kStaleCycles) return false;
-  // Where the spindle will be when this cycle's setpoint is played, at its speed and
-  // acceleration (the samples are a few cycles old).
-  const double dt = (static_cast<double>(cycle_) - sp_cycle_) * period_s_;
+  // Where the spindle will be when the axes reach this cycle's setpoint (played at
+  // this cycle, reached spindle.sync_lead_s later), at its speed and acceleration
+  // (the samples are a few cycles old).
+  const double dt = (static_cast<double>(cycle_) - sp_cycle_) * period_s_ + cfg_.spindle.sync_lead_s;
   *rps = sp_rps_ + sp_acc_ * dt;
   *rev = sp_rev_ + (sp_rps_ + 0.5 * sp_acc_ * dt) * dt;
   return true;

@@ -66,7 +66,7 @@ for ts, ch, b in events(log):
         stats.append((ts, state, seq, at_seq, d, crpm, arpm, cur))
     elif ch == prefix + "SETPOINTS":
         _, _, _, cycle, _, n, x = fields(b, "qqiqdid")
-        xs.append((ts, cycle, x))
+        xs.append((ts, x))
 from checks import Checks
 check = Checks()
 m3 = next((c for c in cmds if c[2] == 1 and c[3] == 6000), None)
