@@ -58,8 +58,8 @@ void DriveBridgeNode::gantry_tick(double now_s) {
       char b[400];
       std::snprintf(b, sizeof b,
                     "gantry skew: axis %s's drives %s (unit %d) at %.4f mm and %s (unit %d) at %.4f mm differ by "
-                    "%.4f mm from their squaring %.4f mm, over the limit %g mm (axes[].gantry.skew_limit_mm; seen "
-                    "%.2f ms after the crossing): controlled stop, drives disabled",
+                    "%.4f mm from their squaring %.4f mm, over the limit %g mm (axes[].gantry.skew_limit_mm; crossed "
+                    "%.2f ms before this read, between it and the one before): controlled stop, drives disabled",
                     name.c_str(), name.c_str(), cfg_.axes[j.axis].drive.unit_id, first.rep.actual_mm, g.name.c_str(),
                     g.drive.unit_id, j.drv.rep.actual_mm, j.skew_mm, j.squaring_mm, g.skew_limit_mm,
                     skew_.reaction_ms);

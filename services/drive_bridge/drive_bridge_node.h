@@ -106,8 +106,9 @@ class DriveBridgeNode {
   double joint_command(size_t j) const { return joints_[j].drv.cmd.cmd_mm; }
   double joint_squaring(size_t j) const { return joints_[j].squaring_mm; }
   double joint_skew(size_t j) const { return joints_[j].skew_mm; }
-  // The last skew fault: how long after the skew crossed the limit (interpolated between
-  // the two reads around it) the bridge saw it and began the stop; -1 none.
+  // The last skew fault: how long before the read that showed it the skew crossed the
+  // limit (interpolated between the two reads around it; the read itself is up to one
+  // I/O round old), the stop beginning in that tick; -1 none.
   double skew_reaction_ms() const { return skew_.reaction_ms; }
 
  private:

@@ -1417,8 +1417,9 @@ TEST(BridgeNodeGantry, BothDrivesFollowTheAxisPlusTheSquaringThenASkewStopsAndDi
   // 0.2 mm in the 9th; the bridge brakes in the tick that reads it.
   c.link().set_jammed(5, true);
   double y = 12, v = 0;
-  int braking = -1, tick = 0;
+  int braking = -1, tick = 0, crossed = -1, decelerating = -1;
   double skew_at_fault = 0;
+  std::vector<double> cmd_y;
   for (int i = 0; i < 80; ++i) {
     if (braking < 0) {
       v = std::min(0.1, v + 0.01);
@@ -1427,17 +1428,33 @@ TEST(BridgeNodeGantry, BothDrivesFollowTheAxisPlusTheSquaringThenASkewStopsAndDi
     c.setpoint(10, y);
     for (int k = 0; k < 4; ++k, ++tick) {
       c.tick();
+      // The drives' own skew (after this tick's round), the command's deceleration.
+      if (crossed < 0 && std::fabs(c.drive_mm(5) - c.drive_mm(2) - 0.3) > 0.2) crossed = tick;
       if (braking < 0 && c.node.core().faulted()) {
         braking = tick;
         skew_at_fault = c.node.joint_skew(0);
       }
+      cmd_y.push_back(c.node.core().commanded()[1]);
+      const size_t n = cmd_y.size();
+      // The brake: the command's acceleration falls (at the jerk limit, 60 mm/s^2 per tick).
+      if (decelerating < 0 && braking >= 0 && n >= 4) {
+        const double a1 = (cmd_y[n - 1] - 2 * cmd_y[n - 2] + cmd_y[n - 3]) / 1e-6;
+        const double a0 = (cmd_y[n - 2] - 2 * cmd_y[n - 3] + cmd_y[n - 4]) / 1e-6;
+        if (a1 < a0 - 30) decelerating = tick;
+      }
     }
   }
   ASSERT_GE(braking, 0) << "no skew fault";
+  ASSERT_GE(crossed, 0);
+  ASSERT_GE(decelerating, 0);
+  // The drives' positions reach the bridge with the next round (the tick after); the
+  // command decelerates from the tick that sees it.
+  EXPECT_LE(braking - crossed, 1) << "ticks from the crossing to the fault";
+  EXPECT_EQ(decelerating, braking) << "the brake begins in the fault's tick";
   EXPECT_LT(skew_at_fault, -0.2);
   EXPECT_GT(skew_at_fault, -0.2 - 0.03) << "seen within a tick of the crossing (25 mm/s: 0.025 mm per tick)";
   EXPECT_GE(c.node.skew_reaction_ms(), 0.0);
-  EXPECT_LE(c.node.skew_reaction_ms(), 1.0) << "between the two reads around the crossing";
+  EXPECT_LE(c.node.skew_reaction_ms(), 1.0) << "between the two reads around the crossing, a tick apart";
   EXPECT_TRUE(c.alarmed("gantry_skew: gantry skew: axis Y's drives Y (unit 2) at ")) << ::testing::PrintToString(c.alarms);
   bool names_both = false;
   for (const auto& a : c.alarms) names_both = names_both || a.find("and Y2 (unit 5) at ") != std::string::npos;
@@ -1451,9 +1468,10 @@ TEST(BridgeNodeGantry, BothDrivesFollowTheAxisPlusTheSquaringThenASkewStopsAndDi
   c.hold_stream(10, y, 20);
   EXPECT_EQ(c.drive_mm(2), y_rest);
   EXPECT_EQ(c.drive_mm(5), y2_rest);
-  std::printf("gantry skew fault at 25 mm/s: skew %.4f mm at the fault (limit 0.2), seen %.2f ms after the crossing, "
-              "braking in that tick; standing %.4f mm apart\n",
-              skew_at_fault, c.node.skew_reaction_ms(), y2_rest - y_rest);
+  std::printf("gantry skew fault at 25 mm/s: skew %.4f mm at the fault (limit 0.2), crossed %.2f ms before the read "
+              "(interpolated); the drives crossed in tick %d, the fault in tick %d, the command's acceleration "
+              "falling from tick %d; standing %.4f mm apart\n",
+              skew_at_fault, c.node.skew_reaction_ms(), crossed, braking, decelerating, y2_rest - y_rest);
   // Freed, FAULT_RESET and ENABLE: the squaring starts where the drives stand and moves
   // back to the homed one: square again.
   c.link().set_jammed(5, false);
