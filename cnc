@@ -23,6 +23,9 @@
 #                                                  path deviation, jerk (tools/bench/machining_time.py)
 #   ./cnc soak --minutes M [--seed S] [--out DIR]  programs back to back with operator actions and injected
 #                                                  faults, every log replayed (tools/soak/soak.py)
+#   ./cnc experiment table1 [--size tiny|reduced|full] [--out DIR]
+#                                                  Choi et al. 2005's Table 1 in a live cell: fixed feed
+#                                                  against the roughness law, Z-map, report (docs/experiment.md)
 #   ./cnc key gen|rotate|show [--machine FILE] [--grace S] [--activate-in S]  the cell's signing key
 #   ./cnc package                                  Debian packages (cnc, cnc-cam) into build/packages, lintian-checked
 #   ./cnc build                                    set up and build only
@@ -409,6 +412,40 @@ cmd_bench() {
   esac
 }
 
+# experiment table1 [--size tiny|reduced|full] [--out DIR] [--machine FILE] [--host-network]:
+# Choi et al. 2005's Table 1 in a live cell, fixed feed against the roughness law, and its
+# report (tools/experiment/table1.py; docs/experiment.md). The cell runs in a network
+# namespace of its own when this PC permits one (as root), so that no other cell on the
+# PC hears it or is heard; --host-network runs it on the PC's network (an HMI can watch).
+cmd_experiment() {
+  [ "$INSTALLED" -eq 0 ] || die "experiment: runs from the source tree"
+  local what="${1:-}"
+  [ $# -gt 0 ] && shift
+  [ "$what" = table1 ] || die "experiment: expected 'table1' (experiment table1 [--size tiny|reduced|full] [--out DIR])"
+  local size=reduced out="" machine="$ROOT/config/machines/sim3_table1.yaml" host=0
+  while [ $# -gt 0 ]; do
+    case "$1" in
+      --size) size="$2"; shift 2 ;;
+      --out) out="$2"; shift 2 ;;
+      --machine) machine="$2"; shift 2 ;;
+      --host-network) host=1; shift ;;
+      *) die "experiment table1: unknown argument '$1' (expected --size tiny|reduced|full, --out DIR, --machine FILE, --host-network)" ;;
+    esac
+  done
+  case "$size" in tiny|reduced|full) ;; *) die "experiment table1: --size is tiny, reduced or full, not '$size'" ;; esac
+  build
+  [ -n "$out" ] || out="$ROOT/runs/table1-$size-$(date -u +%Y%m%d-%H%M%S)"
+  "$(bin cnc-key)" gen --machine "$machine" --if-missing || die "experiment: cannot make the cell's key"
+  local run=(/usr/bin/python3 "$ROOT/tools/experiment/table1.py" --build "$BUILD" --machine "$machine" --size "$size" --out "$out")
+  if [ "$host" -eq 0 ] && unshare -n true 2>/dev/null; then
+    say "experiment table1: size $size in a private network namespace, output in $out"
+    run_child unshare -n bash -c 'ip link set lo up && ip route add 224.0.0.0/4 dev lo && exec "$0" "$@"' "${run[@]}"
+  else
+    say "experiment table1: size $size on this PC's network, output in $out"
+    run_child "${run[@]}"
+  fi
+}
+
 # soak --minutes M [soak.py options]: see tools/soak/soak.py.
 cmd_soak() {
   build
@@ -517,6 +554,7 @@ main() {
     conformance) [ -x "$(bin cnc-rs274)" ] || build; cmd_conformance "$@" ;;
     bench) cmd_bench "$@" ;;
     soak) cmd_soak "$@" ;;
+    experiment) cmd_experiment "$@" ;;
     key) cmd_key "$@" ;;
     --version) [ -x "$(bin cnc-ctl)" ] || die "--version: not built yet (./cnc build)"
                echo "cnc $("$(bin cnc-ctl)" --version | cut -d' ' -f2)" ;;

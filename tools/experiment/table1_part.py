@@ -19,7 +19,7 @@ is printed: below 0.1 um); linked at the tops by a G1 step of 0.2 mm in Y. S1250
 the law's program carries the PROCESS line (r 3, 2 flutes, pick 0.2, R_max 3.3 um), the
 fixed one not.
 
-  table1_part.py --size tiny|reduced|full --out DIR [--print-geometry]
+  table1_part.py --size tiny|reduced|full --out DIR
 writes DIR/table1_fixed.ngc, DIR/table1_law.ngc and DIR/part.json (the surface, the
 strip, the measured regions).
 """
@@ -40,8 +40,8 @@ RPM, FEED = 12500, 7000
 KNOT_MM = 1.25
 # x range (whole wavelengths or a valley-centred span: both ends at the same height) and passes.
 SIZES = {
-    # A valley, 5 passes: the suite's check (tests/integration/table1_test.sh).
-    "tiny": {"x": (17.0, 33.0), "passes": 5},
+    # A valley, 5 passes of 12 mm: the suite's check (tests/integration/table1_test.sh).
+    "tiny": {"x": (19.0, 31.0), "passes": 5},
     # Two wavelengths, 31 passes (6 mm): about half a minute of machining per run.
     "reduced": {"x": (0.0, 100.0), "passes": 31},
     # 150 x 100 mm, 501 passes: about 21 min of machining at F7000.
@@ -111,7 +111,8 @@ def program(size, law):
     if law:
         out.append(f"(PROCESS, BALL_RADIUS={R_MM:g}, FLUTES={FLUTES}, PICK_FEED={PICK_MM:g}, RMAX_UM={RMAX_UM:g})")
     # The first pass starts on its first control point (a clamped spline's start).
-    out += [f"S{RPM} M3", f"G0 Z{SAFE_Z_MM:g}", f"G0 X{cps[0][0]:.5f} Y0", f"G1 Z{cps[0][1]:.5f} F1000"]
+    out += [f"S{RPM} M3", f"G0 Z{SAFE_Z_MM:g}", f"G0 X{cps[0][0]:.5f} Y0", f"G0 Z{cps[0][1] + 1:.5f}",
+            f"G1 Z{cps[0][1]:.5f} F1000"]
     for p in range(cfg["passes"]):
         y = p * PICK_MM
         seq = cps if p % 2 == 0 else cps[::-1]

@@ -256,7 +256,9 @@ void LogExport::write(const std::string& dir, const std::vector<std::string>& lo
     head << "setpoint_cycle" << "t_s";
     for (const auto& n : names)
       head << n + "_commanded_mm" << n + "_actual_mm" << n + "_following_error_mm" << n + "_drive_state";
-    f.line(head << "setpoint_gaps" << "servo_overruns");
+    // playback_cycle: the bridge's playback clock when the drives were read, the time of
+    // the actual positions (setpoint_cycle repeats and skips with the setpoints' jitter).
+    f.line(head << "setpoint_gaps" << "servo_overruns" << "playback_cycle");
     for (const auto& m : axis_status_) {
       Line row;
       row << m.setpoint_cycle << t_of(m.setpoint_cycle);
@@ -272,7 +274,7 @@ void LogExport::write(const std::string& dir, const std::vector<std::string>& lo
         }
         if (m.drive_state[a] == cnc::lcmt_axis_status::FAULT) ++faults;
       }
-      f.line(row << m.setpoint_gaps << m.servo_overruns);
+      f.line(row << m.setpoint_gaps << m.servo_overruns << m.playback_cycle);
     }
   }
 

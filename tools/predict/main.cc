@@ -300,6 +300,7 @@ int main(int argc, char** argv) {
       .text(program, "window", "X0,Y0,X1,Y1", "a ball's Z-map over this window only, R_max against the model")
       .number(program, "pick-feed", "P", "the passes' pick feed of --window, mm (default 0.5)")
       .number(program, "block", "MM", "the R_max map's block, mm (default 0.5)")
+      .number(program, "stock-cells", "N", "stock.csv's most columns a side, downsampled beyond (default 400)")
       .number(program, "station-mm", "MM", "travel between force stations, mm (default 0.05)")
       .number(program, "step-deg", "DEG", "the edge's largest rotation step, degrees (default 2)")
       .number(program, "threads", "N", "threads (default 2)");

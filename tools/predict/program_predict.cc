@@ -320,8 +320,8 @@ int cmd_program(const Args& a) {
     }
   }
   std::fclose(out);
-  // The stock after the cut, downsampled to at most ~400 columns a side.
-  const int every = std::max(1, std::max(nx, ny) / 400);
+  // The stock after the cut, downsampled to at most ~--stock-cells columns a side.
+  const int every = std::max(1, std::max(nx, ny) / std::max(1, a.integer("stock-cells", 400)));
   std::FILE* sf = std::fopen((dir + "/stock.csv").c_str(), "w");
   if (!sf) throw std::invalid_argument("cannot write " + dir + "/stock.csv");
   std::fprintf(sf, "# z_mm; rows y, columns x; x0=%.6f y0=%.6f pitch_mm=%g\n", stock.x(0), stock.y(0), pitch * every);
