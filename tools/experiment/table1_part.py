@@ -44,7 +44,7 @@ SIZES = {
     "tiny": {"x": (19.0, 31.0), "passes": 5},
     # Two wavelengths, 31 passes (6 mm): about half a minute of machining per run.
     "reduced": {"x": (0.0, 100.0), "passes": 31},
-    # 150 x 100 mm, 501 passes: about 21 min of machining at F7000.
+    # 150 x 100 mm, 501 passes: 12 min 46 s fixed, 16 min 4 s under the law (dry run).
     "full": {"x": (0.0, 150.0), "passes": 501},
 }
 
