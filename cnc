@@ -51,7 +51,7 @@ DEFAULT_PROGRAM="$ROOT/config/programs/demo.ngc"
 bin() {
   if [ "$INSTALLED" -eq 1 ]; then echo "$BINDIR/$1"; return; fi
   case "$1" in
-    cnc-logger|cnc-interpolator|cnc-drive-bridge|cnc-monitor|cnc-program-server|cnc-hmi|cnc-opcua) echo "$BUILD/services/$1" ;;
+    cnc-logger|cnc-interpolator|cnc-drive-bridge|cnc-monitor|cnc-program-server|cnc-hmi|cnc-opcua|cnc-mqtt) echo "$BUILD/services/$1" ;;
     cnc-cam) echo "$BUILD/tools/cam/$1" ;;
     cnc-rs274) echo "$BUILD/tools/rs274/$1" ;;
     *) echo "$BUILD/tools/$1" ;;
@@ -81,6 +81,9 @@ PACKAGES=(
   libboost-dev nlohmann-json3-dev        # cnc-hmi: Boost.Beast (HTTP, WebSocket), JSON
   chromium-driver python3-selenium       # integration.hmi drives the page in headless Chromium
   nodejs npm                             # cnc-opcua: node-opcua (npm ci from services/opcua/package-lock.json at build)
+  libmosquitto-dev                       # cnc-mqtt: the MQTT client library
+  mosquitto mosquitto-clients            # integration.mqtt: the broker and a third-party subscriber (mosquitto_sub)
+  openssl                                # integration.mqtt: the test's CA and the broker's TLS certificate
   clang libclang-rt-14-dev               # libFuzzer with ASan and UBSan: tests/fuzz/run (optional)
 )
 
@@ -229,6 +232,7 @@ cmd_up() {
     say "started $s (pid ${pids[$s]})"
     if [ "$s" = hmi ]; then say "the operator's page: $("$(bin cnc-hmi)" --machine "$machine" --print-url 2>/dev/null)"; fi
     if [ "$s" = opcua ]; then say "the OPC UA endpoint: $url"; fi
+    if [ "$s" = mqtt ]; then say "the MQTT topics: $url/..."; fi
     sleep 0.1
   done
   # A service that ends on its own does not end the others: stopping them would take

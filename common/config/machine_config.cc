@@ -29,7 +29,7 @@ std::set<std::string> transport_names() {
 constexpr std::string_view kTopKeys[] = {"cell",    "timing", "motion", "operator",     "hmi",    "process",
                                          "cutting", "program", "axes",  "drive_bridge", "logger", "security",
                                          "monitor", "spindle", "io",  "safety", "kinematics",
-                                         "probe", "opcua"};
+                                         "probe", "opcua", "mqtt"};
 constexpr std::string_view kCellKeys[] = {"name", "channel_prefix", "lcm_url"};
 constexpr std::string_view kTimingKeys[] = {"ipo_period_s",       "servo_period_s",      "setpoint_timeout_s",
                                             "stop_decel_mm_s2",   "heartbeat_period_s",  "heartbeat_timeout_s",
@@ -45,6 +45,9 @@ constexpr std::string_view kOpcuaKeys[] = {"listen",   "port",          "anonymo
                                            "trust_unknown_clients", "hmi_user", "hmi_password_file", "identification"};
 constexpr std::string_view kOpcuaIdKeys[] = {"manufacturer", "model", "serial_number", "product_instance_uri",
                                              "year_of_construction"};
+constexpr std::string_view kMqttKeys[] = {"host",     "port",          "topic_prefix", "client_id", "keepalive_s",
+                                          "state_period_s", "username", "password_file", "ca_file", "cert_file",
+                                          "key_file"};
 constexpr std::string_view kProcessKeys[] = {"ball_radius_mm", "flutes", "pick_feed_mm", "target_rmax_um",
                                              "spindle_rpm"};
 constexpr std::string_view kCuttingKeys[] = {"tool",          "material",       "model",          "stock",
@@ -108,6 +111,7 @@ constexpr KeySection kSections[] = {
     {"hmi", kHmiKeys},
     {"opcua", kOpcuaKeys},
     {"opcua.identification", kOpcuaIdKeys},
+    {"mqtt", kMqttKeys},
     {"process", kProcessKeys},
     {"cutting", kCuttingKeys},
     {"cutting.stock", kStockKeys},
@@ -359,6 +363,48 @@ void read_opcua(MapReader r, const HmiConfig& hmi, const std::string& cell, Opcu
     r.fail("hmi_user", "is required: the HMI asks for a login (hmi.users_file) and cnc-opcua reads the cell through it");
   if (!o.hmi_user.empty() && o.hmi_password_file.empty())
     r.fail("hmi_password_file", "is required with hmi_user: the file with " + o.hmi_user + "'s password");
+  r.finish();
+}
+
+// A topic level the cell writes under: no wildcard, no separator, not empty.
+bool topic_level_ok(const std::string& s) { return !s.empty() && s.find_first_of("+#/") == std::string::npos; }
+
+void read_mqtt(MapReader r, const std::string& cell, MqttConfig& m) {
+  m.enabled = true;
+  m.host = r.get_string("host", m.host);
+  if (m.host.empty()) r.fail("host", "must not be empty");
+  m.ca_file = beside(r, r.get_string("ca_file", ""));
+  m.port = static_cast<int>(r.get_int("port", m.ca_file.empty() ? 1883 : 8883, 1, 65535));
+  m.topic_prefix = r.get_string("topic_prefix", m.topic_prefix);
+  for (size_t from = 0; from <= m.topic_prefix.size();) {
+    const size_t end = std::min(m.topic_prefix.find('/', from), m.topic_prefix.size());
+    const std::string level = m.topic_prefix.substr(from, end - from);
+    if (!topic_level_ok(level) || level.front() == '$')
+      r.fail("topic_prefix", "'" + m.topic_prefix +
+                                 "' is not a topic: levels separated by '/', none empty, no '+', '#' or leading '$'");
+    from = end + 1;
+  }
+  // The cell's name is its topic level: the broker's ACL gives each cell its own.
+  if (!topic_level_ok(cell))
+    r.fail("topic_prefix", "cell.name '" + cell + "' cannot be a topic level under it (no '/', '+' or '#')");
+  m.client_id = r.get_string("client_id", "cnc-" + cell);
+  if (m.client_id.empty() || m.client_id.size() > 65535) r.fail("client_id", "must not be empty");
+  m.keepalive_s = r.get_double("keepalive_s", m.keepalive_s, 5.0, 3600.0);
+  m.state_period_s = r.get_double("state_period_s", m.state_period_s, 0.1, 60.0);
+  m.username = r.get_string("username", "");
+  m.password_file = beside(r, r.get_string("password_file", ""));
+  m.cert_file = beside(r, r.get_string("cert_file", ""));
+  m.key_file = beside(r, r.get_string("key_file", ""));
+  if (!m.password_file.empty() && m.username.empty())
+    r.fail("password_file", "needs mqtt.username: the broker user the password is for");
+  if (m.cert_file.empty() != m.key_file.empty())
+    r.fail(m.cert_file.empty() ? "cert_file" : "key_file", "and mqtt." + std::string(m.cert_file.empty() ? "key_file" : "cert_file") +
+                                                                " go together (the client certificate and its key)");
+  if (!m.cert_file.empty() && m.ca_file.empty())
+    r.fail("ca_file", "is required with cert_file: a client certificate is TLS's");
+  const bool local = m.host == "127.0.0.1" || m.host == "::1" || m.host == "localhost";
+  if (!m.password_file.empty() && m.ca_file.empty() && !local)
+    r.fail("ca_file", "is required: a password is not sent in clear to a broker that is not on this PC ('" + m.host + "')");
   r.finish();
 }
 
@@ -832,6 +878,7 @@ MachineConfig read_machine(MapReader top) {
   if (top.has("operator")) read_operator(top.map("operator", kOperatorKeys), c.operator_);
   read_hmi(top.map("hmi", kHmiKeys), c.hmi);
   if (top.has("opcua")) read_opcua(top.map("opcua", kOpcuaKeys), c.hmi, c.name, c.opcua);
+  if (top.has("mqtt")) read_mqtt(top.map("mqtt", kMqttKeys), c.name, c.mqtt);
   read_process(top.map("process", kProcessKeys), c.process);
   if (top.has("cutting")) read_cutting(top.map("cutting", kCuttingKeys), c.cutting);
   read_program(top.map("program", kProgramKeys), c.program);

@@ -375,6 +375,23 @@ struct SecurityConfig {
   double max_age_s = 2.0;       // freshness window of a message's time stamp at its receiver
 };
 
+// The MQTT publisher cnc-mqtt (section `mqtt:`, optional; docs/mqtt.md): the cell's
+// state, alarms and job records to a broker, read-only. Absent: no publisher.
+struct MqttConfig {
+  bool enabled = false;              // the section is there
+  std::string host = "127.0.0.1";    // the broker
+  int port = 1883;                   // 1883 plain, 8883 with TLS (the default when ca_file is set)
+  std::string topic_prefix = "cnc";  // topics are PREFIX/CELL/...
+  std::string client_id;             // "" = cnc-CELL: fixed, so the broker keeps the session
+  double keepalive_s = 10.0;         // the broker declares the cell offline 1.5 keepalives after it went silent
+  double state_period_s = 1.0;       // the retained state at most this often, and on each program state change
+  std::string username;              // the cell's own broker user
+  std::string password_file;         // its password (first line; owner-only); relative to the config
+  std::string ca_file;               // TLS on: the CA that signed the broker's certificate
+  std::string cert_file;             // TLS client certificate (with key_file)
+  std::string key_file;
+};
+
 struct MachineConfig {
   std::string source_file;
   std::string source_text;  // the YAML as loaded: the interpolator records it in the log for replay
@@ -427,6 +444,7 @@ struct MachineConfig {
   OperatorConfig operator_;
   HmiConfig hmi;
   OpcuaConfig opcua;
+  MqttConfig mqtt;
 
   DriveBridgeConfig drive_bridge;
   // drive_bridge.profile_dir: where drive profiles are; "" = config/drives beside the machine's folder.

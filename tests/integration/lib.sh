@@ -109,12 +109,13 @@ services_list() { grep -v -e '^[[:space:]]*#' -e '^[[:space:]]*$' "$(dirname "${
 
 # start_cell [--no-monitor]: the cell's services on machine $M, as every live test
 # starts them, in the list's order: all but the logger and the drives (servo-sim, with
-# each test's own options), which the test starts first itself, and the HMI and the
-# OPC UA server, which only their own tests start; the monitor unless --no-monitor.
+# each test's own options), which the test starts first itself, and the HMI, the
+# OPC UA server and the MQTT publisher, which only their own tests start; the monitor
+# unless --no-monitor.
 start_cell() {
   local s exe
   while read -r s exe _; do
-    case "$s" in logger|servo-sim|hmi|opcua) continue ;; esac
+    case "$s" in logger|servo-sim|hmi|opcua|mqtt) continue ;; esac
     [ "$s" = monitor ] && [ "${1:-}" = --no-monitor ] && continue
     start "$s" "$BUILD/$exe" --machine "$M"
   done < <(services_list)

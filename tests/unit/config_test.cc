@@ -568,6 +568,36 @@ TEST(MachineConfig, OpcuaErrors) {
   expect_error_at(sim3_text() + "opcua:\n  anonymous: true\n  policy: None\n" + id, "opcua.policy", "unknown key");
 }
 
+TEST(MachineConfig, MqttSection) {
+  EXPECT_FALSE(parse_machine_config(sim3_text(), kLabel).mqtt.enabled);
+  const MachineConfig plain = parse_machine_config(sim3_text() + "mqtt: {}\n", kLabel);
+  EXPECT_TRUE(plain.mqtt.enabled);
+  EXPECT_EQ(plain.mqtt.port, 1883);
+  EXPECT_EQ(plain.mqtt.client_id, "cnc-sim3");
+  EXPECT_EQ(plain.mqtt.topic_prefix, "cnc");
+  const MachineConfig c = parse_machine_config(
+      sim3_text() + "mqtt:\n  host: broker.plant\n  topic_prefix: plant/hall2\n  username: sim3\n"
+                    "  password_file: mqtt.pw\n  ca_file: ca.crt\n",
+      "/etc/cnc/cell.yaml");
+  EXPECT_EQ(c.mqtt.port, 8883);  // TLS's port when a CA is given
+  EXPECT_EQ(c.mqtt.password_file, "/etc/cnc/mqtt.pw");
+  EXPECT_EQ(c.mqtt.ca_file, "/etc/cnc/ca.crt");
+  EXPECT_EQ(c.mqtt.topic_prefix, "plant/hall2");
+}
+
+TEST(MachineConfig, MqttErrors) {
+  // A password in clear to a broker on another PC.
+  expect_error_at(sim3_text() + "mqtt: {host: broker.plant, username: u, password_file: pw}\n", "mqtt.ca_file",
+                  "not sent in clear");
+  expect_error_at(sim3_text() + "mqtt: {password_file: pw}\n", "mqtt.password_file", "needs mqtt.username");
+  expect_error_at(sim3_text() + "mqtt: {ca_file: ca, cert_file: c}\n", "mqtt.key_file", "go together");
+  expect_error_at(sim3_text() + "mqtt: {cert_file: c, key_file: k}\n", "mqtt.ca_file", "is required with cert_file");
+  for (const char* bad : {"'a/+/b'", "'a//b'", "'/a'", "'a/'", "'#'", "'$SYS'"})
+    expect_error_at(sim3_text() + "mqtt: {topic_prefix: " + bad + "}\n", "mqtt.topic_prefix", "is not a topic");
+  expect_error_at(sim3_text() + "mqtt: {keepalive_s: 1}\n", "mqtt.keepalive_s", "out of range");
+  expect_error_at(sim3_text() + "mqtt: {qos: 2}\n", "mqtt.qos", "unknown key");
+}
+
 TEST(MachineConfig, DuplicateKey) {
   expect_error_at(replace_nth(sim3_text(), "timing:\n", "timing:\n  stop_decel_mm_s2: 100\n"),
                   "timing.stop_decel_mm_s2", "duplicate key");
