@@ -51,7 +51,7 @@ DEFAULT_PROGRAM="$ROOT/config/programs/demo.ngc"
 bin() {
   if [ "$INSTALLED" -eq 1 ]; then echo "$BINDIR/$1"; return; fi
   case "$1" in
-    cnc-logger|cnc-interpolator|cnc-drive-bridge|cnc-monitor|cnc-program-server|cnc-hmi|cnc-opcua|cnc-mqtt) echo "$BUILD/services/$1" ;;
+    cnc-logger|cnc-interpolator|cnc-drive-bridge|cnc-monitor|cnc-program-server|cnc-hmi|cnc-opcua|cnc-mqtt|cnc-fleet) echo "$BUILD/services/$1" ;;
     cnc-cam) echo "$BUILD/tools/cam/$1" ;;
     cnc-rs274) echo "$BUILD/tools/rs274/$1" ;;
     *) echo "$BUILD/tools/$1" ;;

@@ -25,13 +25,14 @@ struct Library {
 
 MqttClient::MqttClient(const ClientOptions& o) : o_(o) {
   static Library library;
-  m_ = mosquitto_new(o_.client_id.c_str(), false, this);
+  m_ = mosquitto_new(o_.client_id.c_str(), o_.clean_session, this);
   if (m_ == nullptr) throw std::runtime_error("mqtt: cannot make a client with id '" + o_.client_id + "'");
   check(mosquitto_int_option(m_, MOSQ_OPT_PROTOCOL_VERSION, MQTT_PROTOCOL_V311), "mqtt: protocol 3.1.1");
   check(mosquitto_threaded_set(m_, true), "mqtt: threads");
-  check(mosquitto_will_set(m_, o_.will.topic.c_str(), static_cast<int>(o_.will.payload.size()), o_.will.payload.data(), 1,
-                           o_.will.retained),
-        "mqtt: the last will on " + o_.will.topic);
+  if (!o_.will.topic.empty())
+    check(mosquitto_will_set(m_, o_.will.topic.c_str(), static_cast<int>(o_.will.payload.size()), o_.will.payload.data(),
+                             1, o_.will.retained),
+          "mqtt: the last will on " + o_.will.topic);
   if (!o_.username.empty())
     check(mosquitto_username_pw_set(m_, o_.username.c_str(), o_.password.empty() ? nullptr : o_.password.c_str()),
           "mqtt.username");
@@ -45,6 +46,7 @@ MqttClient::MqttClient(const ClientOptions& o) : o_(o) {
   mosquitto_connect_callback_set(m_, &MqttClient::on_connect);
   mosquitto_disconnect_callback_set(m_, &MqttClient::on_disconnect);
   mosquitto_publish_callback_set(m_, &MqttClient::on_publish);
+  if (o_.on_message) mosquitto_message_callback_set(m_, &MqttClient::on_message);
 }
 
 MqttClient::~MqttClient() {
@@ -86,6 +88,9 @@ void MqttClient::on_connect(mosquitto*, void* self, int rc) {
                   mosquitto_connack_string(rc));
     return;
   }
+  for (const std::string& t : c->o_.subscribe)
+    if (const int src = mosquitto_subscribe(c->m_, nullptr, t.c_str(), 1); src != MOSQ_ERR_SUCCESS)
+      spdlog::error("cnc-mqtt: cannot subscribe to {}: {}", t, mosquitto_strerror(src));
   c->connected_ = true;
   ++c->connections_;
   spdlog::info("cnc-mqtt: connected to {}:{} as {}", c->o_.host, c->o_.port, c->o_.client_id);
@@ -94,6 +99,20 @@ void MqttClient::on_connect(mosquitto*, void* self, int rc) {
 void MqttClient::on_disconnect(mosquitto*, void* self, int) { static_cast<MqttClient*>(self)->connected_ = false; }
 
 void MqttClient::on_publish(mosquitto*, void* self, int) { ++static_cast<MqttClient*>(self)->acknowledged_; }
+
+void MqttClient::on_message(mosquitto*, void* self, const ::mosquitto_message* msg) {
+  auto* c = static_cast<MqttClient*>(self);
+  if (msg->topic == nullptr) return;
+  // Nothing may pass through libmosquitto's C frames.
+  try {
+    const std::string payload = msg->payloadlen > 0 && msg->payload != nullptr
+                                    ? std::string(static_cast<const char*>(msg->payload), static_cast<size_t>(msg->payloadlen))
+                                    : std::string();
+    c->o_.on_message(msg->topic, payload);
+  } catch (const std::exception& e) {
+    spdlog::warn("cnc-mqtt: a message on {} dropped: {}", msg->topic, e.what());
+  }
+}
 
 bool MqttClient::publish(const Record& r) {
   const int rc = mosquitto_publish(m_, nullptr, r.topic.c_str(), static_cast<int>(r.payload.size()), r.payload.data(), 1,
@@ -109,7 +128,7 @@ bool MqttClient::publish(const Record& r) {
 
 void MqttClient::stop(const Record& last, double timeout_s) {
   if (connected_) {
-    publish(last);
+    if (!last.topic.empty()) publish(last);
     const double until = util::monotonic_s() + timeout_s;
     while (acknowledged_ < published_ && util::monotonic_s() < until)
       std::this_thread::sleep_for(std::chrono::milliseconds(10));

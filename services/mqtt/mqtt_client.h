@@ -7,13 +7,15 @@
 // and sent when the connection is back.
 #include <atomic>
 #include <cstdint>
-#include <mutex>
+#include <functional>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "services/mqtt/fleet_reporter.h"
 
 struct mosquitto;
+struct mosquitto_message;
 
 namespace cnc::mqtt {
 
@@ -24,7 +26,12 @@ struct ClientOptions {
   int keepalive_s = 10;
   std::string username, password;
   std::string ca_file, cert_file, key_file;  // ca_file "": no TLS
-  Record will;
+  Record will;                 // topic "": none
+  bool clean_session = false;  // false: the broker keeps the session (a cell's records)
+  // A reader's (cnc-fleet's) topics, subscribed at QoS 1 at every connection, and what
+  // it is handed (in the client's thread). A cell's cnc-mqtt subscribes to nothing.
+  std::vector<std::string> subscribe;
+  std::function<void(const std::string& topic, const std::string& payload)> on_message;
 };
 
 class MqttClient {
@@ -52,6 +59,7 @@ class MqttClient {
   static void on_connect(mosquitto* m, void* self, int rc);
   static void on_disconnect(mosquitto* m, void* self, int rc);
   static void on_publish(mosquitto* m, void* self, int mid);
+  static void on_message(mosquitto* m, void* self, const ::mosquitto_message* msg);
 
   ClientOptions o_;
   mosquitto* m_ = nullptr;

@@ -41,7 +41,8 @@ for f in /usr/bin/cnc-interpolator /usr/bin/cnc-ctl /usr/lib/systemd/system/cnc@
          /usr/bin/cnc-opcua /usr/share/cnc/services/opcua/server.js \
          /usr/share/cnc/services/opcua/node_modules/node-opcua/package.json \
          /usr/lib/systemd/system/cnc@opcua.service.d/restart.conf \
-         /usr/bin/cnc-mqtt /usr/lib/systemd/system/cnc@mqtt.service.d/restart.conf; do
+         /usr/bin/cnc-mqtt /usr/lib/systemd/system/cnc@mqtt.service.d/restart.conf \
+         /usr/bin/cnc-fleet /usr/share/cnc/services/mqtt/www/fleet.html; do
   grep -q " \.$f\$" "$WORK/contents.$(basename "$CELL_DEB").txt" || fail "cnc does not ship $f"
 done
 grep -q ' \./usr/bin/cnc-cam$' "$WORK/contents.$(basename "$CAM_DEB").txt" || fail "cnc-cam does not ship /usr/bin/cnc-cam"

@@ -1,6 +1,8 @@
 // cnc-mqtt's core: a run's start and end records once each, with its summary; aborted
 // runs; MDI lines are no jobs; alarms inside and outside a run; the retained state.
+// cnc-fleet's: the cells, their state and last jobs from those records.
 #include "services/mqtt/fleet_reporter.h"
+#include "services/mqtt/fleet_view.h"
 
 #include <gtest/gtest.h>
 
@@ -133,6 +135,36 @@ TEST(FleetReporter, TheStateIsRetainedAtItsPeriodAndOnAChangeAndItsNumbersAreFin
   EXPECT_EQ(json::parse(r.will().payload)["status"], "offline");
   EXPECT_TRUE(r.will().retained);
   EXPECT_EQ(json::parse(r.birth(1).payload)["status"], "online");
+}
+
+}  // namespace
+
+namespace {
+
+using cnc::mqtt::FleetView;
+
+TEST(FleetView, TheCellsTheirStateAndLastJobsNewestFirstEachOnce) {
+  FleetView v("plant/hall2", 2);
+  EXPECT_FALSE(v.on_message("plant/hall2/sim3/alarm", R"({"code":"x"})"));  // not a page's record
+  EXPECT_FALSE(v.on_message("other/sim3/status", R"({"status":"online"})"));
+  EXPECT_FALSE(v.on_message("plant/hall2/sim3/state", "not json"));
+  EXPECT_TRUE(v.on_message("plant/hall2/sim3/status", R"({"status":"online"})"));
+  EXPECT_TRUE(v.on_message("plant/hall2/mill1/status", R"({"status":"offline","reason":"connection lost"})"));
+  EXPECT_TRUE(v.on_message("plant/hall2/sim3/state", R"({"program":{"state":"running"}})"));
+  EXPECT_TRUE(v.on_message("plant/hall2/sim3/job/end", R"({"job":"a","start_utime":1})"));
+  EXPECT_TRUE(v.on_message("plant/hall2/sim3/job/end", R"({"job":"b","start_utime":3})"));
+  EXPECT_TRUE(v.on_message("plant/hall2/sim3/job/last", R"({"job":"b","start_utime":3})"));  // again: kept once
+  EXPECT_TRUE(v.on_message("plant/hall2/sim3/job/end", R"({"job":"c","start_utime":2})"));
+  const nlohmann::json j = v.to_json();
+  ASSERT_EQ(j["cells"].size(), 2u);
+  EXPECT_EQ(j["cells"][0]["cell"], "mill1");
+  EXPECT_EQ(j["cells"][0]["status"]["reason"], "connection lost");
+  const nlohmann::json& sim3 = j["cells"][1];
+  EXPECT_EQ(sim3["state"]["program"]["state"], "running");
+  ASSERT_EQ(sim3["jobs"].size(), 2u);  // the newest two
+  EXPECT_EQ(sim3["jobs"][0]["job"], "b");
+  EXPECT_EQ(sim3["jobs"][1]["job"], "c");
+  EXPECT_EQ(j["records"], 7);
 }
 
 }  // namespace
