@@ -37,6 +37,7 @@ namespace ch = cnc::config::channels;
 namespace {
 
 constexpr int kExitNotConfigured = 3;
+constexpr int64_t kMaxKept = 10000;  // records waiting for the broker (some 5 MB)
 
 // "" when `path` is a regular file of this user that group and others cannot read.
 std::string secret_file_problem(const std::string& key, const std::string& path) {
@@ -149,7 +150,7 @@ int run_mqtt(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
   client.start();
   spdlog::info("cnc-mqtt: publishing {}/{}/... to {}:{} as {}{}", q.topic_prefix, cfg.name, q.host, q.port, q.client_id,
                q.ca_file.empty() ? "" : " (TLS)");
-  int64_t connections = 0;
+  int64_t connections = 0, dropped = 0;
   while (!cnc::util::stop_requested()) {
     bus.handle(50);
     // A (re)connection: online, and the state at once (the retained one may be old).
@@ -160,15 +161,27 @@ int run_mqtt(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
       client.publish(core.birth(cnc::util::wall_utime()));
     }
     core.tick(cnc::util::monotonic_s(), cnc::util::wall_utime(), fresh, &out);
-    for (const auto& r : out)
-      if (r.durable || client.connected()) client.publish(r);
+    for (const auto& r : out) {
+      if (!r.durable && !client.connected()) continue;
+      // The records kept for a broker that stays away are bounded: past kMaxKept the
+      // alarms are dropped (counted), the job records still kept.
+      if (!client.connected() && client.published() - client.acknowledged() >= kMaxKept &&
+          r.topic.size() >= 6 && r.topic.compare(r.topic.size() - 6, 6, "/alarm") == 0) {
+        if (dropped++ % 1000 == 0)
+          spdlog::warn("cnc-mqtt: the broker is away and {} records wait: alarm records dropped ({} so far)", kMaxKept,
+                       dropped);
+        continue;
+      }
+      client.publish(r);
+    }
     out.clear();
     hb.tick(cnc::lcmt_heartbeat::RUNNING, 0, client.connected() ? "broker connected" : "broker not connected");
   }
   client.stop(core.stopped(cnc::util::wall_utime()), 2.0);
-  spdlog::info("cnc-mqtt: stopped: {} jobs started, {} ended, {} alarms, {} states; {} records published, {} acknowledged",
+  spdlog::info("cnc-mqtt: stopped: {} jobs started, {} ended, {} alarms, {} states; {} records published, {} acknowledged, {} "
+               "alarm records dropped while the broker was away",
                core.jobs_started(), core.jobs_ended(), core.alarms(), core.states(), client.published(),
-               client.acknowledged());
+               client.acknowledged(), dropped);
   hb.tick(cnc::lcmt_heartbeat::STOPPING, 0, "", true);
   return cnc::service::kExitOk;
 }
