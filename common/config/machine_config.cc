@@ -389,7 +389,8 @@ void read_mqtt(MapReader r, const std::string& cell, MqttConfig& m) {
     r.fail("topic_prefix", "cell.name '" + cell + "' cannot be a topic level under it (no '/', '+' or '#')");
   m.client_id = r.get_string("client_id", "cnc-" + cell);
   if (m.client_id.empty() || m.client_id.size() > 65535) r.fail("client_id", "must not be empty");
-  m.keepalive_s = r.get_double("keepalive_s", m.keepalive_s, 5.0, 3600.0);
+  // libmosquitto refuses a keepalive under 5 s.
+  m.keepalive_s = static_cast<int>(r.get_int("keepalive_s", m.keepalive_s, 5, 3600));
   m.state_period_s = r.get_double("state_period_s", m.state_period_s, 0.1, 60.0);
   m.username = r.get_string("username", "");
   m.password_file = beside(r, r.get_string("password_file", ""));

@@ -383,7 +383,7 @@ struct MqttConfig {
   int port = 1883;                   // 1883 plain, 8883 with TLS (the default when ca_file is set)
   std::string topic_prefix = "cnc";  // topics are PREFIX/CELL/...
   std::string client_id;             // "" = cnc-CELL: fixed, so the broker keeps the session
-  double keepalive_s = 10.0;         // the broker declares the cell offline 1.5 keepalives after it went silent
+  int keepalive_s = 10;              // the broker declares the cell offline 1.5 keepalives after it went silent
   double state_period_s = 1.0;       // the retained state at most this often, and on each program state change
   std::string username;              // the cell's own broker user
   std::string password_file;         // its password (first line; owner-only); relative to the config

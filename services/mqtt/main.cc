@@ -98,7 +98,7 @@ int run_mqtt(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
   o.host = q.host;
   o.port = q.port;
   o.client_id = q.client_id;
-  o.keepalive_s = static_cast<int>(q.keepalive_s);
+  o.keepalive_s = q.keepalive_s;
   o.username = q.username;
   o.ca_file = q.ca_file;
   o.cert_file = q.cert_file;

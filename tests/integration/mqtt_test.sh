@@ -7,8 +7,8 @@
 # fleet's reader is mosquitto_sub (mosquitto-clients), a persistent QoS 1 session.
 # Checked: the birth retained; a program's job start and end arrive once each with
 # the run's summary; a broker stopped (persistence) while a program runs and started
-# again loses none of its records; a cnc-mqtt killed (SIGKILL) is marked offline by
-# its will (the time measured); a cell's user publishing on another cell's topics is
+# again loses none of its records; a cnc-mqtt killed (SIGKILL) and one gone silent
+# (SIGSTOP, after its keepalive) are marked offline by their wills (times measured); a cell's user publishing on another cell's topics is
 # dropped by the broker; cnc-fleet's page (fleet.json, and the page in headless
 # Chromium) lists the three cells and sim3's jobs. Before the cell: config errors exit
 # 2 naming the key.
@@ -73,8 +73,8 @@ EOF2
 chmod 600 "$WORK/passwd" "$WORK/acl"
 
 # ---- the three cells' configs ----------------------------------------------------------
-cell_config() {  # NAME OUT: base.yaml as cell NAME on a bus of its own, with the mqtt: section
-  local name="$1" out="$2" lcm=$((TEST_LCM_PORT + ${3:-0}))
+cell_config() {  # NAME OUT LCM_PORT_OFFSET KEEPALIVE: base.yaml as cell NAME on a bus of its own, with the mqtt: section
+  local name="$1" out="$2" lcm=$((TEST_LCM_PORT + $3)) keepalive="$4"
   sed -e "s/^  name: sim3$/  name: $name/" -e "s#:${TEST_LCM_PORT}?#:${lcm}?#" -e "s#channel_prefix: \"${TEST_PREFIX}\"#channel_prefix: \"${TEST_PREFIX%.}$name.\"#" \
     "$WORK/base.yaml" >"$out"
   cat >>"$out" <<EOF2
@@ -83,7 +83,7 @@ mqtt:
   username: $name
   password_file: $name.pw
   ca_file: ca.crt
-  keepalive_s: 5
+  keepalive_s: $keepalive
 EOF2
   grep -q "^  name: $name$" "$out" || fail "cell_config: no name $name in $out"
 }
@@ -97,8 +97,8 @@ mqtt:
   ca_file: ca.crt
   keepalive_s: 5
 EOF2
-cell_config sim3b "$WORK/sim3b.yaml" 2
-cell_config sim3c "$WORK/sim3c.yaml" 3
+cell_config sim3b "$WORK/sim3b.yaml" 2 5
+cell_config sim3c "$WORK/sim3c.yaml" 3 5
 
 # ---- config errors name the key (exit 2); no section: exit 3 ---------------------------
 expect_exit() {
@@ -227,6 +227,11 @@ for t in start end; do
 done
 note "broker restart: job $JOB2 (run while the broker was down) arrived once, start and end"
 
+# ---- a cell gone silent (SIGSTOP: a frozen PC, a cable pulled): its will when the broker
+# has heard nothing for 1.5 keepalives (7.5 s); the next steps run meanwhile.
+s0=$(date +%s.%N)
+kill -STOP "${TEST_PIDS[mqtt-c]}"
+
 # ---- a cell killed: its will marks it offline -----------------------------------------
 # (A broker stopping publishes its clients' wills too: only a will after the kill counts.)
 k0=$(date +%s.%N)
@@ -264,7 +269,7 @@ for _ in range(50):
 else:
     print(json.dumps(f, indent=1), file=sys.stderr)
     sys.exit(1)
-assert cells["sim3"]["status"]["status"] == "online" and cells["sim3c"]["status"]["status"] == "online"
+assert cells["sim3"]["status"]["status"] == "online"
 assert cells["sim3"]["state"]["program"]["name"] == "second.ngc", cells["sim3"]["state"]
 assert cells["sim3b"]["status"]["reason"] == "connection lost"
 print(f"# fleet page: {len(cells)} cells, sim3's last jobs {[j['program'] + ' ' + j['outcome'] for j in cells['sim3']['jobs']]}, "
@@ -286,6 +291,24 @@ if [ -n "${CNC_FLEET_SCREENSHOT:-}" ]; then
   timeout 60 chromium "${flags[@]}" --screenshot="$CNC_FLEET_SCREENSHOT" "http://127.0.0.1:$FLEET_PORT/" >>"$WORK/chromium.log" 2>&1 ||
     fail "chromium: no screenshot"
 fi
+
+# ---- the silent cell: offline by its will after 1.5 keepalives, back when it wakes -----
+silent_after() { awk -v t0="$s0" '$1 > t0 && $2 == 0 && $3 == "cnc/sim3c/status" && /connection lost/ {print $1; exit}' "$WORK/fleet.log"; }
+for ((i = 0; i < 300; i++)); do [ -n "$(silent_after)" ] && break; sleep 0.05; done
+s1=$(silent_after)
+kill -CONT "${TEST_PIDS[mqtt-c]}"
+[ -n "$s1" ] || fail "sim3c, silent, was not marked offline within 15 s"
+SILENT=$(awk -v a="$s0" -v b="$s1" 'BEGIN {printf "%.3f", b - a}')
+# MQTT: 1.5 keepalives (7.5 s) of silence, the last state up to 1 s before the stop;
+# mosquitto 2.0.11 takes longer: 11 s after the last packet seen (10.5 s from the stop).
+awk -v s="$SILENT" 'BEGIN {exit !(s >= 6.4 && s <= 12.5)}' || fail "sim3c silent to offline: $SILENT s, expected 6.5-12.5 s"
+note "SIGSTOP to offline at the reader: $SILENT s (keepalive 5 s; MQTT's 1.5 keepalives: 7.5 s)"
+for ((i = 0; i < 100; i++)); do
+  awk -v t0="$s1" '$1 > t0 && $3 == "cnc/sim3c/status" && /"status":"online"/ {f = 1} END {exit !f}' "$WORK/fleet.log" && break
+  sleep 0.05
+done
+awk -v t0="$s1" '$1 > t0 && $3 == "cnc/sim3c/status" && /"status":"online"/ {f = 1} END {exit !f}' "$WORK/fleet.log" ||
+  fail "sim3c did not come back online within 5 s of SIGCONT"
 
 stop mqtt TERM
 wait_lines cnc/sim3/status 1 '"reason":"stopped"' 5

@@ -594,7 +594,7 @@ TEST(MachineConfig, MqttErrors) {
   expect_error_at(sim3_text() + "mqtt: {cert_file: c, key_file: k}\n", "mqtt.ca_file", "is required with cert_file");
   for (const char* bad : {"'a/+/b'", "'a//b'", "'/a'", "'a/'", "'#'", "'$SYS'"})
     expect_error_at(sim3_text() + "mqtt: {topic_prefix: " + bad + "}\n", "mqtt.topic_prefix", "is not a topic");
-  expect_error_at(sim3_text() + "mqtt: {keepalive_s: 1}\n", "mqtt.keepalive_s", "out of range");
+  expect_error_at(sim3_text() + "mqtt: {keepalive_s: 4}\n", "mqtt.keepalive_s", "out of range");
   expect_error_at(sim3_text() + "mqtt: {qos: 2}\n", "mqtt.qos", "unknown key");
 }
 
