@@ -94,7 +94,8 @@ constexpr std::string_view kKinematicsKeys[] = {"type",        "x_rot_point_mm",
                                                 "x_offset_mm", "y_offset_mm",    "z_offset_mm",    "conventional_directions",
                                                 "pivot_mm",    "solution",       "pole_tolerance_deg"};
 constexpr std::string_view kProbeKeys[] = {"input", "latch", "sim_box"};
-constexpr std::string_view kProbeBoxKeys[] = {"x_min_mm", "x_max_mm", "y_min_mm", "y_max_mm", "z_min_mm", "z_max_mm"};
+constexpr std::string_view kProbeBoxKeys[] = {"x_min_mm", "x_max_mm", "y_min_mm", "y_max_mm", "z_min_mm", "z_max_mm",
+                                             "bore_x_mm", "bore_y_mm", "bore_diameter_mm"};
 constexpr std::string_view kDriveBridgeKeys[] = {"enable_on_start", "profile_dir",     "enable_timeout_s",
                                                  "link_loss_timeout_s", "reconnect_min_s", "reconnect_max_s",
                                                  "lead_cycles"};
@@ -841,6 +842,11 @@ void read_probe(MapReader r, MachineConfig& c) {
       c.probe.box_min_mm[i] = box.require_double(kMin[i], -1e6, 1e6);
       c.probe.box_max_mm[i] = box.require_double(kMax[i], -1e6, 1e6);
       if (!(c.probe.box_max_mm[i] > c.probe.box_min_mm[i])) box.fail(kMax[i], std::string("must exceed ") + kMin[i]);
+    }
+    if (box.has("bore_diameter_mm") || box.has("bore_x_mm") || box.has("bore_y_mm")) {
+      c.probe.bore_diameter_mm = box.require_double("bore_diameter_mm", 1e-3, 1e6);
+      c.probe.bore_xy_mm[0] = box.require_double("bore_x_mm", -1e6, 1e6);
+      c.probe.bore_xy_mm[1] = box.require_double("bore_y_mm", -1e6, 1e6);
     }
     box.finish();
     c.probe.sim_box = true;

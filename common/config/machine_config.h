@@ -229,6 +229,8 @@ struct ProbeConfig {
   // coordinates of the first three axes; the input reads 1 while the tool tip is in it.
   bool sim_box = false;
   double box_min_mm[3] = {0, 0, 0}, box_max_mm[3] = {0, 0, 0};
+  // A vertical bore through it (bore_diameter_mm > 0): the tip in the bore is not in the box.
+  double bore_xy_mm[2] = {0, 0}, bore_diameter_mm = 0;
   bool enabled() const { return input >= 0; }
 };
 

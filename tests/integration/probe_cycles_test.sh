@@ -8,6 +8,9 @@
 # o<tool_length> takes the fixture for a tool setter (reference Z -25: the tool is 5 mm
 # long), under a G54 Z offset of -3 and a G92 offset of 2: the tool table's T1 gets Z 5
 # (0.1 um), and the program ends at X 100 + the length, at the safe Z 0: (105, 100, 0).
+# Then o<probe_bore> in a bore of the fixture (D 20 at X 125 Y 125, probe.sim_box.bore_*),
+# started 2 mm off its centre: six touches, each within 1 um of the wall; the program ends
+# at the centre plus a tenth of each diameter, (127, 127, -10), within 1 um.
 # Last, M6 remapped to o<change_and_measure> (program.m6_remap): T2 M6 G0 X60 Y60 goes to
 # the change position, holds for the change until RESUME, measures T2 on the setter
 # (T2 Z +5 in the tool table), applies it, and the block's G0 ends at (60, 60, 0).
@@ -20,6 +23,8 @@ trap 'cleanup $?' EXIT
 M="$WORK/machine.yaml"
 make_machine "$SRC/config/machines/sim3_probe.yaml" "$M"
 sed -i 's/^  input: probe_tip .*/  input: probe_tip\n  latch: drives/' "$M"
+sed -i 's/z_max_mm: -20}/z_max_mm: -20, bore_x_mm: 125, bore_y_mm: 125, bore_diameter_mm: 20}/' "$M"
+grep -q "bore_diameter_mm: 20" "$M" || fail "could not add the bore to probe.sim_box in $M"
 printf 'T1 P1 Z0 D6 ;\nT2 P2 Z0 D6 ;\n' >"$WORK/tools.tbl"
 printf '\nprogram:\n  subroutine_path: %s\n  tool_table: %s\n  m6_remap: change_and_measure\n' \
   "$SRC/config/subroutines" "$WORK/tools.tbl" >>"$M"
@@ -75,6 +80,41 @@ for _ in range(250):
     time.sleep(0.02)
 print(f"# at the end: X {pos[0]:.4f} Y {pos[1]:.4f} Z {pos[2]:.4f}, {worst * 1e3:.4f} um from (110, 110, -15)", file=sys.stderr)
 sys.exit(0 if worst <= 1e-3 else 1)
+PY
+
+cat >"$WORK/bore.ngc" <<'NGC'
+G21 G90
+G0 Z-10
+G0 X127 Y123
+o<probe_bore> call [20] [15] [3] [600] [60] [0.5] [0]
+G0 X[#<_probe_bore_x> + #<_probe_bore_d_x> / 10] Y[#<_probe_bore_y> + #<_probe_bore_d_y> / 10]
+M2
+NGC
+n_before=$(grep -c "probe: G38.2 at" "$WORK/interpolator.log" || true)
+"${CTL[@]}" --do run --program "$WORK/bore.ngc" --timeout 90 >"$WORK/ctl_bore.out" 2>&1 ||
+  { cat "$WORK/ctl_bore.out" >&2; tail -n 20 "$WORK/interpolator.log" >&2; fail "the bore's program did not run to its end"; }
+/usr/bin/python3 - "$WORK/interpolator.log" "$n_before" "$WORK/trace.csv" <<'PY' || fail "o<probe_bore> did not find the bore"
+import math, re, sys, time
+trips = [(m.group(1).rsplit("/", 1)[-1], *map(float, m.group(2, 3, 4))) for m in re.finditer(
+    r"probe: G38\.2 at (\S+):\d+ \(block \d+\): tripped at X (\S+) Y (\S+) Z (\S+)", open(sys.argv[1]).read())]
+trips = trips[int(sys.argv[2]):]
+kinds = [t[0] for t in trips]
+ok = kinds == ["probe_edge_x.ngc"] * 4 + ["probe_edge_y.ngc"] * 4 + ["probe_edge_x.ngc"] * 4
+errs = [abs(math.hypot(x - 125, y - 125) - 10) for _, x, y, z in trips]
+worst = max(errs, default=float("nan")) * 1e3
+print(("# " if ok else "# FAILED: ") + f"o<probe_bore>: {len(trips)} touches, each against the wall within {worst:.4f} um (bound 1 um)",
+      file=sys.stderr)
+end = (127.0, 127.0, -10.0)
+for _ in range(250):
+    lines = open(sys.argv[3]).read().splitlines()
+    f = lines[-2].split(",") if len(lines) > 2 else []
+    pos = [float(f[1]), float(f[4]), float(f[7])] if len(f) >= 10 else [float("nan")] * 3
+    off = max(abs(p - e) for p, e in zip(pos, end))
+    if off < 5e-4: break
+    time.sleep(0.02)
+print(f"# after the bore: X {pos[0]:.4f} Y {pos[1]:.4f} Z {pos[2]:.4f}, {off * 1e3:.4f} um from (127, 127, -10) "
+      "(the centre plus a tenth of each diameter)", file=sys.stderr)
+sys.exit(0 if ok and worst <= 1.0 and off <= 1e-3 else 1)
 PY
 
 cat >"$WORK/length.ngc" <<'NGC'

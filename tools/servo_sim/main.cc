@@ -708,6 +708,8 @@ void Simulator::probe_fixture() {
     p[i] = all_[static_cast<size_t>(i)]->position_mm();
     in = in && p[i] >= pc.box_min_mm[i] && p[i] <= pc.box_max_mm[i];
   }
+  const double R = 0.5 * pc.bore_diameter_mm;
+  if (R > 0 && std::hypot(p[0] - pc.bore_xy_mm[0], p[1] - pc.bore_xy_mm[1]) < R) in = false;
   if (probe_seen_ && in != probe_in_) {
     const std::string& name = cfg_.io.points[static_cast<size_t>(pc.input)].name;
     for (IoSim& io : ios_)
@@ -722,6 +724,18 @@ void Simulator::probe_fixture() {
         const double t = (f - a) / (b - a);
         if (t >= 0 && t <= 1) t_cross = std::min(t_cross, t);
       }
+    }
+    if (R > 0) {
+      // The bore's wall: |a + t (b - a) - c| = R in XY.
+      const double ax = probe_prev_[0] - pc.bore_xy_mm[0], ay = probe_prev_[1] - pc.bore_xy_mm[1];
+      const double dx = p[0] - probe_prev_[0], dy = p[1] - probe_prev_[1];
+      const double qa = dx * dx + dy * dy, qb = 2 * (ax * dx + ay * dy), qc = ax * ax + ay * ay - R * R;
+      const double disc = qb * qb - 4 * qa * qc;
+      if (qa > 0 && disc >= 0)
+        for (double sgn : {-1.0, 1.0}) {
+          const double t = (-qb + sgn * std::sqrt(disc)) / (2 * qa);
+          if (t >= 0 && t <= 1) t_cross = std::min(t_cross, t);
+        }
     }
     const int64_t count = in ? ++probe_rises_ : ++probe_falls_;
     for (size_t d = 0; d < all_.size(); ++d) {
