@@ -75,7 +75,7 @@ constexpr std::string_view kHomeKeys[] = {"method",      "search_velocity_mm_s",
                                           "direction",   "switch_position_mm",   "position_mm",
                                           "backoff_mm",  "order"};
 constexpr std::string_view kSpindleKeys[] = {"drive",        "max_rpm",      "rpm_per_hz", "at_speed_tolerance",
-                                             "at_speed_timeout_s", "min_override", "max_override", "encoder_counts_per_rev", "sync_lead_s",
+                                             "at_speed_timeout_s", "min_override", "max_override", "encoder_counts_per_rev", "sync_lead_s", "orient_offset_deg",
                                              "orient_tolerance_deg", "orient_timeout_s", "orient_rpm",
                                              "orient_gain_per_s", "sim"};
 constexpr std::string_view kSpindleSimKeys[] = {"time_constant_s", "load_current_a", "inertia_current_a"};
@@ -576,6 +576,7 @@ void read_spindle(MapReader r, MachineConfig& c) {
   s.max_override = r.get_double("max_override", s.max_override, 1.0, 10.0);
   s.encoder_counts_per_rev = r.get_int("encoder_counts_per_rev", s.encoder_counts_per_rev, 0, 1 << 24);
   s.sync_lead_s = r.get_double("sync_lead_s", s.sync_lead_s, 0.0, 0.1);
+  s.orient_offset_deg = r.get_double("orient_offset_deg", s.orient_offset_deg, -360.0, 360.0);
   s.orient_tolerance_deg = r.get_double("orient_tolerance_deg", s.orient_tolerance_deg, 0.01, 45.0);
   s.orient_timeout_s = r.get_double("orient_timeout_s", s.orient_timeout_s, 0.1, 600.0);
   s.orient_rpm = r.get_double("orient_rpm", s.orient_rpm, 0.1, 10000.0);

@@ -152,6 +152,9 @@ struct SpindleConfig {
   // predicted this much further ahead, so the axes, not their setpoints, meet the
   // spindle (a rigid tap's way down and up on one helix).
   double sync_lead_s = 0.0;
+  // M19's angle is R plus this, degrees (LinuxCNC's [RS274NGC]ORIENT_OFFSET): where the
+  // encoder's index lies from the spindle's reference angle.
+  double orient_offset_deg = 0.0;
   bool measured_position() const { return enabled && encoder_counts_per_rev > 0; }
   // Orientation (M19; needs the encoder): the bridge's position loop turns the spindle
   // at orient_gain_per_s revolutions per second per revolution of error, at most

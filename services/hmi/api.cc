@@ -450,7 +450,8 @@ std::string Api::alarm_since(size_t from, std::initializer_list<const char*> cod
 
 void Api::open(uint64_t client, bool may_control, const std::string& user) {
   json ax = json::array();
-  for (const auto& a : cfg_.axes) ax.push_back({{"name", a.name}, {"min", a.min_mm}, {"max", a.max_mm}});
+  for (const auto& a : cfg_.axes)
+    ax.push_back({{"name", a.name}, {"min", a.min_mm}, {"max", a.max_mm}, {"rotary", a.rotary}, {"wrapped", a.wrapped}});
   out_.send_to(client, {{"t", "hello"},
                         {"machine", cfg_.name},
                         {"version", util::version()},

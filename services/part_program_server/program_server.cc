@@ -252,6 +252,7 @@ ProgramSetup program_setup(const config::MachineConfig& cfg) {
   s.machine.write_tool_table = true;
   s.machine.has_probe = cfg.program.probe;
   s.machine.spindle_sync = s.builder.spindle_sync = cfg.spindle.measured_position();
+  s.machine.orient_offset_deg = cfg.spindle.orient_offset_deg;
   s.machine.digital_inputs = cfg.program.digital_inputs;
   s.machine.analog_inputs = cfg.program.analog_inputs;
   s.machine.digital_outputs = cfg.program.digital_outputs;

@@ -125,6 +125,27 @@ TEST_F(HmiApi, Hello) {
   EXPECT_EQ(last()["t"], "alarms");
 }
 
+TEST(HmiApiHello, NamesTheRotaryAndWrappedAxes) {
+  // The page shows a wrapped axis in [0, 360) (app.js wrap360), as LinuxCNC's displays do.
+  auto cfg = cnc::config::load_machine_config(std::string(CNC_SOURCE_DIR) + "/config/machines/sim3.yaml");
+  cfg.axes[2].rotary = true;
+  cfg.axes[2].wrapped = true;
+  cnc::bus::Bus bus("memq://");
+  std::vector<json> sent;
+  cnc::hmi::Outbox out;
+  out.broadcast = [](const json&, bool) {};
+  out.send_to = [&](uint64_t, const json& j) { sent.push_back(j); };
+  Api api(cfg, bus, cnc::hmi::offline_api_options(), out);
+  api.open(7, true, "op");
+  ASSERT_FALSE(sent.empty());
+  ASSERT_EQ(sent[0]["axes"].size(), cfg.axes.size());
+  EXPECT_EQ(sent[0]["axes"][0]["wrapped"], false);
+  EXPECT_EQ(sent[0]["axes"][0]["rotary"], false);
+  EXPECT_EQ(sent[0]["axes"][2]["wrapped"], true);
+  EXPECT_EQ(sent[0]["axes"][2]["rotary"], true);
+  api.stop();
+}
+
 TEST_F(HmiApi, AnswersByTheTable) {
   api_->message(7, true, R"({"id": 1, "action": "ping"})");
   EXPECT_EQ(last(), (json{{"t", "pong"}, {"id", 1}}));

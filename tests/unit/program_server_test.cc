@@ -194,6 +194,27 @@ TEST(ProgramServer, AProgramThatNeverEndsIsRefused) {
   EXPECT_FALSE(server.loaded());
 }
 
+TEST(ProgramServer, M19sAngleIsRPlusTheMachinesOrientOffset) {
+  // spindle.orient_offset_deg is LinuxCNC's ORIENT_OFFSET: M19 R10 orients to 52 with 42.
+  TempDir dir;
+  const fs::path file = dir / "orient.ngc";
+  write(file, "M3 S600\nM19 R10 Q2\nM19 P0\nM2\n");
+  auto cfg = config::load_machine_config(std::string(CNC_SOURCE_DIR) + "/config/machines/sim3_servo_spindle.yaml");
+  std::vector<double> angles[2];
+  for (int k = 0; k < 2; ++k) {
+    cfg.spindle.orient_offset_deg = k == 0 ? 0.0 : 42.0;
+    ProgramServer server(cfg);
+    const LoadResult r = server.load(file.string(), 1);
+    ASSERT_TRUE(r.ok) << r.error;
+    for (int64_t i = 0; i < server.num_blocks(); ++i)
+      if (server.block(i)->kind == program::BlockKind::kEvent &&
+          server.block(i)->event.kind == program::EventKind::kSpindleOrient)
+        angles[k].push_back(server.block(i)->event.value);
+  }
+  EXPECT_EQ(angles[0], (std::vector<double>{10.0, 0.0}));
+  EXPECT_EQ(angles[1], (std::vector<double>{52.0, 42.0}));
+}
+
 TEST(ProgramServer, APathOutsideTheTravelIsRefusedWhereItIsWritten) {
   // Travel X [-5, 400], Y [-5, 300], Z [-150, 5]: a rapid to X1000, an arc that
   // bulges past X400 between two points inside, a G53 move under Z-150; and the

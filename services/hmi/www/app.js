@@ -15,6 +15,8 @@ window.hmiStats = { status: 0, since: 0, rate: 0, minRate: 0, window: [], result
 
 const $ = (id) => document.getElementById(id);
 const fmt = (v, d = 3) => (typeof v === 'number' ? v.toFixed(d) : '—');
+// A wrapped rotary axis is shown as LinuxCNC shows it: its angle in [0, 360).
+const wrap360 = (v) => (typeof v === 'number' ? ((v % 360) + 360) % 360 : v);
 
 function send(action, extra = {}) {
   if (!S.ws || S.ws.readyState !== WebSocket.OPEN) { showMsg(false, 'not connected'); return -1; }
@@ -79,7 +81,8 @@ const handlers = {
     st.last = m;
     m.axes.forEach((a, i) => {
       const set = (k, v) => { const el = $(`dro-${a.name}-${k}`); if (el) el.textContent = v; };
-      set('cmd', fmt(a.cmd)); set('act', fmt(a.act)); set('fe', fmt(a.fe, 4));
+      const w = S.axes[i] && S.axes[i].wrapped ? wrap360 : (v) => v;
+      set('cmd', fmt(w(a.cmd))); set('act', fmt(w(a.act))); set('fe', fmt(a.fe, 4));
       set('dtg', fmt(a.dtg)); set('homed', a.homed === undefined ? '—' : (a.homed ? 'yes' : 'no'));
       set('drive', a.drive || '—');
       const row = $(`dro-${a.name}`);
