@@ -139,6 +139,11 @@ class Canon {
   // Text.
   virtual void comment(const SourceRef&, const std::string&) {}
   virtual void message(const SourceRef&, const std::string&) {}
+  // (LOGOPEN,name) / (LOGAPPEND,name) / (LOGCLOSE) / (LOG,text): LinuxCNC writes a file;
+  // the cell's logger records the run instead, so only the canon printer shows them.
+  virtual void log_open(const SourceRef&, const std::string& /*name*/, bool /*append*/) {}
+  virtual void log_close(const SourceRef&) {}
+  virtual void log_line(const SourceRef&, const std::string&) {}
 
   // Program flow.
   virtual void program_stop(const SourceRef&) {}           // M0

@@ -81,6 +81,9 @@ class CanonForward : public Canon {
 
   void comment(const SourceRef& r, const std::string& s) override { next_.comment(r, s); }
   void message(const SourceRef& r, const std::string& s) override { next_.message(r, s); }
+  void log_open(const SourceRef& r, const std::string& name, bool append) override { next_.log_open(r, name, append); }
+  void log_close(const SourceRef& r) override { next_.log_close(r); }
+  void log_line(const SourceRef& r, const std::string& s) override { next_.log_line(r, s); }
 
   void program_stop(const SourceRef& r) override { next_.program_stop(r); }
   void optional_program_stop(const SourceRef& r) override { next_.optional_program_stop(r); }

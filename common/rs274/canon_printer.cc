@@ -145,6 +145,11 @@ void CanonPrinter::analog_output(const SourceRef&, int index, double value, bool
 }
 void CanonPrinter::comment(const SourceRef&, const std::string& text) { line("COMMENT(\"%s\")", text.c_str()); }
 void CanonPrinter::message(const SourceRef&, const std::string& text) { line("MESSAGE(\"%s\")", text.c_str()); }
+void CanonPrinter::log_open(const SourceRef&, const std::string& name, bool append) {
+  line(append ? "LOGAPPEND(\"%s\")" : "LOGOPEN(\"%s\")", name.c_str());
+}
+void CanonPrinter::log_close(const SourceRef&) { line("LOGCLOSE()"); }
+void CanonPrinter::log_line(const SourceRef&, const std::string& text) { line("LOG(\"%s\")", text.c_str()); }
 void CanonPrinter::program_stop(const SourceRef&) { line("PROGRAM_STOP()"); }
 void CanonPrinter::optional_program_stop(const SourceRef&) { line("OPTIONAL_PROGRAM_STOP()"); }
 void CanonPrinter::pallet_shuttle(const SourceRef&) { line("PALLET_SHUTTLE()"); }

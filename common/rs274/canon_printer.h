@@ -65,6 +65,9 @@ class CanonPrinter : public Canon {
   void analog_output(const SourceRef&, int, double, bool) override;
   void comment(const SourceRef&, const std::string&) override;
   void message(const SourceRef&, const std::string&) override;
+  void log_open(const SourceRef&, const std::string& name, bool append) override;
+  void log_close(const SourceRef&) override;
+  void log_line(const SourceRef&, const std::string& text) override;
   void program_stop(const SourceRef&) override;
   void optional_program_stop(const SourceRef&) override;
   void pallet_shuttle(const SourceRef&) override;

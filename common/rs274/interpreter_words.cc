@@ -282,8 +282,19 @@ void Interpreter::comments_of_line() {
           std::fprintf(stderr, "%s\n", out.c_str());
         break;
       }
-      case CommentKind::kLogOpen: case CommentKind::kLogAppend: case CommentKind::kLogClose: case CommentKind::kLog:
-        break;  // file logging from a program is not supported: the cell's logger records messages
+      case CommentKind::kLogOpen: canon_.log_open(r, c.text, false); break;
+      case CommentKind::kLogAppend: canon_.log_open(r, c.text, true); break;
+      case CommentKind::kLogClose: canon_.log_close(r); break;
+      case CommentKind::kLog: {
+        std::string out;
+        try {
+          out = expand_parameters(c.text, c.column + 1, *reader_);
+        } catch (const Error& e) {
+          fail(e.column(), e.detail());
+        }
+        canon_.log_line(r, out);
+        break;
+      }
       case CommentKind::kAbort:
         fail(c.column, "program aborted: " + c.text);
     }

@@ -43,7 +43,7 @@ def main():
     line = serial.Serial(a.device, 19200, timeout=0.002)
     pd = {1: 2, 2: 2, 4: 5000, 5: int(round(a.max_hz * 100)), 11: 0, 144: int(round(a.rpm_per_hz * 50))}
     set_raw, run, reverse, hz, amps = 0, False, False, 0.0, 0.0
-    frames = 0
+    frames = resyncs = 0
     buf = bytearray()
     last = time.monotonic()
     print(f"huanyang_vfd: unit {a.unit} on {a.device}, tau {a.tau} s", flush=True)
@@ -59,14 +59,22 @@ def main():
         amps = 2.0 * abs(hz) / a.max_hz + 6.0 * accel / (a.max_hz / a.tau)
         last = now
         while len(buf) >= 3:
+            # Out of step (a frame read in part, a byte lost): slide on by one byte until a
+            # frame's CRC holds again; clearing the buffer could keep it out of step for good.
             n = buf[2]
             if not 1 <= n <= 8:
-                buf.clear()
-                break
+                del buf[0]
+                resyncs += 1
+                continue
             if len(buf) < 5 + n:
                 break
-            frame, buf = bytes(buf[:5 + n]), buf[5 + n:]
-            if crc16(frame[:-2]) != frame[-2:] or frame[0] != a.unit:
+            frame = bytes(buf[:5 + n])
+            if crc16(frame[:-2]) != frame[-2:]:
+                del buf[0]
+                resyncs += 1
+                continue
+            del buf[:5 + n]
+            if frame[0] != a.unit:
                 continue
             fn, data = frame[1], frame[3:3 + n]
             if fn == 0x01:
@@ -99,7 +107,7 @@ def main():
             reply = bytes([a.unit, fn, len(out)]) + out
             line.write(reply + crc16(reply))
             frames += 1
-    print(f"huanyang_vfd: {frames} frames answered", flush=True)
+    print(f"huanyang_vfd: {frames} frames answered, {resyncs} bytes skipped to find a frame", flush=True)
     return 0
 
 

@@ -191,7 +191,13 @@ rt=(); chrt -f 39 true 2>/dev/null && rt=(chrt -f 39)
 start socat "${rt[@]}" socat pty,raw,echo=0,link="$WORK/hy-bridge" pty,raw,echo=0,link="$WORK/hy-vfd"
 for ((i = 0; i < 50; i++)); do [ -e "$WORK/hy-vfd" ] && break; sleep 0.1; done
 [ -e "$WORK/hy-vfd" ] || fail "socat made no pseudo-terminal pair"
-start hy-vfd /usr/bin/python3 "$(dirname "$0")/huanyang_vfd.py" --device "$WORK/hy-vfd" --tau 0.15
+# The VFD answers on its own processor; here a Python process on a shared host, real-time
+# like socat when permitted. Even so the busy host left it (or the line) silent for the
+# shipped 0.25 s link-loss timeout in 3 of 14 runs under two busy loops and three builds:
+# a lost link (the fault itself: spindle_control_test, bridge_node_test); here the timeout is 1 s.
+sed -i 's/^  link_loss_timeout_s: 0.25 /  link_loss_timeout_s: 1.0 /' "$M"
+grep -q "^  link_loss_timeout_s: 1.0 " "$M" || fail "could not set drive_bridge.link_loss_timeout_s in $M"
+start hy-vfd "${rt[@]}" /usr/bin/python3 "$(dirname "$0")/huanyang_vfd.py" --device "$WORK/hy-vfd" --tau 0.15
 start servo-sim "$BUILD/tools/cnc-servo-sim" --machine "$M"
 start logger "$BUILD/services/cnc-logger" --machine "$M" --out "$WORK/hy"
 start_cell

@@ -27,7 +27,7 @@ import canon            # noqa: E402
 import gen_programs     # noqa: E402
 
 RS274_ARGS = "-g -i {ini} -t {tbl} -v {var} {file} {out}"
-OURS_ARGS = "--spindle-sync -i {ini} -t {tbl} -v {var} {file} {out}"
+OURS_ARGS = "--spindle-sync --probe -i {ini} -t {tbl} -v {var} {file} {out}"
 HARDWARE = re.compile(r'(?i)\bG\s*38\s*\.\s*[2-5]|\bM\s*66\b|#\s*5070\b|#\s*5399\b')
 
 
