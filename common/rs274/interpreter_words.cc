@@ -269,22 +269,7 @@ void Interpreter::comments_of_line() {
         break;
       }
       case CommentKind::kPrint:
-      case CommentKind::kDebug: {
-        std::string out;
-        try {
-          out = expand_parameters(c.text, c.column + 1, *reader_);
-        } catch (const Error& e) {
-          fail(e.column(), e.detail());
-        }
-        if (c.kind == CommentKind::kDebug)
-          canon_.message(r, out);
-        else
-          std::fprintf(stderr, "%s\n", out.c_str());
-        break;
-      }
-      case CommentKind::kLogOpen: canon_.log_open(r, c.text, false); break;
-      case CommentKind::kLogAppend: canon_.log_open(r, c.text, true); break;
-      case CommentKind::kLogClose: canon_.log_close(r); break;
+      case CommentKind::kDebug:
       case CommentKind::kLog: {
         std::string out;
         try {
@@ -292,9 +277,14 @@ void Interpreter::comments_of_line() {
         } catch (const Error& e) {
           fail(e.column(), e.detail());
         }
-        canon_.log_line(r, out);
+        if (c.kind == CommentKind::kDebug) canon_.message(r, out);
+        else if (c.kind == CommentKind::kLog) canon_.log_line(r, out);
+        else std::fprintf(stderr, "%s\n", out.c_str());
         break;
       }
+      case CommentKind::kLogOpen: canon_.log_open(r, c.text, false); break;
+      case CommentKind::kLogAppend: canon_.log_open(r, c.text, true); break;
+      case CommentKind::kLogClose: canon_.log_close(r); break;
       case CommentKind::kAbort:
         fail(c.column, "program aborted: " + c.text);
     }

@@ -67,10 +67,12 @@ worst = max(errs, default=float("nan")) * 1e3
 print(f"# every touch against its face: largest error {worst:.4f} um (bound 1 um)", file=sys.stderr)
 sys.exit(0 if ok and worst <= 1.0 else 1)
 PY
-# The simulator's axes at the end (its trace's last whole row; settled within 0.5 um).
-/usr/bin/python3 - "$WORK/trace.csv" <<'PY' || fail "the program did not end at the centre plus a tenth of the size, 5 mm above the top (110, 110, -15)"
+# ends_at X Y Z: the simulator's axes at the end (its trace's last whole row; settled
+# within 0.5 um) within 1 um of (X, Y, Z).
+ends_at() {
+  /usr/bin/python3 - "$WORK/trace.csv" "$@" <<'PY'
 import sys, time
-end = (110.0, 110.0, -15.0)
+end = tuple(float(v) for v in sys.argv[2:5])
 for _ in range(250):
     lines = open(sys.argv[1]).read().splitlines()
     f = lines[-2].split(",") if len(lines) > 2 else []
@@ -78,9 +80,11 @@ for _ in range(250):
     worst = max(abs(p - e) for p, e in zip(pos, end))
     if worst < 5e-4: break
     time.sleep(0.02)
-print(f"# at the end: X {pos[0]:.4f} Y {pos[1]:.4f} Z {pos[2]:.4f}, {worst * 1e3:.4f} um from (110, 110, -15)", file=sys.stderr)
+print(f"# at the end: X {pos[0]:.4f} Y {pos[1]:.4f} Z {pos[2]:.4f}, {worst * 1e3:.4f} um from {end}", file=sys.stderr)
 sys.exit(0 if worst <= 1e-3 else 1)
 PY
+}
+ends_at 110 110 -15 || fail "the program did not end at the centre plus a tenth of the size, 5 mm above the top (110, 110, -15)"
 
 cat >"$WORK/bore.ngc" <<'NGC'
 G21 G90
@@ -93,8 +97,8 @@ NGC
 n_before=$(grep -c "probe: G38.2 at" "$WORK/interpolator.log" || true)
 "${CTL[@]}" --do run --program "$WORK/bore.ngc" --timeout 90 >"$WORK/ctl_bore.out" 2>&1 ||
   { cat "$WORK/ctl_bore.out" >&2; tail -n 20 "$WORK/interpolator.log" >&2; fail "the bore's program did not run to its end"; }
-/usr/bin/python3 - "$WORK/interpolator.log" "$n_before" "$WORK/trace.csv" <<'PY' || fail "o<probe_bore> did not find the bore"
-import math, re, sys, time
+/usr/bin/python3 - "$WORK/interpolator.log" "$n_before" <<'PY' || fail "o<probe_bore> did not find the bore"
+import math, re, sys
 trips = [(m.group(1).rsplit("/", 1)[-1], *map(float, m.group(2, 3, 4))) for m in re.finditer(
     r"probe: G38\.2 at (\S+):\d+ \(block \d+\): tripped at X (\S+) Y (\S+) Z (\S+)", open(sys.argv[1]).read())]
 trips = trips[int(sys.argv[2]):]
@@ -104,18 +108,9 @@ errs = [abs(math.hypot(x - 125, y - 125) - 10) for _, x, y, z in trips]
 worst = max(errs, default=float("nan")) * 1e3
 print(("# " if ok else "# FAILED: ") + f"o<probe_bore>: {len(trips)} touches, each against the wall within {worst:.4f} um (bound 1 um)",
       file=sys.stderr)
-end = (127.0, 127.0, -10.0)
-for _ in range(250):
-    lines = open(sys.argv[3]).read().splitlines()
-    f = lines[-2].split(",") if len(lines) > 2 else []
-    pos = [float(f[1]), float(f[4]), float(f[7])] if len(f) >= 10 else [float("nan")] * 3
-    off = max(abs(p - e) for p, e in zip(pos, end))
-    if off < 5e-4: break
-    time.sleep(0.02)
-print(f"# after the bore: X {pos[0]:.4f} Y {pos[1]:.4f} Z {pos[2]:.4f}, {off * 1e3:.4f} um from (127, 127, -10) "
-      "(the centre plus a tenth of each diameter)", file=sys.stderr)
-sys.exit(0 if ok and worst <= 1.0 and off <= 1e-3 else 1)
+sys.exit(0 if ok and worst <= 1.0 else 1)
 PY
+ends_at 127 127 -10 || fail "o<probe_bore> did not end at the centre plus a tenth of each diameter (127, 127, -10)"
 
 cat >"$WORK/length.ngc" <<'NGC'
 G21 G90
