@@ -146,6 +146,11 @@ void Interpreter::open(const std::string& path) {
       canon_.set_feed_rate(r0, feed_);
     }
     if (m.coord >= 1 && m.coord <= 9 && m.coord != coord_) set_coord_system(m.coord);
+    twp_ = m.tilted_plane;  // G68.2 stays until G69, from one MDI line to the next
+    if (twp_) {
+      std::copy(m.tilted_frame.begin(), m.tilted_frame.begin() + 9, twp_r_.begin());
+      std::copy(m.tilted_frame.begin() + 9, m.tilted_frame.end(), twp_o_.begin());
+    }
     speed_ = m.speed;
     spindle_ = m.spindle;
     mist_ = m.mist;
@@ -165,7 +170,7 @@ void Interpreter::open(const std::string& path) {
 
 // The current position in #5420-#5428.
 void Interpreter::update_position_params() {
-  const Pose p = current_point();
+  const Pose p = twp_ ? frame_of(current_point()) : current_point();
   for (int i = 0; i < kNumAxes; ++i) params_.set(5420 + i, to_program_axis(i, p[static_cast<size_t>(i)]));
 }
 
@@ -260,6 +265,11 @@ ModalState Interpreter::modal_state() const {
   m.tool_offset = tool_offset_;
   m.g92 = g92_;
   m.g92_active = g92_active_;
+  m.tilted_plane = twp_;
+  if (twp_) {
+    std::copy(twp_r_.begin(), twp_r_.end(), m.tilted_frame.begin());
+    std::copy(twp_o_.begin(), twp_o_.end(), m.tilted_frame.begin() + 9);
+  }
   m.rotation_deg = rotation_deg_;
   m.position = position_;
   for (size_t i = 0; i < m.offsets.size(); ++i) m.offsets[i] = params_.get(5161 + static_cast<int>(i));
@@ -316,7 +326,8 @@ void Interpreter::end_program(bool m30) {
   comp_filter_->stop();
   // LinuxCNC's end of program (M2, M30): G54 with its rotation, the XY plane, G90,
   // G94 with no feed, feed and speed overrides on, spindle off, coolant off, G40, G1.
-  // G92 and the tool length offset stay.
+  // G92 and the tool length offset stay; the tilted work plane goes (Fanuc's reset).
+  twp_ = false;
   if (coord_ != 1) {
     position_ = program_of(machine_of(position_, coord_), 1);
     coord_ = 1;

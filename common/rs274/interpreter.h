@@ -47,11 +47,25 @@ struct ModalState {
   Pose tool_offset{}, g92{};
   bool g92_active = false;
   double rotation_deg = 0;
+  // G68.2: the tilted work plane's rotation (row-major, column j its axis j) and origin.
+  bool tilted_plane = false;
+  std::array<double, 12> tilted_frame{};
   Pose position{};  // program coordinates and units
   // Parameters 5161..5390: G28 and G30 homes, G92 offsets, G54..G59.3 and their rotations.
   std::array<double, 230> offsets{};
   bool operator==(const ModalState&) const = default;
 };
+
+// G53.1: the rotary axes' machine positions that point the tool along a direction.
+struct ToolOrientation {
+  int tilt_axis = -1, rotary_axis = -1;  // indices into a Pose (3 A, 4 B, 5 C)
+  double tilt_deg = 0, rotary_deg = 0;
+};
+// The direction (i, j, k) in the work coordinates, the machine position now (mm,
+// degrees) and G53.1's P (0: the machine's rule, 1: the tilt >= 0 solution, 2: the
+// tilt <= 0 one). Throws std::invalid_argument naming what refused it (a joint out of
+// travel, a machine that cannot turn the tool).
+using OrientTool = std::function<ToolOrientation(const std::array<double, 3>& direction, const Pose& machine, int choice)>;
 
 struct MachineSetup {
   std::string axes = "XYZ";                // axis letters the machine has (of XYZABCUVW)
@@ -104,6 +118,9 @@ struct MachineSetup {
   // (units, distance modes, plane, motion mode, feed mode and rate, coordinate system,
   // tool length offset); nullopt: a program's start.
   std::optional<ModalState> initial_modes;
+  // G53.1 (tool normal to the tilted work plane) through the machine's kinematics;
+  // empty: G53.1 is refused (no five-axis kinematics).
+  OrientTool orient_tool;
 };
 
 class Interpreter {
@@ -240,6 +257,16 @@ class Interpreter {
   void g10_tool(Words& w, int l, int p);
   void g28_g30(Words& w, bool g30);
   void g92(Words& w);
+  // The tilted work plane (interpreter_twp.cc).
+  void g68_2_g69(Words& w);
+  void g53_1(const Words& w);
+  void refuse_in_tilted_plane(const Words& w) const;
+  Pose frame_of(const Pose& work_mm) const;  // X Y Z of work coordinates in the tilted frame
+  Pose work_of(const Pose& frame_mm) const;
+  // An arc of the tilted frame's plane (its axes a1 a2, normal a3; centre in mm) as
+  // the exact curve it is in space: a rational quadratic NURBS.
+  void frame_arc(int col, const std::array<int, 3>& plane_axes, double cen1_mm, double cen2_mm, bool cw, int turns,
+                 const Pose& from_frame, const Pose& to_frame, const Pose& end);
   void tool_change(Words& w);
   void set_tool_params();
   Pose current_point(bool after_g40 = false) const;
@@ -329,6 +356,13 @@ class Interpreter {
   Pose g92_{};
   bool g92_active_ = false;
   double rotation_deg_ = 0;
+  // G68.2 (Fanuc's feature coordinate system): while twp_, the program's X Y Z (and
+  // arcs' centres) are in a frame turned by twp_r_ (row-major: column j is the frame's
+  // axis j in work coordinates) about twp_o_ (work coordinates, mm). position_ stays in
+  // work coordinates.
+  bool twp_ = false;
+  std::array<double, 9> twp_r_{};
+  std::array<double, 3> twp_o_{};
   double mu_ = 1.0;               // mm per machine unit
   Pose position_{};               // current position, program coordinates and units
   double cycle_old_z_ = 0;        // canned cycles: sticky values

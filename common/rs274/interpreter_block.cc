@@ -35,11 +35,14 @@ void Interpreter::execute_block_after_m6(Words& w) {
   if (w.g[15] >= 0) g7_g8(w);
   if (w.g[7] >= 0) g40_g42(w);
   if (w.g[8] >= 0) g43_g49(w);
+  if (twp_) refuse_in_tilted_plane(w);
   if (w.g[12] >= 0) g54_g59(w);
   if (w.g[13] >= 0) g61_g64(w);
   if (w.g[3] >= 0 || w.g[4] >= 0) g90_g91(w);
   if (w.g[10] >= 0) g98_g99(w);
   if (w.g[0] >= 0) homes_and_offsets(w);
+  if (w.g[16] >= 0) g68_2_g69(w);
+  if (w.g[0] == 531) g53_1(w);
   motion_block(w);
   if (w.m[4] >= 0) stops(w);
 }

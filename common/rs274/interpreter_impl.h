@@ -134,8 +134,8 @@ struct Interpreter::Words {
   std::array<double, 29> v{};
   std::array<int32_t, 29> col{};
   uint32_t has = 0;
-  std::array<int, 16> g{};
-  std::array<int32_t, 16> gcol{};
+  std::array<int, 17> g{};
+  std::array<int32_t, 17> gcol{};
   std::array<int, 12> m{};
   std::array<int32_t, 12> mcol{};
   bool m7 = false, m8 = false;

@@ -27,6 +27,19 @@ Pose Interpreter::axis_target(const Words& w, bool machine) const {
   Pose p = position_;
   const double s = length_scale();
   const bool polar = w.on('@') || w.on('^');
+  if (polar && twp_ && !machine)
+    fail(w.on('@') ? w.column('@') : w.column('^'), "polar coordinates (@ ^) in a tilted work plane (G68.2) are not supported");
+  if (twp_ && !machine && (w.axes & 7u) != 0) {
+    // X Y Z are in the tilted frame; the ones not named stay where the tool is in it.
+    Pose f = frame_of(position_);
+    for (int i = 0; i < 3; ++i) {
+      const char c = kAxisLetters[i];
+      if (!w.on(c)) continue;
+      f[static_cast<size_t>(i)] = incremental_ ? f[static_cast<size_t>(i)] + w[c] * s : w[c] * s;
+    }
+    const Pose q = work_of(f);
+    for (size_t i = 0; i < 3; ++i) p[i] = q[i];
+  }
   if (polar) {
     // LinuxCNC's polar coordinates: @ distance and ^ angle (degrees, from +X) about
     // the XY zero of the current system; under G91 both add to the current ones.
@@ -50,7 +63,7 @@ Pose Interpreter::axis_target(const Words& w, bool machine) const {
   }
   for (int i = 0; i < kNumAxes; ++i) {
     const char c = kAxisLetters[i];
-    if (!w.on(c)) continue;
+    if (!w.on(c) || (twp_ && !machine && i < 3)) continue;
     const size_t k = static_cast<size_t>(i);
     const double lin = i < 3 || i >= 6 ? s : 1.0;  // A B C are degrees
     const double v = w[c] * lin;
@@ -199,6 +212,9 @@ void Interpreter::synced_move(Words& w, int g, int col) {
 }
 
 void Interpreter::arc(Words& w, bool cw, const Pose& end) {
+  // In a tilted work plane (G68.2) the arc is made in its frame: the plane is the frame's.
+  const Pose from = twp_ ? frame_of(position_) : position_;
+  const Pose to = twp_ ? frame_of(end) : end;
   int a1 = 0, a2 = 1, a3 = 2;  // plane axes: first, second, normal
   char o1 = 'I', o2 = 'J';
   if (plane_ == Plane::kXZ) {
@@ -207,8 +223,8 @@ void Interpreter::arc(Words& w, bool cw, const Pose& end) {
     a1 = 1; a2 = 2; a3 = 0; o1 = 'J'; o2 = 'K';
   }
   const double s = length_scale();
-  const double c1 = to_program(position_[static_cast<size_t>(a1)]), c2 = to_program(position_[static_cast<size_t>(a2)]);
-  const double e1 = to_program(end[static_cast<size_t>(a1)]), e2 = to_program(end[static_cast<size_t>(a2)]);
+  const double c1 = to_program(from[static_cast<size_t>(a1)]), c2 = to_program(from[static_cast<size_t>(a2)]);
+  const double e1 = to_program(to[static_cast<size_t>(a1)]), e2 = to_program(to[static_cast<size_t>(a2)]);
   const int col = w.g[1] >= 0 ? w.gcol[1] : 0;
   const bool inch = units_ == Units::kInch;
   int turns = 1;
@@ -272,17 +288,21 @@ void Interpreter::arc(Words& w, bool cw, const Pose& end) {
       fail(col, buf);
     }
   }
-  (void)s;
   if (feed_mode_ == FeedMode::kInverseTime) {
     const double r = std::hypot(c1 - cen1, c2 - cen2);
     double a0 = std::atan2(c2 - cen2, c1 - cen1), a1e = std::atan2(e2 - cen2, e1 - cen1);
     double sweep = cw ? a0 - a1e : a1e - a0;
     if (sweep <= 0) sweep += 2 * M_PI;
     sweep += 2 * M_PI * (turns - 1);
-    const double dz = to_program(end[static_cast<size_t>(a3)] - position_[static_cast<size_t>(a3)]);
+    const double dz = to_program(to[static_cast<size_t>(a3)] - from[static_cast<size_t>(a3)]);
     const double length = std::hypot(r * sweep, dz);
     feed_ = length == 0 ? 0.1 : length * w['F'];
     canon_.set_feed_rate(ref(col), feed_);
+  }
+  if (twp_) {
+    frame_arc(col, {a1, a2, a3}, cen1 * s, cen2 * s, cw, turns, from, to, end);
+    position_ = end;
+    return;
   }
   const Pose shown = program_pose(end);
   const int rotation = cw ? -turns : turns;
@@ -648,7 +668,7 @@ void Interpreter::motion_block(Words& w) {
     }
   }
   const bool axis_g0 = w.g[0] == 100 || w.g[0] == 280 || w.g[0] == 300 || w.g[0] == 520 || w.g[0] == 920 ||
-                       w.g[0] == 431;
+                       w.g[0] == 431 || w.g[16] == 682;
   if (w.g[1] == 52) {
     nurbs_g5_open(w);
   } else if (w.g[1] == 62) {

@@ -12,7 +12,8 @@ double Interpreter::named_value(const std::string& name, int column) const {
   double v = 0;
   if (!name.empty() && name[0] == '_') {
     const Pose cur = current_point();
-    const auto axis = [&](int i) { return to_program_axis(i, cur[static_cast<size_t>(i)]); };
+    const Pose shown = twp_ ? frame_of(cur) : cur;  // G68.2: the program's own frame
+    const auto axis = [&](int i) { return to_program_axis(i, shown[static_cast<size_t>(i)]); };
     static const char* kPos[] = {"_x", "_y", "_z", "_a", "_b", "_c", "_u", "_v", "_w"};
     for (int i = 0; i < kNumAxes; ++i)
       if (name == kPos[i]) return axis(i);

@@ -13,6 +13,7 @@ namespace {
 int g_group(int g) {
   switch (g) {
     case 40: case 100: case 280: case 281: case 300: case 301: case 520: case 530: case 920: case 921: case 922: case 923:
+    case 531:
       return 0;
     case 0: case 10: case 20: case 30: case 50: case 51: case 52: case 53: case 62: case 330: case 331: case 382:
     case 383: case 384: case 385: case 730: case 740: case 760: case 800: case 810: case 820: case 830: case 840:
@@ -30,6 +31,7 @@ int g_group(int g) {
     case 610: case 611: case 640: return 13;
     case 960: case 970: return 14;
     case 70: case 80: return 15;
+    case 682: case 690: return 16;  // Fanuc's group 16: the tilted work plane
     default: return -1;
   }
 }
@@ -128,7 +130,8 @@ void Interpreter::collect_words(Words& w) {
 // has axis words that no G10/G28/G30/G52/G92 takes.
 int Interpreter::motion_to_be(const Words& w) const {
   const int g0 = w.g[0];
-  const bool g0_takes_axes = g0 == 100 || g0 == 280 || g0 == 300 || g0 == 520 || g0 == 920;
+  // G68.2's X Y Z are its frame's origin.
+  const bool g0_takes_axes = g0 == 100 || g0 == 280 || g0 == 300 || g0 == 520 || g0 == 920 || w.g[16] == 682;
   return w.g[1] >= 0 ? w.g[1] : (w.axes != 0 && !g0_takes_axes ? motion_ : -1);
 }
 
@@ -149,13 +152,16 @@ void Interpreter::check_words(const Words& w) {
   const int to_be = motion_to_be(w);
   const bool g76 = to_be == 760;
   const bool synced_to_be = to_be == 330 || to_be == 331 || g76;
+  const bool g682 = w.g[16] == 682;
   if (uses_axes && (motion == 800 || motion < 0) && g0 != 100 && g0 != 280 && g0 != 300 && g0 != 520 &&
-      g0 != 920 && g0 != 530)
+      g0 != 920 && g0 != 530 && !g682)
     fail(w.column(kAxisLetters[std::countr_zero(w.axes)]), "axis words without a G code that uses them (motion mode is G80)");
   if (g0 == 530 && !(motion == 0 || motion == 10) ) fail(w.gcol[0], "G53 is only allowed with G0 or G1");
   // The distance mode the block leaves (LinuxCNC's check_g_codes: G90 on the line allows it).
   if (g0 == 530 && (w.g[3] == 910 || (w.g[3] != 900 && incremental_)))
     fail(w.gcol[0], "G53 with G91 (incremental) is not allowed");
+  if (g682 && uses_axes && (w.g[1] >= 0 || (g0 >= 0 && g0 != 531)))
+    fail(w.gcol[16], "G68.2's X Y Z are its origin: no motion or other code that uses axis words on its line");
   if (w.g[0] >= 0 && w.g[1] >= 0 && uses_axes && g0 != 530) {
     if (g0 == 100 || g0 == 280 || g0 == 300 || g0 == 520 || g0 == 920)
       fail(w.gcol[1], g_text(g0) + " and " + g_text(w.g[1]) + " both use axis words: only one per line");
@@ -167,7 +173,7 @@ void Interpreter::check_words(const Words& w) {
   const bool cyc = motion >= 730 && motion != 800 && motion != 760 && motion <= 890;
   const bool nurbs_g = motion == 52 || motion == 62 || motion == 50 || motion == 51;
   const bool m19 = w.m[7] == 19;
-  if (!arc && !cyc && !nurbs_g && g0 != 100) {
+  if (!arc && !cyc && !nurbs_g && g0 != 100 && !g682) {
     if (w.on('R') && !m19 && !g76) not_with('R', "with no G code that uses it (G2/G3, a canned cycle, G10, G76, M19)");
     if (w.on('I') && motion != 331 && !g76) not_with('I', "with no G code that uses it (G2/G3, G5, G33.1, G76, G87)");
     if (w.on('J') && !g76) not_with('J', "with no G code that uses it (G2/G3, G5, G76, G87)");
@@ -184,11 +190,11 @@ void Interpreter::check_words(const Words& w) {
     fail(w.column('K'),
          "a knot after the G6.2 curve's knots were complete (control points + order) at line " +
              std::to_string(fanuc_closed_line_));
-  if (!arc && !cyc && g0 != 100 && !nurbs_g && !synced && w.on('K')) not_with('K', "with no G code that uses it (G2/G3, G33, G76, G73/G83 ...)");
-  if (w.on('P') && !(g0 == 40 || g0 == 100 || arc || cyc || nurbs_g || w.g[13] == 640 || w.g[7] == 410 ||
+  if (!arc && !cyc && g0 != 100 && !nurbs_g && !synced && !g682 && w.on('K')) not_with('K', "with no G code that uses it (G2/G3, G33, G76, G73/G83 ...)");
+  if (w.on('P') && !(g0 == 40 || g0 == 100 || g0 == 531 || g682 || arc || cyc || nurbs_g || w.g[13] == 640 || w.g[7] == 410 ||
                      w.g[7] == 420 || w.m[5] >= 0 || w.g[8] == 432 || m19 || g76 || w.m[9] >= 50))
     not_with('P', "with no G code or M code that uses it");
-  if (w.on('Q') && !(cyc || nurbs_g || w.g[13] == 640 || w.m[5] >= 0 || w.m[6] == 61 || g0 == 100 || m19 || g76))
+  if (w.on('Q') && !(cyc || nurbs_g || g682 || w.g[13] == 640 || w.m[5] >= 0 || w.m[6] == 61 || g0 == 100 || m19 || g76))
     not_with('Q', "with no G code or M code that uses it");
   if (w.on('L') && !(g0 == 100 || cyc || nurbs_g || w.m[5] == 66 || g76))
     not_with('L', "with no G code or M code that uses it (G10, canned cycles, G76, M66)");

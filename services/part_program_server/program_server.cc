@@ -5,7 +5,10 @@
 #include <cstdio>
 #include <cstring>
 #include <stdexcept>
+#include <string_view>
+#include <utility>
 
+#include "common/kinematics/kinematics.h"
 #include "common/motion/corner.h"
 #include "common/motion/path_segment.h"
 
@@ -231,6 +234,54 @@ class ProgramServer::Run {
   rs274::ModalState state_;
 };
 
+namespace {
+
+// G53.1 through the machine's kinematics: the rotary joints that point the tool along a
+// direction of the workpiece, as kinematics.solution chooses (P0) or solution 0 / 1
+// (P1: tilt >= 0, P2: tilt <= 0), refused naming the joint out of travel.
+rs274::OrientTool orient_tool(const config::MachineConfig& cfg) {
+  std::shared_ptr<const kinematics::Kinematics> kin = kinematics::make_kinematics(cfg);
+  static constexpr std::string_view kLetters = "XYZABCUVW";
+  std::vector<int> pose_index;  // the interpreter's Pose index of each machine axis
+  for (const auto& a : cfg.axes) pose_index.push_back(static_cast<int>(kLetters.find(a.name)));
+  return [kin, pose_index](const std::array<double, 3>& d, const rs274::Pose& machine, int choice) {
+    kinematics::Pose joints{};
+    for (size_t a = 0; a < pose_index.size(); ++a) joints[a] = machine[static_cast<size_t>(pose_index[a])];
+    kinematics::Orientation o;
+    kin->orient(kinematics::ToolDirection{d[0], d[1], d[2]}, joints, o);
+    if (o.tilt_joint < 0 || o.rotary_joint < 0) throw std::invalid_argument("this machine cannot turn the tool");
+    const auto& lim = kin->joint_limits();
+    const auto outside = [&](const kinematics::RotaryAngles& r) {
+      std::string why;
+      char buf[160];
+      for (const auto& [joint, deg] : {std::pair{o.tilt_joint, r.tilt_deg}, std::pair{o.rotary_joint, r.rotary_deg}}) {
+        const kinematics::JointLimits& l = lim[static_cast<size_t>(joint)];
+        if (deg >= l.min_mm && deg <= l.max_mm) continue;
+        std::snprintf(buf, sizeof buf, "%sjoint %s would stand at %.3f degrees, outside its travel [%g, %g]",
+                      why.empty() ? "" : "; ", l.name.c_str(), deg, l.min_mm, l.max_mm);
+        why += buf;
+      }
+      return why;
+    };
+    int pick = choice == 0 ? o.chosen : choice - 1;
+    if (pick < 0)
+      throw std::invalid_argument("neither solution is in travel: tilt >= 0: " + outside(o.solution[0]) +
+                                  "; tilt <= 0: " + outside(o.solution[1]));
+    const kinematics::RotaryAngles& r = o.solution[static_cast<size_t>(pick)];
+    if (!r.in_travel)
+      throw std::invalid_argument(std::string(pick == 0 ? "the tilt >= 0 solution (P1): " : "the tilt <= 0 solution (P2): ") +
+                                  outside(r));
+    rs274::ToolOrientation t;
+    t.tilt_axis = pose_index[static_cast<size_t>(o.tilt_joint)];
+    t.rotary_axis = pose_index[static_cast<size_t>(o.rotary_joint)];
+    t.tilt_deg = r.tilt_deg;
+    t.rotary_deg = r.rotary_deg;
+    return t;
+  };
+}
+
+}  // namespace
+
 ProgramSetup program_setup(const config::MachineConfig& cfg) {
   ProgramSetup s;
   s.machine.axes.clear();
@@ -285,6 +336,7 @@ ProgramSetup program_setup(const config::MachineConfig& cfg) {
   }
   for (const auto& a : cfg.axes) s.travel_mm.emplace_back(a.min_mm, a.max_mm);
   s.safe_z_mm = cfg.operator_.safe_z_mm;
+  if (cfg.kinematics.type != "identity") s.machine.orient_tool = orient_tool(cfg);
   return s;
 }
 
@@ -333,7 +385,7 @@ std::string describe(const ProgramSetup& s) {
                m_tool_in_var_file, m_write_tool_table, m_has_probe, m_spindle_sync, m_orient_offset_deg,
                m_machine_results_supplied, m_digital_inputs, m_analog_inputs, m_digital_outputs, m_analog_outputs,
                m_block_delete, m_optional_stop, m_start_position, m_max_call_depth, m_m6_remap, m_fanuc_subs,
-               m_loop_on_main_m99, m_initial_modes] = machine;
+               m_loop_on_main_m99, m_initial_modes, m_orient_tool] = machine;
   const auto& [b_axis_names, b_start_position_mm, b_rotary, b_spindle_rpm, b_process, b_fit_runs,
                b_fit_max_segment_mm, b_fit_max_turn_deg, b_fit_max_spans, b_ipo_period_s, b_corner_dv_mm_s,
                b_accel_mm_s2, b_jerk_mm_s3, b_chord_tolerance_mm, b_default_path_tolerance_mm, b_spindle_sync] = builder;
@@ -364,6 +416,8 @@ std::string describe(const ProgramSetup& s) {
   line("machine.loop_on_main_m99", flag(m_loop_on_main_m99));
   // The modes an MDI line starts in: the server's own, per line, never a machine's setting.
   line("machine.initial_modes", m_initial_modes ? "given" : "none");
+  // G53.1 through the machine's kinematics (made from kinematics.type, described there).
+  line("machine.orient_tool", m_orient_tool ? "kinematics" : "none");
   line("builder.axis_names", list(b_axis_names, quoted));
   line("builder.start_position_mm", list(b_start_position_mm, num));
   line("builder.rotary", list(b_rotary, flag));

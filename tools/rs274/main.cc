@@ -2,10 +2,11 @@
 // format of LinuxCNC's standalone interpreter rs274, for the conformance harness
 // (tools/conformance). Flags as rs274's where they matter:
 //   cnc-rs274 [-g] [-i INI] [-t TOOLTABLE] [-v VARFILE] [-b] [--subroutine-path D:D]
-//             [--table-units inch|mm] [--axes XYZABCUVW] PROGRAM [OUT]
+//             [--table-units inch|mm] [--axes XYZABCUVW] [--machine M] PROGRAM [OUT]
 // Exit status 0 when the program ran to its end, 1 on an interpreter error (the
 // message on stderr as "file:line:column: what", then the offending line), 2 on bad
-// flags (util/cli.h). --subroutine-path overrides the INI file's SUBROUTINE_PATH. Like rs274, lengths in the tool table and var file are read as inches unless
+// flags (util/cli.h). --machine: a machine file whose kinematics G53.1 turns the tool
+// with (the tilted work plane's 3+2 programs). --subroutine-path overrides the INI file's SUBROUTINE_PATH. Like rs274, lengths in the tool table and var file are read as inches unless
 // --table-units mm.
 #include <cctype>
 #include <cstdio>
@@ -16,9 +17,11 @@
 #include <string>
 #include <vector>
 
+#include "common/config/machine_config.h"
 #include "common/rs274/canon_printer.h"
 #include "common/rs274/interpreter.h"
 #include "common/util/cli.h"
+#include "services/part_program_server/program_server.h"
 
 namespace {
 
@@ -97,6 +100,9 @@ int main(int argc, char** argv) {
   setup.digital_inputs = setup.analog_inputs = 64;
   app.add_option("--inputs", setup.digital_inputs, "M66 P inputs (default 64; #5399 as rs274 reads it)");
   app.add_option("--analog-inputs", setup.analog_inputs, "M66 E inputs (default 64)");
+  std::string machine_file;
+  app.add_option("--machine", machine_file, "a machine file: G53.1 orients the tool through its kinematics")
+      ->type_name("M");
   app.add_option("program", program, "the RS274NGC program")->required()->type_name("PROGRAM");
   app.add_option("out", out_path, "where the canonical calls go (default: stdout)")->type_name("OUT");
   if (const int rc = cnc::util::cli::parse(app, argc, argv); rc >= 0) return rc;
@@ -129,6 +135,14 @@ int main(int argc, char** argv) {
       if (yes(std::string("AXIS_") + a, "WRAPPED_ROTARY")) setup.wrapped += a;
   }
   setup.subroutine_path = split_path(sub_path);
+  if (!machine_file.empty()) {
+    try {
+      setup.orient_tool = cnc::pps::program_setup(cnc::config::load_machine_config(machine_file)).machine.orient_tool;
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "cnc-rs274: %s\n", e.what());
+      return 2;
+    }
+  }
   std::FILE* out = stdout;
   if (!out_path.empty()) {
     out = std::fopen(out_path.c_str(), "w");
