@@ -75,7 +75,7 @@ int run(const Spec& spec, int argc, char** argv,
       cfg = config::load_machine_config(args.machine_file);
       // The interpolator, bridge and monitor still take axes for joints: a five-axis
       // machine would move its joints to the tool's coordinates.
-      if (cfg.kinematics.type != "identity") {
+      if (cfg.kinematics.type != "identity" && !spec.applies_kinematics) {
         std::string what = "the cell applies only identity kinematics so far, not ";
         what += cfg.kinematics.type;
         throw config::ConfigError(args.machine_file, "kinematics.type", what += " (docs/motion.md#five-axis-kinematics)");

@@ -42,6 +42,9 @@ struct Spec {
   std::vector<Flag> options;           // accepted --key value options besides --machine
   std::vector<Flag> flags;             // accepted --flag switches
   bool needs_machine = true;
+  // Applies the machine's kinematics (the dry run); every other program refuses a
+  // machine whose kinematics.type is not identity.
+  bool applies_kinematics = false;
 };
 
 // Exit codes shared by all services.

@@ -1,6 +1,9 @@
 // cnc-plan: dry run of a part program through the interpolator core — no LCM, no
 // clock. Writes the setpoint stream as CSV and prints the program time. Two runs
-// of the same program and config give identical files, byte for byte.
+// of the same program and config give identical files, byte for byte. On a five-axis
+// machine it applies the kinematics: every setpoint (the tool tip in the part, the
+// rotary axes) is turned into joints, which the CSV carries and the run checks
+// against the joints' travel (refused, naming the joint and the line) and limits.
 //
 //   cnc-plan --machine M --program P --csv OUT [--override 1.0] [--param-update corrected]
 //            [--subroutine-path DIR:DIR] [--tool-table FILE] [--block-delete on|off] [--start X,Y,Z]
@@ -16,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "common/kinematics/kinematics.h"
 #include "common/motion/feed_override.h"
 #include "common/motion/feed_policy.h"
 #include "common/motion/interpolator.h"
@@ -113,6 +117,10 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
   core.apply_command(cnc::interp::Command{cnc::interp::Command::Kind::kLoad, 1.0});
   core.apply_command(cnc::interp::Command{cnc::interp::Command::Kind::kStart, 1.0});
 
+  // The joints of a five-axis machine: each setpoint's inverse (tool length 0: the
+  // program's G43 is already in Z, along the part's Z).
+  const std::unique_ptr<cnc::kinematics::Kinematics> kin = cnc::kinematics::make_kinematics(cfg);
+  const bool five_axis = cfg.kinematics.type != "identity";
   std::unique_ptr<std::FILE, int (*)(std::FILE*)> csv(nullptr, &std::fclose);
   if (!csv_path.empty()) {
     csv.reset(std::fopen(csv_path.c_str(), "w"));
@@ -120,7 +128,10 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
       std::fprintf(stderr, "cnc-plan: cannot write %s\n", csv_path.c_str());
       return 1;
     }
-    std::fputs("cycle,t_s,x_mm,y_mm,z_mm,line,u,feed_mm_min,limit\n", csv.get());
+    std::fputs("cycle,t_s,x_mm,y_mm,z_mm,line,u,feed_mm_min,limit", csv.get());
+    if (five_axis)
+      for (int j = 0; j < kin->joints(); ++j) std::fprintf(csv.get(), ",j_%s", kin->joint_limits()[static_cast<size_t>(j)].name.c_str());
+    std::fputs("\n", csv.get());
   }
   const int64_t num_blocks = server.num_blocks();
   // A program that never ends (a loop without exit) must not hold the dry run forever.
@@ -133,6 +144,31 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
   const double T = cfg.ipo_period_s;
   std::array<double, cnc::program::kMaxAxes> p_prev = core.last().position_mm, v1{}, v2{};
   std::array<double, cnc::program::kMaxAxes> use_v{}, use_a{}, use_j{};
+  cnc::kinematics::Pose joints{}, j_prev{}, jv1{}, jv2{};
+  std::array<double, cnc::program::kMaxAxes> juse_v{}, juse_a{}, juse_j{};
+  std::string out_of_travel;  // the first joint out of its travel: where and how far
+  if (five_axis && !kin->inverse(p_prev, j_prev)) out_of_travel = "the start is no pose of the machine";
+  const auto account_joints = [&](const cnc::kinematics::Pose& j, int32_t line) {
+    const auto& lim = kin->joint_limits();
+    for (int a = 0; a < kin->joints(); ++a) {
+      const size_t k = static_cast<size_t>(a);
+      const double v = (j[k] - j_prev[k]) / T;
+      const double acc = (v - jv1[k]) / T;
+      const double jerk = (v - 2 * jv1[k] + jv2[k]) / (T * T);
+      juse_v[k] = std::max(juse_v[k], std::fabs(v) / lim[k].max_velocity_mm_s);
+      juse_a[k] = std::max(juse_a[k], std::fabs(acc) / lim[k].max_accel_mm_s2);
+      juse_j[k] = std::max(juse_j[k], std::fabs(jerk) / lim[k].max_jerk_mm_s3);
+      jv2[k] = jv1[k];
+      jv1[k] = v;
+      if (out_of_travel.empty() && !(j[k] >= lim[k].min_mm && j[k] <= lim[k].max_mm)) {
+        char buf[200];
+        std::snprintf(buf, sizeof buf, "joint %s at %.3f, outside its travel [%g, %g], at line %d", lim[k].name.c_str(),
+                      j[k], lim[k].min_mm, lim[k].max_mm, line);
+        out_of_travel = buf;
+      }
+    }
+    j_prev = j;
+  };
   auto account = [&](const std::array<double, cnc::program::kMaxAxes>& p) {
     for (int a = 0; a < naxes; ++a) {
       const double v = (p[a] - p_prev[a]) / T;
@@ -177,16 +213,28 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
     ++cycles;
     max_feed = std::max(max_feed, sp.feed_mm_per_min);
     account(sp.position_mm);
+    if (five_axis) {
+      if (!kin->inverse(sp.position_mm, joints) && out_of_travel.empty())
+        out_of_travel = "no pose of the machine at line " + std::to_string(sp.source_line);
+      account_joints(joints, sp.source_line);
+    }
     if (csv) {
-      std::fprintf(csv.get(), "%" PRId64 ",%.6f,%.9f,%.9f,%.9f,%d,%.9f,%.6f,%s\n", sp.cycle,
+      std::fprintf(csv.get(), "%" PRId64 ",%.6f,%.9f,%.9f,%.9f,%d,%.9f,%.6f,%s", sp.cycle,
                    static_cast<double>(sp.cycle) * cfg.ipo_period_s, sp.position_mm[0],
                    sp.num_axes > 1 ? sp.position_mm[1] : 0.0, sp.num_axes > 2 ? sp.position_mm[2] : 0.0,
                    sp.source_line, sp.u, sp.feed_mm_per_min, cnc::interp::to_string(sp.limit));
+      if (five_axis)
+        for (int j = 0; j < kin->joints(); ++j) std::fprintf(csv.get(), ",%.9f", joints[static_cast<size_t>(j)]);
+      std::fputs("\n", csv.get());
     }
   }
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   account(p_prev);
   account(p_prev);
+  if (five_axis) {
+    account_joints(j_prev, 0);
+    account_joints(j_prev, 0);
+  }
   if (core.state() != cnc::interp::RunState::kDone) {
     std::fprintf(stderr,
                  "cnc-plan: program did not finish within %.0f s of program time (%" PRId64
@@ -202,6 +250,18 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
   for (int a = 0; a < naxes; ++a)
     std::printf(" %s v %.3f a %.3f j %.3f;", cfg.axes[a].name.c_str(), use_v[a], use_a[a], use_j[a]);
   std::printf("\n");
+  if (five_axis) {
+    // The planner limits the axes; the joints' use is reported, not yet planned for.
+    std::printf("peak use of the joint limits (%s, finite differences of the joints):", cfg.kinematics.type.c_str());
+    for (int a = 0; a < kin->joints(); ++a)
+      std::printf(" %s v %.3f a %.3f j %.3f;", kin->joint_limits()[static_cast<size_t>(a)].name.c_str(),
+                  juse_v[static_cast<size_t>(a)], juse_a[static_cast<size_t>(a)], juse_j[static_cast<size_t>(a)]);
+    std::printf("\n");
+    if (!out_of_travel.empty()) {
+      std::fprintf(stderr, "cnc-plan: %s: %s\n", program_path.c_str(), out_of_travel.c_str());
+      return 1;
+    }
+  }
   return 0;
 }
 
@@ -220,5 +280,6 @@ int main(int argc, char** argv) {
                            {"block-delete", "on|off", "the block delete switch: '/' lines skipped when on (default: "
                                                       "program.block_delete)"}},
                           {{"show-setup", "", "print the settings programs are interpreted with, then exit"}}};
+  spec.applies_kinematics = true;
   return cnc::service::run(spec, argc, argv, run_plan);
 }
