@@ -40,7 +40,7 @@ constexpr std::string_view kMotionKeys[] = {"default_feed_mm_per_min", "chord_to
 constexpr std::string_view kOperatorKeys[] = {"homing_required", "jog_keepalive_timeout_s", "mdi_directory",
                                               "safe_z_mm"};
 constexpr std::string_view kHmiKeys[] = {"listen",      "port",           "users_file", "read_only_without_login",
-                                         "program_dir", "status_rate_hz", "runs_dir"};
+                                         "program_dir", "status_rate_hz", "runs_dir",   "upload_max_bytes"};
 constexpr std::string_view kOpcuaKeys[] = {"listen",   "port",          "anonymous",        "allow_security_none",
                                            "trust_unknown_clients", "hmi_user", "hmi_password_file", "identification"};
 constexpr std::string_view kOpcuaIdKeys[] = {"manufacturer", "model", "serial_number", "product_instance_uri",
@@ -330,6 +330,7 @@ void read_hmi(MapReader r, HmiConfig& h) {
   h.program_dir = beside(r, r.get_string("program_dir", "../programs"));
   h.status_rate_hz = r.get_double("status_rate_hz", h.status_rate_hz, 20.0, 100.0);
   h.runs_dir = beside(r, r.get_string("runs_dir", ""));
+  h.upload_max_bytes = r.get_int("upload_max_bytes", h.upload_max_bytes, 1024, int64_t{256} << 20);
   const bool local = h.listen == "127.0.0.1" || h.listen == "::1" || h.listen == "localhost";
   if (!local && h.users_file.empty())
     r.fail("users_file", "is required when hmi.listen is not a localhost address ('" + h.listen +

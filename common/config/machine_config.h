@@ -289,6 +289,7 @@ struct HmiConfig {
   std::string program_dir;           // the only folder programs are loaded from ("" = ../programs beside the config)
   double status_rate_hz = 25;        // status pushed to each browser (>= 20)
   std::string runs_dir;              // the recorded runs the page lists ("" = logger.directory)
+  int64_t upload_max_bytes = int64_t{8} << 20;  // the largest program a browser may upload into program_dir
 };
 
 // The OPC UA server cnc-opcua (section `opcua:`, optional; docs/opcua.md): OPC 40501-1

@@ -3,7 +3,10 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <cstring>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -14,6 +17,8 @@
 #include "cnc/lcmt_program_block.hpp"
 #include "cnc/lcmt_program_command.hpp"
 #include "common/motion/feed_override.h"
+#include "common/rs274/parameters.h"
+#include "common/rs274/tool_table.h"
 #include "common/service/machine_status.h"
 #include "common/util/clock.h"
 #include "common/util/install.h"
@@ -116,6 +121,26 @@ const std::vector<Api::Action>& Api::actions() {
        "`touch_off started` / refusal with its place", false, &Api::touch_off},
       {"mdi", "`line`", "PROGRAM_CMD MDI, then START", "`mdi started` / refusal (`mdi-…ngc:1:7: …`)", false,
        &Api::mdi},
+      {"offsets", "", "nothing (reads `program.var_file` and `program.tool_table`)",
+       "an `offsets` message {coord, systems [{name, p, values, rotation}], g92 {active, values}, tools [{number, "
+       "pocket, offset, diameter, comment}], locked}",
+       true, &Api::send_offsets},
+      {"set_offset", "`system` (`G54` .. `G59.3`), `values` {axis: mm}",
+       "PROGRAM_CMD MDI `G10 L2 P<n> X.. Y..`, then START (as `mdi`)",
+       "`set_offset started`, refused while a program runs (`set_offset refused: a program runs ...`), or the MDI "
+       "line's refusal",
+       false, &Api::set_offset},
+      {"clear_g92", "", "PROGRAM_CMD MDI `G92.1`, then START", "`clear_g92 started` / refused as `set_offset`", false,
+       &Api::clear_g92},
+      {"set_tool", "`tool` (T number), `length` (Z offset, mm), `diameter` (mm, optional)",
+       "PROGRAM_CMD MDI `G10 L1 P<t> Z.. R..`, then START (the tool table written back)",
+       "`set_tool started` / refused as `set_offset`", false, &Api::set_tool},
+      {"upload", "`name` (a file name), `text` (the program), `replace` (bool)",
+       "nothing to the cell: the file written into `program_dir`",
+       "`uploaded NAME (N bytes)` and a new `programs`; refused (naming why) without a logged-in user, over "
+       "`hmi.upload_max_bytes`, for a name with a folder, a hidden or non-program name, or an existing file "
+       "without `replace`",
+       false, &Api::upload},
       {"programs", "", "nothing (lists the program directory)", "a `programs` message", true, &Api::send_programs},
       {"runs", "", "nothing (lists the runs directory)",
        "a `runs` message ([{name, log, start, duration_s, programs, mdi_lines, alarms, faults, report_url}])", true,
@@ -136,7 +161,7 @@ const Api::Action* Api::find_action(const std::string& name) {
   return nullptr;
 }
 
-void Api::message(uint64_t client, bool may_control, const std::string& text) {
+void Api::message(uint64_t client, bool may_control, const std::string& text, const std::string& user) {
   json j;
   try {
     j = json::parse(text);
@@ -166,7 +191,7 @@ void Api::message(uint64_t client, bool may_control, const std::string& text) {
       result(client, id, false, "unknown action '" + action + "'");
       return;
     }
-    (this->*(a->handler))(Request{client, id, j, action});
+    (this->*(a->handler))(Request{client, id, j, action, user});
   } catch (const std::exception& ex) {
     result(client, id, false, action + ": " + ex.what());
   }
@@ -348,6 +373,195 @@ void Api::mdi(const Request& r) {
   send_line(r, c);
 }
 
+// ---- work offsets, tools, upload ----
+
+namespace {
+
+const char* const kSystems[] = {"G54", "G55", "G56", "G57", "G58", "G59", "G59.1", "G59.2", "G59.3"};
+constexpr char kPoseLetters[] = "XYZABCUVW";
+
+double file_stamp(const std::string& path) {
+  std::error_code ec;
+  if (path.empty()) return 0;
+  const auto t = std::filesystem::last_write_time(path, ec);
+  if (ec) return 0;
+  return std::chrono::duration<double>(t.time_since_epoch()).count();
+}
+
+std::string format_mm(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.4f", v);
+  std::string s = buf;
+  while (s.back() == '0') s.pop_back();
+  if (s.back() == '.') s.pop_back();
+  return s == "-0" ? "0" : s;
+}
+
+}  // namespace
+
+std::string Api::offsets_locked() const {
+  const bool running = have_program_ && (program_.state == lcmt_program_state::RUNNING ||
+                                         program_.state == lcmt_program_state::HELD);
+  const bool moving = have_interp_ && (interp_.state == lcmt_setpoint::RUNNING || interp_.state == lcmt_setpoint::HELD);
+  if (!running && !moving) return "";
+  return std::string("a program runs (program ") + program_state_name(have_program_ ? program_.state : 0) +
+         ", interpolator " + interp_state_name(have_interp_ ? interp_.state : 0) +
+         "): offsets and tools are changed between programs";
+}
+
+json Api::offsets() const {
+  json m = {{"t", "offsets"}, {"var_file", cfg_.program.var_file}, {"tool_table", cfg_.program.tool_table}};
+  // The machine's axes on the interpreter's pose (X Y Z A B C U V W).
+  std::vector<int> pose;
+  json names = json::array();
+  for (const auto& a : cfg_.axes) {
+    const char* at = std::strchr(kPoseLetters, a.name.empty() ? '?' : a.name[0]);
+    pose.push_back(at == nullptr ? -1 : static_cast<int>(at - kPoseLetters));
+    names.push_back(a.name);
+  }
+  m["axes"] = names;
+  rs274::Parameters params;
+  std::string error;
+  if (!cfg_.program.var_file.empty() && std::filesystem::exists(cfg_.program.var_file)) {
+    try {
+      params.read_var_file(cfg_.program.var_file);
+    } catch (const std::exception& ex) {
+      error = ex.what();
+    }
+  }
+  auto values = [&](int base) {
+    json v = json::array();
+    for (int p : pose) v.push_back(p < 0 ? 0.0 : fin(params.get(base + p)));
+    return v;
+  };
+  const int coord = static_cast<int>(std::lround(params.get(5220)));
+  m["coord"] = coord >= 1 && coord <= 9 ? coord : 1;
+  json systems = json::array();
+  for (int n = 1; n <= 9; ++n)
+    systems.push_back({{"name", kSystems[n - 1]}, {"p", n}, {"values", values(5201 + 20 * n)},
+                       {"rotation", fin(params.get(5210 + 20 * n))}});
+  m["systems"] = systems;
+  m["g92"] = {{"active", params.get(5210) != 0}, {"values", values(5211)}};
+  json tools = json::array();
+  if (!cfg_.program.tool_table.empty()) {
+    try {
+      rs274::ToolTable table;
+      table.read(cfg_.program.tool_table);
+      for (const rs274::Tool& t : table.tools()) {
+        json off = json::array();
+        for (int p : pose) off.push_back(p < 0 ? 0.0 : fin(t.offset[static_cast<size_t>(p)]));
+        tools.push_back({{"number", t.number}, {"pocket", t.pocket}, {"offset", off},
+                         {"diameter", fin(t.diameter)}, {"comment", t.comment}});
+      }
+    } catch (const std::exception& ex) {
+      error += (error.empty() ? "" : "; ") + std::string(ex.what());
+    }
+  }
+  m["tools"] = tools;
+  m["error"] = error;
+  m["locked"] = offsets_locked();
+  return m;
+}
+
+void Api::send_offsets(const Request& r) { out_.send_to(r.client, offsets()); }
+
+void Api::send_mdi_line(const Request& r, const std::string& line) {
+  if (const std::string why = offsets_locked(); !why.empty()) {
+    result(r.client, r.id, false, r.action + " refused: " + why);
+    return;
+  }
+  service::OperatorCommand c;
+  c.command = lcmt_program_command::MDI;
+  c.text = line;
+  spdlog::info("cnc-hmi: client {}: {} as MDI '{}'", r.client, r.action, line);
+  send_line(r, c);
+}
+
+void Api::set_offset(const Request& r) {
+  const std::string sys = r.message.value("system", "");
+  int p = 0;
+  for (int n = 1; n <= 9; ++n)
+    if (sys == kSystems[n - 1]) p = n;
+  if (p == 0) {
+    result(r.client, r.id, false, "set_offset: 'system' must be one of G54 .. G59.3 (G92: clear_g92), not '" + sys + "'");
+    return;
+  }
+  const json& v = r.message.contains("values") ? r.message["values"] : json::object();
+  if (!v.is_object() || v.empty()) {
+    result(r.client, r.id, false, "set_offset: 'values' must name at least one axis, {\"X\": 10.5}");
+    return;
+  }
+  std::string line = "G10 L2 P" + std::to_string(p);
+  for (const auto& [axis, value] : v.items()) {
+    if (cfg_.axis_index(axis) < 0) {
+      result(r.client, r.id, false, "set_offset: the machine has no axis '" + axis + "'");
+      return;
+    }
+    const double mm = number(v, axis.c_str(), 0.0);
+    if (std::fabs(mm) > 1e6) {
+      result(r.client, r.id, false, "set_offset: " + axis + " " + format_mm(mm) + " mm is not an offset");
+      return;
+    }
+    line += " " + axis + format_mm(mm);
+  }
+  send_mdi_line(r, line);
+}
+
+void Api::clear_g92(const Request& r) { send_mdi_line(r, "G92.1"); }
+
+void Api::set_tool(const Request& r) {
+  const double t = number(r.message, "tool", -1);
+  if (!(t >= 1 && t <= 99999 && t == std::floor(t))) {
+    result(r.client, r.id, false, "set_tool: 'tool' must be a tool number >= 1");
+    return;
+  }
+  if (!r.message.contains("length") && !r.message.contains("diameter")) {
+    result(r.client, r.id, false, "set_tool: give 'length' (Z offset, mm) or 'diameter' (mm)");
+    return;
+  }
+  std::string line = "G10 L1 P" + std::to_string(static_cast<int>(t));
+  if (r.message.contains("length")) {
+    const double z = number(r.message, "length", 0);
+    if (std::fabs(z) > 1e5) {
+      result(r.client, r.id, false, "set_tool: length " + format_mm(z) + " mm is not a tool length");
+      return;
+    }
+    line += " Z" + format_mm(z);
+  }
+  if (r.message.contains("diameter")) {
+    const double d = number(r.message, "diameter", 0);
+    if (!(d >= 0 && d <= 1e4)) {
+      result(r.client, r.id, false, "set_tool: diameter " + format_mm(d) + " mm is not a tool diameter (>= 0)");
+      return;
+    }
+    line += " R" + format_mm(d / 2);
+  }
+  send_mdi_line(r, line);
+}
+
+void Api::upload(const Request& r) {
+  const std::string name = r.message.value("name", "");
+  if (r.user.empty()) {
+    result(r.client, r.id, false, "upload refused: uploading needs a logged-in user (hmi.users_file)");
+    return;
+  }
+  if (!r.message.contains("text") || !r.message["text"].is_string()) {
+    result(r.client, r.id, false, "upload refused: 'text' (the program) must be a string");
+    return;
+  }
+  const std::string& text = r.message["text"].get_ref<const std::string&>();
+  const bool replace = r.message.value("replace", false);
+  std::string why = check_upload(cfg_.hmi.program_dir, name, text, cfg_.hmi.upload_max_bytes, replace);
+  if (why.empty()) why = write_upload(cfg_.hmi.program_dir, name, text);
+  if (!why.empty()) {
+    result(r.client, r.id, false, "upload refused: " + why);
+    return;
+  }
+  spdlog::info("cnc-hmi: {} uploaded {} ({} bytes) into {}", r.user, name, text.size(), cfg_.hmi.program_dir);
+  result(r.client, r.id, true, "uploaded " + name + " (" + std::to_string(text.size()) + " bytes)");
+  out_.broadcast({{"t", "programs"}, {"programs", list_programs(cfg_.hmi.program_dir)}}, false);
+}
+
 // MDI and touch-off: the server writes the line to a program of its own and loads
 // it; follow() starts it once the interpolator has taken it.
 void Api::send_line(const Request& r, service::OperatorCommand& c) {
@@ -466,8 +680,11 @@ void Api::open(uint64_t client, bool may_control, const std::string& user) {
                         {"status_rate_hz", cfg_.hmi.status_rate_hz},
                         // The feed slider's top: the largest override the cell accepts.
                         {"max_feed_override", motion::kMaxFeedOverride},
+                        // The largest upload (the page refuses a larger file before sending it).
+                        {"upload_max_bytes", cfg_.hmi.upload_max_bytes},
                         {"devices", devices()}});
   out_.send_to(client, program_msg_);
+  out_.send_to(client, offsets());
   if (!preview_msg_.is_null()) out_.send_to(client, preview_msg_);
   json list = json::array();
   for (const auto& a : alarms_shown_) list.push_back(a);
@@ -536,6 +753,19 @@ bool Api::all_enabled() const {
 
 void Api::update(double now) {
   follow(now);
+
+  // The var file and the tool table, written at each program's (and MDI line's) end:
+  // a change is sent to every client (looked at twice a second).
+  if (now - offsets_checked_s_ >= 0.5) {
+    offsets_checked_s_ = now;
+    const double stamp = file_stamp(cfg_.program.var_file) + 1e-3 * file_stamp(cfg_.program.tool_table);
+    const bool was_locked = offsets_locked_;
+    offsets_locked_ = !offsets_locked().empty();
+    if (stamp != offsets_stamp_ || was_locked != offsets_locked_) {
+      offsets_stamp_ = stamp;
+      out_.broadcast(offsets(), false);
+    }
+  }
 
   // The loaded program: its text and its dry run for the preview, once per load.
   if (have_program_ && !program_.program_path.empty() && program_.program_path != program_text_path_) {

@@ -56,6 +56,7 @@ class Api {
     const nlohmann::json& id;
     const nlohmann::json& message;
     const std::string& action;
+    const std::string& user;  // the logged-in user ("" without a login)
   };
   struct Action {
     const char* name;
@@ -76,7 +77,8 @@ class Api {
 
   void open(uint64_t client, bool may_control, const std::string& user);  // hello, program, preview, alarms
   void close(uint64_t client);
-  void message(uint64_t client, bool may_control, const std::string& text);  // one action
+  // One action; `user`: who is logged in on that client ("" without a login).
+  void message(uint64_t client, bool may_control, const std::string& text, const std::string& user = "");
   // The pending actions followed, the loaded program's text and preview, the runs worker's answers.
   void update(double now);
   nlohmann::json status(double now, int64_t login_refusals, int clients) const;
@@ -136,6 +138,19 @@ class Api {
   void jog_stop(const Request& r);
   void touch_off(const Request& r);
   void mdi(const Request& r);
+  void send_offsets(const Request& r);
+  void set_offset(const Request& r);
+  void clear_g92(const Request& r);
+  void set_tool(const Request& r);
+  void upload(const Request& r);
+
+  // The work offsets and the tool table as the interpreter keeps them (program.var_file,
+  // program.tool_table), for the `offsets` message.
+  nlohmann::json offsets() const;
+  // "" when the offsets and tools may be changed now, else why not (a program runs).
+  std::string offsets_locked() const;
+  // An offset or tool edit as the MDI line an operator would type (as AXIS's touch-off).
+  void send_mdi_line(const Request& r, const std::string& line);
 
   int jog_axis(const Request& r);  // the axis of a jog message, -1 (answered) when the machine has none
   void send_line(const Request& r, service::OperatorCommand& c);
@@ -183,6 +198,10 @@ class Api {
   nlohmann::json program_msg_ = {{"t", "program"}, {"path", ""}, {"text", ""}};
   nlohmann::json preview_msg_;
   int64_t preview_token_ = 0;
+  // The var file's and the tool table's modification times: a change is broadcast.
+  double offsets_stamp_ = -1;
+  double offsets_checked_s_ = 0;
+  bool offsets_locked_ = false;
 };
 
 }  // namespace cnc::hmi

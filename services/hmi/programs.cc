@@ -1,8 +1,14 @@
 #include "services/hmi/programs.h"
 
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
+#include <cerrno>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <system_error>
 
@@ -76,6 +82,56 @@ std::string resolve_program(const std::string& dir, const std::string& name, std
     return "";
   }
   return full.string();
+}
+
+std::string check_upload(const std::string& dir, const std::string& name, const std::string& text, int64_t max_bytes,
+                         bool replace) {
+  const std::string q = "'" + name + "'";
+  if (name.empty()) return "no file name";
+  if (name.size() > 100) return "the name is " + std::to_string(name.size()) + " characters long, more than 100";
+  if (name.find('/') != std::string::npos || name.find('\\') != std::string::npos)
+    return q + " names a folder: a plain file name only (programs go into " + dir + " itself)";
+  if (name[0] == '.') return q + " is a hidden file (starts with '.')";
+  for (const char c : name)
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '_' || c == '-' || c == '+'))
+      return q + " has a character other than letters, digits and . _ - +";
+  if (!is_program(fs::path(name))) return q + " is not a program's name: the extension must be .ngc, .nc or .tap";
+  if (static_cast<int64_t>(text.size()) > max_bytes)
+    return q + " is " + std::to_string(text.size()) + " bytes, more than hmi.upload_max_bytes (" +
+           std::to_string(max_bytes) + ")";
+  if (const size_t nul = text.find('\0'); nul != std::string::npos)
+    return q + " is not text (a NUL byte at offset " + std::to_string(nul) + ")";
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) return "the program directory " + dir + " (hmi.program_dir) is not there";
+  const fs::path target = fs::path(dir) / name;
+  if (fs::exists(fs::symlink_status(target, ec))) {
+    if (!fs::is_regular_file(fs::symlink_status(target, ec)))
+      return q + " exists in " + dir + " and is not a plain file: it is not replaced";
+    if (!replace) return q + " exists in " + dir + ": kept (replace it on purpose: replace true)";
+  }
+  return "";
+}
+
+std::string write_upload(const std::string& dir, const std::string& name, const std::string& text) {
+  const fs::path target = fs::path(dir) / name;
+  std::string tmp = (fs::path(dir) / ".upload-XXXXXX").string();
+  const int fd = mkstemp(tmp.data());
+  if (fd < 0) return "cannot write into " + dir + ": " + std::strerror(errno);
+  size_t done = 0;
+  while (done < text.size()) {
+    const ssize_t n = ::write(fd, text.data() + done, text.size() - done);
+    if (n <= 0) break;
+    done += static_cast<size_t>(n);
+  }
+  const bool ok = done == text.size() && fchmod(fd, 0644) == 0 && fsync(fd) == 0;
+  const int saved = errno;
+  close(fd);
+  if (!ok || std::rename(tmp.c_str(), target.c_str()) != 0) {
+    const std::string why = std::strerror(ok ? errno : saved);
+    std::remove(tmp.c_str());
+    return "cannot write " + target.string() + ": " + why;
+  }
+  return "";
 }
 
 std::vector<RunEntry> list_runs(const std::string& dir, size_t limit) {

@@ -1,6 +1,7 @@
 #pragma once
 // The machine's program directory as the HMI offers it: the programs under it, and
 // a name from a browser resolved to a file inside it, or refused with the reason.
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -14,6 +15,16 @@ std::vector<std::string> list_programs(const std::string& dir, size_t limit = 10
 // the name is absolute, climbs out (".."), leads outside through a link, or is not a
 // program file there. Nothing outside `dir` is reachable.
 std::string resolve_program(const std::string& dir, const std::string& name, std::string* error);
+
+// A program uploaded from a browser (the API's `upload`), checked before anything is
+// written: `name` a plain file name (no folder, not hidden, of letters, digits and
+// "._-+", at most 100 characters, a program's extension .ngc .nc .tap), `text` at most
+// `max_bytes` and text (no NUL byte), an existing file replaced only when `replace`.
+// "" when it may be written, else why not (naming the name, the limit's config key...).
+std::string check_upload(const std::string& dir, const std::string& name, const std::string& text, int64_t max_bytes,
+                         bool replace);
+// Writes it (a temporary file in `dir`, synced, renamed over the name): "" or why not.
+std::string write_upload(const std::string& dir, const std::string& name, const std::string& text);
 
 // The runs of a logger directory: each folder with a .lcmlog in it (./cnc demo's
 // runs/demo-*) or a .lcmlog file directly in `dir` (./cnc up's logger), newest first.

@@ -7,6 +7,7 @@
 //
 //   cnc-plan --machine M --program P --csv OUT [--override 1.0] [--param-update corrected]
 //            [--subroutine-path DIR:DIR] [--tool-table FILE] [--block-delete on|off] [--start X,Y,Z]
+//            [--with-kind] [--modes OUT]
 //   cnc-plan --machine M --show-setup     (what a program may do here: the program server's setup)
 #include <utility>
 #include <array>
@@ -15,6 +16,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -24,10 +26,67 @@
 #include "common/motion/feed_policy.h"
 #include "common/motion/interpolator.h"
 #include "common/service/service.h"
+#include "common/rs274/modal_text.h"
 #include "common/util/signals.h"
 #include "services/part_program_server/program_server.h"
 
 namespace {
+
+// --modes OUT: the interpreter's modal state after each line of the main program (a
+// row where it changed), interpreted again with the dry run's setup: what the HMI shows
+// as the active G-codes, F and S, and the work offset, at the line a program runs.
+int write_modes(const cnc::pps::ProgramSetup& setup, const std::string& program, const std::vector<double>& start,
+                const std::string& out_path) {
+  struct Quiet : cnc::rs274::Canon {
+    void straight_traverse(const cnc::rs274::SourceRef&, const cnc::rs274::Pose&) override {}
+    void straight_feed(const cnc::rs274::SourceRef&, const cnc::rs274::Pose&) override {}
+    void arc_feed(const cnc::rs274::SourceRef&, double, double, double, double, int, double,
+                  const cnc::rs274::Pose&) override {}
+    void nurbs_feed(const cnc::rs274::SourceRef&, int, const std::vector<cnc::rs274::NurbsPoint>&,
+                    const std::vector<double>&, const cnc::rs274::Pose&) override {}
+    void dwell(const cnc::rs274::SourceRef&, double) override {}
+  } canon;
+  cnc::rs274::MachineSetup m = setup.machine;
+  m.write_var_file = false;
+  // The machine's axes (m.axes, in the config's order) to the interpreter's pose (X Y Z A B C U V W).
+  for (size_t a = 0; a < start.size() && a < m.axes.size(); ++a)
+    if (const size_t i = std::string("XYZABCUVW").find(m.axes[a]); i != std::string::npos) m.start_position[i] = start[a];
+  std::unique_ptr<std::FILE, int (*)(std::FILE*)> f(std::fopen(out_path.c_str(), "w"), &std::fclose);
+  if (!f) {
+    std::fprintf(stderr, "cnc-plan: cannot write %s\n", out_path.c_str());
+    return 1;
+  }
+  std::fputs("line,codes,feed,speed,tool,offset_x,offset_y,offset_z\n", f.get());
+  cnc::rs274::Interpreter in(m, canon);
+  int32_t last_file = -1, last_line = 0;
+  std::string last_row;
+  auto emit = [&] {
+    if (last_file != 0 || last_line <= 0) return;
+    const cnc::rs274::ModalState s = in.modal_state();
+    const cnc::rs274::Pose off = cnc::rs274::work_offset(s);
+    char buf[512];
+    std::snprintf(buf, sizeof buf, "%s,%.6g,%.6g,%d,%.6f,%.6f,%.6f", cnc::rs274::active_codes(s).c_str(), s.feed,
+                  s.speed, s.tool, off[0], off[1], off[2]);
+    if (last_row == buf) return;
+    last_row = buf;
+    std::fprintf(f.get(), "%d,%s\n", last_line, buf);
+  };
+  in.set_line_hook([&](int32_t file, int32_t line) {
+    emit();
+    last_file = file;
+    last_line = line;
+  });
+  try {
+    in.open(program);
+    for (int64_t n = 0; in.execute_next(); ++n)
+      if (n > setup.max_validation_lines) break;
+    emit();
+  } catch (const std::exception& ex) {
+    std::fprintf(stderr, "cnc-plan: --modes: %s\n", ex.what());
+    return 1;
+  }
+  return 0;
+}
 
 int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& args) {
   const std::string program_path = args.option("program");
@@ -77,12 +136,16 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
       throw cnc::service::FlagError("--start " + text + ": expected " + std::to_string(naxes) +
                                     " machine positions, one per axis, comma-separated");
   }
+  const bool with_kind = args.flags.count("with-kind") > 0;
+  const cnc::pps::ProgramSetup modes_setup = setup;
   cnc::pps::ProgramServer server(std::move(setup), cnc::pps::ServerLimits{});
   const cnc::pps::LoadResult loaded = server.load(program_path, 1, start);
   if (!loaded.ok) {
     std::fprintf(stderr, "cnc-plan: program refused: %s\n", loaded.error.c_str());
     return 3;
   }
+  if (const std::string modes = args.option("modes"); !modes.empty())
+    if (const int rc = write_modes(modes_setup, program_path, start, modes); rc != 0) return rc;
   for (const std::string& w : loaded.warnings) std::fprintf(stderr, "cnc-plan: warning: %s\n", w.c_str());
   // The planner inline: each plan is ready the cycle its block is submitted, as if
   // the planner thread were never late.
@@ -131,7 +194,7 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
     std::fputs("cycle,t_s,x_mm,y_mm,z_mm,line,u,feed_mm_min,limit", csv.get());
     if (five_axis)
       for (int j = 0; j < kin->joints(); ++j) std::fprintf(csv.get(), ",j_%s", kin->joint_limits()[static_cast<size_t>(j)].name.c_str());
-    std::fputs("\n", csv.get());
+    std::fputs(with_kind ? ",kind\n" : "\n", csv.get());
   }
   const int64_t num_blocks = server.num_blocks();
   // A program that never ends (a loop without exit) must not hold the dry run forever.
@@ -182,6 +245,8 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
     }
     p_prev = p;
   };
+  // --with-kind: each submitted block's kind, until the setpoints are past it.
+  std::map<int64_t, cnc::program::BlockKind> kinds;
   while (core.state() != cnc::interp::RunState::kDone && cycles < max_cycles) {
     if (cnc::util::stop_requested()) {  // SIGTERM / SIGINT: end here, the CSV holds what was computed
       std::fprintf(stderr, "cnc-plan: stopped by signal %d after %" PRId64 " cycles\n", cnc::util::stop_signal(),
@@ -199,6 +264,7 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
             missing = index;
             return nullptr;
           }
+          if (with_kind) kinds[index] = b->kind;
           return std::make_unique<cnc::program::Block>(*b);
         },
         [](int64_t) {}, [](int) {});
@@ -225,6 +291,11 @@ int run_plan(const cnc::config::MachineConfig& cfg, const cnc::service::Args& ar
                    sp.source_line, sp.u, sp.feed_mm_per_min, cnc::interp::to_string(sp.limit));
       if (five_axis)
         for (int j = 0; j < kin->joints(); ++j) std::fprintf(csv.get(), ",%.9f", joints[static_cast<size_t>(j)]);
+      if (with_kind) {
+        const auto k = kinds.find(sp.block_index);
+        std::fprintf(csv.get(), ",%s", k == kinds.end() ? "?" : cnc::program::to_string(k->second));
+        kinds.erase(kinds.begin(), kinds.lower_bound(sp.block_index));
+      }
       std::fputs("\n", csv.get());
     }
   }
@@ -278,8 +349,12 @@ int main(int argc, char** argv) {
                            {"tool-table", "FILE", "the tool table (default: the config's)"},
                            {"start", "X,Y,Z", "where the machine stands, machine coordinates per axis (default: home)"},
                            {"block-delete", "on|off", "the block delete switch: '/' lines skipped when on (default: "
-                                                      "program.block_delete)"}},
-                          {{"show-setup", "", "print the settings programs are interpreted with, then exit"}}};
+                                                      "program.block_delete)"},
+                           {"modes", "OUT", "the modal state after each main-program line (CSV: line, active codes, "
+                                            "F, S, tool, work offset X Y Z)"}},
+                          {{"show-setup", "", "print the settings programs are interpreted with, then exit"},
+                           {"with-kind", "", "a last CSV column: the kind of the setpoint's block (rapid, line, "
+                                             "arc_cw, ...)"}}};
   spec.applies_kinematics = true;
   return cnc::service::run(spec, argc, argv, run_plan);
 }
