@@ -63,6 +63,13 @@ int run_hmi(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
   wopt.port = args.option("port").empty() ? cfg.hmi.port : std::stoi(args.option("port"));
   wopt.read_only_without_login = cfg.hmi.read_only_without_login;
   wopt.www_dir = args.option("www", cnc::util::resource_path("services/hmi/www"));
+  // three.js (npm ci from services/hmi/three/package-lock.json): beside the page when
+  // installed (/usr/share/cnc/services/hmi/three), in the build tree beside this program otherwise.
+  wopt.three_dir = cnc::util::resource_path("services/hmi/three/node_modules/three");
+  if (std::error_code ec; !std::filesystem::is_directory(wopt.three_dir, ec))
+    wopt.three_dir = cnc::util::executable_dir() + "/hmi/three/node_modules/three";
+  // An upload (the API's `upload`) is one text frame: the program, JSON-escaped.
+  wopt.max_message_bytes = static_cast<size_t>(2 * cfg.hmi.upload_max_bytes + 65536);
   wopt.runs_dir = args.option("runs", cfg.hmi.runs_dir.empty() ? cfg.log_directory : cfg.hmi.runs_dir);
   if (args.flags.count("print-url")) {
     std::printf("http://%s:%d/\n", wopt.listen.c_str(), wopt.port);
@@ -145,7 +152,7 @@ int run_hmi(const cnc::config::MachineConfig& cfg, const cnc::service::Args& arg
           }
           break;
         case cnc::hmi::WebEvent::Kind::kMessage:
-          api.message(e.client, e.may_control, e.text);
+          api.message(e.client, e.may_control, e.text, e.user);
           break;
       }
     }

@@ -201,7 +201,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
 
   void run(http::request<http::string_body> req) {
     ws_.set_option(websocket::stream_base::timeout::suggested(beast::role_type::server));
-    ws_.read_message_max(64 * 1024);
+    if (auto impl = impl_.lock()) ws_.read_message_max(impl->opt.max_message_bytes);
     ws_.async_accept(req, beast::bind_front_handler(&WsSession::on_accept, shared_from_this()));
   }
 
@@ -396,8 +396,17 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     }
     // The page's own files only: a fixed list, no path from the request reaches the file system.
     static const std::map<std::string, std::string> kFiles = {
-        {"/", "index.html"}, {"/index.html", "index.html"}, {"/app.js", "app.js"}, {"/style.css", "style.css"},
-        {"/login.html", "login.html"}};
+        {"/", "index.html"},         {"/index.html", "index.html"}, {"/app.js", "app.js"},
+        {"/preview3d.js", "preview3d.js"}, {"/style.css", "style.css"}, {"/login.html", "login.html"}};
+    // The 3D preview's library, the files of it the page imports (a fixed list too).
+    static const std::map<std::string, std::string> kThree = {
+        {"/three/three.module.min.js", "build/three.module.min.js"},
+        {"/three/three.core.min.js", "build/three.core.min.js"},
+        {"/three/OrbitControls.js", "examples/jsm/controls/OrbitControls.js"}};
+    if (const auto t = kThree.find(target); t != kThree.end() && level > 0) {
+      three_file(impl, req, t->second);
+      return;
+    }
     const auto it = kFiles.find(target);
     if (it == kFiles.end()) {
       if (target.rfind("/runs/", 0) == 0 && level > 0) {
@@ -416,6 +425,22 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
       return;
     }
     send(file(impl, req, it->second));
+  }
+
+  // The page imports three.js by these paths; the controls' bare `from 'three'` (an
+  // import map would be an inline script, which the page's policy forbids) is pointed
+  // at the module build here.
+  void three_file(WebServer::Impl& impl, const http::request<http::string_body>& req, const std::string& rel) {
+    std::string body;
+    if (impl.opt.three_dir.empty() || !read_whole(impl.opt.three_dir + "/" + rel, &body)) {
+      send(plain(req, http::status::not_found, "cnc-hmi: three.js is not installed (" + impl.opt.three_dir + ")\n"));
+      return;
+    }
+    for (size_t at = 0; (at = body.find("from 'three';", at)) != std::string::npos;)
+      body.replace(at, 13, "from '/three/three.module.min.js';");
+    Response res = plain(req, http::status::ok, body, content_type(rel));
+    res.set(http::field::cache_control, "max-age=3600");
+    send(std::move(res));
   }
 
   // GET /runs/RUN/report/FILE: a run's report (./cnc report's output beside its log), read only.

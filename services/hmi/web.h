@@ -26,10 +26,12 @@ namespace cnc::hmi {
 struct WebOptions {
   std::string listen = "127.0.0.1";
   int port = 8080;
-  std::string www_dir;                       // index.html, login.html, app.js, style.css
+  std::string www_dir;                       // index.html, login.html, app.js, preview3d.js, style.css
+  std::string three_dir;                     // three.js as npm installed it (node_modules/three)
   std::map<std::string, std::string> users;  // user -> crypto_pwhash_str hash; empty: no login
   bool read_only_without_login = false;
   std::string runs_dir;                      // GET /runs/...: the reports under it (read only)
+  size_t max_message_bytes = 64 * 1024;      // a WebSocket message from a browser (an upload is one)
 };
 
 // What a browser did, for the main loop.

@@ -54,11 +54,16 @@ def shot(name):
 
 opts = webdriver.ChromeOptions()
 opts.binary_location = "/usr/bin/chromium"
-for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--no-first-run",
+# A 1280 x 800 touch panel's screen; WebGL (the 3D preview) in software (SwiftShader).
+for a in ("--headless=new", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+          "--disable-dev-shm-usage", "--no-first-run",
           "--disable-background-networking", "--disable-component-update", "--disable-sync",
-          "--window-size=1700,1050", f"--user-data-dir={os.path.join(OUT, 'chromium-profile')}"):
+          "--window-size=1280,800", f"--user-data-dir={os.path.join(OUT, 'chromium-profile')}"):
     opts.add_argument(a)
 driver = webdriver.Chrome(service=Service("/usr/bin/chromedriver"), options=opts)
+# The page's viewport exactly the panel's 1280 x 800 (the window's size includes its frame).
+driver.execute_cdp_cmd("Emulation.setDeviceMetricsOverride", {"width": 1280, "height": 800, "deviceScaleFactor": 1,
+                                                               "mobile": False})
 driver.set_script_timeout(60)
 
 
@@ -122,6 +127,44 @@ def effect(name, button, el, kind, value=None, tol=0.0, timeout_s=20.0):
     timings[name] = round(r["ms"], 1)
     note(f"{name}: {r['ms']:.0f} ms from the click to #{el} = '{r['text']}'")
     return r
+
+
+# In the page: click a view button of the 3D preview; milliseconds from the click to
+# the frame rendered with that view (the preview renders on demand, once a frame).
+VIEW_JS = r"""
+const [view, done] = arguments;
+const st = window.hmiStats, f0 = st.preview3dFrames || 0, t0 = performance.now();
+document.getElementById('view-' + view).click();
+const poll = () => {
+  if (st.preview3dView === view && (st.preview3dFrames || 0) > f0) { done(performance.now() - t0); return; }
+  if (performance.now() - t0 > 5000) { done(-1); return; }
+  requestAnimationFrame(poll);
+};
+requestAnimationFrame(poll);
+"""
+
+# Upload a file from "this computer" as the file chooser would hand it to the page.
+UPLOAD_JS = r"""
+const [name, text, replace] = arguments;
+const dt = new DataTransfer();
+dt.items.add(new File([text], name, {type: 'text/plain'}));
+document.getElementById('upload-replace').checked = replace;
+const input = document.getElementById('upload-file');
+input.files = dt.files;
+input.dispatchEvent(new Event('change'));
+"""
+
+# The touch layout at this size: no horizontal scrolling, every control the finger
+# may use at least 44 px high (the hidden ones not counted), nothing that needs hover.
+LAYOUT_JS = r"""
+const small = [];
+for (const e of document.querySelectorAll('button, .button, select, input:not([type=checkbox]):not([type=file])')) {
+  const r = e.getBoundingClientRect();
+  if (r.width === 0 && r.height === 0) continue;
+  if (r.height < 43.5) small.push(`${e.id || e.textContent.trim() || e.tagName} ${r.height.toFixed(0)}px`);
+}
+return {scrollWidth: document.documentElement.scrollWidth, width: window.innerWidth, height: window.innerHeight, small};
+"""
 
 
 def last_result():
@@ -197,6 +240,15 @@ try:
     if x0 is None or abs(x0) > 0.01:
         fail(f"X should stand at 0 (nothing changed before the login), shows {text('dro-X-act')}")
     note(f"logged in; X at {x0:.3f}: the refused clients changed nothing")
+    # 3b. The touch layout on a 1280 x 800 panel; the 3D preview there (WebGL).
+    lay = driver.execute_script(LAYOUT_JS)
+    if lay["width"] != 1280 or lay["height"] != 800 or lay["scrollWidth"] > lay["width"]:
+        fail(f"the page at {lay['width']} x {lay['height']} scrolls sideways: {lay['scrollWidth']} px wide")
+    if lay["small"]:
+        fail(f"controls lower than 44 px: {lay['small']}")
+    if not driver.execute_script("return !!window.preview3d"):
+        fail("no 3D preview: " + str(driver.execute_script("return window.preview3dError || 'preview3d.js not run'")))
+    note(f"layout at {lay['width']} x {lay['height']}: no sideways scrolling, every control >= 44 px; 3D preview on")
     wait("the login refusals alarm", lambda: driver.execute_script(
         "return document.querySelector('#alarms-body tr[data-code=hmi_login_refused]') !== null"), 10)
 
@@ -219,7 +271,36 @@ try:
     driver.find_element(By.ID, "btn-touch-off").click()
     wait_result(n0, "touch_off started")
     wait("the touch-off line's end", lambda: state("program") == "done", 20)
-
+    # 5b. The var file's G54 X (10: the touch-off at X 10) in the offsets table, and the
+    #     large display's work X (machine minus it) at 0 beside machine X 10.
+    wait("G54 X 10 in the offsets", lambda: text("offset-G54-X") == "10.000", 10)
+    wait("work X 0, machine X 10", lambda: abs((num("big-X-work") or 99)) < 0.005 and
+         abs((num("big-X-mach") or 0) - 10) < 0.005, 5)
+    note(f"after the touch-off: G54 X {text('offset-G54-X')}; work X {text('big-X-work')}, machine X {text('big-X-mach')}")
+    # 5c. Work offsets and the tool table edited from the page (G10 L2 / G10 L1 as MDI):
+    #     the click to the table showing the value the var file / tool table now holds.
+    driver.execute_script("document.getElementById('os-system').value = 'G55'; document.getElementById('os-axis').value = 'X';"
+                          "document.getElementById('os-value').value = '5.25';")
+    effect("set_offset_g55_x_to_table", "btn-set-offset", "offset-G55-X", "equals", "5.250", timeout_s=15)
+    driver.execute_script("document.getElementById('tl-tool').value = '1'; document.getElementById('tl-length').value = '12.5';"
+                          "document.getElementById('tl-diameter').value = '6';")
+    effect("set_tool_1_to_table", "btn-set-tool", "tool-1-z", "equals", "12.500", timeout_s=15)
+    if text("tool-1-d") != "6.000":
+        fail(f"tool 1's diameter shows {text('tool-1-d')}, expected 6.000")
+    # 5d. Upload a program from the browser; the same name again is kept (refused).
+    n0 = n_results()
+    t_up = driver.execute_script("return performance.now()")
+    driver.execute_script(UPLOAD_JS, "uploaded.ngc", "G21 G90\nG0 X5 Y5\nM2\n", False)
+    wait_result(n0, "uploaded uploaded.ngc (20 bytes)")
+    wait("the upload in the program list", lambda: driver.execute_script(
+        "return [...document.getElementById('program-list').options].some(o => o.value === 'uploaded.ngc')"), 5)
+    timings["upload_click_to_listed_ms"] = round(driver.execute_script("return performance.now()") - t_up, 1)
+    n0 = n_results()
+    driver.execute_script(UPLOAD_JS, "uploaded.ngc", "M2\n", False)
+    r = wait_result(n0, "exists", ok=False)
+    if "kept (replace it on purpose" not in r["text"]:
+        fail(f"the second upload of the same name: {r['text']}")
+    note(f"upload listed in {timings['upload_click_to_listed_ms']} ms; the same name again refused: {r['text']}")
     # 6. Load and start the program; the highlighted line moves.
     driver.execute_script("document.getElementById('program-list').value = 'square.ngc';")
     n0 = n_results()
@@ -227,6 +308,17 @@ try:
     wait_result(n0, "loaded")
     wait("the program text", lambda: driver.execute_script("return document.querySelectorAll('#program-text div').length") >= 8)
     wait("the preview", lambda: driver.execute_script("return (window.hmiStats.previewPoints || 0) > 4"), 30)
+    if driver.execute_script("return window.hmiStats.previewRapids || 0") < 2:
+        fail("the preview has no rapid moves (square.ngc starts with G0)")
+    for view in ("top", "front", "side", "iso"):
+        ms = driver.execute_async_script(VIEW_JS, view)
+        if ms < 0:
+            fail(f"the 3D view button '{view}' rendered no frame within 5 s")
+        timings[f"view_{view}_click_to_frame"] = round(ms, 1)
+        if view == "top":
+            shot("03b-preview-top")
+    note("3D views, click to the frame drawn: " + ", ".join(f"{v} {timings[f'view_{v}_click_to_frame']} ms"
+                                                            for v in ("top", "front", "side", "iso")))
     effect("start_click_to_running", "btn-start", "state-interp", "contains", "running", timeout_s=10)
     wait("line 5 highlighted", lambda: text("line-no") == "5", 20)
     t_line = time.monotonic()
@@ -247,6 +339,29 @@ try:
     if not line_no.isdigit() or int(line_no) < 6 or hl != f"L{line_no}":
         fail(f"the highlighted program line is {hl} while line {line_no} runs (expected L{line_no}, from line 6 on)")
     note(f"highlight moved 5 -> 6 ({time.monotonic() - t_line:.1f} s: 40 mm at 10 mm/s)")
+    # 6b. While it runs: the active codes and F and S at the running line (the dry run's
+    #     interpreter), the offsets locked (the page says so, the API refuses), and the 3D
+    #     preview's part already run growing along the path.
+    codes = text("modal-codes") or ""
+    for want in ("G1 ", "G17", "G21", "G54", "G90", "M3", "M8"):
+        if want not in codes:
+            fail(f"the active codes while line {text('line-no')} runs: '{codes}' has no {want}")
+    if text("f-prog") != "600" or text("s-prog") != "6000":
+        fail(f"F and S programmed show {text('f-prog')} and {text('s-prog')}, expected 600 and 6000")
+    wait("the offsets locked", lambda: "a program runs" in (text("offsets-locked") or ""), 5)
+    if driver.execute_script("return !document.getElementById('btn-set-offset').disabled"):
+        fail("the offset's Set button is enabled while a program runs")
+    n0 = n_results()
+    driver.execute_script("send('set_offset', {system: 'G54', values: {X: 1}})")
+    r = wait_result(n0, "set_offset refused", ok=False)
+    if "a program runs" not in r["text"]:
+        fail(f"set_offset while running: {r['text']}")
+    d0 = driver.execute_script("return window.hmiStats.preview3dDone || 0")
+    wait("the run part of the 3D path grows", lambda: driver.execute_script("return window.hmiStats.preview3dDone || 0") > d0 + 5, 5)
+    note(f"running: codes '{codes}', F {text('f-prog')}/{text('f-act')}, S {text('s-prog')}/{text('s-act')}; "
+         f"offsets locked ('{r['text']}'); 3D path run to point {driver.execute_script('return window.hmiStats.preview3dDone')}"
+         f" of {driver.execute_script('return window.hmiStats.previewPoints')} ({driver.execute_script('return window.hmiStats.previewRapids')} rapid)")
+    driver.execute_script("document.getElementById('left').scrollTop = 0; document.getElementById('right').scrollTop = 0;")
     shot("04-running")
 
     # 7. Hold: the feed shown drops to 0 and the position stands.
@@ -305,6 +420,7 @@ try:
         fail(f"the I/O points on the page: {io}")
     note(f"machine panel: spindle {text('spindle-actual')} rpm {text('spindle-at-speed')}, load {text('spindle-load')} A,"
          f" override 80 % -> 4800 rpm and back, flood on, {len(io)} I/O points named, safety chain shown")
+    driver.execute_script("document.getElementById('machine-panel').scrollIntoView({block: 'start'});")
     shot("05b-machine")
 
     # 9. Stop.

@@ -74,9 +74,11 @@ printf '%s\n' "$HMI_PASSWORD" | "$BUILD/services/cnc-hmi" --hash-password operat
   fail "cnc-hmi --hash-password failed"
 grep -q '^operator:\$argon2id\$' "$WORK/users" || fail "the users file line is not an argon2id hash: $(cat "$WORK/users")"
 chmod 600 "$WORK/users"
+printf 'T1 P1 Z0 D3 ;centre drill\nT2 P2 Z5 D10 ;end mill\n' >"$WORK/tools.tbl"
 cat >>"$M" <<EOF2
 program:
   var_file: $WORK/cnc.var
+  tool_table: $WORK/tools.tbl
 hmi:
   listen: 127.0.0.1
   port: 8093
@@ -121,6 +123,12 @@ HMI_VIEW_URL="http://127.0.0.1:8094/" timeout 300 /usr/bin/python3 "$SRC/tests/i
 grep -q "rapid override 0.5" "$WORK/up.log" || fail "the page's rapid override 50 % did not reach the interpolator"
 # The touch-off reached the var file (G10 L20 P0 X0 at X = 10: the G54 X offset 10).
 grep -qE '^5221[[:space:]]+10\.0' "$WORK/cnc.var" || { cat "$WORK/cnc.var" >&2 2>/dev/null; fail "the touch-off is not in the var file (5221 10.0)"; }
+# The page's offset and tool edits reached the var file and the tool table (G10 L2 P2
+# X5.25: #5241; G10 L1 P1 Z12.5 R3), and its upload the program directory.
+grep -qE '^5241[[:space:]]+5\.25' "$WORK/cnc.var" || { cat "$WORK/cnc.var" >&2; fail "the page's G55 X offset is not in the var file (5241 5.25)"; }
+grep -qE '^T1 .*Z\+?12\.5' "$WORK/tools.tbl" || { cat "$WORK/tools.tbl" >&2; fail "the page's tool 1 length is not in the tool table (Z12.5)"; }
+[ "$(cat "$WORK/programs/uploaded.ngc" 2>/dev/null)" = "$(printf 'G21 G90\nG0 X5 Y5\nM2')" ] ||
+  fail "the uploaded program is not in the program directory as sent"
 # The refused logins counted: in the log and in the heartbeat's detail.
 grep -q "login refused for user 'operator'" "$WORK/up.log" || fail "the refused login is not in the log"
 grep -q "login refused for user 'nobody'" "$WORK/up.log" || fail "the refused unknown user is not in the log"

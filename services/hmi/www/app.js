@@ -51,6 +51,7 @@ function connect() {
 const handlers = {
   hello(m) {
     S.axes = m.axes; S.mayControl = m.may_control; S.unavailable = m.unavailable || [];
+    S.maxUpload = m.upload_max_bytes || 0;
     if (typeof m.max_feed_override === 'number') $('feed-override').max = Math.round(m.max_feed_override * 100);
     buildMachine(m.devices || {});
     $('machine').textContent = `${m.machine} · cnc-hmi ${m.version}`;
@@ -58,6 +59,7 @@ const handlers = {
     $('logout').hidden = !m.login;
     document.body.classList.toggle('view-only', !m.may_control);
     buildAxes();
+    if (window.preview3d) window.preview3d.setTravel(S.axes);
     fillPrograms(m.programs);
     $('program-dir').textContent = m.program_dir;
     for (const el of document.querySelectorAll('[data-control]')) el.disabled = !m.may_control;
@@ -79,6 +81,7 @@ const handlers = {
     $('rate').textContent = `${st.rate} Hz`;
     S.lastStatus = m;
     st.last = m;
+    showBigDro(m);
     m.axes.forEach((a, i) => {
       const set = (k, v) => { const el = $(`dro-${a.name}-${k}`); if (el) el.textContent = v; };
       const w = S.axes[i] && S.axes[i].wrapped ? wrap360 : (v) => v;
@@ -134,7 +137,18 @@ const handlers = {
       sv.appendChild(d);
     }
     const x = m.axes[0] && m.axes[0].act, y = m.axes[1] && m.axes[1].act;
-    if (typeof x === 'number' && typeof y === 'number') {
+    const z = m.axes[2] && m.axes[2].act;
+    if (window.preview3d && typeof x === 'number' && typeof y === 'number') {
+      const p3 = window.preview3d, running = pg.state === 'running' || pg.state === 'held';
+      p3.setTool([x, y, typeof z === 'number' ? z : 0]);
+      if (pg.token !== S.progressToken || (pg.state === 'loaded' && p3.progress > 0)) {
+        S.progressToken = pg.token;
+        p3.setProgress(0);
+      }
+      if (running && pg.token === S.previewToken) p3.follow([x, y, z || 0], line, true);
+      if (pg.state === 'done' && pg.token === S.previewToken && p3.points && p3.progress < p3.points.length / 3 - 1)
+        p3.setProgress(p3.points.length / 3 - 1);
+    } else if (typeof x === 'number' && typeof y === 'number') {
       const last = S.trail[S.trail.length - 1];
       if (!last || Math.abs(last[0] - x) + Math.abs(last[1] - y) > 0.01) {
         S.trail.push([x, y]);
@@ -163,9 +177,13 @@ const handlers = {
   preview(m) {
     if (m.error) { showMsg(false, `preview: ${m.error}`); return; }
     S.preview = m.points; S.bounds = null; S.trail = [];
+    S.previewToken = m.token; S.modes = m.modes || []; S.lastPreview = m;
     window.hmiStats.previewPoints = m.points.length / 3;
-    drawPreview(null);
+    window.hmiStats.previewRapids = (m.rapid || []).reduce((n, r) => n + r, 0);
+    if (window.preview3d) window.preview3d.setPath(m.points, m.rapid, m.lines);
+    else drawPreview(null);
   },
+  offsets(m) { showOffsets(m); },
   alarms(m) { $('alarms-body').innerHTML = ''; for (const a of m.alarms) addAlarm(a); },
   alarm(m) { addAlarm(m); },
   result(m) {
@@ -176,6 +194,7 @@ const handlers = {
   playback(m) {
     // The run's commanded path from its log, animated in the preview at the chosen speed.
     S.preview = m.points; S.bounds = null; S.trail = [];
+    if (window.preview3d) { window.preview3d.setPath(m.points, null, m.lines); S.previewToken = -1; }
     S.play = { log: m.log, pts: m.points, times: m.times, lines: m.lines, i: 0,
       speed: Number($('play-speed').value) || 1, t0: performance.now(), duration: m.duration_s };
     window.hmiStats.playbackFrames = 0; window.hmiStats.playbackDone = false;
@@ -349,7 +368,129 @@ function highlight(line) {
   }
 }
 
+// The large position display: work coordinates (machine minus the active offset),
+// machine coordinates and the distance to go, and the active codes with F and S.
+// The offset and codes: at the running line of the loaded program, the dry run's
+// interpreter state there (preview.modes); between programs, the var file's system and G92.
+function modesAt(line) {
+  const rows = S.modes || [];
+  let lo = 0, hi = rows.length - 1, best = null;
+  while (lo <= hi) {
+    const mid = (lo + hi) >> 1;
+    if (rows[mid][0] <= line) { best = rows[mid]; lo = mid + 1; } else hi = mid - 1;
+  }
+  return best;
+}
+
+function showBigDro(m) {
+  const pg = m.program || {}, it = m.interp || {};
+  const running = (pg.state === 'running' || pg.state === 'held') && pg.token === S.previewToken;
+  const line = typeof m.line === 'number' && m.line_in_program !== false ? m.line : -1;
+  const row = running && line > 0 ? modesAt(line) : null;
+  if (row) S.lastModes = row;
+  let offset, coordName, codes, source;
+  const os = S.offsets;
+  if (row) {
+    offset = S.axes.map((a) => ({ X: row[5][0], Y: row[5][1], Z: row[5][2] }[a.name] || 0));
+    codes = row[1];
+    coordName = (codes.match(/G5[4-9](\.\d)?/) || ['G54'])[0];
+    source = `at line ${line} (the dry run's interpreter)`;
+  } else if (os && os.systems) {
+    const sys = os.systems[(os.coord || 1) - 1];
+    offset = S.axes.map((a, i) => (sys.values[i] || 0) + (os.g92.active ? os.g92.values[i] || 0 : 0));
+    coordName = sys.name + (os.g92.active ? ' + G92' : '');
+    codes = coordName;
+    source = 'between programs: the var file\'s system (the rest at a program\'s line)';
+  } else {
+    offset = S.axes.map(() => 0); coordName = 'G54'; codes = '—'; source = '';
+  }
+  $('work-coord').textContent = coordName;
+  $('modal-codes').textContent = codes;
+  $('modal-source').textContent = source;
+  m.axes.forEach((a, i) => {
+    const w = S.axes[i] && S.axes[i].wrapped ? wrap360 : (v) => v;
+    const set = (k, v) => { const el = $(`big-${a.name}-${k}`); if (el) el.textContent = v; };
+    set('work', typeof a.act === 'number' ? fmt(w(a.act - offset[i])) : '—');
+    set('mach', fmt(w(a.act)));
+    set('dtg', fmt(a.dtg));
+  });
+  $('f-prog').textContent = row ? row[2].toFixed(0) : '—';
+  $('f-act').textContent = typeof m.feed === 'number' ? m.feed.toFixed(0) : '—';
+  $('s-prog').textContent = row ? row[3].toFixed(0) : '—';
+  const sp = m.machine && m.machine.spindle;
+  $('s-act').textContent = sp ? sp.actual_rpm.toFixed(0) : '—';
+}
+
+// The work offsets (G54..G59.3, G92) and the tool table, as the var file and the tool
+// table hold them; edited by the MDI line AXIS's touch-off would send.
+function showOffsets(m) {
+  S.offsets = m;
+  const names = m.axes || S.axes.map((a) => a.name);
+  $('offsets-head').innerHTML = '';
+  const hr = document.createElement('tr');
+  for (const h of ['', ...names, 'R']) { const th = document.createElement('th'); th.textContent = h; hr.appendChild(th); }
+  $('offsets-head').appendChild(hr);
+  const body = $('offsets-body'); body.innerHTML = '';
+  const rows = (m.systems || []).map((sys) => [sys.name, sys.values, sys.rotation, sys.p === m.coord]);
+  if (m.g92) rows.push([`G92${m.g92.active ? '' : ' (off)'}`, m.g92.values, null, false]);
+  for (const [name, values, rot, active] of rows) {
+    const tr = document.createElement('tr');
+    tr.id = `offset-${name.split(' ')[0]}`;
+    if (active) tr.className = 'active';
+    const cells = [name, ...values.map((v) => v.toFixed(3)), rot === null ? '' : rot.toFixed(1)];
+    cells.forEach((c, i) => {
+      const td = document.createElement('td'); td.textContent = c;
+      if (i > 0 && i <= values.length) td.id = `offset-${name.split(' ')[0]}-${names[i - 1]}`;
+      tr.appendChild(td);
+    });
+    body.appendChild(tr);
+  }
+  const sel = $('os-system');
+  if (!sel.options.length) {
+    for (const sys of m.systems || []) { const o = document.createElement('option'); o.value = o.textContent = sys.name; sel.appendChild(o); }
+    const ax = $('os-axis');
+    for (const n of names) { const o = document.createElement('option'); o.value = o.textContent = n; ax.appendChild(o); }
+  }
+  const tb = $('tools-body'); tb.innerHTML = '';
+  const zi = names.indexOf('Z');
+  for (const t of m.tools || []) {
+    const tr = document.createElement('tr'); tr.id = `tool-${t.number}`;
+    for (const [k, c] of [['n', `T${t.number}`], ['p', t.pocket], ['z', (zi >= 0 ? t.offset[zi] : 0).toFixed(3)],
+      ['d', t.diameter.toFixed(3)], ['c', t.comment]]) {
+      const td = document.createElement('td'); td.textContent = c; td.id = `tool-${t.number}-${k}`; tr.appendChild(td);
+    }
+    tb.appendChild(tr);
+  }
+  $('tools-file').textContent = m.tool_table || '(program.tool_table not set)';
+  // Refused while a program runs: said here, and the API refuses it too.
+  $('offsets-locked').textContent = m.locked ? `locked: ${m.locked}` : '';
+  for (const id of ['btn-set-offset', 'btn-clear-g92', 'btn-set-tool']) $(id).disabled = !S.mayControl || !!m.locked;
+  if (m.error) showMsg(false, `offsets: ${m.error}`);
+}
+
+function uploadFile() {
+  const f = $('upload-file').files[0];
+  if (!f) return;
+  if (S.maxUpload && f.size > S.maxUpload) {
+    showMsg(false, `upload refused: '${f.name}' is ${f.size} bytes, more than hmi.upload_max_bytes (${S.maxUpload})`);
+    return;
+  }
+  f.text().then((text) => {
+    send('upload', { name: f.name, text, replace: $('upload-replace').checked });
+    $('upload-file').value = '';
+  });
+}
+
 function buildAxes() {
+  const big = $('big-dro-body'); big.innerHTML = '';
+  for (const a of S.axes) {
+    const tr = document.createElement('tr');
+    const name = document.createElement('td'); name.textContent = a.name; tr.appendChild(name);
+    for (const k of ['work', 'mach', 'dtg']) {
+      const td = document.createElement('td'); td.id = `big-${a.name}-${k}`; td.className = k; td.textContent = '—'; tr.appendChild(td);
+    }
+    big.appendChild(tr);
+  }
   const dro = $('dro-body'); dro.innerHTML = '';
   const jog = $('jog-axes'); jog.innerHTML = '';
   const to = $('to-axis'); to.innerHTML = '';
@@ -411,10 +552,11 @@ function playFrame() {
     at = [at[0] + f * (p.pts[3 * k + 3] - at[0]), at[1] + f * (p.pts[3 * k + 4] - at[1])];
   }
   S.playAt = at;
+  if (window.preview3d) window.preview3d.setPlay([at[0], at[1], p.pts[3 * k + 2]]);
   window.hmiStats.playbackFrames++;
   $('playback').textContent = `${p.log}: ${Math.min(t, p.duration).toFixed(1)} / ${p.duration.toFixed(1)} s, line ${p.lines[k]}` +
     (done ? ' (end)' : '');
-  drawPreview(null);
+  if (!window.preview3d) drawPreview(null);
   if (done) { window.hmiStats.playbackDone = true; S.play = null; $('btn-play-stop').disabled = true; return; }
   requestAnimationFrame(playFrame);
 }
@@ -488,6 +630,21 @@ function wire() {
   $('btn-play-stop').onclick = () => { S.play = null; S.playAt = null; $('btn-play-stop').disabled = true; $('playback').textContent = ''; };
   for (const [id, line] of [['btn-coolant-mist', 'M7'], ['btn-coolant-flood', 'M8'], ['btn-coolant-off', 'M9']])
     $(id).onclick = () => send('mdi', { line });
+  $('btn-set-offset').onclick = () =>
+    send('set_offset', { system: $('os-system').value, values: { [$('os-axis').value]: Number($('os-value').value) } });
+  $('btn-clear-g92').onclick = () => send('clear_g92');
+  $('btn-set-tool').onclick = () => {
+    const msg = { tool: Number($('tl-tool').value), length: Number($('tl-length').value) };
+    if ($('tl-diameter').value !== '') msg.diameter = Number($('tl-diameter').value);
+    send('set_tool', msg);
+  };
+  $('upload-file').addEventListener('change', uploadFile);
+  for (const b of document.querySelectorAll('[data-view]')) {
+    b.onclick = () => { if (window.preview3d) window.preview3d.setView(b.dataset.view); };
+  }
+  for (const b of document.querySelectorAll('[data-goto]')) {
+    b.onclick = () => $(b.dataset.goto).scrollIntoView({ block: 'start' });
+  }
   $('btn-touch-off').onclick = () => send('touch_off', { axis: $('to-axis').value, value: Number($('to-value').value) });
   $('mdi-form').onsubmit = (e) => {
     e.preventDefault();
@@ -511,4 +668,17 @@ function wire() {
   spindle.addEventListener('change', () => send('spindle_override', { value: Number(spindle.value) / 100 }));
 }
 
-window.addEventListener('DOMContentLoaded', () => { wire(); drawPreview(null); connect(); });
+// The 3D preview (preview3d.js, a module) may come after this script: until it has
+// said whether WebGL works, and without it, the flat XY view is drawn.
+function preview3dReady() {
+  const p3 = window.preview3d;
+  $('preview3d').hidden = !p3; $('preview').hidden = !!p3; $('views').hidden = !p3;
+  if (!p3) { drawPreview(null); return; }
+  if (S.axes.length) p3.setTravel(S.axes);
+  if (S.preview) p3.setPath(S.preview, S.lastPreview && S.lastPreview.rapid, S.lastPreview && S.lastPreview.lines);
+}
+window.addEventListener('preview3d', preview3dReady);
+window.addEventListener('DOMContentLoaded', () => {
+  wire(); connect();
+  if (window.preview3d !== undefined) preview3dReady(); else drawPreview(null);
+});
