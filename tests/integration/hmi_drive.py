@@ -11,6 +11,7 @@ page's clock. Writes OUT_DIR/*.png and OUT_DIR/timings.json; exit 1 on a failure
 CTL_CMD (cnc-ctl --machine M) injects a fault from outside the page: DRIVE_CMD DISABLE.
 """
 import json
+import math
 import os
 import subprocess
 import sys
@@ -319,6 +320,38 @@ try:
             shot("03b-preview-top")
     note("3D views, click to the frame drawn: " + ", ".join(f"{v} {timings[f'view_{v}_click_to_frame']} ms"
                                                             for v in ("top", "front", "side", "iso")))
+    # 6a. A finger orbits the preview (a one-finger drag of 100 px, as a touch panel sends
+    #     it) and the mouse wheel zooms it: the camera turns about its target, then nears it.
+    cam_js = ("const p = window.preview3d; const c = p.camera.position, t = p.controls.target;"
+              "return [c.x - t.x, c.y - t.y, c.z - t.z, window.hmiStats.preview3dFrames || 0];")
+    r = driver.execute_script("const r = document.getElementById('preview3d-canvas').getBoundingClientRect();"
+                              "return [r.left + r.width / 2, r.top + r.height / 2];")
+    cx, cy = r[0], r[1]
+    c0 = driver.execute_script(cam_js)
+    driver.execute_cdp_cmd("Emulation.setTouchEmulationEnabled", {"enabled": True, "maxTouchPoints": 2})
+    t_touch = time.monotonic()
+    driver.execute_cdp_cmd("Input.dispatchTouchEvent", {"type": "touchStart", "touchPoints": [{"x": cx, "y": cy}]})
+    for k in range(1, 6):
+        driver.execute_cdp_cmd("Input.dispatchTouchEvent", {"type": "touchMove", "touchPoints": [{"x": cx + 20 * k, "y": cy}]})
+    driver.execute_cdp_cmd("Input.dispatchTouchEvent", {"type": "touchEnd", "touchPoints": []})
+    driver.execute_cdp_cmd("Emulation.setTouchEmulationEnabled", {"enabled": False})
+
+    def turned():
+        c = driver.execute_script(cam_js)
+        dot = sum(a * b for a, b in zip(c[:3], c0[:3]))
+        n = (sum(a * a for a in c[:3]) * sum(a * a for a in c0[:3])) ** 0.5
+        return math.degrees(math.acos(max(-1.0, min(1.0, dot / n)))) if c[3] > c0[3] else 0.0
+    wait("the finger's drag turns the 3D view", lambda: turned() > 5, 5)
+    timings["finger_drag_100px_turn_deg"] = round(turned(), 1)
+    timings["finger_drag_to_frame_ms"] = round((time.monotonic() - t_touch) * 1000, 1)
+    d0 = math.dist(driver.execute_script(cam_js)[:3], (0, 0, 0))
+    driver.execute_cdp_cmd("Input.dispatchMouseEvent", {"type": "mouseWheel", "x": cx, "y": cy, "deltaX": 0, "deltaY": -500})
+    wait("the wheel zooms the 3D view in", lambda: math.dist(driver.execute_script(cam_js)[:3], (0, 0, 0)) < 0.9 * d0, 5)
+    d1 = math.dist(driver.execute_script(cam_js)[:3], (0, 0, 0))
+    note(f"3D preview: a one-finger drag of 100 px turned the view {timings['finger_drag_100px_turn_deg']} deg "
+         f"({timings['finger_drag_to_frame_ms']} ms from the touch to the frame, the CDP calls included); "
+         f"the wheel zoomed from {d0:.0f} to {d1:.0f} mm from the target")
+    driver.execute_async_script(VIEW_JS, "iso")
     effect("start_click_to_running", "btn-start", "state-interp", "contains", "running", timeout_s=10)
     wait("line 5 highlighted", lambda: text("line-no") == "5", 20)
     t_line = time.monotonic()
