@@ -1,5 +1,8 @@
 // Motion: the axis words' target, G0/G1, arcs, canned cycles (run by cycles.cc),
 // G5/G5.1 splines and NURBS curves (G5.2/G5.3, Fanuc G6.2).
+#include <optional>
+
+#include "common/rs274/canon_forward.h"
 #include "common/rs274/cycles.h"
 #include "common/rs274/interpreter_impl.h"
 
@@ -19,6 +22,18 @@ constexpr double kSpiralRelTolerance = 0.001;
 constexpr double kArcRToleranceInch = 0.0005;
 constexpr double kArcRToleranceMm = 0.005;
 constexpr double kTiny = 1e-12;
+
+// A canned cycle made in a tilted work plane's frame: its moves' ends, frame
+// coordinates in program units, handed on in work coordinates.
+class FramedMoves final : public CanonForward {
+ public:
+  FramedMoves(Canon& next, std::function<Pose(const Pose&)> to_work) : CanonForward(next), to_work_(std::move(to_work)) {}
+  void straight_traverse(const SourceRef& r, const Pose& end) override { CanonForward::straight_traverse(r, to_work_(end)); }
+  void straight_feed(const SourceRef& r, const Pose& end) override { CanonForward::straight_feed(r, to_work_(end)); }
+
+ private:
+  std::function<Pose(const Pose&)> to_work_;
+};
 
 
 }  // namespace
@@ -321,15 +336,17 @@ void Interpreter::cycle(Words& w) {
   if (plane_ == Plane::kXZ) { a1 = 2; a2 = 0; a3 = 1; o1 = 'K'; o2 = 'I'; o3 = 'J'; }
   if (plane_ == Plane::kYZ) { a1 = 1; a2 = 2; a3 = 0; o1 = 'J'; o2 = 'K'; o3 = 'I'; }
   const char l1 = kAxisLetters[a1], l2 = kAxisLetters[a2], l3 = kAxisLetters[a3];
+  // In a tilted work plane the cycle is made in its frame.
+  const Pose here = twp_ ? frame_of(position_) : position_;
   // The depth-axis level where a run of cycle blocks started (G98 returns to it).
-  if (!in_cycle_) cycle_old_z_ = to_program(position_[static_cast<size_t>(a3)]);
+  if (!in_cycle_) cycle_old_z_ = to_program(here[static_cast<size_t>(a3)]);
   const bool continuing = prev_motion_ == m;
   CycleInput in;
   in.g = m;
   in.plane = plane_;
   in.incremental = incremental_;
   in.retract_to_r = retract_r_;
-  in.start = program_pose(position_);
+  in.start = program_pose(here);
   in.has_x = w.on(l1);
   in.has_y = w.on(l2);
   in.x = in.has_x ? w[l1] : (incremental_ ? 0 : in.start[static_cast<size_t>(a1)]);
@@ -391,13 +408,21 @@ void Interpreter::cycle(Words& w) {
     };
   }
   CycleResult res;
+  std::optional<FramedMoves> framed;
+  if (twp_)
+    framed.emplace(canon_, [this](const Pose& p) {
+      Pose mm = p;
+      for (size_t i = 0; i < mm.size(); ++i) mm[i] = i < 3 || i >= 6 ? p[i] * length_scale() : p[i];
+      return program_pose(work_of(mm));
+    });
   try {
-    res = run_cycle(in, ref(col), canon_);
+    res = run_cycle(in, ref(col), framed ? static_cast<Canon&>(*framed) : canon_);
   } catch (const Error& e) {
     if (!e.file_name().empty()) throw;
     fail(e.column() > 0 ? e.column() : col, e.detail());
   }
   for (size_t i = 0; i < res.end.size(); ++i) position_[i] = i < 3 || i >= 6 ? res.end[i] * length_scale() : res.end[i];
+  if (twp_) position_ = work_of(position_);
   in_cycle_ = true;
   w.axes = 0;
 }

@@ -150,8 +150,9 @@ void Interpreter::g53_1(const Words& w) {
 
 // What the frame does not take, as Fanuc refuses it in G68.2 mode: another work
 // coordinate system, G52/G92, G28/G30, cutter compensation; and what this
-// interpreter does not turn into the frame (canned cycles, splines and NURBS,
-// spindle-synchronised motion, probing).
+// interpreter does not turn into the frame (splines and NURBS, spindle-synchronised
+// motion, probing). Canned cycles are made in the frame, as Fanuc's (drilling along
+// the frame's Z in G17).
 void Interpreter::refuse_in_tilted_plane(const Words& w) const {
   if (w.g[16] == 690) return;  // cancelled on this line
   const auto refuse = [&](int column, const std::string& what) {
@@ -169,8 +170,7 @@ void Interpreter::refuse_in_tilted_plane(const Words& w) const {
   }
   if (w.g[7] > 400) refuse(w.gcol[7], "cutter radius compensation " + g_text(w.g[7]));
   const int m = motion_to_be(w);
-  const bool cycle = m >= 730 && m <= 890 && m != 800;
-  if (cycle || m == 760 || m == 330 || m == 331 || (m >= 382 && m <= 385) || (m >= 50 && m <= 62)) {
+  if (m == 760 || m == 330 || m == 331 || (m >= 382 && m <= 385) || (m >= 50 && m <= 62)) {
     const int column = w.g[1] >= 0 ? w.gcol[1] : w.column(kAxisLetters[std::countr_zero(w.axes)]);
     fail(column, g_text(m) + " in a tilted work plane (G68.2) is not supported");
   }

@@ -191,6 +191,24 @@ TEST(Rs274Twp, AFullCircleStaysFullThroughTheFramesRounding) {
   EXPECT_EQ(r.canon.moves[2].points.size(), 9u);
 }
 
+TEST(Rs274Twp, CannedCyclesDrillAlongTheFramesZ) {
+  // The same cycles with and without a frame turned 30° about X at (5, 0, 2): every
+  // move's end is the frame's image of the plain run's (G98 and G99, G81 G83 G82, L2).
+  const std::string cycles = "G0 X0 Y0 Z10\nG99 G81 X10 Y5 Z-2 R1 F100\nG91 X3 L2\nG90 G98 G83 X0 Y0 Z-4 R2 Q1.5\n"
+                             "G82 X-5 Z-1 R2 P0.5\nG80 G0 Z20\nM2\n";
+  Outcome plain, tilted;
+  run(plain, cycles);
+  run(tilted, "G68.2 X5 Y0 Z2 I0 J30 K0\n" + cycles);
+  ASSERT_GT(plain.canon.moves.size(), 15u);
+  ASSERT_EQ(tilted.canon.moves.size(), plain.canon.moves.size());
+  for (size_t i = 0; i < plain.canon.moves.size(); ++i) {
+    const Pose& f = plain.canon.moves[i].end;
+    EXPECT_EQ(tilted.canon.moves[i].kind, plain.canon.moves[i].kind) << i;
+    expect_xyz(tilted.canon.moves[i].end, 5 + f[0], f[1] * kC30 - f[2] * kS30, 2 + f[1] * kS30 + f[2] * kC30,
+               "move " + std::to_string(i));
+  }
+}
+
 TEST(Rs274Twp, G18ArcsAndRFormatLieInTheFramesPlanes) {
   // G18 in a frame turned 90° about Z (I90 J0 K0: frame X = work Y, frame Y = −work X):
   // the frame's XZ plane is the work's YZ plane at work X = −(frame Y) = 0.
@@ -252,7 +270,7 @@ TEST(Rs274Twp, RefusalsNameTheirPlace) {
   expect_refused(on + "G28\n", 2, 1, "G28");
   expect_refused(on + "G10 L2 P1 X3\n", 2, 1, "G10 L2 of the active coordinate system");
   expect_refused(on + "G41 D0\n", 2, 1, "cutter radius compensation G41");
-  expect_refused(on + "G81 X0 Y0 Z-1 R1 F100\n", 2, 1, "G81 in a tilted work plane (G68.2) is not supported");
+  expect_refused(on + "G5.2 X0 Y0 P1 L3\n", 2, 1, "G5.2 in a tilted work plane (G68.2) is not supported");
   expect_refused(on + "G0 @10 ^30\n", 2, 4, "polar coordinates");
   expect_refused(on + "G68.2 I0 J0 K0\n", 2, 1, "G69 first");
   expect_refused(on + "G1 X5 Z1 F100\nG2 X0 Y5 Z2 I-5 J0\n", 3, 1, "a helix in a tilted work plane");
