@@ -327,7 +327,7 @@ void Interpreter::end_program(bool m30) {
   // LinuxCNC's end of program (M2, M30): G54 with its rotation, the XY plane, G90,
   // G94 with no feed, feed and speed overrides on, spindle off, coolant off, G40, G1.
   // G92 and the tool length offset stay; the tilted work plane goes (Fanuc's reset).
-  twp_ = false;
+  twp_ = twp_tool_tilted_ = false;
   if (coord_ != 1) {
     position_ = program_of(machine_of(position_, coord_), 1);
     coord_ = 1;

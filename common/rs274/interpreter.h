@@ -361,6 +361,7 @@ class Interpreter {
   // axis j in work coordinates) about twp_o_ (work coordinates, mm). position_ stays in
   // work coordinates.
   bool twp_ = false;
+  bool twp_tool_tilted_ = false;  // G53.1 turned the tool off the work's Z
   std::array<double, 9> twp_r_{};
   std::array<double, 3> twp_o_{};
   double mu_ = 1.0;               // mm per machine unit

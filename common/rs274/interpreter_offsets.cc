@@ -374,6 +374,9 @@ void Interpreter::g43_g49(Words& w) {
       for (size_t i = 0; i < off.size(); ++i) off[i] += tool->offset[i];
     }
   }
+  if (twp_tool_tilted_ && (off[0] != 0 || off[1] != 0 || off[2] != 0))
+    fail(w.gcol[8], g_text(g) + " with the tool turned by G53.1: the offset would act along the part's Z, not the "
+                    "tool's (G69 first)");
   // The program position moves by the change of offset; the machine stays. The
   // offset acts in the machine's frame: X and Y turn into a rotated system's frame
   // (LinuxCNC's convert_tool_length_offset).

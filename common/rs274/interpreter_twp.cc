@@ -63,7 +63,7 @@ Pose Interpreter::work_of(const Pose& frame_mm) const {
 void Interpreter::g68_2_g69(Words& w) {
   const int col = w.gcol[16];
   if (w.g[16] == 690) {
-    twp_ = false;
+    twp_ = twp_tool_tilted_ = false;
     return;
   }
   if (twp_) fail(col, "G68.2 while a tilted work plane is active: G69 first");
@@ -127,6 +127,11 @@ void Interpreter::g53_1(const Words& w) {
     if (std::fabs(v - choice) > 1e-4 || choice < 0 || choice > 2) fail(w.column('P'), "G53.1 P must be 0, 1 or 2");
   }
   const std::array<double, 3> direction{twp_r_[2], twp_r_[5], twp_r_[8]};
+  // The block builder adds a tool length offset along the part's Z: with the tool
+  // turned off it, the tip would be off by the offset's turn.
+  const bool tilted = std::fabs(direction[0]) > 1e-12 || std::fabs(direction[1]) > 1e-12;
+  if (tilted && (tool_offset_[0] != 0 || tool_offset_[1] != 0 || tool_offset_[2] != 0))
+    fail(col, "G53.1 with a tool length offset in effect: it acts along the part's Z, not the turned tool's (G49 first)");
   Pose machine = machine_of(position_, coord_);
   ToolOrientation o;
   try {
@@ -143,6 +148,7 @@ void Interpreter::g53_1(const Words& w) {
   Pose target = position_;
   target[static_cast<size_t>(o.tilt_axis)] = q[static_cast<size_t>(o.tilt_axis)];
   target[static_cast<size_t>(o.rotary_axis)] = q[static_cast<size_t>(o.rotary_axis)];
+  twp_tool_tilted_ = tilted;
   if (target == position_) return;
   canon_.straight_traverse(ref(col), program_pose(target));
   position_ = target;

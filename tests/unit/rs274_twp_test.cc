@@ -337,6 +337,11 @@ TEST(Rs274Twp, G53_1PChoosesTheSolutionAndRefusesOneOutOfTravel) {
   EXPECT_NEAR(r.canon.moves[0].end[3], 40, 1e-9);
   expect_refused("G68.2 I0 J40 K0\nG53.1 P2\n", 2, 1, "joint A would stand at -40.000 degrees, outside its travel [-30, 120]",
                  trt);
+  // A tool length offset acts along the part's Z here: not with a tool G53.1 turned.
+  expect_refused("G0 X0\nG43.1 Z10\nG68.2 I0 J40 K0\nG53.1\n", 4, 1, "G53.1 with a tool length offset in effect", trt);
+  expect_refused("G0 X0\nG68.2 I0 J40 K0\nG53.1\nG43.1 Z10\n", 4, 1, "G43.1 with the tool turned by G53.1", trt);
+  Outcome vertical;
+  run(vertical, "G0 X0\nG43.1 Z10\nG68.2 I30 J0 K0\nG53.1\nG69\nG43.1 Z5\nM2\n", trt);  // a frame turned about Z only
   // P0 takes what kinematics.solution (nearest) picks: the one in travel here.
   Outcome r0;
   run(r0, "G68.2 I0 J40 K0\nG53.1\nM2\n", trt);
