@@ -1,6 +1,9 @@
 #include "common/rs274/canon_printer.h"
 
+#include <cmath>
 #include <cstdarg>
+#include <cstdint>
+#include <cstring>
 
 namespace cnc::rs274 {
 
@@ -23,10 +26,69 @@ const char* plane_name(Plane p) {
 CanonPrinter::CanonPrinter(std::FILE* out, std::function<const std::string&()> line_text)
     : out_(out), line_text_(std::move(line_text)) {}
 
+namespace {
+
+// printf's "%.4f" of v, exactly, at p (room for 32 characters); returns the end.
+// The multiple of 1e-4 nearest to v's binary value: v * 1e4 is off the exact product
+// by at most 1.2e-5 below 1e11, so only a fraction within 1e-4 of one half can round
+// the other way: those, and |v| >= 1e7, NaN and infinities, are left to snprintf
+// (nullptr). 10 times faster than snprintf on a canon line of 6.
+char* fixed4(char* p, double v) {
+  const double a = std::fabs(v);
+  if (!(a < 1e7)) return nullptr;
+  const double s = a * 1e4;
+  const double whole = std::floor(s);
+  const double frac = s - whole;
+  if (std::fabs(frac - 0.5) < 1e-4) return nullptr;
+  const uint64_t q = static_cast<uint64_t>(whole) + (frac > 0.5 ? 1 : 0);
+  if (std::signbit(v)) *p++ = '-';
+  // The digits written in place (a copy loop would become a call to memcpy: 10 % of
+  // the time of cnc-rs274 at this size).
+  char rev[20];
+  int n = 0;
+  uint64_t ip = q / 10000;
+  do {
+    rev[n++] = static_cast<char>('0' + ip % 10);
+    ip /= 10;
+  } while (ip != 0);
+  while (n > 0) *p++ = rev[--n];
+  const auto dec = static_cast<unsigned>(q % 10000);
+  p[0] = '.';
+  p[1] = static_cast<char>('0' + dec / 1000);
+  p[2] = static_cast<char>('0' + dec / 100 % 10);
+  p[3] = static_cast<char>('0' + dec / 10 % 10);
+  p[4] = static_cast<char>('0' + dec % 10);
+  return p + 5;
+}
+
+// v in decimal at p, right-aligned in `width` (room for 32 characters); returns the end.
+char* decimal(char* p, long v, int width) {
+  char rev[24];
+  int n = 0;
+  const bool neg = v < 0;
+  unsigned long u = neg ? 0ul - static_cast<unsigned long>(v) : static_cast<unsigned long>(v);
+  do {
+    rev[n++] = static_cast<char>('0' + u % 10);
+    u /= 10;
+  } while (u != 0);
+  if (neg) rev[n++] = '-';
+  for (int k = n; k < width; ++k) *p++ = ' ';
+  while (n > 0) *p++ = rev[--n];
+  return p;
+}
+
+}  // namespace
+
 // "%5d " counter, then the N field of the block being executed, then the call.
-void CanonPrinter::line(const char* fmt, ...) {
+// Formats the conversions the calls use (%.4f %d %s %lu) itself, into one buffer
+// written at once: printf's own formatting was half of cnc-rs274's time. A call
+// with any other conversion (%f), a number printf must round itself or a string
+// too long for the buffer is printed by vsnprintf.
+// The counter and the N field at buf (the block's text is at most 255 characters).
+char* CanonPrinter::head(char* buf) {
   ++counter_;
-  std::fprintf(out_, "%5ld ", static_cast<long>(counter_));
+  char* p = decimal(buf, static_cast<long>(counter_), 5);
+  *p++ = ' ';
   const std::string& t = line_text_();
   size_t i = 0;
   while (i < t.size() && (t[i] == ' ' || t[i] == '\t' || t[i] == '/')) ++i;
@@ -34,16 +96,99 @@ void CanonPrinter::line(const char* fmt, ...) {
     ++i;
     size_t j = i;
     while (j < t.size() && t[j] >= '0' && t[j] <= '9') ++j;
-    const int digits = static_cast<int>(j - i);
-    std::fprintf(out_, "N%.*s%*s", digits, t.c_str() + i, digits < 6 ? 6 - digits : 0, "");
+    const size_t digits = j - i;
+    *p++ = 'N';
+    for (size_t k = i; k < j; ++k) *p++ = t[k];
+    for (size_t k = digits; k < 6; ++k) *p++ = ' ';
   } else {
-    std::fputs("N..... ", out_);
+    std::memcpy(p, "N..... ", 7);
+    p += 7;
   }
+  return p;
+}
+
+// NAME(x, y, z, a, b, c): the moves, most of a program's canon, without a format
+// string to read.
+void CanonPrinter::pose_line(const char* name, size_t name_len, const Pose& pose) {
+  char buf[1024];
+  char* const start = head(buf);
+  char* p = start;
+  std::memcpy(p, name, name_len);
+  p += name_len;
+  for (size_t k = 0; k < 6; ++k) {
+    if (k > 0) {
+      p[0] = ',';
+      p[1] = ' ';
+      p += 2;
+    }
+    p = fixed4(p, pose[k]);
+    if (p == nullptr) {  // a number printf must round itself
+      std::fwrite(buf, 1, static_cast<size_t>(start - buf), out_);
+      std::fprintf(out_, "%s%.4f, %.4f, %.4f, %.4f, %.4f, %.4f)\n", name, pose[0], pose[1], pose[2], pose[3], pose[4],
+                   pose[5]);
+      return;
+    }
+  }
+  *p++ = ')';
+  *p++ = '\n';
+  fwrite_unlocked(buf, 1, static_cast<size_t>(p - buf), out_);  // one thread writes out_
+}
+
+void CanonPrinter::line(const char* fmt, ...) {
+  char buf[1024];
+  char* const limit = buf + sizeof buf - 40;  // room for a number and the newline
+  char* p = head(buf);
+  char* const call_at = p;
   va_list ap;
   va_start(ap, fmt);
-  std::vfprintf(out_, fmt, ap);
+  va_list again;
+  va_copy(again, ap);
+  bool ok = true;
+  for (const char* f = fmt; ok && *f != '\0';) {
+    if (*f != '%') {
+      if (p >= limit) {
+        ok = false;
+        break;
+      }
+      *p++ = *f++;
+      continue;
+    }
+    if (f[1] == '.' && f[2] == '4' && f[3] == 'f') {
+      char* q = fixed4(p, va_arg(ap, double));
+      if (q == nullptr) ok = false;
+      else p = q;
+      f += 4;
+    } else if (f[1] == 'd') {
+      p = decimal(p, va_arg(ap, int), 0);
+      f += 2;
+    } else if (f[1] == 's') {
+      const char* str = va_arg(ap, const char*);
+      const size_t n = std::strlen(str);
+      if (n >= static_cast<size_t>(limit - p)) {
+        ok = false;
+      } else {
+        std::memcpy(p, str, n);
+        p += n;
+      }
+      f += 2;
+    } else if (f[1] == 'l' && f[2] == 'u') {
+      p = decimal(p, static_cast<long>(va_arg(ap, unsigned long)), 0);
+      f += 3;
+    } else {
+      ok = false;
+    }
+    if (p >= limit) ok = false;
+  }
   va_end(ap);
-  std::fputc('\n', out_);
+  if (ok) {
+    *p++ = '\n';
+    fwrite_unlocked(buf, 1, static_cast<size_t>(p - buf), out_);  // one thread writes out_
+  } else {  // printf's, on the whole call
+    std::fwrite(buf, 1, static_cast<size_t>(call_at - buf), out_);
+    std::vfprintf(out_, fmt, again);
+    std::fputc('\n', out_);
+  }
+  va_end(again);
 }
 
 void CanonPrinter::use_length_units(const SourceRef&, Units u) {
@@ -75,11 +220,9 @@ void CanonPrinter::use_tool_length_offset(const SourceRef&, const Pose& p) {
 }
 void CanonPrinter::on_reset(const SourceRef&) { line("ON_RESET()"); }
 void CanonPrinter::straight_traverse(const SourceRef&, const Pose& p) {
-  line("STRAIGHT_TRAVERSE(%.4f, %.4f, %.4f, %.4f, %.4f, %.4f)", p[0], p[1], p[2], p[3], p[4], p[5]);
+  pose_line("STRAIGHT_TRAVERSE(", 18, p);
 }
-void CanonPrinter::straight_feed(const SourceRef&, const Pose& p) {
-  line("STRAIGHT_FEED(%.4f, %.4f, %.4f, %.4f, %.4f, %.4f)", p[0], p[1], p[2], p[3], p[4], p[5]);
-}
+void CanonPrinter::straight_feed(const SourceRef&, const Pose& p) { pose_line("STRAIGHT_FEED(", 14, p); }
 void CanonPrinter::arc_feed(const SourceRef&, double first_end, double second_end, double first_axis,
                             double second_axis, int rotation, double axis_end, const Pose& p) {
   line("ARC_FEED(%.4f, %.4f, %.4f, %.4f, %d, %.4f, %.4f, %.4f, %.4f)", first_end, second_end, first_axis, second_axis,

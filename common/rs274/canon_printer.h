@@ -78,6 +78,8 @@ class CanonPrinter : public Canon {
 
  private:
   void line(const char* fmt, ...) __attribute__((format(printf, 2, 3)));
+  char* head(char* buf);
+  void pose_line(const char* name, size_t name_len, const Pose& pose);
   std::FILE* out_;
   std::function<const std::string&()> line_text_;
   int64_t counter_ = 0;

@@ -6,6 +6,7 @@
 //
 //   cnc-bench-program-server [--runs N] [--lines N] [--repeat N] [--iterations N]
 //                            [--only NAME] [--no-rs274] [--rs274 PATH] [--keep]
+//                            [--program FILE]... [--canon-dir DIR]
 //                            [--profile count|builder|server|printer]
 //
 // Programs, written into a fresh temporary folder:
@@ -16,6 +17,8 @@
 //            G1 words, --iterations times (default 100,000);
 //   sub      the same loop calling `o200 sub` (two G1 lines from its arguments),
 //            --iterations / 2 calls (as many G1 blocks as `while`).
+//   FILE     --program FILE (any number of times): a program of your own, e.g. the
+//            10-million-line finishing program of tools/bench/finishing_program.py.
 // Cases, each run --runs times (default 3, median shown), each run in a child process
 // of its own so that its peak RSS (wait4's ru_maxrss) is its alone:
 //   interp+count   Interpreter with a Canon that only counts the motion calls;
@@ -23,9 +26,11 @@
 //   server.load    ProgramServer::load (validation: a whole interpretation, a hash per
 //   server.serve   chunk), then block(i) for every block in order (a second run);
 //                  both in one child, so both rows show that child's peak RSS;
-//   interp+printer CanonPrinter (rs274's text) to /dev/null, set up as cnc-rs274 is:
-//                  the like-for-like comparison with rs274, which prints too;
-//   rs274          LinuxCNC's /usr/bin/rs274 -g -t TBL -v VAR FILE /dev/null, its own
+//   interp+printer CanonPrinter (rs274's text) to a file (--canon-dir, default the
+//                  temporary folder; 1 MiB stdio buffer, as cnc-rs274), set up as
+//                  cnc-rs274 is: the like-for-like comparison with rs274, which prints
+//                  the same text to a file in the same folder (compared once: equal);
+//   rs274          LinuxCNC's /usr/bin/rs274 -g -t TBL -v VAR FILE OUT, its own
 //                  HOME and a fresh var file per run, timed from spawn to exit (so
 //                  its start-up, shown on its own row, is included). A program whose
 //                  first rs274 run takes over 6 s is run once, to keep the bench
@@ -33,8 +38,8 @@
 // --profile CASE runs that case once per program in this process and prints no
 // table: for `valgrind --tool=callgrind`.
 // "vs rs274" is rs274's median seconds over the case's: how many times faster; "cpu s"
-// is the child's user + system time from wait4 (the whole child: both server rows
-// show the one child's), "cpu vs" the same ratio on it: on a machine busy with other
+// is the child's user + system time from wait4 (server.load: up to the load's end,
+// getrusage; server.serve: the whole child), "cpu vs" the same ratio on it: on a machine busy with other
 // work, wall seconds include waiting for a core, CPU seconds do not.
 // blocks: motion canonical calls for the interpreter cases and rs274 (the program's
 // G0/G1 moves), interpolator blocks (motion + event blocks) for builder and server.
@@ -168,6 +173,7 @@ struct Result {
   int ok = 0;
   double seconds = 0;    // the whole case (server: load)
   double seconds2 = 0;   // server: serving every block
+  double cpu_load = 0;   // server: the child's CPU seconds up to the end of the load
   int64_t blocks = 0;
   int64_t lines = 0;     // lines the interpreter executed
   uint64_t fingerprint = 14695981039346656037ull;
@@ -297,6 +303,10 @@ Result server(const std::string& dir, const std::string& path, const std::string
     auto t0 = Clock::now();
     const cnc::pps::LoadResult lr = srv.load(path, 1);
     r.seconds = seconds_since(t0);
+    struct rusage ru {};
+    getrusage(RUSAGE_SELF, &ru);
+    r.cpu_load = static_cast<double>(ru.ru_utime.tv_sec + ru.ru_stime.tv_sec) +
+                 1e-6 * static_cast<double>(ru.ru_utime.tv_usec + ru.ru_stime.tv_usec);
     if (!lr.ok) throw std::runtime_error("load: " + lr.error);
     r.lines = srv.lines_interpreted();
     t0 = Clock::now();
@@ -312,11 +322,13 @@ Result server(const std::string& dir, const std::string& path, const std::string
 }
 
 // As cnc-rs274 (tools/rs274/main.cc) sets up for the conformance harness.
-Result interp_printer(const std::string& dir, const std::string& path, const std::string& var) {
+Result interp_printer(const std::string& dir, const std::string& path, const std::string& var,
+                      const std::string& canon) {
   return guarded([&](Result& r) {
     const auto t0 = Clock::now();
-    std::FILE* out = std::fopen("/dev/null", "w");
-    if (out == nullptr) throw std::runtime_error("cannot open /dev/null");
+    std::FILE* out = std::fopen(canon.c_str(), "w");
+    if (out == nullptr) throw std::runtime_error("cannot write " + canon);
+    std::setvbuf(out, nullptr, _IOFBF, 1 << 20);
     rs::MachineSetup m = machine(dir, var);
     m.axes = "XYZABCUVW";
     m.machine_units = rs::Units::kInch;
@@ -332,6 +344,9 @@ Result interp_printer(const std::string& dir, const std::string& path, const std
       while (interp.execute_next()) {
       }
       ip = nullptr;
+      // rs274's closing resets, as cnc-rs274 prints them (run without an INI file: two).
+      printer.on_reset(rs::SourceRef{});
+      printer.on_reset(rs::SourceRef{});
       r.blocks = printer.motions;
       r.lines = interp.lines_executed();
     }
@@ -389,7 +404,8 @@ Measured in_child(const std::function<Result()>& work) {
 
 // rs274 in its own process, HOME of its own, stdout and output to /dev/null, stderr
 // kept for the report. Timed from spawn to exit.
-Measured run_rs274(const std::string& exe, const std::string& dir, const std::string& path) {
+Measured run_rs274(const std::string& exe, const std::string& dir, const std::string& path,
+                   const std::string& canon = "/dev/null") {
   Measured m;
   const std::string var = fresh_var(dir);
   const std::string home = dir + "/home";
@@ -402,7 +418,7 @@ Measured run_rs274(const std::string& exe, const std::string& dir, const std::st
   std::vector<char*> envp;
   for (auto& s : env_s) envp.push_back(s.data());
   envp.push_back(nullptr);
-  std::vector<std::string> args = {exe, "-g", "-t", dir + "/bench.tbl", "-v", var, path, "/dev/null"};
+  std::vector<std::string> args = {exe, "-g", "-t", dir + "/bench.tbl", "-v", var, path, canon};
   std::vector<char*> argv;
   for (auto& s : args) argv.push_back(s.data());
   argv.push_back(nullptr);
@@ -506,7 +522,8 @@ void print_row(const Row& r, double rs274_seconds, double rs274_cpu) {
 int main(int argc, char** argv) {
   int runs = 3;
   int64_t lines = 200'000, repeat = 1'000'000, iterations = 100'000;
-  std::string only, profile, rs274 = "/usr/bin/rs274";
+  std::string only, profile, rs274 = "/usr/bin/rs274", canon_dir;
+  std::vector<std::string> extra;
   bool keep = false, no_rs274 = false;
   CLI::App app{"throughput and peak memory of the interpreter and the program server, against LinuxCNC's rs274", "cnc-bench-program-server"};
   cnc::util::cli::setup(app);
@@ -514,12 +531,17 @@ int main(int argc, char** argv) {
   app.add_option("--lines", lines, "lines of the straight-line program")->type_name("N")->check(CLI::Range(int64_t{10}, int64_t{1} << 40));
   app.add_option("--repeat", repeat, "iterations of the O-repeat program")->type_name("N")->check(CLI::Range(int64_t{1}, int64_t{1} << 40));
   app.add_option("--iterations", iterations, "iterations of the while and sub programs")->type_name("N")->check(CLI::Range(int64_t{2}, int64_t{1} << 40));
-  app.add_option("--only", only, "one case")->check(CLI::IsMember({"lines", "repeat", "while", "sub"}));
+  app.add_option("--only", only, "one case (none: with --program, only those)")
+      ->check(CLI::IsMember({"lines", "repeat", "while", "sub", "none"}));
   app.add_option("--profile", profile, "one run of that stage per program, in this process, no table (for callgrind)")
       ->check(CLI::IsMember({"count", "builder", "server", "printer"}));
   app.add_option("--rs274", rs274, "LinuxCNC's rs274")->type_name("PATH");
   app.add_flag("--no-rs274", no_rs274, "without rs274's figures");
   app.add_flag("--keep", keep, "keep the generated programs");
+  app.add_option("--program", extra, "a program of your own as one more case (any number of times)")
+      ->type_name("FILE")->check(CLI::ExistingFile);
+  app.add_option("--canon-dir", canon_dir, "where rs274 and interp+printer write their canon (default: the temporary folder)")
+      ->type_name("DIR")->check(CLI::ExistingDirectory);
   if (const int rc = cnc::util::cli::parse(app, argc, argv); rc >= 0) return rc;
   const auto t_start = Clock::now();
   char tmpl[] = "/tmp/cnc-bench-program-XXXXXX";
@@ -540,6 +562,12 @@ int main(int argc, char** argv) {
   if (only.empty() || only == "repeat") programs.push_back(write_repeat(dir, repeat));
   if (only.empty() || only == "while") programs.push_back(write_while(dir, iterations));
   if (only.empty() || only == "sub") programs.push_back(write_sub(dir, iterations));
+  for (const std::string& f : extra) {
+    Program p{fs::path(f).filename().string(), "", fs::absolute(f).string(), -1};
+    p.what = "--program " + f;
+    programs.push_back(p);
+  }
+  if (canon_dir.empty()) canon_dir = dir;
   if (programs.empty()) {
     std::fprintf(stderr, "--only: no program named %s\n", only.c_str());
     return 2;
@@ -551,7 +579,7 @@ int main(int argc, char** argv) {
       const Result r = profile == "count"     ? interp_count(dir, p.path, var)
                        : profile == "builder" ? interp_builder(dir, p.path, var)
                        : profile == "server"  ? server(dir, p.path, var)
-                                              : interp_printer(dir, p.path, var);
+                                              : interp_printer(dir, p.path, var, canon_dir + "/ours.canon");
       std::printf("%s, %s: %s, %" PRId64 " blocks, %.3f s (+%.3f s)\n", p.name.c_str(), profile.c_str(),
                   r.ok ? "ok" : r.error, r.blocks, r.seconds, r.seconds2);
     }
@@ -584,7 +612,11 @@ int main(int argc, char** argv) {
   int rc = 0;
   for (const Program& p : programs) {
     const double mib = static_cast<double>(fs::file_size(p.path)) / (1024.0 * 1024.0);
-    std::printf("\n%s: %s; %" PRId64 " moves; file %.2f MiB\n", p.name.c_str(), p.what.c_str(), p.motions, mib);
+    if (p.motions >= 0)
+      std::printf("\n%s: %s; %" PRId64 " moves; file %.2f MiB\n", p.name.c_str(), p.what.c_str(), p.motions, mib);
+    else
+      std::printf("\n%s: %s; file %.2f MiB\n", p.name.c_str(), p.what.c_str(), mib);
+    const std::string ours_canon = canon_dir + "/ours.canon", rs274_canon = canon_dir + "/rs274.canon";
     std::printf("  %-15s %4s %10s %9s %11s %11s %9s %9s %8s %9s\n", "case", "runs", "blocks", "seconds", "blocks/s",
                 "lines/s", "RSS MiB", "vs rs274", "cpu s", "cpu vs");
     std::vector<Measured> count, build, serve, print, base;
@@ -592,14 +624,15 @@ int main(int argc, char** argv) {
       count.push_back(in_child([&] { return interp_count(dir, p.path, fresh_var(dir)); }));
       build.push_back(in_child([&] { return interp_builder(dir, p.path, fresh_var(dir)); }));
       serve.push_back(in_child([&] { return server(dir, p.path, fresh_var(dir)); }));
-      print.push_back(in_child([&] { return interp_printer(dir, p.path, fresh_var(dir)); }));
+      print.push_back(in_child([&] { return interp_printer(dir, p.path, fresh_var(dir), ours_canon); }));
     }
     if (have_rs274) {
       for (int k = 0; k < runs; ++k) {
-        base.push_back(run_rs274(rs274, dir, p.path));
+        base.push_back(run_rs274(rs274, dir, p.path, rs274_canon));
         if (!base.back().r.ok || base.back().r.seconds > 6.0) break;
       }
-      for (Measured& m : base) m.r.blocks = p.motions;  // rs274 prints; the moves are the program's
+      // rs274 prints; the moves are the program's (of a program of your own: as many as ours printed)
+      for (Measured& m : base) m.r.blocks = p.motions >= 0 ? p.motions : (print.empty() ? 0 : print.front().r.blocks);
     }
     std::vector<Row> rows = {summarise(p.name, "interp+count", count, false),
                              summarise(p.name, "interp+builder", build, false),
@@ -607,6 +640,11 @@ int main(int argc, char** argv) {
                              summarise(p.name, "server.serve", serve, true),
                              summarise(p.name, "interp+printer", print, false)};
     rows[2].lines = 0;  // the load interprets; serving interprets again (shown once)
+    {  // the load's own CPU seconds (the child's up to the load's end)
+      std::vector<double> c;
+      for (const Measured& m : serve) c.push_back(m.r.cpu_load);
+      if (rows[2].ok) rows[2].cpu_s = median(c);
+    }
     Row base_row;
     double base_s = 0, base_cpu = 0;
     if (have_rs274) {
@@ -622,8 +660,23 @@ int main(int argc, char** argv) {
     // What the runs produced must agree: every move counted, the same blocks built and served.
     bool agree = true;
     for (const Row& r : rows) agree = agree && r.ok;
+    if (have_rs274 && base_row.ok) {
+      // Like for like: both wrote the same canon (the last runs of each).
+      std::ifstream a(ours_canon, std::ios::binary), b(rs274_canon, std::ios::binary);
+      const bool same = a && b && std::equal(std::istreambuf_iterator<char>(a), std::istreambuf_iterator<char>(),
+                                             std::istreambuf_iterator<char>(b), std::istreambuf_iterator<char>());
+      std::printf("  canon of interp+printer and rs274: %s (%.1f MB)\n", same ? "identical" : "DIFFERENT",
+                  static_cast<double>(fs::file_size(rs274_canon)) / 1e6);
+      if (!same) agree = false;
+      if (rows[4].ok && rows[2].ok && rows[4].seconds > 0 && rows[2].seconds > 0)
+        std::printf("  like for like: interp+printer %.2f x rs274 (wall), %.2f x (cpu); server.load %.2f x (wall), %.2f x (cpu)\n",
+                    base_row.seconds / rows[4].seconds, base_row.cpu_s / rows[4].cpu_s, base_row.seconds / rows[2].seconds,
+                    base_row.cpu_s / rows[2].cpu_s);
+    }
+    fs::remove(ours_canon);
+    fs::remove(rs274_canon);
     if (agree) {
-      if (rows[0].blocks != p.motions || rows[4].blocks != p.motions) {
+      if (p.motions >= 0 && (rows[0].blocks != p.motions || rows[4].blocks != p.motions)) {
         std::printf("  MISMATCH: %" PRId64 " moves expected, counted %" PRId64 " / printed %" PRId64 "\n", p.motions,
                     rows[0].blocks, rows[4].blocks);
         agree = false;
@@ -639,7 +692,7 @@ int main(int argc, char** argv) {
   if (have_rs274)
     std::printf("\nvs rs274: rs274's median seconds / the case's (rs274's include its start-up, %.3f s); cpu s: the\n"
                 "child's user+system time (wait4), less disturbed than wall time on a busy machine; cpu vs: the same\n"
-                "ratio on cpu s (a server.load/.serve cpu s is of the child that does both)\n",
+                "ratio on cpu s (server.load's up to the load's end, server.serve's of the whole child)\n",
                 rs274_startup);
   std::printf("total bench time %.1f s\n", seconds_since(t_start));
   if (!keep) fs::remove_all(dir);
