@@ -3,12 +3,24 @@
 #include <pthread.h>
 #include <sched.h>
 
+#include <algorithm>
 #include <chrono>
 
 namespace cnc::interp {
 
+namespace {
+size_t ring_capacity(const config::MachineConfig& cfg, size_t capacity) {
+  if (capacity > 0) return capacity;
+  return std::max<size_t>(1024, 2 * static_cast<size_t>(std::max(cfg.block_window, 1)));
+}
+}  // namespace
+
 ThreadedPlanLink::ThreadedPlanLink(const config::MachineConfig& cfg, size_t capacity)
-    : planner_(cfg), requests_(capacity), updates_(capacity), returned_(capacity), thread_([this] { run(); }) {}
+    : planner_(cfg),
+      requests_(ring_capacity(cfg, capacity)),
+      updates_(ring_capacity(cfg, capacity)),
+      returned_(ring_capacity(cfg, capacity)),
+      thread_([this] { run(); }) {}
 
 ThreadedPlanLink::~ThreadedPlanLink() {
   stop_.store(true, std::memory_order_release);

@@ -16,7 +16,10 @@ namespace cnc::interp {
 
 class ThreadedPlanLink final : public PlanLink {
  public:
-  explicit ThreadedPlanLink(const config::MachineConfig& cfg, size_t capacity = 1024);
+  // capacity 0: twice motion.block_window, at least 1024. The rings must hold a whole
+  // window of blocks submitted in one cycle (a window of 4096 in rings of 1024 stopped
+  // a program with "the planner is busy" at its 1025th block).
+  explicit ThreadedPlanLink(const config::MachineConfig& cfg, size_t capacity = 0);
   ~ThreadedPlanLink() override;  // stops and joins the thread; frees the requests left
 
   // Cyclic side (one thread).

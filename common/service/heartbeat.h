@@ -8,6 +8,9 @@
 
 namespace cnc::service {
 
+// The program server's heartbeat detail while a load validates: "validating: N blocks".
+inline constexpr const char* kValidatingDetail = "validating: ";
+
 class Heartbeat {
  public:
   Heartbeat(bus::Bus& bus, const config::MachineConfig& cfg, std::string service_name);

@@ -24,9 +24,10 @@ namespace cnc::interp {
 namespace ch = config::channels;
 
 namespace {
-// Inputs kept until the logger confirms them or, while the bus fails, for a later
-// publish (about 16 s of a busy program).
-constexpr size_t kMaxPendingInputs = 4096;
+// Inputs kept until the logger confirms them (every second) or, while the bus fails,
+// for a later publish: 4 s of a program of 4,000 blocks/s (one input each; 4,096 ran
+// out within a second at 6,000 blocks/s and the log did not replay).
+constexpr size_t kMaxPendingInputs = 16384;
 // An AXIS_STATUS older than this does not tell where the drives are now.
 constexpr double kStatusFresh_s = 0.5;
 // The bridge publishes AXIS_STATUS every T_ipo: silent this long while a program
@@ -367,19 +368,32 @@ void InterpolatorNode::request_blocks() {
   while (missing < end && reorder_.count(missing)) ++missing;
   if (missing >= end) return;
   const int64_t now = core_.cycle();
-  // Ask in batches of half a window (or for the tail of the program), and again
-  // when nothing came for a while: a lost request or block only delays.
-  const bool batch_ready = end - missing >= std::max<int64_t>(1, cfg_.block_window / 2) || end == num_blocks_;
-  const bool fresh = missing != last_request_first_;
-  const bool timed_out = now - last_request_cycle_ >= resend_cycles_;
-  if (!((fresh && batch_ready) || timed_out)) return;
+  if (last_request_first_ < 0) requested_end_ = -1;  // a new load or START: nothing in flight
+  if (missing != waiting_for_) {
+    waiting_for_ = missing;
+    waiting_since_ = now;
+  }
+  // Ask in batches of half a window (or for the tail of the program) for blocks not
+  // asked for yet: those asked for are in flight. All of them again from the first
+  // missing one when it has not come for a while: a lost request or block only
+  // delays. (Asking for the window's whole rest each cycle made the server send each
+  // block five times at 6,000 blocks/s, fall behind and miss its heartbeats.)
+  const bool lost = now - waiting_since_ >= resend_cycles_ && now - last_resend_cycle_ >= resend_cycles_;
+  const int64_t from = lost ? missing : std::max(missing, requested_end_);
+  if (from >= end) return;
+  const bool batch_ready = end - from >= std::max<int64_t>(1, cfg_.block_window / 2) || end == num_blocks_;
+  if (!lost && !batch_ready) return;
   cnc::lcmt_block_request r{};
   r.program_token = token_;
-  r.first_block = missing;
-  r.count = static_cast<int32_t>(end - missing);
+  r.first_block = from;
+  r.count = static_cast<int32_t>(end - from);
   bus_.publish(ch_request_, r);
-  last_request_first_ = missing;
-  last_request_cycle_ = now;
+  last_request_first_ = from;
+  requested_end_ = std::max(requested_end_, end);
+  if (lost) {
+    last_resend_cycle_ = now;
+    waiting_since_ = now;
+  }
 }
 
 void InterpolatorNode::cycle() {

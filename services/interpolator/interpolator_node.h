@@ -238,7 +238,10 @@ class InterpolatorNode {
   std::string program_path_;
   std::map<int64_t, cnc::lcmt_program_block> reorder_;  // received ahead of the core
   int64_t last_request_first_ = -1;
-  int64_t last_request_cycle_ = -1000000;
+  int64_t requested_end_ = -1;       // one past the last block asked for (in flight or here)
+  int64_t waiting_for_ = -1;         // the first block missing ...
+  int64_t waiting_since_ = 0;        // ... since this cycle
+  int64_t last_resend_cycle_ = -1000000;
   int64_t resend_cycles_;
   int64_t setpoints_published_ = 0;
   RunState last_state_ = RunState::kIdle;

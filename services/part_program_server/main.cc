@@ -1,5 +1,6 @@
 // cnc-program-server: parses part programs and serves their blocks on request.
 #include <cstdio>
+#include <string>
 
 #include "cnc/lcmt_heartbeat.hpp"
 #include "common/service/heartbeat.h"
@@ -25,6 +26,11 @@ int main(int argc, char** argv) {
     cnc::pps::ProgramServerNode node(cfg, bus);
     node.use_state_file(args.option("state"));
     cnc::service::Heartbeat hb(bus, cfg, "cnc-program-server");
+    // A program of millions of lines validates for seconds: the heartbeat goes on,
+    // saying so (cnc-ctl waits for the load's answer while it does).
+    node.on_validation_progress([&hb](int64_t blocks) {
+      hb.tick(cnc::lcmt_heartbeat::RUNNING, 0, std::string(cnc::service::kValidatingDetail) + std::to_string(blocks) + " blocks");
+    });
     // The interpolator requests the blocks: an ALARM naming it when it is lost.
     cnc::service::PeerWatch peers(bus, cfg, "cnc-program-server", {"cnc-interpolator"});
     while (!cnc::util::stop_requested()) {

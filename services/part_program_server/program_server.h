@@ -12,6 +12,7 @@
 // interpreter's position (rare: the interpolator asks for blocks in order) restarts
 // it from the program's start. Memory is O(blocks / chunk) + a few chunks, whatever
 // the program's length or the number of times its loops run.
+#include <functional>
 #include <limits>
 #include <memory>
 #include <optional>
@@ -164,6 +165,11 @@ class ProgramServer {
   int64_t probes_known() const { return program_ ? program_->probes_known : 0; }
   int64_t inputs_known() const { return program_ ? static_cast<int64_t>(program_->results.size()) - program_->probes_known : 0; }
 
+  // Called as a validation begins and every 4,096 blocks of it with the blocks so far:
+  // a program of millions of lines validates for seconds (a minute on a busy machine),
+  // and the node keeps its heartbeat going.
+  void on_validation_progress(std::function<void(int64_t)> f) { progress_ = std::move(f); }
+
   const ProgramSetup& setup() const { return setup_; }
   // The block delete switch ('/' lines skipped when on) for the programs loaded from now
   // on; a loaded program keeps the value it was loaded with.
@@ -176,6 +182,7 @@ class ProgramServer {
 
  private:
   class Run;
+  std::function<void(int64_t)> progress_;
   struct Loaded {
     std::string path;
     int64_t token = 0;

@@ -1,4 +1,5 @@
 #pragma once
+#include <functional>
 #include <map>
 
 #include "cnc/lcmt_axis_status.hpp"
@@ -40,6 +41,8 @@ class ProgramServerNode {
   // The state file ("" = none). Call before the first message is handled: a program
   // recorded there is loaded again (an unreadable or malformed file is ignored with a warning).
   void use_state_file(const std::string& path);
+  // Called while a load validates (ProgramServer::on_validation_progress).
+  void on_validation_progress(std::function<void(int64_t)> f) { core_.on_validation_progress(std::move(f)); }
   // Publishes the program state when it changed or every `period_s`.
   void publish_state(bool force);
   // Once per loop: watches this node's publishes (FAULT on a failure, ALARM once the bus works).

@@ -181,6 +181,20 @@ TEST(ProgramServer, MemoryIsOneHashPerChunkOfALongLoop) {
   EXPECT_EQ(server.block(50000)->kind, BlockKind::kEnd);
 }
 
+// A load of millions of lines validates for seconds: the server reports its progress
+// (the node keeps its heartbeat going with it) as it begins and every 4,096 blocks.
+TEST(ProgramServer, AValidationReportsItsProgressEvery4096Blocks) {
+  TempDir dir;
+  const fs::path file = dir / "loop.ngc";
+  write(file, "F1000\n#1=0\no1 while [#1 LT 10000]\n  G1 X[#1 MOD 7]\n  #1=[#1+1]\no1 endwhile\nM2\n");
+  ProgramServer server(test::xyz_setup(), ServerLimits{});
+  std::vector<int64_t> calls;
+  server.on_validation_progress([&calls](int64_t blocks) { calls.push_back(blocks); });
+  ASSERT_TRUE(server.load(file.string(), 1).ok);
+  EXPECT_EQ(server.num_blocks(), 10001);
+  EXPECT_EQ(calls, (std::vector<int64_t>{0, 4096, 8192}));
+}
+
 TEST(ProgramServer, AProgramThatNeverEndsIsRefused) {
   TempDir dir;
   const fs::path file = dir / "forever.ngc";

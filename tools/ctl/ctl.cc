@@ -10,6 +10,7 @@
 #include "cnc/lcmt_drive_command.hpp"
 #include "cnc/lcmt_program_command.hpp"
 #include "cnc/lcmt_setpoint.hpp"
+#include "common/service/heartbeat.h"
 #include "common/service/operator_commands.h"
 #include "common/util/clock.h"
 #include "common/util/install.h"
@@ -699,6 +700,13 @@ bool Ctl::services_up() {
   return true;
 }
 
+// The program server's last heartbeat, at most 5 s old, says it validates a load.
+bool Ctl::server_validating() const {
+  const auto it = view_.heartbeats.find("cnc-program-server");
+  return it != view_.heartbeats.end() && it->second.detail.starts_with(cnc::service::kValidatingDetail) &&
+         cnc::util::wall_utime() - it->second.utime < 5'000'000;
+}
+
 // LOAD; repeated if no answer (a lost datagram), the answer names the path.
 int Ctl::load(const std::string& program, bool line_cmd) {
   const int64_t old_token = view_.have_program ? view_.program.program_token : 0;
@@ -733,6 +741,8 @@ int Ctl::load(const std::string& program, bool line_cmd) {
     }
     line_suffix = cnc::service::mdi_program_suffix(bus_.sender(), sent_seq_);
     got = wait(2.0, [&] { return answered() || !refused().empty(); });
+    // A long program: the server's heartbeat says it validates; waited for, not sent again.
+    while (!got && server_validating()) got = wait(2.0, [&] { return answered() || !refused().empty(); });
   }
   if (const std::string why = refused(); !why.empty()) {
     std::fprintf(stderr, "cnc-ctl: %s\n", why.c_str());

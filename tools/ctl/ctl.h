@@ -71,6 +71,7 @@ class Ctl {
   // Runs the bus until `done()` or `timeout_s`; false on timeout or stop signal.
   template <class Pred>
   bool wait(double timeout_s, Pred done);
+  bool server_validating() const;
   void send(int8_t command, const std::string& path = "", double value = 1.0);
   std::string refused() const;
   bool answered() const;
