@@ -153,15 +153,48 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
     }
     run_no = static_cast<int>(v);
   }
+  // Two passes over the log, so that memory does not grow with its length (a run of
+  // ten million blocks logs 10 GB): the first finds the runs, checks the inputs are
+  // complete and notes where programs change; the second replays as it reads.
   std::vector<cnc::lcmt_config> runs;  // each run's config, in the order they began
-  std::map<int32_t, std::vector<cnc::lcmt_interp_input>> inputs_of;
-  std::map<int32_t, std::map<int64_t, cnc::lcmt_setpoint>> setpoints_of;
+  struct Seen {
+    std::map<int64_t, int64_t> indices;  // input indices logged, as [first, end) intervals
+    int64_t inputs = 0, copies = 0, setpoints = 0;
+    int64_t first_cycle = -1, last_cycle = -1;  // of the setpoints
+    std::map<int64_t, int64_t> token_at;  // input index where the blocks' program token changed -> token
+    int64_t last_token = 0;
+  };
+  std::map<int32_t, Seen> seen;
   std::map<int64_t, bool> block_delete_of;  // program token -> the switch it was loaded with
   cnc::bus::LogFormat format;  // format 1 unless the log says otherwise
   bool format_seen = false;
   const std::string key_file = args.option("key");
   std::optional<cnc::bus::LogVerifier> verifier;
   if (!key_file.empty()) verifier.emplace(cnc::bus::read_key_file(key_file));
+  // Adds index to the intervals; false when it was there already (a copy sent again).
+  const auto add_index = [](std::map<int64_t, int64_t>& iv, int64_t i) {
+    auto next = iv.upper_bound(i);
+    if (next != iv.begin()) {
+      auto prev = std::prev(next);
+      if (i < prev->second) return false;
+      if (i == prev->second) {
+        prev->second = i + 1;
+        if (next != iv.end() && next->first == i + 1) {
+          prev->second = next->second;
+          iv.erase(next);
+        }
+        return true;
+      }
+    }
+    if (next != iv.end() && next->first == i + 1) {
+      const int64_t e = next->second;
+      iv.erase(next);
+      iv.emplace(i, e);
+    } else {
+      iv.emplace(i, i + 1);
+    }
+    return true;
+  };
   {
     cnc::bus::Bus bus("file://" + log + "?speed=0");
     if (verifier)
@@ -180,7 +213,14 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
     });
     bus.subscribe_raw(".*INTERP_INPUT", [&](const std::string&, const void* d, size_t n, int64_t) {
       cnc::lcmt_interp_input in;
-      if (decode(d, n, &in) || decode_v2(d, n, &in)) inputs_of[in.sender].push_back(std::move(in));
+      if (!(decode(d, n, &in) || decode_v2(d, n, &in))) return;
+      Seen& w = seen[in.sender];
+      ++w.inputs;
+      if (!add_index(w.indices, in.index)) ++w.copies;
+      if (in.kind == cnc::lcmt_interp_input::BLOCK && in.block.program_token != w.last_token) {
+        w.last_token = in.block.program_token;
+        w.token_at.emplace(in.index, in.block.program_token);
+      }
     });
     // The block delete switch each program was loaded with (the server's, not an
     // interpolator input): --program reads the edited program with it.
@@ -191,7 +231,11 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
     });
     bus.subscribe_raw(".*SETPOINTS", [&](const std::string&, const void* d, size_t n, int64_t) {
       cnc::lcmt_setpoint sp;
-      if (decode(d, n, &sp) || decode_v1(d, n, &sp)) setpoints_of[sp.sender].emplace(sp.cycle, std::move(sp));
+      if (!(decode(d, n, &sp) || decode_v1(d, n, &sp))) return;
+      Seen& w = seen[sp.sender];
+      ++w.setpoints;
+      if (w.first_cycle < 0 || sp.cycle < w.first_cycle) w.first_cycle = sp.cycle;
+      w.last_cycle = std::max(w.last_cycle, sp.cycle);
     });
     while (bus.handle(1000) > 0) {
     }
@@ -245,37 +289,28 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
   const cnc::lcmt_config* config = &runs[static_cast<size_t>(run_no - 1)];
   const int32_t sender = config->sender;
   int64_t foreign = 0;
-  for (const auto& [who, v] : inputs_of)
-    if (who != sender) foreign += static_cast<int64_t>(v.size());
-  for (const auto& [who, m] : setpoints_of)
-    if (who != sender) foreign += static_cast<int64_t>(m.size());
-  std::vector<cnc::lcmt_interp_input>& inputs = inputs_of[sender];
-  std::map<int64_t, cnc::lcmt_setpoint>& setpoints = setpoints_of[sender];
+  for (const auto& [who, w] : seen)
+    if (who != sender) foreign += w.inputs + w.setpoints;
+  const Seen& mine = seen[sender];
   // Inputs from the interpolator that sent the config, each index once (an input
   // the logger did not confirm in time was sent again: the copies are equal), in
   // index order; none may be missing.
-  std::map<int64_t, cnc::lcmt_interp_input> by_index;
-  int64_t copies = 0;
-  for (auto& in : inputs) {
-    if (in.sender != sender) continue;
-    if (!by_index.emplace(in.index, std::move(in)).second) ++copies;
-  }
-  std::vector<cnc::lcmt_interp_input> mine;
-  for (auto& [index, in] : by_index) {
-    const int64_t expected = mine.empty() ? 0 : mine.back().index + 1;
-    if (index != expected) {
-      if (mine.empty())
-        std::fprintf(stderr, "cnc-replay: the log starts after the interpolator's first input (index %lld)\n",
-                     static_cast<long long>(index));
-      else
-        std::fprintf(stderr, "cnc-replay: inputs lost: INTERP_INPUT index %lld..%lld missing; the run cannot be reproduced\n",
-                     static_cast<long long>(expected), static_cast<long long>(index - 1));
+  if (!mine.indices.empty()) {
+    const auto& [first, end] = *mine.indices.begin();
+    if (first != 0) {
+      std::fprintf(stderr, "cnc-replay: the log starts after the interpolator's first input (index %lld)\n",
+                   static_cast<long long>(first));
       return kExitUnreplayable;
     }
-    mine.push_back(std::move(in));
+    if (mine.indices.size() > 1) {
+      std::fprintf(stderr, "cnc-replay: inputs lost: INTERP_INPUT index %lld..%lld missing; the run cannot be reproduced\n",
+                   static_cast<long long>(end), static_cast<long long>(std::next(mine.indices.begin())->first - 1));
+      return kExitUnreplayable;
+    }
   }
-  if (copies > 0) std::printf("inputs: %lld sent again after a loss, taken once\n", static_cast<long long>(copies));
-  if (setpoints.empty()) {
+  const int64_t num_inputs = mine.indices.empty() ? 0 : mine.indices.begin()->second;
+  if (mine.copies > 0) std::printf("inputs: %lld sent again after a loss, taken once\n", static_cast<long long>(mine.copies));
+  if (mine.setpoints == 0) {
     std::fprintf(stderr, "cnc-replay: no setpoints of that interpolator in %s\n", log.c_str());
     return kExitUnreplayable;
   }
@@ -307,26 +342,62 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
   // at the cycle the log recorded (PLAN inputs), as live.
   cnc::interp::SyncPlanLink planner(cfg);
   cnc::interp::Interpolator core(cfg, planner);
-  const int64_t last_cycle = setpoints.rbegin()->first;
+  const int64_t last_cycle = mine.last_cycle;
   const auto base_name = [](const std::string& path) { return path.substr(path.find_last_of('/') + 1); };
   const std::string other_name = other ? base_name(args.option("program")) : "";
   bool substituting = false;  // the recorded program now running has other_name
   int64_t substituted = 0;
-  size_t next_input = 0;
+  int64_t applied = 0;
   int64_t compared = 0;
+  // The second pass: inputs and setpoints of this run as the log gives them, held
+  // only until their cycle is replayed (inputs by index: a copy sent again comes later).
+  std::map<int64_t, cnc::lcmt_interp_input> inputs;  // index >= next_index
+  std::map<int64_t, cnc::lcmt_setpoint> setpoints;   // cycle >= the cycle being replayed
+  int64_t next_index = 0;
+  cnc::bus::Bus bus("file://" + log + "?speed=0");
+  bus.subscribe_raw(".*INTERP_INPUT", [&](const std::string&, const void* d, size_t n, int64_t) {
+    cnc::lcmt_interp_input in;
+    if ((decode(d, n, &in) || decode_v2(d, n, &in)) && in.sender == sender && in.index >= next_index)
+      inputs.emplace(in.index, std::move(in));
+  });
+  bus.subscribe_raw(".*SETPOINTS", [&](const std::string&, const void* d, size_t n, int64_t) {
+    cnc::lcmt_setpoint sp;
+    if ((decode(d, n, &sp) || decode_v1(d, n, &sp)) && sp.sender == sender) setpoints.emplace(sp.cycle, std::move(sp));
+  });
+  bool log_ended = false;
+  const auto read_more = [&]() {
+    if (!log_ended && bus.handle(1000) <= 0) log_ended = true;
+    return !log_ended;
+  };
+  // Setpoints come in cycle order but for a datagram overtaken on the way: a few later.
+  constexpr int64_t kReorder = 16;
   for (int64_t cycle = 0; cycle <= last_cycle; ++cycle) {
-    while (next_input < mine.size() && mine[next_input].cycle == cycle) {
-      cnc::lcmt_interp_input in = mine[next_input++];
+    for (;;) {
+      if (next_index >= num_inputs) break;
+      while (!inputs.count(next_index) && read_more()) {
+      }
+      auto found = inputs.find(next_index);
+      if (found == inputs.end()) {
+        std::fprintf(stderr, "cnc-replay: input %lld not found again in %s\n", static_cast<long long>(next_index),
+                     log.c_str());
+        return kExitUnreplayable;
+      }
+      if (found->second.cycle > cycle) break;
+      if (found->second.cycle < cycle) {
+        std::fprintf(stderr, "cnc-replay: inputs out of cycle order at index %lld\n", static_cast<long long>(next_index));
+        return kExitUnreplayable;
+      }
+      cnc::lcmt_interp_input in = std::move(found->second);
+      inputs.erase(found);
+      ++next_index;
+      ++applied;
       if (in.kind == cnc::lcmt_interp_input::COMMAND && in.command.command == cnc::lcmt_program_command::LOAD) {
         substituting = other && base_name(in.command.program_path) == other_name;
         if (substituting) {
           // The program this LOAD became: the token of the next recorded block.
-          for (size_t k = next_input; k < mine.size(); ++k) {
-            if (mine[k].kind != cnc::lcmt_interp_input::BLOCK) continue;
-            if (const auto bd = block_delete_of.find(mine[k].block.program_token); bd != block_delete_of.end())
+          if (const auto t = mine.token_at.upper_bound(in.index); t != mine.token_at.end())
+            if (const auto bd = block_delete_of.find(t->second); bd != block_delete_of.end())
               other->set_block_delete(bd->second);
-            break;
-          }
           std::vector<double> here(naxes);
           for (int a = 0; a < naxes; ++a)
             here[a] = core.last().num_axes > 0 ? core.last().position_mm[a] : cfg.axes[a].home_mm;
@@ -354,12 +425,10 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
         return diverged();
       }
     }
-    if (next_input < mine.size() && mine[next_input].cycle < cycle) {
-      std::fprintf(stderr, "cnc-replay: inputs out of cycle order at index %lld\n",
-                   static_cast<long long>(mine[next_input].index));
-      return kExitUnreplayable;
-    }
     const cnc::interp::Setpoint& sp = core.step();
+    while ((setpoints.empty() || setpoints.rbegin()->first < cycle + kReorder) && read_more()) {
+    }
+    while (!setpoints.empty() && setpoints.begin()->first < cycle) setpoints.erase(setpoints.begin());
     auto it = setpoints.find(cycle);
     if (it == setpoints.end()) continue;
     const std::string diff = compare(it->second, sp, cfg.ipo_period_s);
@@ -370,6 +439,7 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
       std::printf("%lld setpoints identical before it\n", static_cast<long long>(compared));
       return diverged();
     }
+    setpoints.erase(it);
     ++compared;
   }
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -379,9 +449,10 @@ int replay(const cnc::config::MachineConfig&, const cnc::service::Args& args) {
   const int64_t missing = last_cycle + 1 - compared;
   std::printf("identical: %lld setpoints compared bit for bit (cycles %lld..%lld%s), %zu inputs applied; "
               "%.1f s of run replayed in %.3f s (%.0fx real time)\n",
-              static_cast<long long>(compared), static_cast<long long>(setpoints.begin()->first),
+              static_cast<long long>(compared), static_cast<long long>(mine.first_cycle),
               static_cast<long long>(last_cycle),
-              missing > 0 ? (", " + std::to_string(missing) + " cycles not in the log").c_str() : "", mine.size(), run_s,
+              missing > 0 ? (", " + std::to_string(missing) + " cycles not in the log").c_str() : "",
+              static_cast<size_t>(applied), run_s,
               wall, run_s / std::max(wall, 1e-9));
   if (foreign > 0) std::printf("(%lld messages of other interpolator runs in the log were not replayed)\n",
                                static_cast<long long>(foreign));
