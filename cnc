@@ -21,6 +21,10 @@
 #   ./cnc bench machining-time [--modes main,asis] [--only NAMES] [--out DIR] [--no-linuxcnc] [--reuse]
 #                                                  CAM programs on our planner and LinuxCNC 2.9's: times, stops,
 #                                                  path deviation, jerk (tools/bench/machining_time.py)
+#   ./cnc bench interpreter [--lines N] [--runs N]  LinuxCNC's rs274 against our interpreter and program server
+#                                                  on a finishing program of N lines (default 10 M), like for like
+#   ./cnc bench ten-million [--lines N] [--out DIR] [--keep-log]  the program through a live cell: memory,
+#                                                  throughput, log rate, replay (tools/bench/tenm/run.sh)
 #   ./cnc soak --minutes M [--seed S] [--out DIR]  programs back to back with operator actions and injected
 #                                                  faults, every log replayed (tools/soak/soak.py)
 #   ./cnc experiment table1 [--size tiny|reduced|full] [--out DIR]
@@ -403,6 +407,10 @@ cmd_conformance() {
 
 # bench latency [latency_bench.sh options]: see tools/bench/latency_bench.sh.
 # bench machining-time [machining_time.py options]: see tools/bench/machining_time.py.
+# bench interpreter [--lines N] [cnc-bench-program-server options]: a finishing program of
+#   N lines (default 10,000,000; tools/bench/finishing_program.py) and the bench's own
+#   200,000-line program through LinuxCNC's rs274 and ours, like for like.
+# bench ten-million [run.sh options]: tools/bench/tenm/run.sh, the program through a live cell.
 cmd_bench() {
   local what="${1:-}"
   [ $# -gt 0 ] && shift
@@ -412,7 +420,24 @@ cmd_bench() {
       [ "$INSTALLED" -eq 0 ] || die "bench machining-time: runs from the source tree (it needs the build's cnc-path-deviation)"
       build
       run_child /usr/bin/python3 "$ROOT/tools/bench/machining_time.py" --build "$BUILD" "$@" ;;
-    *) die "bench: expected 'latency' or 'machining-time' (bench latency [--machine F] [--program P] [--out DIR] [--load N]; bench machining-time [--modes main,asis] [--only NAMES] [--out DIR] [--no-linuxcnc] [--reuse])" ;;
+    interpreter)
+      [ "$INSTALLED" -eq 0 ] || die "bench interpreter: runs from the source tree (it needs the build's cnc-bench-program-server)"
+      build
+      local lines=10000000
+      if [ "${1:-}" = --lines ]; then lines="$2"; shift 2; fi
+      local dir
+      dir="$(mktemp -d /tmp/cnc-bench-interpreter.XXXXXX)"
+      /usr/bin/python3 "$ROOT/tools/bench/finishing_program.py" --lines "$lines" --out "$dir/finish.ngc"
+      local rc=0
+      "$BUILD/tools/bench/cnc-bench-program-server" --only lines --lines 200000 --program "$dir/finish.ngc" \
+        --canon-dir "$dir" "$@" || rc=$?
+      rm -rf "$dir"
+      return $rc ;;
+    ten-million)
+      [ "$INSTALLED" -eq 0 ] || die "bench ten-million: runs from the source tree"
+      build
+      run_child "$ROOT/tools/bench/tenm/run.sh" "$BUILD" "$ROOT" "$@" ;;
+    *) die "bench: expected 'latency', 'machining-time', 'interpreter' or 'ten-million' (bench latency [--machine F] [--program P] [--out DIR] [--load N]; bench machining-time [--modes main,asis] [--only NAMES] [--out DIR] [--no-linuxcnc] [--reuse])" ;;
   esac
 }
 
