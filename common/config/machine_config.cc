@@ -57,7 +57,7 @@ constexpr std::string_view kStockKeys[] = {"x_min_mm", "y_min_mm", "x_max_mm", "
 constexpr std::string_view kProgramKeys[] = {
     "subroutine_path", "m6_remap",     "tool_table",    "var_file",      "probe",         "digital_inputs",
     "analog_inputs",   "digital_outputs", "analog_outputs", "block_delete", "optional_stop",
-    "max_validation_lines", "dry_run_max_time_s", "g64_fit", "g64_fit_max_segment_mm", "g64_fit_max_turn_deg",
+    "max_validation_lines", "dry_run_max_time_s", "g64_fit", "g64_fit_max_segment_mm", "g64_fit_max_segment_per_p", "g64_fit_max_turn_deg",
     "default_path_tolerance_mm"};
 constexpr std::string_view kAxisKeys[] = {"name",          "type",    "wrapped",         "min_mm",
                                           "max_mm",        "max_velocity_mm_s", "max_accel_mm_s2", "max_jerk_mm_s3",
@@ -492,6 +492,7 @@ void read_program(MapReader r, ProgramConfig& p) {
   p.dry_run_max_time_s = r.get_double("dry_run_max_time_s", p.dry_run_max_time_s, 1.0, 1e9);
   p.g64_fit = r.get_bool("g64_fit", p.g64_fit);
   p.g64_fit_max_segment_mm = r.get_double("g64_fit_max_segment_mm", p.g64_fit_max_segment_mm, 0.001, 1000.0);
+  p.g64_fit_max_segment_per_p = r.get_double("g64_fit_max_segment_per_p", p.g64_fit_max_segment_per_p, 0.0, 1e6);
   p.g64_fit_max_turn_deg = r.get_double("g64_fit_max_turn_deg", p.g64_fit_max_turn_deg, 0.0, 90.0);
   p.default_path_tolerance_mm = r.get_double("default_path_tolerance_mm", p.default_path_tolerance_mm, 0.0, 1.0);
   r.finish();

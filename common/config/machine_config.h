@@ -367,7 +367,8 @@ struct ProgramConfig {
   double dry_run_max_time_s = 7 * 86400.0;
   // G64 P: runs of short G1 moves fitted to splines within P (else only corner blends).
   bool g64_fit = true;
-  double g64_fit_max_segment_mm = 2.0;  // longer moves are not part of a fitted run
+  double g64_fit_max_segment_mm = 2.0;  // longer moves are not part of a fitted run...
+  double g64_fit_max_segment_per_p = 100.0;  // ...unless within this many times P
   double g64_fit_max_turn_deg = 30.0;   // a sharper turn between two moves ends a run
   // The path tolerance of G64 without P (and of a program with no G64 word, which
   // starts in G64): 0 keeps the programmed lines exactly, as G61 does; never unbounded.

@@ -374,13 +374,14 @@ std::vector<BlockBuilder::Stretch> BlockBuilder::fit_stretches(RunShape& r) cons
   };
   if (setup_.fit_runs) {
     const double cos_turn = std::cos(setup_.fit_max_turn_deg * M_PI / 180.0);
+    const double max_segment = std::max(setup_.fit_max_segment_mm, setup_.fit_max_segment_per_p * path_tol_mm_);
     for (size_t a = 0; a < n;) {
-      if (r.len[a] > setup_.fit_max_segment_mm) {
+      if (r.len[a] > max_segment) {
         ++a;
         continue;
       }
       size_t b = a + 1;
-      while (b < n && r.len[b] <= setup_.fit_max_segment_mm && r.dir[b - 1].dot(r.dir[b]) >= cos_turn) ++b;
+      while (b < n && r.len[b] <= max_segment && r.dir[b - 1].dot(r.dir[b]) >= cos_turn) ++b;
       fit_range(a, b);
       a = b;
     }

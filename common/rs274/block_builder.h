@@ -31,6 +31,9 @@ struct BuilderSetup {
   // fit_max_segment_mm long, turning by at most fit_max_turn_deg at each vertex.
   bool fit_runs = true;
   double fit_max_segment_mm = 2.0;
+  // ...or up to this many times P: a coarser CAM post's chords of a gentle curve
+  // (3D_Chips' 1-2.3 mm moves at P 0.1) are one curve too.
+  double fit_max_segment_per_p = 100.0;
   double fit_max_turn_deg = 30.0;
   int fit_max_spans = 100;  // knot spans per NURBS block the fit is cut into
   // No corner blend where the interpolator's corner rule passes the kink at the

@@ -333,6 +333,7 @@ ProgramSetup program_setup(const config::MachineConfig& cfg) {
   s.max_validation_lines = cfg.program.max_validation_lines;
   s.builder.fit_runs = cfg.program.g64_fit;
   s.builder.fit_max_segment_mm = cfg.program.g64_fit_max_segment_mm;
+  s.builder.fit_max_segment_per_p = cfg.program.g64_fit_max_segment_per_p;
   s.builder.fit_max_turn_deg = cfg.program.g64_fit_max_turn_deg;
   s.builder.ipo_period_s = cfg.ipo_period_s;
   s.builder.chord_tolerance_mm = cfg.chord_tolerance_mm;
@@ -402,7 +403,7 @@ std::string describe(const ProgramSetup& s) {
                m_block_delete, m_optional_stop, m_start_position, m_max_call_depth, m_m6_remap, m_fanuc_subs,
                m_loop_on_main_m99, m_initial_modes, m_orient_tool] = machine;
   const auto& [b_axis_names, b_start_position_mm, b_rotary, b_spindle_rpm, b_process, b_fit_runs,
-               b_fit_max_segment_mm, b_fit_max_turn_deg, b_fit_max_spans, b_ipo_period_s, b_corner_dv_mm_s,
+               b_fit_max_segment_mm, b_fit_max_segment_per_p, b_fit_max_turn_deg, b_fit_max_spans, b_ipo_period_s, b_corner_dv_mm_s,
                b_accel_mm_s2, b_jerk_mm_s3, b_chord_tolerance_mm, b_default_path_tolerance_mm, b_spindle_sync] = builder;
   const auto& [p_ball_radius_mm, p_flutes, p_pick_feed_mm, p_target_rmax_um] = b_process;
   line("machine.axes", quoted(m_axes));
@@ -443,6 +444,7 @@ std::string describe(const ProgramSetup& s) {
   line("builder.process.target_rmax_um", num(p_target_rmax_um));
   line("builder.fit_runs", flag(b_fit_runs));
   line("builder.fit_max_segment_mm", num(b_fit_max_segment_mm));
+  line("builder.fit_max_segment_per_p", num(b_fit_max_segment_per_p));
   line("builder.fit_max_turn_deg", num(b_fit_max_turn_deg));
   line("builder.fit_max_spans", std::to_string(b_fit_max_spans));
   line("builder.ipo_period_s", num(b_ipo_period_s));

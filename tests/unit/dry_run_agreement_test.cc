@@ -211,7 +211,8 @@ TEST_F(DryRunAgreement, EveryProgramSettingReachesTheSetup) {
   // (every M1 is an event, held at when the switch is on).
   [[maybe_unused]] const auto& [subroutine_path, m6_remap, tool_table, var_file, probe, digital_inputs, analog_inputs,
                                 digital_outputs, analog_outputs, block_delete, optional_stop, max_validation_lines,
-                                dry_run_max_time_s, g64_fit, g64_fit_max_segment_mm, g64_fit_max_turn_deg,
+                                dry_run_max_time_s, g64_fit, g64_fit_max_segment_mm, g64_fit_max_segment_per_p,
+                                g64_fit_max_turn_deg,
                                 default_path_tolerance_mm] = base.program;
   changes.emplace_back("subroutine_path", [](auto& c) { c.program.subroutine_path = {"/nowhere"}; });
   changes.emplace_back("m6_remap", [](auto& c) { c.program.m6_remap = "change"; });
@@ -226,6 +227,7 @@ TEST_F(DryRunAgreement, EveryProgramSettingReachesTheSetup) {
   changes.emplace_back("max_validation_lines", [](auto& c) { c.program.max_validation_lines += 1000; });
   changes.emplace_back("g64_fit", [](auto& c) { c.program.g64_fit = !c.program.g64_fit; });
   changes.emplace_back("g64_fit_max_segment_mm", [](auto& c) { c.program.g64_fit_max_segment_mm += 1; });
+  changes.emplace_back("g64_fit_max_segment_per_p", [](auto& c) { c.program.g64_fit_max_segment_per_p += 1; });
   changes.emplace_back("g64_fit_max_turn_deg", [](auto& c) { c.program.g64_fit_max_turn_deg += 1; });
   changes.emplace_back("default_path_tolerance_mm", [](auto& c) { c.program.default_path_tolerance_mm += 0.01; });
   // And the machine's other settings a program meets.
