@@ -29,13 +29,14 @@ struct PlanRun {
   double a_use = 0, j_use = 0;
 };
 
-PlanRun run(const std::string& text, bool fit = true, double default_tol_mm = 0) {
+PlanRun run(const std::string& text, bool fit = true, double default_tol_mm = 0, double max_segment_per_p = 100) {
   test::TempDir dir;
   const std::string file = (dir.path() / "p.ngc").string();
   test::write_file(file, text);
   pps::ProgramSetup setup = test::xyz_setup();
   setup.builder.fit_runs = fit;
   setup.builder.default_path_tolerance_mm = default_tol_mm;
+  setup.builder.fit_max_segment_per_p = max_segment_per_p;
   PlanRun r;
   r.blocks = test::run_program(file, setup);
   const config::MachineConfig cfg =
@@ -127,6 +128,40 @@ TEST(G64Path, ARasterOfShortMovesIsFittedWithinPAndRunsFasterThanUnderG61) {
   EXPECT_LE(g64.j_use, 1.01);
   for (int k = 0; k < 3; ++k) EXPECT_NEAR(g64.path.back()[k], pts.back()[k], 1e-9);
   EXPECT_LT(g64.time_s, g61.time_s);
+}
+
+TEST(G64Path, CoarserChordsOfAGentleCurveAreOneFitWhereThePAllows) {
+  // 3D_Chips' passes: chords of 1 to 2.3 mm (over the 2-mm segment limit) of a curve in
+  // Y-Z (r 40 mm), 3 decimals, at P 0.1. Up to 100 P long they join the fit: one curve
+  // at the speed its curvature allows, where lines and corner blends of a few degrees
+  // held it to about 50 mm/s (their curvature ramps against the jerk limit).
+  const double steps[] = {1.0, 2.3, 0.5, 2.0, 1.5, 2.3, 1.0};
+  std::vector<P3> pts;
+  std::string s = "G21 G90 G64 P0.1\nG0 X0 Y0 Z0\nG1 F12000\n";
+  auto r3 = [](double v) { return std::round(v * 1000.0) / 1000.0; };
+  char buf[96];
+  double y = 0;
+  for (int i = 0; y < 70; ++i) {
+    y += steps[i % 7];
+    const double a = (y - 35.0) / 40.0;  // the chord's end on the circle, by arc length
+    const P3 p{0.0, r3(40.0 * std::sin(a) + 40.0 * std::sin(35.0 / 40.0)), r3(40.0 * (std::cos(a) - std::cos(35.0 / 40.0)))};
+    std::snprintf(buf, sizeof buf, "G1 Y%.3f Z%.3f\n", p[1], p[2]);
+    s += buf;
+    pts.push_back(p);
+  }
+  s += "M2\n";
+  const PlanRun fit = run(s);
+  const PlanRun lines = run(s, true, 0, 0);
+  EXPECT_EQ(count(fit.blocks, program::BlockKind::kLine), 0u);
+  EXPECT_GE(count(lines.blocks, program::BlockKind::kLine), 10u);
+  double worst = 0;
+  for (const P3& q : pts) worst = std::max(worst, distance_to_path(fit.path, q));
+  std::printf("chords of 0.5-2.3 mm at P 0.1: fitted %.3f s, lines and blends %.3f s, largest distance %.4f mm\n",
+              fit.time_s, lines.time_s, worst);
+  EXPECT_LE(worst, 0.1 + 1e-6);
+  EXPECT_LE(fit.j_use, 1.01);
+  EXPECT_LE(fit.a_use, 1.01);
+  EXPECT_LT(fit.time_s, 0.8 * lines.time_s);
 }
 
 TEST(G64Path, CornersBetweenLinesAreRoundedWithinP) {
