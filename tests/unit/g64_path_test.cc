@@ -85,6 +85,13 @@ double distance_to_path(const std::vector<P3>& path, const P3& q) {
   return best;
 }
 
+// The largest distance of the programmed points pts from the path.
+double largest_distance(const std::vector<P3>& path, const std::vector<P3>& pts) {
+  double worst = 0;
+  for (const P3& q : pts) worst = std::max(worst, distance_to_path(path, q));
+  return worst;
+}
+
 // A raster over a gently curved surface, as a CAM post writes it: rows of 0.3-mm
 // moves, coordinates to 3 decimals, 1-mm step-overs, F3000.
 std::string raster(const std::string& mode, std::vector<P3>* points, int rows = 4, int moves = 100) {
@@ -119,8 +126,7 @@ TEST(G64Path, ARasterOfShortMovesIsFittedWithinPAndRunsFasterThanUnderG61) {
   EXPECT_EQ(count(g61.blocks, program::BlockKind::kLine), 404u);
   EXPECT_LE(count(g64.blocks, program::BlockKind::kNurbs), 8u);
   EXPECT_GE(count(g64.blocks, program::BlockKind::kNurbs), 4u);
-  double worst = 0;
-  for (const P3& q : pts) worst = std::max(worst, distance_to_path(g64.path, q));
+  const double worst = largest_distance(g64.path, pts);
   std::printf("raster: G64 P0.01 %.3f s, G61 %.3f s, largest distance of a point from the path %.4f mm\n",
               g64.time_s, g61.time_s, worst);
   EXPECT_LE(worst, 0.01 + 0.001 + 1e-6);
@@ -154,8 +160,7 @@ TEST(G64Path, CoarserChordsOfAGentleCurveAreOneFitWhereThePAllows) {
   const PlanRun lines = run(s, true, 0, 0);
   EXPECT_EQ(count(fit.blocks, program::BlockKind::kLine), 0u);
   EXPECT_GE(count(lines.blocks, program::BlockKind::kLine), 10u);
-  double worst = 0;
-  for (const P3& q : pts) worst = std::max(worst, distance_to_path(fit.path, q));
+  const double worst = largest_distance(fit.path, pts);
   std::printf("chords of 0.5-2.3 mm at P 0.1: fitted %.3f s, lines and blends %.3f s, largest distance %.4f mm\n",
               fit.time_s, lines.time_s, worst);
   EXPECT_LE(worst, 0.1 + 1e-6);
@@ -220,8 +225,7 @@ TEST(G64Path, AKinkTheFitCannotHoldIsCutThereAndTheRestStaysWithinP) {
   }
   const PlanRun r = run(s + "M2\n");
   EXPECT_GE(count(r.blocks, program::BlockKind::kNurbs), 2u);
-  double worst = 0;
-  for (const P3& q : pts) worst = std::max(worst, distance_to_path(r.path, q));
+  const double worst = largest_distance(r.path, pts);
   EXPECT_LE(worst, 0.0001 * (1 + 1e-6));
   EXPECT_LE(r.a_use, 1.01);
   EXPECT_LE(r.j_use, 1.01);
@@ -258,9 +262,7 @@ TEST(G64Path, AMachineDefaultToleranceAppliesToG64WithoutPAndToNoG64Word) {
         EXPECT_EQ(b.path_tolerance_mm, exact ? 0.0 : p) << mode << " line " << b.source_line;
       }
     }
-    double worst = 0;
-    for (const P3& q : pts) worst = std::max(worst, distance_to_path(r.path, q));
-    EXPECT_LE(worst, (exact ? 0.001 : p) * (1 + 1e-6)) << mode;
+    EXPECT_LE(largest_distance(r.path, pts), (exact ? 0.001 : p) * (1 + 1e-6)) << mode;
   }
 }
 
